@@ -1,0 +1,25 @@
+//! `didim-core`: the numerical kernels of DIDIM identification of position-controlled
+//! drives and flexible-joint axes (M. Gautier, A. Jubien, A. Janot, P.-Ph. Robet,
+//! "Dynamic identification of flexible joint manipulators with an efficient closed
+//! loop output error method based on motor torque output data").
+//!
+//! - [`model`]: linear-in-parameters models, one definition for the direct dynamics,
+//!   the inverse dynamic model and its regressor;
+//! - [`controller`] and [`sim`]: the fixed-step closed-loop simulator (digital
+//!   controller with zero-order hold, RK4 plant);
+//! - [`filter`]: zero-phase filters and parallel decimation (paper section III);
+//! - [`lstsq`]: QR least squares with base parameters and covariance (eqs. (11)-(15)).
+//!
+//! Pure Rust: no Python types. SI units on the load side throughout.
+
+pub mod controller;
+pub mod error;
+pub mod filter;
+pub mod lstsq;
+pub mod model;
+pub mod sim;
+
+pub use controller::Controller;
+pub use error::{Error, Result};
+pub use model::{Basis, Model};
+pub use sim::{simulate, SimOptions, SimOutput};

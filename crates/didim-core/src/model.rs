@@ -1,0 +1,458 @@
+//! Linear-in-parameters models of a position-controlled axis.
+//!
+//! One definition feeds everything: a [`Model`] is a list of named terms, each a
+//! parameter times a basis function of the state ([`Basis`]). The same basis
+//! functions give
+//! - the inverse dynamic model (IDM), `τ_idm = Σ_j χ_j φ_j(q, q̇, q̈)`, one row per
+//!   degree of freedom (paper eqs. (2), (4), (6), (7)),
+//! - the regressor `W` used by IDIM-LS and DIDIM (the matrix of the `φ_j`),
+//! - the direct dynamic model integrated by the simulator (eqs. (5), (9)):
+//!   `M q̈ = u − Σ_{non-inertial j} χ_j φ_j(q, q̇)`, where `u = (τ, 0, …)`.
+//!
+//! A new physical effect is added as one [`Basis`] variant; the simulator, the
+//! regressor and the sensitivities pick it up unchanged.
+//!
+//! Units are SI on the load side: positions in m, velocities in m/s, forces in N,
+//! masses in kg, viscous friction in N/(m/s), Coulomb friction in N, stiffness in N/m.
+//!
+//! Coordinates of the flexible model follow the paper: dof 0 is the motor
+//! position `q1`, dof 1 is the load position `q12 = q1 + q2`; the spring
+//! elongation is `q2 = q12 − q1`.
+
+use crate::error::{invalid, Result};
+use nalgebra::SVector;
+
+/// Index of the motor (actuated, measured) degree of freedom.
+pub const MOTOR: usize = 0;
+/// Index of the load degree of freedom of the flexible model (`q12`).
+pub const LOAD: usize = 1;
+
+/// Default velocity scale of the smoothed Coulomb sign, in m/s.
+///
+/// Small against the EMPS speeds (plateaus at 0.042 to 0.125 m/s, sign > 0.9999
+/// there), about two encoder counts per millisecond, and large enough that the
+/// equivalent viscous slope `Fc/ε` at rest stays well inside the stability region
+/// of RK4 with the default 10 substeps of 1 kHz sampling.
+pub const DEFAULT_COULOMB_EPS: f64 = 1e-4;
+
+/// The sign of a velocity in every Coulomb-type friction term.
+///
+/// `eps > 0`: the smooth sign `v / sqrt(v² + eps²)` (odd, monotone, slope `1/eps`
+/// at rest, within 0.5 % of ±1 beyond `|v| = 10 eps`).
+/// `eps == 0`: the hard sign, with `sign(0) = 0` (MATLAB's `sign`, used by the
+/// EMPS benchmark's IDIM-LS recipe on filtered measured velocities).
+///
+/// The simulator and the regressors call this one function with the model's
+/// `coulomb_eps`, so the dynamics that produce the states and the regressor that
+/// explains the force use the same friction law: a hard sign in the regressor
+/// against a smoothed sign in the dynamics would bias the friction estimates.
+#[inline]
+pub fn coulomb_sign(v: f64, eps: f64) -> f64 {
+    if eps > 0.0 {
+        v / (v * v + eps * eps).sqrt()
+    } else if v > 0.0 {
+        1.0
+    } else if v < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
+/// Derivative of [`coulomb_sign`] with respect to the velocity (0 for the hard sign
+/// away from 0; the hard sign has no derivative at 0 and 0 is returned).
+#[inline]
+pub fn coulomb_sign_derivative(v: f64, eps: f64) -> f64 {
+    if eps > 0.0 {
+        let s = v * v + eps * eps;
+        eps * eps / (s * s.sqrt())
+    } else {
+        0.0
+    }
+}
+
+/// The basis function multiplying one parameter, per degree of freedom.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Basis {
+    /// Mass of dof `dof`: `φ = q̈_dof` on row `dof` (kg).
+    Inertia { dof: usize },
+    /// Viscous friction of dof `dof`: `φ = q̇_dof` (N/(m/s)).
+    Viscous { dof: usize },
+    /// Coulomb friction of dof `dof`: `φ = coulomb_sign(q̇_dof)` (N).
+    Coulomb { dof: usize },
+    /// Constant force on dof `dof`: `φ = 1` (N), e.g. an amplifier offset.
+    Offset { dof: usize },
+    /// Spring between the motor dof `a` and the load dof `b` (N/m):
+    /// `φ_a = q_a − q_b = −q2`, `φ_b = q_b − q_a = q2` (eq. (4), last column).
+    Spring { a: usize, b: usize },
+}
+
+impl Basis {
+    /// True for the terms that multiply an acceleration (they build the mass matrix).
+    pub fn is_inertia(&self) -> bool {
+        matches!(self, Basis::Inertia { .. })
+    }
+
+    /// The degrees of freedom this basis function touches.
+    fn dofs(&self) -> (usize, Option<usize>) {
+        match *self {
+            Basis::Inertia { dof }
+            | Basis::Viscous { dof }
+            | Basis::Coulomb { dof }
+            | Basis::Offset { dof } => (dof, None),
+            Basis::Spring { a, b } => (a, Some(b)),
+        }
+    }
+
+    /// Adds `value · φ(q, q̇, q̈)` to `out`, one entry per dof.
+    #[inline(always)]
+    fn accumulate<const N: usize>(
+        &self,
+        value: f64,
+        q: &SVector<f64, N>,
+        qd: &SVector<f64, N>,
+        qdd: &SVector<f64, N>,
+        eps: f64,
+        out: &mut SVector<f64, N>,
+    ) {
+        match *self {
+            Basis::Inertia { dof } => out[dof] += value * qdd[dof],
+            Basis::Viscous { dof } => out[dof] += value * qd[dof],
+            Basis::Coulomb { dof } => out[dof] += value * coulomb_sign(qd[dof], eps),
+            Basis::Offset { dof } => out[dof] += value,
+            Basis::Spring { a, b } => {
+                let f = value * (q[a] - q[b]);
+                out[a] += f;
+                out[b] -= f;
+            }
+        }
+    }
+}
+
+/// A model: named parameters, each with its basis function, on `N` degrees of freedom.
+///
+/// The structure is separate from the parameter values `χ` (a slice in the
+/// order of [`Model::names`]), so one model serves every iteration of an
+/// identification and every member of a batch.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Model<const N: usize> {
+    names: Vec<String>,
+    basis: Vec<Basis>,
+    coulomb_eps: f64,
+}
+
+impl<const N: usize> Model<N> {
+    /// Builds a model from `(name, basis)` terms.
+    ///
+    /// Errors when a term refers to a dof `>= N`, a name repeats, a dof has no
+    /// inertia term (its acceleration would be undefined), or `coulomb_eps` is
+    /// negative or not finite.
+    pub fn new(terms: Vec<(String, Basis)>, coulomb_eps: f64) -> Result<Self> {
+        if !(coulomb_eps.is_finite() && coulomb_eps >= 0.0) {
+            return Err(invalid!(
+                "coulomb_eps must be a finite velocity >= 0 m/s (0 = hard sign), got {coulomb_eps}"
+            ));
+        }
+        let mut names: Vec<String> = Vec::with_capacity(terms.len());
+        let mut basis = Vec::with_capacity(terms.len());
+        for (name, b) in terms {
+            let (d0, d1) = b.dofs();
+            if d0 >= N || d1.is_some_and(|d| d >= N) {
+                return Err(invalid!(
+                    "term {name} refers to a degree of freedom outside this {N}-dof model"
+                ));
+            }
+            if matches!(b, Basis::Spring { a, b } if a == b) {
+                return Err(invalid!("term {name}: a spring needs two different dofs"));
+            }
+            if names.contains(&name) {
+                return Err(invalid!("parameter name {name} appears twice in the model"));
+            }
+            names.push(name);
+            basis.push(b);
+        }
+        for dof in 0..N {
+            if !basis.iter().any(|b| *b == Basis::Inertia { dof }) {
+                return Err(invalid!(
+                    "degree of freedom {dof} has no inertia term: add a mass parameter for it"
+                ));
+            }
+        }
+        Ok(Self {
+            names,
+            basis,
+            coulomb_eps,
+        })
+    }
+
+    /// Parameter names, in the order of `χ`.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Basis functions, in the order of `χ`.
+    pub fn basis(&self) -> &[Basis] {
+        &self.basis
+    }
+
+    /// Number of parameters.
+    pub fn n_params(&self) -> usize {
+        self.basis.len()
+    }
+
+    /// Velocity scale of the Coulomb sign (m/s), see [`coulomb_sign`].
+    pub fn coulomb_eps(&self) -> f64 {
+        self.coulomb_eps
+    }
+
+    /// Returns a copy with another Coulomb velocity scale.
+    pub fn with_coulomb_eps(&self, coulomb_eps: f64) -> Result<Self> {
+        let terms = self.names.iter().cloned().zip(self.basis.iter().copied()).collect();
+        Self::new(terms, coulomb_eps)
+    }
+
+    /// Checks a parameter vector for simulation: right length, finite values,
+    /// positive masses (each dof's total inertia) and positive stiffness.
+    pub fn check_params(&self, chi: &[f64]) -> Result<()> {
+        if chi.len() != self.n_params() {
+            return Err(invalid!(
+                "expected {} parameters ({}), got {}",
+                self.n_params(),
+                self.names.join(", "),
+                chi.len()
+            ));
+        }
+        for (name, &v) in self.names.iter().zip(chi) {
+            if !v.is_finite() {
+                return Err(invalid!("parameter {name} is not finite ({v})"));
+            }
+        }
+        for ((name, b), &v) in self.names.iter().zip(&self.basis).zip(chi) {
+            match b {
+                Basis::Inertia { .. } if v <= 0.0 => {
+                    return Err(invalid!("mass {name} must be > 0 kg, got {v}"))
+                }
+                Basis::Spring { .. } if v <= 0.0 => {
+                    return Err(invalid!("stiffness {name} must be > 0 N/m, got {v}"))
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// Diagonal of the mass matrix for `χ` (sum of the inertia terms of each dof).
+    pub fn masses(&self, chi: &[f64]) -> SVector<f64, N> {
+        let mut m = SVector::<f64, N>::zeros();
+        for (b, &v) in self.basis.iter().zip(chi) {
+            if let Basis::Inertia { dof } = *b {
+                m[dof] += v;
+            }
+        }
+        m
+    }
+
+    /// Inverse dynamic model, eq. (3): the generalized forces `τ_idm(q, q̇, q̈)` of every dof.
+    pub fn idm(
+        &self,
+        chi: &[f64],
+        q: &SVector<f64, N>,
+        qd: &SVector<f64, N>,
+        qdd: &SVector<f64, N>,
+    ) -> SVector<f64, N> {
+        let mut out = SVector::<f64, N>::zeros();
+        for (b, &v) in self.basis.iter().zip(chi) {
+            b.accumulate(v, q, qd, qdd, self.coulomb_eps, &mut out);
+        }
+        out
+    }
+
+    /// Direct dynamic model, eqs. (5) and (9): accelerations for the generalized
+    /// input `u` (the motor force on dof 0, zero on the others), with
+    /// `inv_mass` the inverse of [`Model::masses`].
+    #[inline]
+    pub fn accel(
+        &self,
+        chi: &[f64],
+        inv_mass: &SVector<f64, N>,
+        q: &SVector<f64, N>,
+        qd: &SVector<f64, N>,
+        u: &SVector<f64, N>,
+    ) -> SVector<f64, N> {
+        let zero = SVector::<f64, N>::zeros();
+        let mut f = SVector::<f64, N>::zeros();
+        for (b, &v) in self.basis.iter().zip(chi) {
+            if !b.is_inertia() {
+                b.accumulate(v, q, qd, &zero, self.coulomb_eps, &mut f);
+            }
+        }
+        (u - f).component_mul(inv_mass)
+    }
+
+    /// The regressor row block of one sample: `out[d * p + j] = φ_j` of dof `d`
+    /// (`p` = number of parameters), so that `idm = Σ_j χ_j φ_j` (eqs. (4), (7)).
+    pub fn regressor_into(
+        &self,
+        q: &SVector<f64, N>,
+        qd: &SVector<f64, N>,
+        qdd: &SVector<f64, N>,
+        out: &mut [f64],
+    ) {
+        let p = self.n_params();
+        out.iter_mut().for_each(|x| *x = 0.0);
+        for (j, b) in self.basis.iter().enumerate() {
+            let mut col = SVector::<f64, N>::zeros();
+            b.accumulate(1.0, q, qd, qdd, self.coulomb_eps, &mut col);
+            for d in 0..N {
+                out[d * p + j] = col[d];
+            }
+        }
+    }
+
+    /// The regressor of a whole trajectory, from per-dof sample series
+    /// (`q[d][k]`, likewise `qd`, `qdd`).
+    ///
+    /// Layout: `[dof][parameter][sample]`, i.e. for each dof a column-major
+    /// `(n × p)` block whose columns are the `φ_j` over time, ready for
+    /// parallel decimation column by column.
+    pub fn regressor(&self, q: &[Vec<f64>], qd: &[Vec<f64>], qdd: &[Vec<f64>]) -> Result<Vec<f64>> {
+        let n = check_series::<N>(q, qd, qdd)?;
+        let p = self.n_params();
+        let mut w = vec![0.0; N * p * n];
+        let mut row = vec![0.0; N * p];
+        for k in 0..n {
+            let qk = SVector::<f64, N>::from_fn(|d, _| q[d][k]);
+            let qdk = SVector::<f64, N>::from_fn(|d, _| qd[d][k]);
+            let qddk = SVector::<f64, N>::from_fn(|d, _| qdd[d][k]);
+            self.regressor_into(&qk, &qdk, &qddk, &mut row);
+            for d in 0..N {
+                for j in 0..p {
+                    w[(d * p + j) * n + k] = row[d * p + j];
+                }
+            }
+        }
+        Ok(w)
+    }
+}
+
+fn check_series<const N: usize>(q: &[Vec<f64>], qd: &[Vec<f64>], qdd: &[Vec<f64>]) -> Result<usize> {
+    if q.len() != N || qd.len() != N || qdd.len() != N {
+        return Err(invalid!(
+            "expected position, velocity and acceleration series for {N} dof(s), got {}, {} and {}",
+            q.len(),
+            qd.len(),
+            qdd.len()
+        ));
+    }
+    let n = q[0].len();
+    for (what, s) in [("position", q), ("velocity", qd), ("acceleration", qdd)] {
+        for (d, x) in s.iter().enumerate() {
+            if x.len() != n {
+                return Err(invalid!(
+                    "{what} series of dof {d} has {} samples, expected {n}",
+                    x.len()
+                ));
+            }
+            if let Some(k) = x.iter().position(|v| !v.is_finite()) {
+                return Err(invalid!("{what} series of dof {d} is not finite at sample {k}"));
+            }
+        }
+    }
+    Ok(n)
+}
+
+/// The rigid model, eqs. (6)-(7): parameters `M` (kg), `Fv` (N/(m/s)), `Fc` (N)
+/// and, with `offset`, a constant force `OF` (N).
+pub fn rigid(offset: bool, coulomb_eps: f64) -> Result<Model<1>> {
+    let mut terms = vec![
+        ("M".to_string(), Basis::Inertia { dof: MOTOR }),
+        ("Fv".to_string(), Basis::Viscous { dof: MOTOR }),
+        ("Fc".to_string(), Basis::Coulomb { dof: MOTOR }),
+    ];
+    if offset {
+        terms.push(("OF".to_string(), Basis::Offset { dof: MOTOR }));
+    }
+    Model::new(terms, coulomb_eps)
+}
+
+/// The flexible two-mass model, eqs. (2)-(4): `M1, Fv1, Fc1` on the motor side,
+/// `M2, Fv2, Fc2` on the load side, `K12` the coupling stiffness.
+pub fn flexible(coulomb_eps: f64) -> Result<Model<2>> {
+    Model::new(
+        vec![
+            ("M1".to_string(), Basis::Inertia { dof: MOTOR }),
+            ("Fv1".to_string(), Basis::Viscous { dof: MOTOR }),
+            ("Fc1".to_string(), Basis::Coulomb { dof: MOTOR }),
+            ("M2".to_string(), Basis::Inertia { dof: LOAD }),
+            ("Fv2".to_string(), Basis::Viscous { dof: LOAD }),
+            ("Fc2".to_string(), Basis::Coulomb { dof: LOAD }),
+            ("K12".to_string(), Basis::Spring { a: MOTOR, b: LOAD }),
+        ],
+        coulomb_eps,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector2;
+
+    #[test]
+    fn coulomb_sign_is_odd_saturating_and_hard_at_zero_eps() {
+        assert_eq!(coulomb_sign(0.0, 0.0), 0.0);
+        assert_eq!(coulomb_sign(-3.0, 0.0), -1.0);
+        assert_eq!(coulomb_sign(1e-300, 0.0), 1.0);
+        let eps = 1e-4;
+        assert!((coulomb_sign(10.0 * eps, eps) - 0.995037190).abs() < 1e-9);
+        assert_eq!(coulomb_sign(-2e-3, eps), -coulomb_sign(2e-3, eps));
+        // derivative against a central difference
+        for v in [-3e-4, 0.0, 5e-5, 2e-3] {
+            let h = 1e-9;
+            let fd = (coulomb_sign(v + h, eps) - coulomb_sign(v - h, eps)) / (2.0 * h);
+            assert!((fd - coulomb_sign_derivative(v, eps)).abs() < 1e-5 * (1.0 / eps));
+        }
+    }
+
+    #[test]
+    fn flexible_idm_matches_equation_2() {
+        let m = flexible(0.0).unwrap();
+        let chi = [68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5];
+        let q = Vector2::new(0.10, 0.1001); // q2 = 1e-4 m
+        let qd = Vector2::new(0.05, -0.02);
+        let qdd = Vector2::new(1.5, -2.0);
+        let tau = m.idm(&chi, &q, &qd, &qdd);
+        let q2 = q[1] - q[0];
+        let t1 = 68.0 * 1.5 + 104.0 * 0.05 + 10.0 - 8.8e5 * q2;
+        let t2 = 38.0 * -2.0 + 96.5 * -0.02 - 9.5 + 8.8e5 * q2;
+        assert!((tau[0] - t1).abs() < 1e-9 && (tau[1] - t2).abs() < 1e-9);
+        // The direct model inverts the inverse model.
+        let inv_m = m.masses(&chi).map(|x| 1.0 / x);
+        let u = Vector2::new(t1, t2);
+        let acc = m.accel(&chi, &inv_m, &q, &qd, &u);
+        assert!((acc - qdd).norm() < 1e-9);
+        // The regressor reproduces the idm.
+        let mut row = vec![0.0; 14];
+        m.regressor_into(&q, &qd, &qdd, &mut row);
+        let r0: f64 = (0..7).map(|j| row[j] * chi[j]).sum();
+        let r1: f64 = (0..7).map(|j| row[7 + j] * chi[j]).sum();
+        assert!((r0 - t1).abs() < 1e-9 && (r1 - t2).abs() < 1e-9);
+        assert_eq!(row[6], -q2);
+        assert_eq!(row[13], q2);
+    }
+
+    #[test]
+    fn invalid_models_and_parameters_are_named() {
+        let e = Model::<1>::new(vec![("Fv".into(), Basis::Viscous { dof: 0 })], 0.0).unwrap_err();
+        assert!(e.to_string().contains("no inertia"));
+        let e = Model::<1>::new(vec![("M".into(), Basis::Inertia { dof: 1 })], 0.0).unwrap_err();
+        assert!(e.to_string().contains("outside"));
+        let r = rigid(true, 1e-4).unwrap();
+        assert!(r.check_params(&[1.0, 2.0]).unwrap_err().to_string().contains("expected 4"));
+        assert!(r.check_params(&[-1.0, 2.0, 1.0, 0.0]).unwrap_err().to_string().contains("mass M"));
+        assert!(r.check_params(&[1.0, f64::NAN, 1.0, 0.0]).unwrap_err().to_string().contains("Fv"));
+        let f = flexible(1e-4).unwrap();
+        let e = f.check_params(&[1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]).unwrap_err();
+        assert!(e.to_string().contains("stiffness K12"));
+        assert!(rigid(false, -1.0).is_err());
+    }
+}

@@ -1,0 +1,211 @@
+use super::*;
+use crate::model::{flexible, rigid, Basis, Model};
+
+fn pd(kp: f64, kd: f64) -> Controller {
+    Controller::Pd {
+        kp,
+        kd,
+        tau_max: f64::INFINITY,
+    }
+}
+
+/// Exact zero-order-hold discretization of `M q̈ + Fv q̇ = τ`, iterated with the
+/// same digital PD: the reference the RK4 simulation must reproduce.
+fn exact_pd_viscous(m: f64, fv: f64, kp: f64, kd: f64, qr: &[f64], dt: f64) -> (Vec<f64>, Vec<f64>) {
+    let (p_qv, p_vv, p_qt, p_vt) = if fv == 0.0 {
+        (dt, 1.0, dt * dt / (2.0 * m), dt / m)
+    } else {
+        let a = fv / m;
+        let e = (-a * dt).exp();
+        (
+            (1.0 - e) / a,
+            e,
+            (dt - (1.0 - e) / a) / (m * a),
+            (1.0 - e) / (m * a),
+        )
+    };
+    let (mut q, mut v) = (qr[0], 0.0);
+    let (mut qm1, mut qm2) = (q, q);
+    let (mut qs, mut fs) = (vec![], vec![]);
+    for &r in qr {
+        let tau = kp * (r - q) - kd * (q - qm2) / (2.0 * dt);
+        qm2 = qm1;
+        qm1 = q;
+        qs.push(q);
+        fs.push(tau);
+        let qn = q + p_qv * v + p_qt * tau;
+        v = p_vv * v + p_vt * tau;
+        q = qn;
+    }
+    (qs, fs)
+}
+
+fn trapezoid(n: usize, dt: f64) -> Vec<f64> {
+    // smooth-ish move: accelerate, cruise, decelerate, rest, and back
+    (0..n)
+        .map(|k| {
+            let t = k as f64 * dt;
+            0.1 * (1.0 - (2.0 * std::f64::consts::PI * t / (n as f64 * dt)).cos()) + 0.01 * (t * 25.0).sin()
+        })
+        .collect()
+}
+
+#[test]
+fn frictionless_rigid_axis_under_pd_matches_exact_discretization() {
+    let dt = 1e-3;
+    let qr = trapezoid(3000, dt);
+    let model = Model::<1>::new(
+        vec![("M".into(), Basis::Inertia { dof: 0 }), ("Fv".into(), Basis::Viscous { dof: 0 })],
+        0.0,
+    )
+    .unwrap();
+    let (m, fv, kp, kd) = (95.0, 200.0, 2.0e5, 3.0e3);
+    let out = simulate(&model, &[m, fv], &pd(kp, kd), &qr, None, &SimOptions::new(dt)).unwrap();
+    let (qx, fx) = exact_pd_viscous(m, fv, kp, kd, &qr, dt);
+    let scale_q = qx.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let scale_f = fx.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let eq = out.q[0].iter().zip(&qx).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+    let ef = out.force.iter().zip(&fx).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+    assert!(eq / scale_q < 1e-9, "position error {eq}");
+    assert!(ef / scale_f < 1e-7, "force error {ef} of {scale_f}");
+    // Pure inertia (Fv → 0): RK4 is exact for a constant force, so agreement is at rounding level.
+    let model = Model::<1>::new(vec![("M".into(), Basis::Inertia { dof: 0 })], 0.0).unwrap();
+    let out = simulate(&model, &[m], &pd(kp, kd), &qr, None, &SimOptions::new(dt)).unwrap();
+    let (qx, _) = exact_pd_viscous(m, 0.0, kp, kd, &qr, dt);
+    let eq = out.q[0].iter().zip(&qx).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+    assert!(eq / scale_q < 1e-11, "position error {eq}");
+}
+
+#[test]
+fn load_oscillates_at_sqrt_k12_over_m2_with_the_motor_blocked() {
+    // A motor of 1e9 kg held by a stiff PD moves at constant speed; the unloaded
+    // spring then rings freely at f = sqrt(K12/M2)/(2π) on the load side.
+    let dt = 1e-3;
+    let n = 4000;
+    let qr: Vec<f64> = (0..n).map(|k| 0.01 * k as f64 * dt).collect();
+    let model = flexible(0.0).unwrap();
+    let (m2, k12) = (38.0, 8.8e5);
+    let chi = [1e9, 0.0, 0.0, m2, 0.0, 0.0, k12];
+    let (kp, kd) = (1e13, 2.0 * (1e13f64 * 1e9).sqrt());
+    let out = simulate(&model, &chi, &pd(kp, kd), &qr, None, &SimOptions::new(dt)).unwrap();
+    let q2: Vec<f64> = out.q[1].iter().zip(&out.q[0]).map(|(a, b)| a - b).collect();
+    // zero crossings by linear interpolation, after the first second
+    let mut crossings = vec![];
+    for k in 1000..n - 1 {
+        if q2[k] <= 0.0 && q2[k + 1] > 0.0 {
+            crossings.push(k as f64 + q2[k] / (q2[k] - q2[k + 1]));
+        }
+    }
+    assert!(crossings.len() > 50, "{} crossings", crossings.len());
+    let period = (crossings[crossings.len() - 1] - crossings[0]) * dt / (crossings.len() - 1) as f64;
+    let f_expected = (k12 / m2).sqrt() / (2.0 * std::f64::consts::PI);
+    assert!(((1.0 / period) - f_expected).abs() / f_expected < 1e-3, "{} vs {}", 1.0 / period, f_expected);
+}
+
+#[test]
+fn rk4_error_falls_with_the_fourth_power_of_the_substep() {
+    let dt = 1e-3;
+    let qr = trapezoid(1500, dt);
+    // The asymptotic regime needs substeps that resolve the friction transition
+    // (|v| < eps is crossed in eps/|a| seconds), hence a wide eps here.
+    let model = flexible(2e-2).unwrap();
+    let chi = [68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5];
+    let run = |substeps| {
+        let o = SimOptions {
+            substeps,
+            ..SimOptions::new(dt)
+        };
+        simulate(&model, &chi, &Controller::EMPS, &qr, None, &o).unwrap()
+    };
+    let reference = run(64);
+    let err = |s: usize| {
+        let o = run(s);
+        o.q[1].iter().zip(&reference.q[1]).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()))
+    };
+    let (e1, e2, e4) = (err(1), err(2), err(4));
+    let (o1, o2) = ((e1 / e2).log2(), (e2 / e4).log2());
+    assert!((3.5..4.5).contains(&o1) && (3.5..4.5).contains(&o2), "orders {o1} {o2} ({e1} {e2} {e4})");
+}
+
+#[test]
+fn simulated_states_reproduce_the_force_through_the_idm() {
+    let dt = 1e-3;
+    let qr = trapezoid(2000, dt);
+    let model = flexible(1e-4).unwrap();
+    let chi = [68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5];
+    let opts = SimOptions {
+        quantization: 5e-8,
+        ..SimOptions::new(dt)
+    };
+    let out = simulate(&model, &chi, &Controller::EMPS, &qr, None, &opts).unwrap();
+    let n = qr.len();
+    let w = model.regressor(&out.q, &out.qd, &out.qdd).unwrap();
+    let p = chi.len();
+    for k in (0..n).step_by(37) {
+        let row0: f64 = (0..p).map(|j| w[j * n + k] * chi[j]).sum();
+        let row1: f64 = (0..p).map(|j| w[(p + j) * n + k] * chi[j]).sum();
+        assert!((row0 - out.force[k]).abs() < 1e-8 * (1.0 + out.force[k].abs()));
+        assert!(row1.abs() < 1e-6);
+    }
+    // with a delay, the applied force is the command of `delay` samples earlier
+    let opts = SimOptions { delay: 3, ..opts };
+    let out = simulate(&model, &chi, &Controller::EMPS, &qr, None, &opts).unwrap();
+    let w = model.regressor(&out.q, &out.qd, &out.qdd).unwrap();
+    for k in (3..n).step_by(41) {
+        let row0: f64 = (0..p).map(|j| w[j * n + k] * chi[j]).sum();
+        assert!((row0 - out.force[k - 3]).abs() < 1e-8 * (1.0 + out.force[k].abs()));
+    }
+}
+
+#[test]
+fn external_input_and_saturation_enter_the_command() {
+    let dt = 1e-3;
+    let n = 500;
+    let qr = vec![0.0; n];
+    let u: Vec<f64> = (0..n).map(|k| if (100..200).contains(&k) { 100.0 } else { 0.0 }).collect();
+    let model = rigid(false, 1e-4).unwrap();
+    let chi = [95.0, 200.0, 20.0];
+    let out = simulate(&model, &chi, &Controller::EMPS, &qr, Some(&u), &SimOptions::new(dt)).unwrap();
+    assert_eq!(out.force[50], 0.0);
+    assert!((out.force[100] - 100.0).abs() < 1e-12); // the pulse arrives before any motion
+    assert!(out.q[0][199] > 0.0);
+    // a huge input saturates at gtau*vsat
+    let big: Vec<f64> = vec![1e6; n];
+    let out = simulate(&model, &chi, &Controller::EMPS, &qr, Some(&big), &SimOptions::new(dt)).unwrap();
+    assert!((out.force[0] - 351.5065188248547).abs() < 1e-9);
+}
+
+#[test]
+fn unstable_loop_is_a_simulation_error_naming_sample_and_parameters() {
+    let dt = 1e-3;
+    let qr = trapezoid(2000, dt);
+    let model = rigid(false, 1e-4).unwrap();
+    // a 10 g axis under these unsaturated gains is far beyond the discrete loop's stability
+    let c = pd(2.0e5, 3.0e3);
+    let e = simulate(&model, &[0.01, 0.0, 0.0], &c, &qr, None, &SimOptions::new(dt)).unwrap_err();
+    match e {
+        Error::Simulation(msg) => {
+            assert!(msg.contains("diverged at sample"), "{msg}");
+            assert!(msg.contains("M=0.01"), "{msg}");
+        }
+        other => panic!("unexpected {other:?}"),
+    }
+}
+
+#[test]
+fn bad_inputs_are_invalid_input_errors() {
+    let model = rigid(true, 1e-4).unwrap();
+    let chi = [95.0, 200.0, 20.0, 0.0];
+    let c = Controller::EMPS;
+    let o = SimOptions::new(1e-3);
+    let is_invalid = |r: Result<SimOutput>, needle: &str| match r {
+        Err(Error::InvalidInput(m)) => assert!(m.contains(needle), "{m} lacks {needle}"),
+        other => panic!("expected InvalidInput({needle}), got {other:?}"),
+    };
+    is_invalid(simulate(&model, &chi, &c, &[], None, &o), "empty");
+    is_invalid(simulate(&model, &chi, &c, &[0.0, f64::NAN], None, &o), "sample 1");
+    is_invalid(simulate(&model, &chi, &c, &[0.0; 3], Some(&[0.0; 2]), &o), "external input");
+    is_invalid(simulate(&model, &chi, &c, &[0.0; 3], None, &SimOptions { substeps: 0, ..o }), "substeps");
+    is_invalid(simulate(&model, &chi, &c, &[0.0; 3], None, &SimOptions::new(-1.0)), "dt");
+    is_invalid(simulate(&model, &[0.0, 1.0, 1.0, 0.0], &c, &[0.0; 3], None, &o), "mass M");
+}

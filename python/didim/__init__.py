@@ -1,0 +1,28 @@
+"""didim: identify the dynamics of position-controlled drives and flexible-joint axes from the motor force alone.
+
+The DIDIM closed-loop output-error method (Gautier, Jubien, Janot, Robet) on a Rust core: fixed-step closed-loop
+simulation, parallel decimation and QR least squares. SI units on the load side everywhere.
+"""
+
+from ._errors import DataError, DidimError, IdentifiabilityError, SimulationError
+from .controllers import PD, EmpsCascade
+from .recording import Recording, load_mat
+from .simulation import DEFAULT_COULOMB_EPS, SimResult, coulomb_sign, param_names, simulate
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "DidimError",
+    "DataError",
+    "SimulationError",
+    "IdentifiabilityError",
+    "EmpsCascade",
+    "PD",
+    "Recording",
+    "load_mat",
+    "simulate",
+    "SimResult",
+    "param_names",
+    "coulomb_sign",
+    "DEFAULT_COULOMB_EPS",
+]

@@ -1,0 +1,189 @@
+"""Closed-loop simulation of a recording's axis with given parameters (thin layer over the Rust core)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Dict, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _core
+from ._errors import DataError
+from .recording import Recording
+
+MODELS = ("rigid", "flexible")
+
+#: Default velocity scale of the smoothed Coulomb sign (m/s); see :func:`coulomb_sign`.
+DEFAULT_COULOMB_EPS: float = _core.DEFAULT_COULOMB_EPS
+
+Params = Union[Mapping[str, float], Sequence[float], np.ndarray]
+
+
+def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
+    """The sign used by every Coulomb friction term, identical to the core's: ``v/sqrt(v²+eps²)``, hard sign for eps = 0."""
+    v = np.asarray(v, dtype=float)
+    if eps > 0:
+        return v / np.sqrt(v * v + eps * eps)
+    return np.sign(v)
+
+
+def _check_model(model: str) -> None:
+    if model not in MODELS:
+        raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)}")
+
+
+def param_names(model: str = "rigid", offset: bool = False) -> list:
+    """Parameter names of a model in the order of its parameter vector (M, Fv, Fc[, OF] or M1, Fv1, Fc1, M2, Fv2, Fc2, K12)."""
+    _check_model(model)
+    return list(_core.param_names(model, offset))
+
+
+def params_vector(model: str, params: Params, offset: Optional[bool] = None):
+    """Returns ``(names, vector, offset)`` for parameters given as a name → value mapping or a sequence."""
+    _check_model(model)
+    if isinstance(params, Mapping):
+        if offset is None:
+            offset = model == "rigid" and "OF" in params
+        names = param_names(model, offset)
+        missing = [k for k in names if k not in params]
+        unknown = [k for k in params if k not in names]
+        if missing or unknown:
+            raise DataError(
+                f"parameters for the {model} model{' with offset' if offset else ''} are {', '.join(names)}"
+                + (f"; missing {', '.join(missing)}" if missing else "")
+                + (f"; unknown {', '.join(map(str, unknown))}" if unknown else "")
+            )
+        vec = np.array([float(params[k]) for k in names])
+    else:
+        vec = np.asarray(params, dtype=float).ravel()
+        if offset is None:
+            offset = model == "rigid" and vec.size == 4
+        names = param_names(model, offset)
+        if vec.size != len(names):
+            raise DataError(f"the {model} model takes {len(names)} parameters ({', '.join(names)}), got {vec.size}")
+    return names, vec, bool(offset)
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """Outputs of a closed-loop simulation, one value per sample (time is the last axis).
+
+    ``force`` is the commanded motor force (N); ``q``, ``qd``, ``qdd`` have shape (ndof, n): row 0 is the motor
+    (q1, m, m/s, m/s²), row 1 the load (q12) for the flexible model. States are noise-free.
+    """
+
+    model: str
+    params: Dict[str, float]
+    t: np.ndarray
+    force: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+
+    @property
+    def q1(self) -> np.ndarray:
+        return self.q[0]
+
+    @property
+    def qd1(self) -> np.ndarray:
+        return self.qd[0]
+
+    @property
+    def qdd1(self) -> np.ndarray:
+        return self.qdd[0]
+
+    @property
+    def q12(self) -> Optional[np.ndarray]:
+        return self.q[1] if self.q.shape[0] > 1 else None
+
+    @property
+    def qd12(self) -> Optional[np.ndarray]:
+        return self.qd[1] if self.qd.shape[0] > 1 else None
+
+    @property
+    def qdd12(self) -> Optional[np.ndarray]:
+        return self.qdd[1] if self.qdd.shape[0] > 1 else None
+
+    def relative_error(self, recording: Recording) -> float:
+        """``‖τ − τ_sim‖ / ‖τ‖`` against the recording's measured force."""
+        return float(np.linalg.norm(recording.force - self.force) / np.linalg.norm(recording.force))
+
+    def plot(self, recording: Optional[Recording] = None, ax=None):
+        """Measured (when a recording is given) and simulated force with their difference, like Fig. 6 of the paper."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            fig, ax = plt.subplots(figsize=(10, 4))
+        else:
+            fig = ax.figure
+        if recording is not None:
+            ax.plot(self.t, recording.force, color="tab:red", lw=0.8, label="measured")
+        ax.plot(self.t, self.force, color="tab:blue", lw=0.8, label="simulated")
+        if recording is not None:
+            ax.plot(self.t, recording.force - self.force, color="k", lw=0.6, label="error")
+            ax.set_title(f"{self.model} model, relative error {100 * self.relative_error(recording):.2f} %")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("motor force (N)")
+        ax.legend(loc="upper right")
+        ax.grid(True, alpha=0.3)
+        return fig
+
+
+def simulate(
+    recording: Recording,
+    params: Params,
+    model: str = "rigid",
+    *,
+    offset: Optional[bool] = None,
+    substeps: int = 10,
+    quantization: Optional[float] = None,
+    delay: int = 0,
+    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+) -> SimResult:
+    """Simulates the recording's closed loop (its reference, controller and known external input) with ``params``.
+
+    Args:
+        recording: the record whose reference, controller, sample period and external input drive the simulation.
+        params: a mapping name → value (SI units, load side) or a sequence in the order of :func:`param_names`.
+        model: "rigid" (eq. (6)) or "flexible" (eq. (2)).
+        offset: rigid model with a constant force OF; by default, when params names OF or has 4 values.
+        substeps: RK4 substeps per sample period.
+        quantization: resolution of the simulated motor encoder (m); default the recording's ``position_resolution``.
+        delay: extra actuation delay in samples.
+        coulomb_eps: velocity scale of the Coulomb sign (m/s), 0 for the hard sign.
+    """
+    names, vec, offset = params_vector(model, params, offset)
+    if quantization is None:
+        quantization = recording.position_resolution or 0.0
+    for what, v in (("substeps", substeps), ("delay", delay)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise DataError(f"{what} must be a whole number >= 0, got {v!r}")
+    if not (isinstance(coulomb_eps, (int, float)) and math.isfinite(coulomb_eps) and coulomb_eps >= 0):
+        raise DataError(f"coulomb_eps must be a finite velocity >= 0 m/s, got {coulomb_eps!r}")
+    out = _core.simulate(
+        model,
+        vec,
+        recording.qr,
+        recording.dt,
+        recording.controller.kind,
+        list(recording.controller.gains),
+        u_ext=recording.u_ext,
+        substeps=int(substeps),
+        quantization=float(quantization),
+        delay=int(delay),
+        coulomb_eps=float(coulomb_eps),
+        offset=offset,
+    )
+    return SimResult(
+        model=model,
+        params=dict(zip(names, map(float, vec))),
+        t=recording.t,
+        force=out["force"],
+        q=out["q"],
+        qd=out["qd"],
+        qdd=out["qdd"],
+    )
+
+
+__all__ = ["simulate", "SimResult", "param_names", "params_vector", "coulomb_sign", "MODELS", "DEFAULT_COULOMB_EPS"]

@@ -1,0 +1,38 @@
+import os
+import pathlib
+
+import pytest
+
+#: The EMPS records live outside the package, in the shared data folder next to the checkout.
+EMPS_DIR = pathlib.Path(os.environ.get("DIDIM_EMPS_DIR", pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "emps"))
+
+
+def _emps(name):
+    path = EMPS_DIR / name
+    if not path.exists():
+        pytest.skip(f"EMPS record {path} not available (set DIDIM_EMPS_DIR)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def emps_path():
+    return _emps("DATA_EMPS.mat")
+
+
+@pytest.fixture(scope="session")
+def emps_pulses_path():
+    return _emps("DATA_EMPS_PULSES.mat")
+
+
+@pytest.fixture(scope="session")
+def emps(emps_path):
+    import didim
+
+    return didim.load_mat(emps_path)
+
+
+@pytest.fixture(scope="session")
+def emps_pulses(emps_pulses_path):
+    import didim
+
+    return didim.load_mat(emps_pulses_path)
