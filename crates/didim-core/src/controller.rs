@@ -82,6 +82,24 @@ impl Controller {
         }
     }
 
+    /// The command (N) and its derivatives with respect to `qm` and `qm2`
+    /// (zero while the output saturates), for the sensitivity equations.
+    #[inline]
+    pub fn command_with_partials(&self, qr: f64, qm: f64, qm2: f64, dt: f64, u_ext: f64) -> (f64, f64, f64) {
+        let tau = self.command(qr, qm, qm2, dt, u_ext);
+        let (d_qm, d_qm2, limit) = match *self {
+            Controller::EmpsCascade { kp, kv, gtau, vsat } => {
+                (-gtau * kv * (kp + 0.5 / dt), gtau * kv * 0.5 / dt, gtau * vsat)
+            }
+            Controller::Pd { kp, kd, tau_max } => (-(kp + 0.5 * kd / dt), 0.5 * kd / dt, tau_max),
+        };
+        if tau.abs() >= limit {
+            (tau, 0.0, 0.0)
+        } else {
+            (tau, d_qm, d_qm2)
+        }
+    }
+
     /// Force per metre of position error at low frequency (N/m), used to scale
     /// checks (`kv·kp·gtau` or `kp`).
     pub fn stiffness(&self) -> f64 {
@@ -106,8 +124,26 @@ mod tests {
         let with = c.command(qr, qm, qm2, dt, 35.15065188248547 * 5.0);
         assert!((with - 35.15065188248547 * (vir + 5.0)).abs() < 1e-9);
         assert!((c.command(1.0, 0.0, 0.0, dt, 0.0) - 351.5065188248547).abs() < 1e-9);
-        assert!(Controller::Pd { kp: 0.0, kd: 1.0, tau_max: 1.0 }.validate().is_err());
-        assert!(Controller::Pd { kp: 1.0, kd: 1.0, tau_max: f64::INFINITY }.validate().is_ok());
-        assert!(Controller::Pd { kp: 1.0, kd: 1.0, tau_max: f64::NAN }.validate().is_err());
+        assert!(Controller::Pd {
+            kp: 0.0,
+            kd: 1.0,
+            tau_max: 1.0
+        }
+        .validate()
+        .is_err());
+        assert!(Controller::Pd {
+            kp: 1.0,
+            kd: 1.0,
+            tau_max: f64::INFINITY
+        }
+        .validate()
+        .is_ok());
+        assert!(Controller::Pd {
+            kp: 1.0,
+            kd: 1.0,
+            tau_max: f64::NAN
+        }
+        .validate()
+        .is_err());
     }
 }

@@ -20,7 +20,7 @@
 //! elongation is `q2 = q12 − q1`.
 
 use crate::error::{invalid, Result};
-use nalgebra::SVector;
+use nalgebra::{SMatrix, SVector};
 
 /// Index of the motor (actuated, measured) degree of freedom.
 pub const MOTOR: usize = 0;
@@ -129,6 +129,32 @@ impl Basis {
     }
 }
 
+impl Basis {
+    /// Adds `value · ∂φ/∂q` to `dq` and `value · ∂φ/∂q̇` to `dv` (`[row dof, column dof]`),
+    /// for the non-inertial terms; used by the sensitivity equations.
+    #[inline(always)]
+    fn accumulate_partials<const N: usize>(
+        &self,
+        value: f64,
+        qd: &SVector<f64, N>,
+        eps: f64,
+        dq: &mut SMatrix<f64, N, N>,
+        dv: &mut SMatrix<f64, N, N>,
+    ) {
+        match *self {
+            Basis::Inertia { .. } | Basis::Offset { .. } => {}
+            Basis::Viscous { dof } => dv[(dof, dof)] += value,
+            Basis::Coulomb { dof } => dv[(dof, dof)] += value * coulomb_sign_derivative(qd[dof], eps),
+            Basis::Spring { a, b } => {
+                dq[(a, a)] += value;
+                dq[(a, b)] -= value;
+                dq[(b, a)] -= value;
+                dq[(b, b)] += value;
+            }
+        }
+    }
+}
+
 /// A model: named parameters, each with its basis function, on `N` degrees of freedom.
 ///
 /// The structure is separate from the parameter values `χ` (a slice in the
@@ -207,7 +233,12 @@ impl<const N: usize> Model<N> {
 
     /// Returns a copy with another Coulomb velocity scale.
     pub fn with_coulomb_eps(&self, coulomb_eps: f64) -> Result<Self> {
-        let terms = self.names.iter().cloned().zip(self.basis.iter().copied()).collect();
+        let terms = self
+            .names
+            .iter()
+            .cloned()
+            .zip(self.basis.iter().copied())
+            .collect();
         Self::new(terms, coulomb_eps)
     }
 
@@ -287,6 +318,29 @@ impl<const N: usize> Model<N> {
             }
         }
         (u - f).component_mul(inv_mass)
+    }
+
+    /// Jacobians of the accelerations of the direct model with respect to the
+    /// positions and the velocities, `(∂q̈/∂q, ∂q̈/∂q̇)`, at `(q, q̇)`.
+    #[inline]
+    pub fn accel_partials(
+        &self,
+        chi: &[f64],
+        inv_mass: &SVector<f64, N>,
+        qd: &SVector<f64, N>,
+    ) -> (SMatrix<f64, N, N>, SMatrix<f64, N, N>) {
+        let mut dq = SMatrix::<f64, N, N>::zeros();
+        let mut dv = SMatrix::<f64, N, N>::zeros();
+        for (b, &v) in self.basis.iter().zip(chi) {
+            b.accumulate_partials(v, qd, self.coulomb_eps, &mut dq, &mut dv);
+        }
+        for d in 0..N {
+            for e in 0..N {
+                dq[(d, e)] *= -inv_mass[d];
+                dv[(d, e)] *= -inv_mass[d];
+            }
+        }
+        (dq, dv)
     }
 
     /// The regressor row block of one sample: `out[d * p + j] = φ_j` of dof `d`
@@ -378,18 +432,24 @@ pub fn rigid(offset: bool, coulomb_eps: f64) -> Result<Model<1>> {
 /// The flexible two-mass model, eqs. (2)-(4): `M1, Fv1, Fc1` on the motor side,
 /// `M2, Fv2, Fc2` on the load side, `K12` the coupling stiffness.
 pub fn flexible(coulomb_eps: f64) -> Result<Model<2>> {
-    Model::new(
-        vec![
-            ("M1".to_string(), Basis::Inertia { dof: MOTOR }),
-            ("Fv1".to_string(), Basis::Viscous { dof: MOTOR }),
-            ("Fc1".to_string(), Basis::Coulomb { dof: MOTOR }),
-            ("M2".to_string(), Basis::Inertia { dof: LOAD }),
-            ("Fv2".to_string(), Basis::Viscous { dof: LOAD }),
-            ("Fc2".to_string(), Basis::Coulomb { dof: LOAD }),
-            ("K12".to_string(), Basis::Spring { a: MOTOR, b: LOAD }),
-        ],
-        coulomb_eps,
-    )
+    flexible_with(false, coulomb_eps)
+}
+
+/// The flexible model with, when `offset`, a constant motor-side force `OF` (N).
+pub fn flexible_with(offset: bool, coulomb_eps: f64) -> Result<Model<2>> {
+    let mut terms = vec![
+        ("M1".to_string(), Basis::Inertia { dof: MOTOR }),
+        ("Fv1".to_string(), Basis::Viscous { dof: MOTOR }),
+        ("Fc1".to_string(), Basis::Coulomb { dof: MOTOR }),
+        ("M2".to_string(), Basis::Inertia { dof: LOAD }),
+        ("Fv2".to_string(), Basis::Viscous { dof: LOAD }),
+        ("Fc2".to_string(), Basis::Coulomb { dof: LOAD }),
+        ("K12".to_string(), Basis::Spring { a: MOTOR, b: LOAD }),
+    ];
+    if offset {
+        terms.push(("OF".to_string(), Basis::Offset { dof: MOTOR }));
+    }
+    Model::new(terms, coulomb_eps)
 }
 
 #[cfg(test)]
@@ -447,9 +507,21 @@ mod tests {
         let e = Model::<1>::new(vec![("M".into(), Basis::Inertia { dof: 1 })], 0.0).unwrap_err();
         assert!(e.to_string().contains("outside"));
         let r = rigid(true, 1e-4).unwrap();
-        assert!(r.check_params(&[1.0, 2.0]).unwrap_err().to_string().contains("expected 4"));
-        assert!(r.check_params(&[-1.0, 2.0, 1.0, 0.0]).unwrap_err().to_string().contains("mass M"));
-        assert!(r.check_params(&[1.0, f64::NAN, 1.0, 0.0]).unwrap_err().to_string().contains("Fv"));
+        assert!(r
+            .check_params(&[1.0, 2.0])
+            .unwrap_err()
+            .to_string()
+            .contains("expected 4"));
+        assert!(r
+            .check_params(&[-1.0, 2.0, 1.0, 0.0])
+            .unwrap_err()
+            .to_string()
+            .contains("mass M"));
+        assert!(r
+            .check_params(&[1.0, f64::NAN, 1.0, 0.0])
+            .unwrap_err()
+            .to_string()
+            .contains("Fv"));
         let f = flexible(1e-4).unwrap();
         let e = f.check_params(&[1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]).unwrap_err();
         assert!(e.to_string().contains("stiffness K12"));

@@ -45,13 +45,19 @@ impl SimOptions {
 
     fn validate(&self) -> Result<()> {
         if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(invalid!("sample period dt must be finite and > 0 s, got {}", self.dt));
+            return Err(invalid!(
+                "sample period dt must be finite and > 0 s, got {}",
+                self.dt
+            ));
         }
         if self.substeps == 0 {
             return Err(invalid!("substeps must be at least 1 (default 10)"));
         }
         if self.substeps > 100_000 {
-            return Err(invalid!("substeps = {} is unreasonably large (at most 100000)", self.substeps));
+            return Err(invalid!(
+                "substeps = {} is unreasonably large (at most 100000)",
+                self.substeps
+            ));
         }
         if !(self.quantization.is_finite() && self.quantization >= 0.0) {
             return Err(invalid!(
@@ -94,9 +100,198 @@ pub fn simulate<const N: usize>(
     u_ext: Option<&[f64]>,
     opts: &SimOptions,
 ) -> Result<SimOutput> {
-    model.check_params(chi)?;
-    controller.validate()?;
-    opts.validate()?;
+    run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)
+}
+
+/// Output of [`simulate_sensitivity`]: the simulation and the derivatives of its
+/// outputs with respect to the parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensOutput {
+    /// The simulation itself.
+    pub sim: SimOutput,
+    /// `∂force[k]/∂χ_j`, layout `[j][k]` (p rows of n samples).
+    pub dforce: Vec<f64>,
+    /// `∂q_d[k]/∂χ_j`, layout `[d][j][k]`.
+    pub dq: Vec<f64>,
+}
+
+/// Simulates like [`simulate`] and integrates, with the same RK4 stages, the
+/// forward sensitivity equations of the closed loop: `Ṡq = Sv`,
+/// `Ṡv = ∂q̈/∂q·Sq + ∂q̈/∂q̇·Sv + ∂q̈/∂χ + ∂q̈/∂τ·∂τ/∂χ`, where the held command's
+/// sensitivity `∂τ[k]/∂χ` follows from the controller's response to the measured
+/// motor position at samples `k` and `k − 2` (zero while saturated). The
+/// quantizer is treated as the identity. The derivatives come from the same model
+/// definition as the dynamics and the regressor.
+pub fn simulate_sensitivity<const N: usize>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+) -> Result<SensOutput> {
+    let p = model.n_params();
+    let mut t = Sensitivity::<N>::new(p, qr.len(), opts.delay);
+    let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
+    Ok(SensOutput {
+        sim,
+        dforce: t.dforce,
+        dq: t.dq,
+    })
+}
+
+/// One RK4 stage of the state: position, velocity, acceleration.
+type Stage<const N: usize> = (SVector<f64, N>, SVector<f64, N>, SVector<f64, N>);
+
+/// What rides along the state through the simulation loop: nothing for a plain
+/// simulation, the sensitivity matrices for [`simulate_sensitivity`].
+trait Tangent<const N: usize> {
+    /// The command of sample `k` has been computed; `dtau_dqm`, `dtau_dqm2` are its
+    /// derivatives with respect to the measurements at `k` and `k − 2`.
+    fn command(&mut self, k: usize, dtau_dqm: f64, dtau_dqm2: f64);
+    /// Records the state outputs of sample `k`.
+    fn record(&mut self, k: usize);
+    /// Advances by one RK4 substep of length `h` through the state's four stages.
+    fn substep(
+        &mut self,
+        model: &Model<N>,
+        chi: &[f64],
+        inv_mass: &SVector<f64, N>,
+        stages: &[Stage<N>; 4],
+        h: f64,
+    );
+}
+
+struct NoTangent;
+
+impl<const N: usize> Tangent<N> for NoTangent {
+    #[inline(always)]
+    fn command(&mut self, _: usize, _: f64, _: f64) {}
+    #[inline(always)]
+    fn record(&mut self, _: usize) {}
+    #[inline(always)]
+    fn substep(&mut self, _: &Model<N>, _: &[f64], _: &SVector<f64, N>, _: &[Stage<N>; 4], _: f64) {}
+}
+
+/// Sensitivities `Sq = ∂q/∂χ`, `Sv = ∂q̇/∂χ` (dof × parameter, flat `[d * p + j]`)
+/// and the work buffers of their RK4 integration.
+struct Sensitivity<const N: usize> {
+    p: usize,
+    n: usize,
+    sq: Vec<f64>,
+    sv: Vec<f64>,
+    /// `∂q1/∂χ` at samples k−1 and k−2.
+    sq1_hist: [Vec<f64>; 2],
+    /// Sensitivity of the force applied over the current period.
+    dtau: Vec<f64>,
+    /// Delayed command sensitivities (ring buffer, like the commands).
+    pending: Vec<Vec<f64>>,
+    dforce: Vec<f64>,
+    dq: Vec<f64>,
+    // RK4 work buffers
+    kq: [Vec<f64>; 4],
+    kv: [Vec<f64>; 4],
+    stage_q: Vec<f64>,
+    stage_v: Vec<f64>,
+    phi: Vec<f64>,
+}
+
+impl<const N: usize> Sensitivity<N> {
+    fn new(p: usize, n: usize, delay: usize) -> Self {
+        let z = vec![0.0; N * p];
+        Self {
+            p,
+            n,
+            sq: z.clone(),
+            sv: z.clone(),
+            sq1_hist: [vec![0.0; p], vec![0.0; p]],
+            dtau: vec![0.0; p],
+            pending: vec![vec![0.0; p]; delay],
+            dforce: vec![0.0; p * n],
+            dq: vec![0.0; N * p * n],
+            kq: [z.clone(), z.clone(), z.clone(), z.clone()],
+            kv: [z.clone(), z.clone(), z.clone(), z.clone()],
+            stage_q: z.clone(),
+            stage_v: z.clone(),
+            phi: z,
+        }
+    }
+}
+
+impl<const N: usize> Tangent<N> for Sensitivity<N> {
+    fn command(&mut self, k: usize, dtau_dqm: f64, dtau_dqm2: f64) {
+        let (p, n, d) = (self.p, self.n, self.pending.len());
+        // ∂τ[k]/∂χ from ∂q1[k]/∂χ (the current state) and ∂q1[k−2]/∂χ.
+        let cmd = if d == 0 {
+            &mut self.dtau
+        } else {
+            // the slot of sample k held the command of sample k − d: apply it now
+            let slot = &mut self.pending[k % d];
+            std::mem::swap(&mut self.dtau, slot);
+            slot
+        };
+        for j in 0..p {
+            cmd[j] = dtau_dqm * self.sq[j] + dtau_dqm2 * self.sq1_hist[1][j];
+            self.dforce[j * n + k] = cmd[j];
+        }
+        self.sq1_hist.swap(0, 1);
+        self.sq1_hist[0].copy_from_slice(&self.sq[..p]);
+    }
+
+    fn record(&mut self, k: usize) {
+        let (p, n) = (self.p, self.n);
+        for d in 0..N {
+            for j in 0..p {
+                self.dq[(d * p + j) * n + k] = self.sq[d * p + j];
+            }
+        }
+    }
+
+    fn substep(
+        &mut self,
+        model: &Model<N>,
+        chi: &[f64],
+        inv_mass: &SVector<f64, N>,
+        stages: &[Stage<N>; 4],
+        h: f64,
+    ) {
+        let p = self.p;
+        let len = N * p;
+        for (i, (q, v, a)) in stages.iter().enumerate() {
+            if i == 0 {
+                self.stage_q.copy_from_slice(&self.sq);
+                self.stage_v.copy_from_slice(&self.sv);
+            } else {
+                let f = if i == 3 { h } else { 0.5 * h };
+                for x in 0..len {
+                    self.stage_q[x] = self.sq[x] + f * self.kq[i - 1][x];
+                    self.stage_v[x] = self.sv[x] + f * self.kv[i - 1][x];
+                }
+            }
+            let (aq, av) = model.accel_partials(chi, inv_mass, v);
+            model.regressor_into(q, v, a, &mut self.phi);
+            for d in 0..N {
+                for j in 0..p {
+                    let mut s = -self.phi[d * p + j] * inv_mass[d];
+                    for e in 0..N {
+                        s += aq[(d, e)] * self.stage_q[e * p + j] + av[(d, e)] * self.stage_v[e * p + j];
+                    }
+                    if d == 0 {
+                        s += inv_mass[0] * self.dtau[j];
+                    }
+                    self.kv[i][d * p + j] = s;
+                    self.kq[i][d * p + j] = self.stage_v[d * p + j];
+                }
+            }
+        }
+        for x in 0..len {
+            self.sq[x] += h / 6.0 * (self.kq[0][x] + 2.0 * (self.kq[1][x] + self.kq[2][x]) + self.kq[3][x]);
+            self.sv[x] += h / 6.0 * (self.kv[0][x] + 2.0 * (self.kv[1][x] + self.kv[2][x]) + self.kv[3][x]);
+        }
+    }
+}
+
+fn validate_signals(qr: &[f64], u_ext: Option<&[f64]>) -> Result<usize> {
     let n = qr.len();
     if n == 0 {
         return Err(invalid!("the reference position qr is empty"));
@@ -115,8 +310,27 @@ pub fn simulate<const N: usize>(
             return Err(invalid!("external input is not finite at sample {k}"));
         }
     }
+    Ok(n)
+}
 
-    let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+/// The simulation loop shared by [`simulate`] and [`simulate_sensitivity`].
+fn run<const N: usize, T: Tangent<N>>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+    tangent: &mut T,
+) -> Result<SimOutput> {
+    model.check_params(chi)?;
+    controller.validate()?;
+    opts.validate()?;
+    let n = validate_signals(qr, u_ext)?;
+
+    let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+        (a.min(x), b.max(x))
+    });
     let bound = 10.0 * (hi - lo) + 1.0;
 
     let inv_mass = model.masses(chi).map(|m| 1.0 / m);
@@ -149,7 +363,9 @@ pub fn simulate<const N: usize>(
 
     for k in 0..n {
         let qm = quantize(q[0]);
-        let tau_cmd = controller.command(qr[k], qm, qm2, opts.dt, u_ext.map_or(0.0, |u| u[k]));
+        let (tau_cmd, dtau_dqm, dtau_dqm2) =
+            controller.command_with_partials(qr[k], qm, qm2, opts.dt, u_ext.map_or(0.0, |u| u[k]));
+        tangent.command(k, dtau_dqm, dtau_dqm2);
         qm2 = qm1;
         qm1 = qm;
         let tau = if opts.delay == 0 {
@@ -165,6 +381,7 @@ pub fn simulate<const N: usize>(
             out.qd[d].push(qd[d]);
             out.qdd[d].push(a[d]);
         }
+        tangent.record(k);
         if k + 1 == n {
             break;
         }
@@ -175,13 +392,20 @@ pub fn simulate<const N: usize>(
             if s > 0 {
                 a1 = accel(&q, &qd, tau);
             }
-            let (v1, q2, v2) = (qd, q + qd * (0.5 * h), qd + a1 * (0.5 * h));
+            let (q2, v2) = (q + qd * (0.5 * h), qd + a1 * (0.5 * h));
             let a2 = accel(&q2, &v2, tau);
             let (q3, v3) = (q + v2 * (0.5 * h), qd + a2 * (0.5 * h));
             let a3 = accel(&q3, &v3, tau);
             let (q4, v4) = (q + v3 * h, qd + a3 * h);
             let a4 = accel(&q4, &v4, tau);
-            q += (v1 + (v2 + v3) * 2.0 + v4) * (h / 6.0);
+            tangent.substep(
+                model,
+                chi,
+                &inv_mass,
+                &[(q, qd, a1), (q2, v2, a2), (q3, v3, a3), (q4, v4, a4)],
+                h,
+            );
+            q += (qd + (v2 + v3) * 2.0 + v4) * (h / 6.0);
             qd += (a1 + (a2 + a3) * 2.0 + a4) * (h / 6.0);
         }
 

@@ -15,7 +15,11 @@ pub fn slice1<'a>(a: &'a PyReadonlyArray1<'_, f64>) -> Cow<'a, [f64]> {
 
 /// The rows of a 2-D array as vectors.
 pub fn rows2(a: &PyReadonlyArray2<'_, f64>) -> Vec<Vec<f64>> {
-    a.as_array().rows().into_iter().map(|r| r.iter().copied().collect()).collect()
+    a.as_array()
+        .rows()
+        .into_iter()
+        .map(|r| r.iter().copied().collect())
+        .collect()
 }
 
 /// The columns of a 2-D array (n, p), column-major, and p.
@@ -38,8 +42,12 @@ pub fn rows_to_array<'py>(py: Python<'py>, rows: Vec<Vec<f64>>) -> PyResult<Boun
 }
 
 /// A column-major (n, p) buffer -> a 2-D numpy array (n, p).
-pub fn colmajor_to_array<'py>(py: Python<'py>, data: Vec<f64>, n: usize, p: usize) -> PyResult<Bound<'py, PyAny>> {
+pub fn colmajor_to_array<'py>(
+    py: Python<'py>,
+    data: Vec<f64>,
+    n: usize,
+    p: usize,
+) -> PyResult<Bound<'py, PyAny>> {
     let a = PyArray1::from_vec(py, data).reshape([p, n])?;
     a.call_method0("transpose")
 }
-

@@ -33,7 +33,9 @@ fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> Result<T, Error> + Send) -> 
             Err(py_error(
                 py,
                 "DidimError",
-                format!("internal error in didim's core (please report it with the input that caused it): {what}"),
+                format!(
+                    "internal error in didim's core (please report it with the input that caused it): {what}"
+                ),
             ))
         }
     }
@@ -82,15 +84,34 @@ fn make_model(kind: &str, offset: bool, coulomb_eps: f64) -> Result<AnyModel, Er
 
 fn make_controller(kind: &str, gains: &[f64]) -> Result<Controller, Error> {
     let c = match (kind, gains) {
-        ("emps", [kp, kv, gtau, vsat]) => Controller::EmpsCascade { kp: *kp, kv: *kv, gtau: *gtau, vsat: *vsat },
-        ("pd", [kp, kd, tau_max]) => Controller::Pd { kp: *kp, kd: *kd, tau_max: *tau_max },
+        ("emps", [kp, kv, gtau, vsat]) => Controller::EmpsCascade {
+            kp: *kp,
+            kv: *kv,
+            gtau: *gtau,
+            vsat: *vsat,
+        },
+        ("pd", [kp, kd, tau_max]) => Controller::Pd {
+            kp: *kp,
+            kd: *kd,
+            tau_max: *tau_max,
+        },
         ("emps", g) => {
-            return Err(Error::InvalidInput(format!("the emps controller takes 4 gains (kp, kv, gtau, vsat), got {}", g.len())))
+            return Err(Error::InvalidInput(format!(
+                "the emps controller takes 4 gains (kp, kv, gtau, vsat), got {}",
+                g.len()
+            )))
         }
         ("pd", g) => {
-            return Err(Error::InvalidInput(format!("the pd controller takes 3 gains (kp, kd, tau_max), got {}", g.len())))
+            return Err(Error::InvalidInput(format!(
+                "the pd controller takes 3 gains (kp, kd, tau_max), got {}",
+                g.len()
+            )))
         }
-        (other, _) => return Err(Error::InvalidInput(format!("unknown controller {other:?}: use \"emps\" or \"pd\""))),
+        (other, _) => {
+            return Err(Error::InvalidInput(format!(
+                "unknown controller {other:?}: use \"emps\" or \"pd\""
+            )))
+        }
     };
     c.validate()?;
     Ok(c)
@@ -129,7 +150,12 @@ fn simulate<'py>(
     let chi = slice1(&params);
     let qr = slice1(&qr);
     let u = u_ext.as_ref().map(slice1);
-    let opts = sim::SimOptions { dt, substeps, quantization, delay };
+    let opts = sim::SimOptions {
+        dt,
+        substeps,
+        quantization,
+        delay,
+    };
     let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
     let out = run(py, || {
         let c = make_controller(controller, &gains)?;

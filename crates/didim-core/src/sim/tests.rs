@@ -1,4 +1,5 @@
 use super::*;
+use crate::sim::simulate_sensitivity;
 use crate::model::{flexible, rigid, Basis, Model};
 
 fn pd(kp: f64, kd: f64) -> Controller {
@@ -55,7 +56,10 @@ fn frictionless_rigid_axis_under_pd_matches_exact_discretization() {
     let dt = 1e-3;
     let qr = trapezoid(3000, dt);
     let model = Model::<1>::new(
-        vec![("M".into(), Basis::Inertia { dof: 0 }), ("Fv".into(), Basis::Viscous { dof: 0 })],
+        vec![
+            ("M".into(), Basis::Inertia { dof: 0 }),
+            ("Fv".into(), Basis::Viscous { dof: 0 }),
+        ],
         0.0,
     )
     .unwrap();
@@ -64,15 +68,25 @@ fn frictionless_rigid_axis_under_pd_matches_exact_discretization() {
     let (qx, fx) = exact_pd_viscous(m, fv, kp, kd, &qr, dt);
     let scale_q = qx.iter().fold(0.0f64, |a, x| a.max(x.abs()));
     let scale_f = fx.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-    let eq = out.q[0].iter().zip(&qx).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
-    let ef = out.force.iter().zip(&fx).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+    let eq = out.q[0]
+        .iter()
+        .zip(&qx)
+        .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+    let ef = out
+        .force
+        .iter()
+        .zip(&fx)
+        .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
     assert!(eq / scale_q < 1e-9, "position error {eq}");
     assert!(ef / scale_f < 1e-7, "force error {ef} of {scale_f}");
     // Pure inertia (Fv → 0): RK4 is exact for a constant force, so agreement is at rounding level.
     let model = Model::<1>::new(vec![("M".into(), Basis::Inertia { dof: 0 })], 0.0).unwrap();
     let out = simulate(&model, &[m], &pd(kp, kd), &qr, None, &SimOptions::new(dt)).unwrap();
     let (qx, _) = exact_pd_viscous(m, 0.0, kp, kd, &qr, dt);
-    let eq = out.q[0].iter().zip(&qx).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+    let eq = out.q[0]
+        .iter()
+        .zip(&qx)
+        .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
     assert!(eq / scale_q < 1e-11, "position error {eq}");
 }
 
@@ -99,7 +113,12 @@ fn load_oscillates_at_sqrt_k12_over_m2_with_the_motor_blocked() {
     assert!(crossings.len() > 50, "{} crossings", crossings.len());
     let period = (crossings[crossings.len() - 1] - crossings[0]) * dt / (crossings.len() - 1) as f64;
     let f_expected = (k12 / m2).sqrt() / (2.0 * std::f64::consts::PI);
-    assert!(((1.0 / period) - f_expected).abs() / f_expected < 1e-3, "{} vs {}", 1.0 / period, f_expected);
+    assert!(
+        ((1.0 / period) - f_expected).abs() / f_expected < 1e-3,
+        "{} vs {}",
+        1.0 / period,
+        f_expected
+    );
 }
 
 #[test]
@@ -120,11 +139,17 @@ fn rk4_error_falls_with_the_fourth_power_of_the_substep() {
     let reference = run(64);
     let err = |s: usize| {
         let o = run(s);
-        o.q[1].iter().zip(&reference.q[1]).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()))
+        o.q[1]
+            .iter()
+            .zip(&reference.q[1])
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()))
     };
     let (e1, e2, e4) = (err(1), err(2), err(4));
     let (o1, o2) = ((e1 / e2).log2(), (e2 / e4).log2());
-    assert!((3.5..4.5).contains(&o1) && (3.5..4.5).contains(&o2), "orders {o1} {o2} ({e1} {e2} {e4})");
+    assert!(
+        (3.5..4.5).contains(&o1) && (3.5..4.5).contains(&o2),
+        "orders {o1} {o2} ({e1} {e2} {e4})"
+    );
 }
 
 #[test]
@@ -162,16 +187,34 @@ fn external_input_and_saturation_enter_the_command() {
     let dt = 1e-3;
     let n = 500;
     let qr = vec![0.0; n];
-    let u: Vec<f64> = (0..n).map(|k| if (100..200).contains(&k) { 100.0 } else { 0.0 }).collect();
+    let u: Vec<f64> = (0..n)
+        .map(|k| if (100..200).contains(&k) { 100.0 } else { 0.0 })
+        .collect();
     let model = rigid(false, 1e-4).unwrap();
     let chi = [95.0, 200.0, 20.0];
-    let out = simulate(&model, &chi, &Controller::EMPS, &qr, Some(&u), &SimOptions::new(dt)).unwrap();
+    let out = simulate(
+        &model,
+        &chi,
+        &Controller::EMPS,
+        &qr,
+        Some(&u),
+        &SimOptions::new(dt),
+    )
+    .unwrap();
     assert_eq!(out.force[50], 0.0);
     assert!((out.force[100] - 100.0).abs() < 1e-12); // the pulse arrives before any motion
     assert!(out.q[0][199] > 0.0);
     // a huge input saturates at gtau*vsat
     let big: Vec<f64> = vec![1e6; n];
-    let out = simulate(&model, &chi, &Controller::EMPS, &qr, Some(&big), &SimOptions::new(dt)).unwrap();
+    let out = simulate(
+        &model,
+        &chi,
+        &Controller::EMPS,
+        &qr,
+        Some(&big),
+        &SimOptions::new(dt),
+    )
+    .unwrap();
     assert!((out.force[0] - 351.5065188248547).abs() < 1e-9);
 }
 
@@ -204,8 +247,72 @@ fn bad_inputs_are_invalid_input_errors() {
     };
     is_invalid(simulate(&model, &chi, &c, &[], None, &o), "empty");
     is_invalid(simulate(&model, &chi, &c, &[0.0, f64::NAN], None, &o), "sample 1");
-    is_invalid(simulate(&model, &chi, &c, &[0.0; 3], Some(&[0.0; 2]), &o), "external input");
-    is_invalid(simulate(&model, &chi, &c, &[0.0; 3], None, &SimOptions { substeps: 0, ..o }), "substeps");
-    is_invalid(simulate(&model, &chi, &c, &[0.0; 3], None, &SimOptions::new(-1.0)), "dt");
-    is_invalid(simulate(&model, &[0.0, 1.0, 1.0, 0.0], &c, &[0.0; 3], None, &o), "mass M");
+    is_invalid(
+        simulate(&model, &chi, &c, &[0.0; 3], Some(&[0.0; 2]), &o),
+        "external input",
+    );
+    is_invalid(
+        simulate(
+            &model,
+            &chi,
+            &c,
+            &[0.0; 3],
+            None,
+            &SimOptions { substeps: 0, ..o },
+        ),
+        "substeps",
+    );
+    is_invalid(
+        simulate(&model, &chi, &c, &[0.0; 3], None, &SimOptions::new(-1.0)),
+        "dt",
+    );
+    is_invalid(
+        simulate(&model, &[0.0, 1.0, 1.0, 0.0], &c, &[0.0; 3], None, &o),
+        "mass M",
+    );
+}
+
+fn check_sensitivities<const N: usize>(model: &Model<N>, chi: &[f64], delay: usize) {
+    let dt = 1e-3;
+    let qr = trapezoid(1500, dt);
+    let opts = SimOptions {
+        delay,
+        ..SimOptions::new(dt)
+    };
+    let c = Controller::EMPS;
+    let s = simulate_sensitivity(model, chi, &c, &qr, None, &opts).unwrap();
+    let plain = simulate(model, chi, &c, &qr, None, &opts).unwrap();
+    assert_eq!(s.sim, plain, "the tangent must not change the simulation");
+    let n = qr.len();
+    for j in 0..chi.len() {
+        let h = 1e-6 * chi[j].abs().max(1e-3);
+        let (mut up, mut dn) = (chi.to_vec(), chi.to_vec());
+        up[j] += h;
+        dn[j] -= h;
+        let fu = simulate(model, &up, &c, &qr, None, &opts).unwrap();
+        let fd = simulate(model, &dn, &c, &qr, None, &opts).unwrap();
+        let num: Vec<f64> = fu.force.iter().zip(&fd.force).map(|(a, b)| (a - b) / (2.0 * h)).collect();
+        let ana = &s.dforce[j * n..(j + 1) * n];
+        let scale = num.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let err = num.iter().zip(ana).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        assert!(err <= 1e-4 * scale, "param {} force sensitivity error {err:e} of {scale:e}", model.names()[j]);
+        let numq: Vec<f64> = fu.q[N - 1].iter().zip(&fd.q[N - 1]).map(|(a, b)| (a - b) / (2.0 * h)).collect();
+        let p = chi.len();
+        let anaq = &s.dq[((N - 1) * p + j) * n..((N - 1) * p + j + 1) * n];
+        let scale = numq.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let err = numq.iter().zip(anaq).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        assert!(err <= 1e-4 * scale, "param {} position sensitivity error {err:e} of {scale:e}", model.names()[j]);
+    }
+}
+
+#[test]
+fn sensitivities_match_finite_differences_for_the_flexible_model() {
+    let model = flexible(1e-3).unwrap();
+    check_sensitivities(&model, &[68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5], 0);
+}
+
+#[test]
+fn sensitivities_match_finite_differences_for_the_rigid_model_with_delay() {
+    let model = rigid(true, 1e-3).unwrap();
+    check_sensitivities(&model, &[95.0, 203.0, 20.0, -3.0], 2);
 }
