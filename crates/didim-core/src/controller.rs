@@ -57,7 +57,7 @@ impl Controller {
                 return Err(invalid!("controller gain {name} must be finite and > 0, got {g}"));
             }
         }
-        if !(sat > 0.0) || sat.is_nan() {
+        if sat.is_nan() || sat <= 0.0 {
             return Err(invalid!(
                 "controller saturation {sat_name} must be > 0 (or infinite for none), got {sat}"
             ));

@@ -12,6 +12,9 @@
 //!
 //! Pure Rust: no Python types. SI units on the load side throughout.
 
+// Numerical kernels index like the equations they implement.
+#![allow(clippy::needless_range_loop)]
+
 pub mod controller;
 pub mod error;
 pub mod filter;

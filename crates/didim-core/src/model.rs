@@ -198,7 +198,7 @@ impl<const N: usize> Model<N> {
             basis.push(b);
         }
         for dof in 0..N {
-            if !basis.iter().any(|b| *b == Basis::Inertia { dof }) {
+            if !basis.contains(&Basis::Inertia { dof }) {
                 return Err(invalid!(
                     "degree of freedom {dof} has no inertia term: add a mass parameter for it"
                 ));

@@ -8,8 +8,10 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use didim_core::error::Error;
+use didim_core::filter::{self as flt, Decimator, FilterForm};
+use didim_core::lstsq::{LstsqOptions, SigmaConvention};
 use didim_core::model::{self, Model, DEFAULT_COULOMB_EPS};
-use didim_core::{sim, Controller};
+use didim_core::{lstsq as ls, sim, Controller};
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -72,10 +74,7 @@ enum AnyModel {
 fn make_model(kind: &str, offset: bool, coulomb_eps: f64) -> Result<AnyModel, Error> {
     match kind {
         "rigid" => Ok(AnyModel::Rigid(model::rigid(offset, coulomb_eps)?)),
-        "flexible" if offset => Err(Error::InvalidInput(
-            "offset is only available for the rigid model".into(),
-        )),
-        "flexible" => Ok(AnyModel::Flexible(model::flexible(coulomb_eps)?)),
+        "flexible" => Ok(AnyModel::Flexible(model::flexible_with(offset, coulomb_eps)?)),
         other => Err(Error::InvalidInput(format!(
             "unknown model {other:?}: use \"rigid\" or \"flexible\""
         ))),
@@ -195,6 +194,268 @@ fn regressor<'py>(
     a.call_method1("transpose", ((0, 2, 1),))
 }
 
+/// Closed-loop simulation with forward sensitivities; the dict of `simulate` plus
+/// dforce (p, n) and dq (ndof, p, n).
+#[pyfunction]
+#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false))]
+#[allow(clippy::too_many_arguments)]
+fn simulate_sensitivity<'py>(
+    py: Python<'py>,
+    model: &str,
+    params: PyReadonlyArray1<'py, f64>,
+    qr: PyReadonlyArray1<'py, f64>,
+    dt: f64,
+    controller: &str,
+    gains: Vec<f64>,
+    u_ext: Option<PyReadonlyArray1<'py, f64>>,
+    substeps: usize,
+    quantization: f64,
+    delay: usize,
+    coulomb_eps: f64,
+    offset: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let chi = slice1(&params);
+    let qr = slice1(&qr);
+    let u = u_ext.as_ref().map(slice1);
+    let opts = sim::SimOptions {
+        dt,
+        substeps,
+        quantization,
+        delay,
+    };
+    let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
+    let n = qr.len();
+    let (ndof, out) = run(py, || {
+        let c = make_controller(controller, &gains)?;
+        match make_model(model, offset, coulomb_eps)? {
+            AnyModel::Rigid(m) => Ok((1, sim::simulate_sensitivity(&m, chi, &c, qr, u, &opts)?)),
+            AnyModel::Flexible(m) => Ok((2, sim::simulate_sensitivity(&m, chi, &c, qr, u, &opts)?)),
+        }
+    })?;
+    let p = chi.len();
+    let d = PyDict::new(py);
+    d.set_item("force", out.sim.force.into_pyarray(py))?;
+    d.set_item("q", rows_to_array(py, out.sim.q)?)?;
+    d.set_item("qd", rows_to_array(py, out.sim.qd)?)?;
+    d.set_item("qdd", rows_to_array(py, out.sim.qdd)?)?;
+    d.set_item("dforce", PyArray1::from_vec(py, out.dforce).reshape([p, n])?)?;
+    d.set_item("dq", PyArray1::from_vec(py, out.dq).reshape([ndof, p, n])?)?;
+    Ok(d)
+}
+
+/// QR least squares with covariance, paper eqs. (11)-(15). W is (r, n), y is (r,).
+#[pyfunction]
+#[pyo3(signature = (w, y, *, rank_tol=None, sigma="paper"))]
+fn lstsq<'py>(
+    py: Python<'py>,
+    w: PyReadonlyArray2<'py, f64>,
+    y: PyReadonlyArray1<'py, f64>,
+    rank_tol: Option<f64>,
+    sigma: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let sigma = match sigma {
+        "paper" => SigmaConvention::Paper,
+        "sample_std" => SigmaConvention::SampleStd,
+        other => {
+            return Err(core_error(
+                py,
+                Error::InvalidInput(format!(
+                    "unknown sigma convention {other:?}: use \"paper\" or \"sample_std\""
+                )),
+            ))
+        }
+    };
+    let (wc, r, c) = columns2(&w);
+    let y = slice1(&y);
+    let y: &[f64] = &y;
+    let opts = LstsqOptions { rank_tol, sigma };
+    let sol = run(py, || ls::lstsq(&wc, r, c, y, &opts))?;
+    let d = PyDict::new(py);
+    d.set_item("params", sol.params.into_pyarray(py))?;
+    d.set_item("std", sol.std.into_pyarray(py))?;
+    d.set_item("rel_std_pct", sol.rel_std_pct.into_pyarray(py))?;
+    d.set_item(
+        "covariance",
+        PyArray1::from_vec(py, sol.covariance).reshape([c, c])?,
+    )?;
+    d.set_item("base_columns", sol.base_columns)?;
+    let deps: Vec<(usize, Vec<(usize, f64)>)> = sol
+        .dependencies
+        .into_iter()
+        .map(|x| (x.column, x.combination))
+        .collect();
+    d.set_item("dependencies", deps)?;
+    d.set_item("rank", sol.rank)?;
+    d.set_item("rows", sol.rows)?;
+    d.set_item("residual_norm", sol.residual_norm)?;
+    d.set_item("sigma_rho", sol.sigma_rho)?;
+    d.set_item("relative_error", sol.relative_error)?;
+    d.set_item("condition_number", sol.condition_number)?;
+    d.set_item("residual", sol.residual.into_pyarray(py))?;
+    Ok(d)
+}
+
+/// Butterworth low-pass design: (b, a), or the sos array (n, 6) with `sos=True`.
+#[pyfunction]
+#[pyo3(signature = (order, wn, *, sos=false))]
+fn butter<'py>(py: Python<'py>, order: usize, wn: f64, sos: bool) -> PyResult<Bound<'py, PyAny>> {
+    design(
+        py,
+        sos,
+        move || flt::butter(order, wn),
+        move || flt::butter_sos(order, wn),
+    )
+}
+
+/// Chebyshev type I low-pass design: (b, a), or the sos array (n, 6) with `sos=True`.
+#[pyfunction]
+#[pyo3(signature = (order, rp_db, wn, *, sos=false))]
+fn cheby1<'py>(py: Python<'py>, order: usize, rp_db: f64, wn: f64, sos: bool) -> PyResult<Bound<'py, PyAny>> {
+    design(
+        py,
+        sos,
+        move || flt::cheby1(order, rp_db, wn),
+        move || flt::cheby1_sos(order, rp_db, wn),
+    )
+}
+
+fn design<'py>(
+    py: Python<'py>,
+    sos: bool,
+    ba: impl FnOnce() -> Result<flt::Tf, Error> + Send,
+    so: impl FnOnce() -> Result<flt::Sos, Error> + Send,
+) -> PyResult<Bound<'py, PyAny>> {
+    if sos {
+        let s = run(py, so)?;
+        let n = s.n_sections();
+        let flat: Vec<f64> = s.sections().iter().flatten().copied().collect();
+        Ok(PyArray1::from_vec(py, flat).reshape([n, 6])?.into_any())
+    } else {
+        let tf = run(py, ba)?;
+        Ok((tf.b.into_pyarray(py), tf.a.into_pyarray(py))
+            .into_pyobject(py)?
+            .into_any())
+    }
+}
+
+/// Zero-phase filtering, `scipy.signal.filtfilt(b, a, x, padtype="odd", padlen=padlen)`.
+#[pyfunction]
+#[pyo3(signature = (b, a, x, *, padlen=None))]
+fn filtfilt<'py>(
+    py: Python<'py>,
+    b: Vec<f64>,
+    a: Vec<f64>,
+    x: PyReadonlyArray1<'py, f64>,
+    padlen: Option<usize>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let x = slice1(&x);
+    let x: &[f64] = &x;
+    let tf = flt::Tf { b, a };
+    Ok(run(py, || flt::filtfilt(&tf, x, padlen))?.into_pyarray(py))
+}
+
+/// Zero-phase filtering with second-order sections, `scipy.signal.sosfiltfilt(sos, x, padlen=padlen)`.
+#[pyfunction]
+#[pyo3(signature = (sos, x, *, padlen=None))]
+fn sosfiltfilt<'py>(
+    py: Python<'py>,
+    sos: PyReadonlyArray2<'py, f64>,
+    x: PyReadonlyArray1<'py, f64>,
+    padlen: Option<usize>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let rows = rows2(&sos);
+    let x = slice1(&x);
+    let x: &[f64] = &x;
+    let out = run(py, || {
+        let mut secs = Vec::with_capacity(rows.len());
+        for r in &rows {
+            let s: [f64; 6] = r.as_slice().try_into().map_err(|_| {
+                Error::InvalidInput(format!(
+                    "sos must have 6 columns (b0 b1 b2 a0 a1 a2), got {}",
+                    r.len()
+                ))
+            })?;
+            secs.push(s);
+        }
+        flt::sosfiltfilt(&flt::Sos(secs), x, padlen)
+    })?;
+    Ok(out.into_pyarray(py))
+}
+
+/// Decimated y and, when given, decimated w.
+type Decimated<'py> = (Bound<'py, PyArray1<f64>>, Option<Bound<'py, PyAny>>);
+
+/// Parallel decimation of y (n,) and of every column of w (n, p): the same zero-phase low-pass and
+/// down-sampling. kind "butter" (order, cutoff_hz, fs_hz, form "sos"|"ba") or "matlab" (MATLAB's decimate).
+#[pyfunction]
+#[pyo3(signature = (y, w=None, *, factor, kind="butter", order=4, cutoff_hz=None, fs_hz=None, form="sos"))]
+#[allow(clippy::too_many_arguments)]
+fn decimate<'py>(
+    py: Python<'py>,
+    y: PyReadonlyArray1<'py, f64>,
+    w: Option<PyReadonlyArray2<'py, f64>>,
+    factor: usize,
+    kind: &str,
+    order: usize,
+    cutoff_hz: Option<f64>,
+    fs_hz: Option<f64>,
+    form: &str,
+) -> PyResult<Decimated<'py>> {
+    let y = slice1(&y);
+    let y: &[f64] = &y;
+    let (wc, n, p) = match &w {
+        Some(w) => columns2(w),
+        None => (Vec::new(), y.len(), 0),
+    };
+    let (yd, wd) = run(py, || {
+        let dec = match (kind, cutoff_hz, fs_hz) {
+            ("matlab", _, _) => Decimator::matlab(factor)?,
+            ("butter", Some(c), Some(fs)) => {
+                let form = match form {
+                    "sos" => FilterForm::Sos,
+                    "ba" => FilterForm::Ba,
+                    other => {
+                        return Err(Error::InvalidInput(format!(
+                            "unknown filter form {other:?}: use \"sos\" or \"ba\""
+                        )))
+                    }
+                };
+                Decimator::butterworth(order, c, fs, factor, form)?
+            }
+            ("butter", _, _) => {
+                return Err(Error::InvalidInput(
+                    "a Butterworth decimation needs cutoff_hz and fs_hz".into(),
+                ))
+            }
+            (other, _, _) => {
+                return Err(Error::InvalidInput(format!(
+                    "unknown decimation kind {other:?}: use \"butter\" or \"matlab\""
+                )))
+            }
+        };
+        if p > 0 && n != y.len() {
+            return Err(Error::InvalidInput(format!(
+                "w has {n} rows but y has {} samples",
+                y.len()
+            )));
+        }
+        dec.apply_parallel(y, &wc, p)
+    })?;
+    let m = yd.len();
+    let wd = if w.is_some() {
+        Some(colmajor_to_array(py, wd, m, p)?)
+    } else {
+        None
+    };
+    Ok((yd.into_pyarray(py), wd))
+}
+
+/// Down-sampling factor keeping the cutoff at 80 % of the new Nyquist frequency.
+#[pyfunction]
+fn default_factor(fs_hz: f64, cutoff_hz: f64) -> usize {
+    flt::default_factor(fs_hz, cutoff_hz)
+}
+
 /// The compiled core of didim. Use the `didim` package, not this module.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -202,5 +463,13 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(regressor, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate_sensitivity, m)?)?;
+    m.add_function(wrap_pyfunction!(lstsq, m)?)?;
+    m.add_function(wrap_pyfunction!(butter, m)?)?;
+    m.add_function(wrap_pyfunction!(cheby1, m)?)?;
+    m.add_function(wrap_pyfunction!(filtfilt, m)?)?;
+    m.add_function(wrap_pyfunction!(sosfiltfilt, m)?)?;
+    m.add_function(wrap_pyfunction!(decimate, m)?)?;
+    m.add_function(wrap_pyfunction!(default_factor, m)?)?;
     Ok(())
 }

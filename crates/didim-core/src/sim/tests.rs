@@ -1,6 +1,6 @@
 use super::*;
-use crate::sim::simulate_sensitivity;
 use crate::model::{flexible, rigid, Basis, Model};
+use crate::sim::simulate_sensitivity;
 
 fn pd(kp: f64, kd: f64) -> Controller {
     Controller::Pd {
@@ -291,17 +291,37 @@ fn check_sensitivities<const N: usize>(model: &Model<N>, chi: &[f64], delay: usi
         dn[j] -= h;
         let fu = simulate(model, &up, &c, &qr, None, &opts).unwrap();
         let fd = simulate(model, &dn, &c, &qr, None, &opts).unwrap();
-        let num: Vec<f64> = fu.force.iter().zip(&fd.force).map(|(a, b)| (a - b) / (2.0 * h)).collect();
+        let num: Vec<f64> = fu
+            .force
+            .iter()
+            .zip(&fd.force)
+            .map(|(a, b)| (a - b) / (2.0 * h))
+            .collect();
         let ana = &s.dforce[j * n..(j + 1) * n];
         let scale = num.iter().fold(0.0f64, |a, x| a.max(x.abs()));
         let err = num.iter().zip(ana).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
-        assert!(err <= 1e-4 * scale, "param {} force sensitivity error {err:e} of {scale:e}", model.names()[j]);
-        let numq: Vec<f64> = fu.q[N - 1].iter().zip(&fd.q[N - 1]).map(|(a, b)| (a - b) / (2.0 * h)).collect();
+        assert!(
+            err <= 1e-4 * scale,
+            "param {} force sensitivity error {err:e} of {scale:e}",
+            model.names()[j]
+        );
+        let numq: Vec<f64> = fu.q[N - 1]
+            .iter()
+            .zip(&fd.q[N - 1])
+            .map(|(a, b)| (a - b) / (2.0 * h))
+            .collect();
         let p = chi.len();
         let anaq = &s.dq[((N - 1) * p + j) * n..((N - 1) * p + j + 1) * n];
         let scale = numq.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-        let err = numq.iter().zip(anaq).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
-        assert!(err <= 1e-4 * scale, "param {} position sensitivity error {err:e} of {scale:e}", model.names()[j]);
+        let err = numq
+            .iter()
+            .zip(anaq)
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        assert!(
+            err <= 1e-4 * scale,
+            "param {} position sensitivity error {err:e} of {scale:e}",
+            model.names()[j]
+        );
     }
 }
 

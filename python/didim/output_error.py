@@ -1,0 +1,206 @@
+"""Closed-loop output-error methods: the Nelder-Mead baselines of section VI.F and an exact-sensitivity
+Levenberg-Marquardt solver whose Jacobian comes from the forward sensitivity equations integrated in Rust."""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from . import _core
+from ._errors import DataError, SimulationError
+from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say
+from .recording import Recording
+from .result import IdentificationResult, Iteration
+from .signal import Decimation
+from .simulation import DEFAULT_COULOMB_EPS, param_names, params_vector, simulate
+
+CRITERIA = ("force", "position")
+
+
+def pseudo_regular_initial(rigid: Dict[str, float], f_n_nat: float = 30.0) -> Dict[str, float]:
+    """Eq. (33): half the rigid totals on each side, K12 = π² f_n_nat² M_tot (M_eq = M_tot/4)."""
+    m, fv, fc = rigid["M"], rigid["Fv"], rigid["Fc"]
+    d = {"M1": m / 2, "Fv1": fv / 2, "Fc1": fc / 2, "M2": m / 2, "Fv2": fv / 2, "Fc2": fc / 2,
+         "K12": math.pi**2 * f_n_nat**2 * m}
+    if "OF" in rigid:
+        d["OF"] = rigid["OF"]
+    return d
+
+
+def _check_criterion(criterion: str) -> None:
+    if criterion not in CRITERIA:
+        raise DataError(f"criterion must be one of {', '.join(CRITERIA)}, got {criterion!r}")
+
+
+def _measured(rec: Recording, criterion: str) -> np.ndarray:
+    return rec.force if criterion == "force" else rec.qm
+
+
+def oe_nm(
+    rec: Recording,
+    model: str,
+    initial: Dict[str, float],
+    *,
+    criterion: str = "force",
+    cutoff_hz: float = FLEXIBLE_CUTOFF_HZ,
+    xatol: float = 1e-4,
+    fatol: float = 1e-6,
+    max_iter: int = 2000,
+    substeps: int = 10,
+    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    progress: Progress = None,
+) -> IdentificationResult:
+    """Nelder-Mead (scipy's) on all parameters with J_τ = ‖τ_ddm − τ‖² or J_q = ‖q1_ddm − q1‖² (eq. (32)) on
+    decimated signals. Variables are scaled by their initial values (all nonzero with eq. (33)), so ``xatol`` is
+    relative; ``fatol`` is relative to the initial criterion."""
+    from scipy.optimize import minimize
+
+    _check_criterion(criterion)
+    t0 = time.perf_counter()
+    offset = "OF" in initial
+    names, x0, offset = params_vector(model, initial, offset)
+    scale = np.where(x0 != 0, np.abs(x0), 1.0)
+    dec = Decimation.lowpass(cutoff_hz, rec.fs)
+    yd = dec(_measured(rec, criterion))
+    ny = float(np.linalg.norm(yd))
+    count = {"sim": 0}
+    history: List[Iteration] = []
+
+    def cost(z):
+        chi = z * scale
+        try:
+            s = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps)
+        except (SimulationError, DataError):
+            return 1e3 * ny**2
+        finally:
+            count["sim"] += 1
+        e = yd - dec(s.force if criterion == "force" else s.q1)
+        return float(e @ e)
+
+    def callback(zk):
+        history.append(Iteration(k=len(history) + 1, params=dict(zip(names, map(float, zk * scale))), rel_std_pct={},
+                                 relative_error=float("nan"), output_error=float("nan")))
+        if len(history) % 25 == 0:
+            _say(progress, f"oe-nm iteration {len(history)}, {count['sim']} simulations")
+
+    j0 = cost(np.ones_like(x0))
+    res = minimize(cost, np.ones_like(x0), method="Nelder-Mead", callback=callback,
+                   options=dict(xatol=xatol, fatol=fatol * j0, maxiter=max_iter, maxfev=4 * max_iter))
+    chi = res.x * scale
+    out = math.sqrt(float(res.fun)) / ny
+    nan = {n: float("nan") for n in names}
+    return IdentificationResult(
+        model=model, method=f"oe-nm ({'J_tau' if criterion == 'force' else 'J_q'})",
+        params=dict(zip(names, map(float, chi))), std=dict(nan), rel_std_pct=dict(nan),
+        relative_error=out, output_error=out, iterations=int(res.nit), simulations=count["sim"],
+        elapsed_s=time.perf_counter() - t0, converged=bool(res.success), message="" if res.success else str(res.message),
+        initial=dict(initial), history=history,
+        options=dict(criterion=criterion, decimation=dec.describe(), xatol=xatol, fatol=fatol),
+    )
+
+
+def oe_gn(
+    rec: Recording,
+    model: str,
+    initial: Dict[str, float],
+    *,
+    criterion: str = "force",
+    cutoff_hz: float = FLEXIBLE_CUTOFF_HZ,
+    frozen: Optional[Dict[str, float]] = None,
+    tol: float = 1e-8,
+    max_iter: int = 50,
+    substeps: int = 10,
+    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    progress: Progress = None,
+) -> IdentificationResult:
+    """Closed-loop output error by Levenberg-Marquardt with the exact Jacobian of the decimated simulated output
+    (motor force, or motor position), from the forward sensitivity equations of the closed loop (controller
+    included). Covariance: σ̂²(JᵀJ)⁻¹ at the solution, σ̂² = ‖r‖²/(m − p), from the same QR solver as DIDIM."""
+    _check_criterion(criterion)
+    t0 = time.perf_counter()
+    frozen = dict(frozen or {})
+    offset = "OF" in initial or "OF" in frozen
+    names = param_names(model, offset)
+    full = {**initial, **frozen}
+    names, chi, offset = params_vector(model, full, offset)
+    free = [i for i, n in enumerate(names) if n not in frozen]
+    dec = Decimation.lowpass(cutoff_hz, rec.fs)
+    measured = _measured(rec, criterion)
+    ny = float(np.linalg.norm(dec(measured)))
+    ctrl = rec.controller
+    n_sim = 0
+
+    def evaluate(x):
+        nonlocal n_sim
+        n_sim += 1
+        s = _core.simulate_sensitivity(
+            model, x, rec.qr, rec.dt, ctrl.kind, list(ctrl.gains), u_ext=rec.u_ext, substeps=substeps,
+            quantization=float(rec.position_resolution or 0.0), coulomb_eps=coulomb_eps, offset=offset)
+        if criterion == "force":
+            out, sens = s["force"], s["dforce"]
+        else:
+            out, sens = s["q"][0], s["dq"][0]
+        # residual (decimated measured − simulated) and ∂(simulated)/∂χ, decimated alike
+        return dec.apply(measured - out, sens[free].T)
+
+    try:
+        r, jac = evaluate(chi)
+    except (SimulationError, DataError) as e:
+        raise SimulationError(f"oe-gn: the simulation with the initial parameters failed: {e}") from None
+    cost = float(r @ r)
+    mu = 1e-3
+    history: List[Iteration] = []
+    converged, message = False, ""
+    for it in range(max_iter):
+        d = np.sqrt(np.sum(jac**2, axis=0))
+        d[d == 0] = 1.0
+        step_ok = False
+        for _ in range(20):
+            a = np.vstack([jac, math.sqrt(mu) * np.diag(d)])
+            b = np.concatenate([r, np.zeros(len(free))])
+            delta = np.linalg.lstsq(a, b, rcond=None)[0]
+            trial = chi.copy()
+            trial[free] += delta
+            try:
+                r_t, j_t = evaluate(trial)
+                c_t = float(r_t @ r_t)
+            except (SimulationError, DataError):
+                c_t = math.inf
+            if c_t < cost:
+                step_ok = True
+                break
+            mu *= 4.0
+        if not step_ok:
+            message = "no step decreased the criterion (local minimum or too flat)"
+            converged = True
+            break
+        rel_dec = (cost - c_t) / cost
+        rel_step = float(np.max(np.abs(delta) / np.maximum(np.abs(chi[free]), 1e-12)))
+        chi, r, jac, cost = trial, r_t, j_t, c_t
+        mu = max(mu / 3.0, 1e-12)
+        history.append(Iteration(k=it + 1, params=dict(zip(names, map(float, chi))), rel_std_pct={},
+                                 relative_error=math.sqrt(cost) / ny, output_error=math.sqrt(cost) / ny))
+        _say(progress, f"oe-gn iteration {it + 1}: output error {100 * math.sqrt(cost) / ny:.4f} %")
+        if rel_dec < tol or rel_step < 1e-9:
+            converged = True
+            break
+    else:
+        message = f"no convergence in {max_iter} iterations"
+    sol = _core.lstsq(np.ascontiguousarray(jac), np.ascontiguousarray(r))
+    fnames = [names[i] for i in free]
+    return IdentificationResult(
+        model=model, method=f"oe-gn ({'J_tau' if criterion == 'force' else 'J_q'})",
+        params={n: float(chi[i]) for i, n in enumerate(names) if i in free},
+        std=dict(zip(fnames, map(float, sol["std"]))),
+        rel_std_pct={n: float(100 * s / abs(chi[names.index(n)])) if chi[names.index(n)] else math.inf
+                     for n, s in zip(fnames, sol["std"])},
+        relative_error=math.sqrt(cost) / ny, output_error=math.sqrt(cost) / ny,
+        iterations=len(history), simulations=n_sim, elapsed_s=time.perf_counter() - t0,
+        converged=converged, message=message, initial=dict(initial), frozen=frozen, history=history,
+        options=dict(criterion=criterion, decimation=dec.describe(), tol=tol,
+                     condition_number=float(sol["condition_number"])),
+        covariance=sol["covariance"],
+    )

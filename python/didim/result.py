@@ -1,0 +1,233 @@
+"""Results of an identification: parameters with their uncertainty, the work done, and the history."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+#: Units of the paper's parameters (SI, load side).
+UNITS = {
+    "M": "kg",
+    "Fv": "N/(m/s)",
+    "Fc": "N",
+    "OF": "N",
+    "M1": "kg",
+    "Fv1": "N/(m/s)",
+    "Fc1": "N",
+    "M2": "kg",
+    "Fv2": "N/(m/s)",
+    "Fc2": "N",
+    "K12": "N/m",
+    "lambda": "-",
+    "f_n_flex": "Hz",
+}
+
+
+@dataclass
+class Iteration:
+    """One iteration: the parameters it produced, their %σ, the regression's relative error ‖Y − Wχ‖/‖Y‖ and the
+    relative output error ‖Y − Y_s‖/‖Y‖ of the simulation that built W (NaN where not defined)."""
+
+    k: int
+    params: Dict[str, float]
+    rel_std_pct: Dict[str, float]
+    relative_error: float
+    output_error: float
+
+
+@dataclass
+class IdentificationResult:
+    """Identified parameters (SI, load side) with σ and %σ (eq. (15)), the final relative error, the work done and the
+    per-iteration history. ``converged`` is False with a ``message`` when the method stopped without converging or
+    detected divergence."""
+
+    model: str
+    method: str
+    params: Dict[str, float]
+    std: Dict[str, float]
+    rel_std_pct: Dict[str, float]
+    relative_error: float
+    iterations: int
+    simulations: int
+    elapsed_s: float
+    converged: bool = True
+    message: str = ""
+    initial: Dict[str, float] = field(default_factory=dict)
+    output_error: float = float("nan")
+    history: List[Iteration] = field(default_factory=list)
+    frozen: Dict[str, float] = field(default_factory=dict)
+    options: Dict[str, Any] = field(default_factory=dict)
+    covariance: Optional[np.ndarray] = None
+    steps: Dict[str, "IdentificationResult"] = field(default_factory=dict)
+
+    @property
+    def names(self) -> List[str]:
+        return list(self.params)
+
+    def to_dict(self) -> Dict[str, Any]:
+        """A JSON-ready dict with the contract keys: model, method, params, std, rel_std_pct, relative_error, iterations,
+        simulations, elapsed_s (plus converged, message, initial, output_error, frozen, options, history)."""
+
+        def clean(x):
+            if isinstance(x, float) and not math.isfinite(x):
+                return None
+            if isinstance(x, dict):
+                return {k: clean(v) for k, v in x.items()}
+            if isinstance(x, (list, tuple)):
+                return [clean(v) for v in x]
+            if isinstance(x, (np.floating,)):
+                return clean(float(x))
+            if isinstance(x, np.integer):
+                return int(x)
+            return x
+
+        d = {
+            "model": self.model,
+            "method": self.method,
+            "params": self.params,
+            "std": self.std,
+            "rel_std_pct": self.rel_std_pct,
+            "relative_error": self.relative_error,
+            "output_error": self.output_error,
+            "iterations": self.iterations,
+            "simulations": self.simulations,
+            "elapsed_s": self.elapsed_s,
+            "converged": self.converged,
+            "message": self.message,
+            "initial": self.initial,
+            "frozen": self.frozen,
+            "options": self.options,
+            "history": [asdict(h) for h in self.history],
+            "steps": {k: v.to_dict() for k, v in self.steps.items()},
+            "units": {k: UNITS.get(k, "") for k in self.params},
+        }
+        return clean(d)
+
+    def to_json(self, **kw) -> str:
+        return json.dumps(self.to_dict(), indent=2, **kw)
+
+    def summary(self) -> str:
+        """A table in the paper's layout: χ⁰, χ̂ᵏ and %σ per parameter, then ‖Y − Wχ‖/‖Y‖."""
+        k = self.iterations
+        head = f"{self.method} identification of the {self.model} model"
+        lines = [head, "=" * len(head)]
+        lines.append(f"{'parameter':<18}{'χ0':>12}{'χ' + str(k):>14}{'σ':>12}{'%σ':>8}")
+        for name, v in self.params.items():
+            unit = UNITS.get(name, "")
+            label = f"{name} ({unit})" if unit else name
+            x0 = self.initial.get(name, float("nan"))
+            lines.append(
+                f"{label:<18}{_fmt(x0):>12}{_fmt(v):>14}{_fmt(self.std.get(name, float('nan'))):>12}"
+                f"{_pct(self.rel_std_pct.get(name, float('nan'))):>8}"
+            )
+        for name, v in self.frozen.items():
+            lines.append(f"{name + ' (frozen)':<18}{'':>12}{_fmt(v):>14}{'-':>12}{'-':>8}")
+        lines.append(f"‖Y − Wχ‖/‖Y‖ = {100 * self.relative_error:.2f} %" if math.isfinite(self.relative_error) else "")
+        if math.isfinite(self.output_error):
+            lines.append(f"‖Y − Ys‖/‖Y‖ (simulated output) = {100 * self.output_error:.2f} %")
+        lines.append(f"{k} iterations, {self.simulations} simulations, {self.elapsed_s:.3f} s")
+        if not self.converged:
+            lines.append(f"NOT CONVERGED: {self.message}")
+        elif self.message:
+            lines.append(self.message)
+        return "\n".join(l for l in lines if l != "")
+
+    def __str__(self) -> str:
+        return self.summary()
+
+    def plot_history(self, ax=None):
+        """Parameter trajectories over the iterations, normalised by their final value (like Fig. 5)."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            fig, ax = plt.subplots(figsize=(7, 4))
+        else:
+            fig = ax.figure
+        if not self.history:
+            ax.text(0.5, 0.5, "no history", ha="center", transform=ax.transAxes)
+            return fig
+        ks = [h.k for h in self.history]
+        for name in self.params:
+            vals = np.array([h.params.get(name, np.nan) for h in self.history])
+            final = self.params[name]
+            ax.plot(ks, vals / final if final else vals, marker="o", label=name)
+        ax.set_xlabel("iteration k")
+        ax.set_ylabel("χᵏ / χ̂ (final)")
+        ax.set_title(f"{self.method}, {self.model} model")
+        ax.grid(True, alpha=0.3)
+        ax.legend(ncol=2, fontsize=8)
+        return fig
+
+
+def _fmt(x: float) -> str:
+    if x is None or not math.isfinite(x):
+        return "-"
+    a = abs(x)
+    if a != 0 and (a >= 1e5 or a < 1e-3):
+        return f"{x:.4g}"
+    return f"{x:.4g}" if a >= 1000 else f"{x:.4g}"
+
+
+def _pct(x: float) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{x:.2f}"
+
+
+def compare(results: Dict[str, IdentificationResult], reference: Optional[str] = None, truth: Optional[Dict[str, float]] = None) -> str:
+    """Side-by-side table of several results (like Tables 3 to 6): parameters, the sums M1 + M2, Fv1 + Fv2, Fc1 + Fc2,
+    and, with ``reference``, the relative differences %e = 100 (χ − χ_ref)/χ_ref of eq. (34); with ``truth``, a truth column."""
+    names: List[str] = []
+    for r in results.values():
+        for n in list(r.params) + list(r.frozen):
+            if n not in names:
+                names.append(n)
+
+    def value(r: IdentificationResult, n: str) -> float:
+        return r.params.get(n, r.frozen.get(n, float("nan")))
+
+    rows: List[tuple] = [(n, {k: value(r, n) for k, r in results.items()}, truth.get(n) if truth else None) for n in names]
+    if {"M1", "M2"} <= set(names):
+        for s, (a, b) in {"M1 + M2": ("M1", "M2"), "Fv1 + Fv2": ("Fv1", "Fv2"), "Fc1 + Fc2": ("Fc1", "Fc2")}.items():
+            rows.append(
+                (
+                    s,
+                    {k: np.nansum([value(r, a), value(r, b)]) for k, r in results.items()},
+                    (truth.get(a, 0) + truth.get(b, 0)) if truth else None,
+                )
+            )
+    cols = list(results)
+    head = f"{'parameter':<12}" + ("".join(f"{'truth':>12}") if truth else "")
+    for c in cols:
+        head += f"{c:>14}"
+        if reference and c != reference:
+            head += f"{'%e':>8}"
+    lines = [head, "-" * len(head)]
+    for name, vals, tv in rows:
+        line = f"{name:<12}" + (f"{_fmt(tv) if tv is not None else '-':>12}" if truth else "")
+        for c in cols:
+            line += f"{_fmt(vals[c]):>14}"
+            if reference and c != reference:
+                ref = vals[reference]
+                e = 100 * (vals[c] - ref) / ref if ref and math.isfinite(ref) and math.isfinite(vals[c]) else float("nan")
+                line += f"{_pct(e) if math.isfinite(e) else '-':>8}"
+        lines.append(line)
+    lines.append("-" * len(head))
+    lines.append(f"{'rel. error':<12}" + (f"{'':>12}" if truth else "") + "".join(
+        f"{100 * results[c].relative_error:>13.2f}%" + ("" if not reference or c == reference else f"{'':>8}") for c in cols
+    ))
+    lines.append(f"{'iterations':<12}" + (f"{'':>12}" if truth else "") + "".join(
+        f"{results[c].iterations:>14d}" + ("" if not reference or c == reference else f"{'':>8}") for c in cols
+    ))
+    lines.append(f"{'simulations':<12}" + (f"{'':>12}" if truth else "") + "".join(
+        f"{results[c].simulations:>14d}" + ("" if not reference or c == reference else f"{'':>8}") for c in cols
+    ))
+    lines.append(f"{'time (s)':<12}" + (f"{'':>12}" if truth else "") + "".join(
+        f"{results[c].elapsed_s:>14.3f}" + ("" if not reference or c == reference else f"{'':>8}") for c in cols
+    ))
+    return "\n".join(lines)
+
+
+__all__ = ["IdentificationResult", "Iteration", "compare", "UNITS"]
