@@ -8,6 +8,10 @@ from ._errors import DataError, DidimError, IdentifiabilityError, SimulationErro
 from .controllers import PD, EmpsCascade
 from .recording import Recording, load_mat
 from .simulation import DEFAULT_COULOMB_EPS, SimResult, coulomb_sign, param_names, simulate
+from .signal import Decimation
+from .result import IdentificationResult, compare
+from .api import METHODS, identify
+from . import scenarios
 
 __version__ = "0.1.0"
 
@@ -25,4 +29,10 @@ __all__ = [
     "param_names",
     "coulomb_sign",
     "DEFAULT_COULOMB_EPS",
+    "Decimation",
+    "IdentificationResult",
+    "compare",
+    "identify",
+    "METHODS",
+    "scenarios",
 ]

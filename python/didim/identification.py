@@ -85,6 +85,7 @@ def idim_ls(
     decimation: Optional[Decimation] = None,
     sigma: str = "paper",
     coulomb_eps: float = 0.0,
+    zoh_align: bool = False,
 ) -> IdentificationResult:
     """IDIM-LS: the inverse dynamic model on measured positions, eqs. (10)-(15).
 
@@ -95,6 +96,11 @@ def idim_ls(
 
     ``sigma="sample_std"`` computes σ as the EMPS benchmark does (sample standard deviation of the error) instead of
     eq. (13). ``coulomb_eps=0`` uses the hard sign on the filtered velocities.
+
+    ``zoh_align=True`` compares the central-difference acceleration at sample k with the mean of the commands held
+    over [k−1, k) and [k, k+1), (τ[k−1] + τ[k])/2, instead of τ[k]: a drive's command is held over the following
+    period, so τ[k] leads the central-difference states by half a sample, which biases viscous friction and the
+    flexible parameters once the excitation reaches tens of Hz. Off by default (the benchmark's recipe).
     """
     t0 = time.perf_counter()
     names = param_names(model, offset)
@@ -108,7 +114,10 @@ def idim_ls(
     qdd = diffcent(qd, rec.dt)
     w = _core.regressor(model, q, qd, qdd, coulomb_eps=coulomb_eps, offset=offset)
     dec = decimation or Decimation.matlab(10)
-    rows = [(rec.force[border:], w[0, border:, :])]
+    force = rec.force
+    if zoh_align:
+        force = np.concatenate([force[:1], 0.5 * (force[1:] + force[:-1])])
+    rows = [(force[border:], w[0, border:, :])]
     if model == "flexible":
         rows.append((np.zeros(rec.n - border), w[1, border:, :]))
     y, wd = _stack_rows(rows, dec)
@@ -125,7 +134,8 @@ def idim_ls(
         simulations=0,
         elapsed_s=time.perf_counter() - t0,
         options=dict(lowpass_hz=lowpass_hz, lowpass_order=lowpass_order, padding=padding, border=border,
-                     decimation=dec.describe(), sigma=sigma, condition_number=float(sol["condition_number"])),
+                     decimation=dec.describe(), sigma=sigma, coulomb_eps=coulomb_eps, zoh_align=zoh_align,
+                     condition_number=float(sol["condition_number"])),
         covariance=sol["covariance"],
     )
 
@@ -400,7 +410,6 @@ def didim_flexible(
     f0: float = 40.0,
     rigid_cutoff_hz: float = RIGID_CUTOFF_HZ,
     cutoff_hz: float = FLEXIBLE_CUTOFF_HZ,
-    load_friction: bool = False,
     tol: float = 1e-3,
     max_iter: int = 30,
     substeps: int = 10,
@@ -408,8 +417,10 @@ def didim_flexible(
     progress: Progress = None,
 ) -> IdentificationResult:
     """The three-step procedure of section V: rigid DIDIM (step 1), Nelder-Mead on (λ, f_n_flex) (step 2), DIDIM on
-    the flexible model initialised by eqs. (29)-(30) (step 3). With ``load_friction=False`` (the paper's choice), Fv2
-    and Fc2 are held at zero and the motor friction carries the totals; see the module docstring for why."""
+    the flexible model initialised by eqs. (29)-(30) (step 3). Fv2 and Fc2 are held at zero (the paper's choice) and
+    the motor friction carries the totals; see the module docstring for why. When the axis has load-side friction,
+    steps 2 and 3 are biased and step 3 can drift: the result is then flagged ``converged=False`` with the reason,
+    and :func:`didim.output_error.oe_gn` (exact sensitivities) is the method to use."""
     t0 = time.perf_counter()
     common = dict(substeps=substeps, coulomb_eps=coulomb_eps)
     _say(progress, "step 1: rigid DIDIM")
@@ -421,15 +432,21 @@ def didim_flexible(
     _say(progress, "step 3: flexible DIDIM")
     init = flexible_from_mode(r1.params["M"], r2.params["lambda"], r2.params["f_n_flex"])
     init.update({"Fv1": 0.0, "Fc1": 0.0})
-    frozen = {} if load_friction else {"Fv2": 0.0, "Fc2": 0.0}
-    if load_friction:
-        # zero load friction would stay zero (see the module docstring): start from half the totals on each side
-        init.update({"Fv1": r1.params["Fv"] / 2, "Fc1": r1.params["Fc"] / 2, "Fv2": r1.params["Fv"] / 2, "Fc2": r1.params["Fc"] / 2})
+    frozen = {"Fv2": 0.0, "Fc2": 0.0}
     if offset:
         init["OF"] = 0.0
     r3 = didim(rec, "flexible", init, frozen=frozen, offset=offset, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter,
                progress=progress, **common)
     r3.steps = {"rigid": r1, "mode": r2}
+    if r3.converged and r3.output_error > r2.output_error * 1.02:
+        r3.converged = False
+        r3.message = (
+            f"step 3 ended with a simulated output error of {100 * r3.output_error:.2f} %, worse than step 2's "
+            f"{100 * r2.output_error:.2f} %: the flexible DIDIM drifted (typical of load-side friction, which the "
+            "three-step procedure freezes at zero); use method='oe-gn'"
+        )
+    elif not r3.converged:
+        r3.message += f" (step 2's output error was {100 * r2.output_error:.2f} %); consider method='oe-gn'"
     r3.simulations += r1.simulations + r2.simulations
     r3.elapsed_s = time.perf_counter() - t0
     r3.method = "didim"
