@@ -11,4 +11,5 @@ python3 -m pip install --quiet -e ".[test]"
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets -- -D warnings
 cargo test --workspace --all-targets
+python3 -m mypy.stubtest didim._core
 python3 -m pytest -q tests

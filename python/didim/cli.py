@@ -41,10 +41,11 @@ def cmd_identify(args) -> int:
 
 def cmd_demo(args) -> int:
     from ._io import write_text
-    from .demo import demo_report, run_demo
+    from .demo import demo_report, didim_case_report, run_demo, run_didim_case
 
     results = run_demo(seed=args.seed, progress=_progress(args.quiet))
     print(demo_report(results))
+    print(didim_case_report(run_didim_case(seed=args.seed)))
     if args.json:
         import json
 

@@ -73,6 +73,37 @@ def _stack_rows(rows: List[tuple], dec: Decimation):
 # --------------------------------------------------------------------------------------------------------------------
 
 
+def _idim_system(rec: Recording, model: str, offset: bool, lowpass_hz: float, lowpass_order: int, padding: str,
+                 border: int, dec: Decimation, coulomb_eps: float, zoh_align: bool):
+    """The decimated IDIM-LS system (Y, W) of a record (both rows of eq. (4) for the flexible model)."""
+    if model == "flexible" and rec.ql is None:
+        raise DataError("IDIM-LS of the flexible model needs the load position ql (a second encoder); use method='didim'")
+    if not (0 <= border < rec.n // 2):
+        raise DataError(f"border must be between 0 and half the record ({rec.n // 2}), got {border}")
+    positions = [rec.qm] + ([rec.ql] if model == "flexible" else [])
+    q = np.array([lowpass(x, lowpass_hz, rec.fs, order=lowpass_order, padding=padding) for x in positions])
+    qd = diffcent(q, rec.dt)
+    qdd = diffcent(qd, rec.dt)
+    w = _core.regressor(model, q, qd, qdd, coulomb_eps=coulomb_eps, offset=offset)
+    force = rec.force
+    if zoh_align:
+        force = np.concatenate([force[:1], 0.5 * (force[1:] + force[:-1])])
+    rows = [(force[border:], w[0, border:, :])]
+    if model == "flexible":
+        rows.append((np.zeros(rec.n - border), w[1, border:, :]))
+    return _stack_rows(rows, dec)
+
+
+def idim_cross_test(rec: Recording, result: IdentificationResult) -> float:
+    """Relative error ‖Y − Wχ̂‖/‖Y‖ of an IDIM-LS result on another record, built with the same recipe."""
+    o = result.options
+    dec = result.options.get("_decimation") or Decimation.matlab(10)
+    y, w = _idim_system(rec, result.model, "OF" in result.params, o["lowpass_hz"], o["lowpass_order"], o["padding"],
+                        o["border"], dec, o["coulomb_eps"], o["zoh_align"])
+    chi = np.array([result.params[n] for n in param_names(result.model, "OF" in result.params)])
+    return float(np.linalg.norm(y - w @ chi) / np.linalg.norm(y))
+
+
 def idim_ls(
     rec: Recording,
     model: str = "rigid",
@@ -104,23 +135,8 @@ def idim_ls(
     """
     t0 = time.perf_counter()
     names = param_names(model, offset)
-    if model == "flexible" and rec.ql is None:
-        raise DataError("IDIM-LS of the flexible model needs the load position ql (a second encoder); use method='didim'")
-    if not (0 <= border < rec.n // 2):
-        raise DataError(f"border must be between 0 and half the record ({rec.n // 2}), got {border}")
-    positions = [rec.qm] + ([rec.ql] if model == "flexible" else [])
-    q = np.array([lowpass(x, lowpass_hz, rec.fs, order=lowpass_order, padding=padding) for x in positions])
-    qd = diffcent(q, rec.dt)
-    qdd = diffcent(qd, rec.dt)
-    w = _core.regressor(model, q, qd, qdd, coulomb_eps=coulomb_eps, offset=offset)
     dec = decimation or Decimation.matlab(10)
-    force = rec.force
-    if zoh_align:
-        force = np.concatenate([force[:1], 0.5 * (force[1:] + force[:-1])])
-    rows = [(force[border:], w[0, border:, :])]
-    if model == "flexible":
-        rows.append((np.zeros(rec.n - border), w[1, border:, :]))
-    y, wd = _stack_rows(rows, dec)
+    y, wd = _idim_system(rec, model, offset, lowpass_hz, lowpass_order, padding, border, dec, coulomb_eps, zoh_align)
     sol = _solve(wd, y, names, sigma)
     p = dict(zip(names, map(float, sol["params"])))
     return IdentificationResult(
@@ -134,7 +150,7 @@ def idim_ls(
         simulations=0,
         elapsed_s=time.perf_counter() - t0,
         options=dict(lowpass_hz=lowpass_hz, lowpass_order=lowpass_order, padding=padding, border=border,
-                     decimation=dec.describe(), sigma=sigma, coulomb_eps=coulomb_eps, zoh_align=zoh_align,
+                     decimation=dec.describe(), _decimation=dec, sigma=sigma, coulomb_eps=coulomb_eps, zoh_align=zoh_align,
                      condition_number=float(sol["condition_number"])),
         covariance=sol["covariance"],
     )

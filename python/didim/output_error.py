@@ -174,7 +174,7 @@ def oe_gn(
                 break
             mu *= 4.0
         if not step_ok:
-            message = "no step decreased the criterion (local minimum or too flat)"
+            message = "converged: no step decreases the criterion any further"
             converged = True
             break
         rel_dec = (cost - c_t) / cost

@@ -100,7 +100,7 @@ class IdentificationResult:
             "message": self.message,
             "initial": self.initial,
             "frozen": self.frozen,
-            "options": self.options,
+            "options": {k: v for k, v in self.options.items() if not k.startswith("_")},
             "history": [asdict(h) for h in self.history],
             "steps": {k: v.to_dict() for k, v in self.steps.items()},
             "units": {k: UNITS.get(k, "") for k in self.params},

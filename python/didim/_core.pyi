@@ -1,0 +1,77 @@
+"""Type stubs of the compiled core (``crates/didim-py``). Use the ``didim`` package, not this module."""
+
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import numpy.typing as npt
+
+DEFAULT_COULOMB_EPS: float
+
+_F64 = npt.NDArray[np.float64]
+
+__all__ = [
+    "DEFAULT_COULOMB_EPS",
+    "butter",
+    "cheby1",
+    "decimate",
+    "default_factor",
+    "filtfilt",
+    "lstsq",
+    "param_names",
+    "regressor",
+    "simulate",
+    "simulate_sensitivity",
+    "sosfiltfilt",
+]
+
+def param_names(model: str, offset: bool = False) -> List[str]: ...
+def simulate(
+    model: str,
+    params: _F64,
+    qr: _F64,
+    dt: float,
+    controller: str,
+    gains: Sequence[float],
+    *,
+    u_ext: Optional[_F64] = None,
+    substeps: int = 10,
+    quantization: float = 0.0,
+    delay: int = 0,
+    coulomb_eps: float = ...,
+    offset: bool = False,
+) -> Dict[str, _F64]: ...
+def simulate_sensitivity(
+    model: str,
+    params: _F64,
+    qr: _F64,
+    dt: float,
+    controller: str,
+    gains: Sequence[float],
+    *,
+    u_ext: Optional[_F64] = None,
+    substeps: int = 10,
+    quantization: float = 0.0,
+    delay: int = 0,
+    coulomb_eps: float = ...,
+    offset: bool = False,
+) -> Dict[str, _F64]: ...
+def regressor(
+    model: str, q: _F64, qd: _F64, qdd: _F64, *, coulomb_eps: float = ..., offset: bool = False
+) -> _F64: ...
+def lstsq(w: _F64, y: _F64, *, rank_tol: Optional[float] = None, sigma: str = "paper") -> Dict[str, Any]: ...
+def butter(order: int, wn: float, *, sos: bool = False) -> Any: ...
+def cheby1(order: int, rp_db: float, wn: float, *, sos: bool = False) -> Any: ...
+def filtfilt(b: Sequence[float], a: Sequence[float], x: _F64, *, padlen: Optional[int] = None) -> _F64: ...
+def sosfiltfilt(sos: _F64, x: _F64, *, padlen: Optional[int] = None) -> _F64: ...
+def decimate(
+    y: _F64,
+    w: Optional[_F64] = None,
+    *,
+    factor: int,
+    kind: str = "butter",
+    order: int = 4,
+    cutoff_hz: Optional[float] = None,
+    fs_hz: Optional[float] = None,
+    form: str = "sos",
+) -> Tuple[_F64, Optional[_F64]]: ...
+def default_factor(fs_hz: float, cutoff_hz: float) -> int: ...
