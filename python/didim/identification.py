@@ -162,7 +162,7 @@ def idim_ls(
 
 
 def _output_error(yd: np.ndarray, sim_force: np.ndarray, dec: Decimation) -> float:
-    return float(np.linalg.norm(yd - dec(sim_force)) / np.linalg.norm(yd))
+    return float(np.linalg.norm(yd - dec(sim_force)[: len(yd)]) / np.linalg.norm(yd))
 
 
 def didim(
@@ -181,6 +181,10 @@ def didim(
     divergence_factor: float = 1.02,
     progress: Progress = None,
     method: str = "didim",
+    terms: Sequence = (),
+    backlash_gap: Optional[float] = None,
+    delay: int = 0,
+    fit_samples: Optional[int] = None,
 ) -> IdentificationResult:
     """DIDIM iterations, eqs. (16)-(21): simulate the closed loop with χᵏ, build the IDM regressor of the simulated
     (noise-free) states, decimate Y and W in parallel, solve by QR for χᵏ⁺¹; stop when
@@ -189,11 +193,12 @@ def didim(
     ``initial`` gives χ⁰ for the estimated parameters, ``frozen`` the parameters held at fixed values. Divergence
     (the simulated output error growing beyond ``divergence_factor`` times its best value twice in a row, or a
     simulation that fails) stops the iteration: the result then holds the iterate with the lowest output error and
-    ``converged=False`` with a message saying what happened.
+    ``converged=False`` with a message saying what happened. ``fit_samples`` restricts the regression and the
+    output errors to the first samples (the rest of the record is then held out for validation).
     """
     t0 = time.perf_counter()
     frozen = dict(frozen or {})
-    names = param_names(model, offset)
+    names = param_names(model, offset, terms)
     unknown = [k for k in list(initial) + list(frozen) if k not in names]
     if unknown:
         raise DataError(f"unknown parameter(s) {', '.join(unknown)} for the {model} model ({', '.join(names)})")
@@ -208,8 +213,12 @@ def didim(
     fi = [names.index(n) for n in free]
     zi = [names.index(n) for n in frozen]
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
-    yd_motor = dec(rec.force)
+    m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
+    yd_motor = dec(rec.force)[:m_fit]
     zero = np.zeros(rec.n)
+
+    def cut(y, w):
+        return (y, w) if m_fit is None else (y[:m_fit], w[:m_fit])
 
     history: List[Iteration] = []
     best = (math.inf, chi.copy(), None)  # (output error, χ, solution)
@@ -218,7 +227,8 @@ def didim(
     sol = None
     for k in range(max_iter):
         try:
-            sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps)
+            sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, terms=terms,
+                           backlash_gap=backlash_gap, delay=delay)
         except (SimulationError, DataError) as e:
             message = f"iteration {k}: the simulation with χ{k} failed ({e}); stopped"
             break
@@ -237,14 +247,23 @@ def didim(
                     "probably too far from the truth, or the model misses a physical effect"
                 )
                 break
-        w = _core.regressor(model, sim.q, sim.qd, sim.qdd, coulomb_eps=coulomb_eps, offset=offset)
+        w = _core.regressor(model, sim.q, sim.qd, sim.qdd, coulomb_eps=coulomb_eps, offset=offset,
+                            terms=[t.spec() for t in terms] or None, backlash_gap=backlash_gap)
         rows = []
+        y_motor = rec.force
+        if delay:  # the states answer the force applied, which is the command `delay` samples earlier
+            y_motor = np.concatenate([np.zeros(delay), rec.force[:-delay]])
         for d in range(w.shape[0]):
-            y = rec.force if d == 0 else zero
+            y = y_motor if d == 0 else zero
             if zi:
                 y = y - w[d][:, zi] @ chi[zi]
             rows.append((y, w[d][:, fi]))
-        y_all, w_all = _stack_rows(rows, dec)
+        ys, ws = [], []
+        for y, wb in rows:
+            yd_, wd_ = cut(*dec.apply(y, wb))
+            ys.append(yd_)
+            ws.append(wd_)
+        y_all, w_all = np.concatenate(ys), np.vstack(ws)
         try:
             sol = _solve(w_all, y_all, free)
         except IdentifiabilityError as e:
@@ -274,7 +293,8 @@ def didim(
     final_out = float("nan")
     if converged:
         try:
-            sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps)
+            sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, terms=terms,
+                           backlash_gap=backlash_gap, delay=delay)
             n_sim += 1
             final_out = _output_error(yd_motor, sim.force, dec)
             history[-1].output_error = final_out
@@ -307,7 +327,8 @@ def didim(
         initial={n: float(initial[n]) for n in free},
         frozen=frozen,
         history=history,
-        options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset),
+        options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset,
+                     terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay),
         covariance=sol["covariance"],
     )
 

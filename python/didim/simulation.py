@@ -19,6 +19,35 @@ DEFAULT_COULOMB_EPS: float = _core.DEFAULT_COULOMB_EPS
 
 Params = Union[Mapping[str, float], Sequence[float], np.ndarray]
 
+#: Kinds of extra model terms (all on the motor side): see :class:`Term`.
+TERM_KINDS = ("offset", "viscous", "coulomb", "abs_viscous", "abs_coulomb", "stribeck", "ripple_sin", "ripple_cos")
+
+
+@dataclass(frozen=True)
+class Term:
+    """An extra term of a model, a parameter ``name`` times a basis function of the motor state:
+
+    - ``offset``: 1 (N); ``viscous``: q̇; ``coulomb``: sign(q̇);
+    - ``abs_viscous``: |q̇| and ``abs_coulomb``: |sign(q̇)|, friction that depends on the direction of motion;
+    - ``stribeck``: sign(q̇)·exp(−(q̇/vs)²) with ``hyper`` = vs (m/s);
+    - ``ripple_sin``/``ripple_cos``: sin/cos(2π q/P) with ``hyper`` = P (m).
+    """
+
+    name: str
+    kind: str
+    hyper: float = 0.0
+
+    def __post_init__(self):
+        if self.kind not in TERM_KINDS:
+            raise DataError(f"unknown term kind {self.kind!r}: use one of {', '.join(TERM_KINDS)}")
+
+    def spec(self) -> tuple:
+        return (self.name, self.kind, float(self.hyper))
+
+
+def _specs(terms) -> Optional[list]:
+    return [t.spec() for t in terms] if terms else None
+
 
 def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
     """The sign used by every Coulomb friction term, identical to the core's: ``v/sqrt(v²+eps²)``, hard sign for eps = 0."""
@@ -33,19 +62,20 @@ def _check_model(model: str) -> None:
         raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)}")
 
 
-def param_names(model: str = "rigid", offset: bool = False) -> list:
-    """Parameter names of a model in the order of its parameter vector (M, Fv, Fc[, OF] or M1, Fv1, Fc1, M2, Fv2, Fc2, K12)."""
+def param_names(model: str = "rigid", offset: bool = False, terms: Sequence[Term] = ()) -> list:
+    """Parameter names of a model in the order of its parameter vector (M, Fv, Fc[, OF] or M1, Fv1, Fc1, M2, Fv2, Fc2,
+    K12[, OF]), followed by the extra terms'."""
     _check_model(model)
-    return list(_core.param_names(model, offset))
+    return list(_core.param_names(model, offset, _specs(terms)))
 
 
-def params_vector(model: str, params: Params, offset: Optional[bool] = None):
+def params_vector(model: str, params: Params, offset: Optional[bool] = None, terms: Sequence[Term] = ()):
     """Returns ``(names, vector, offset)`` for parameters given as a name → value mapping or a sequence."""
     _check_model(model)
     if isinstance(params, Mapping):
         if offset is None:
-            offset = model == "rigid" and "OF" in params
-        names = param_names(model, offset)
+            offset = "OF" in params
+        names = param_names(model, offset, terms)
         missing = [k for k in names if k not in params]
         unknown = [k for k in params if k not in names]
         if missing or unknown:
@@ -58,8 +88,8 @@ def params_vector(model: str, params: Params, offset: Optional[bool] = None):
     else:
         vec = np.asarray(params, dtype=float).ravel()
         if offset is None:
-            offset = model == "rigid" and vec.size == 4
-        names = param_names(model, offset)
+            offset = vec.size == len(param_names(model, False, terms)) + 1
+        names = param_names(model, offset, terms)
         if vec.size != len(names):
             raise DataError(f"the {model} model takes {len(names)} parameters ({', '.join(names)}), got {vec.size}")
     return names, vec, bool(offset)
@@ -140,6 +170,8 @@ def simulate(
     quantization: Optional[float] = None,
     delay: int = 0,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    terms: Sequence[Term] = (),
+    backlash_gap: Optional[float] = None,
 ) -> SimResult:
     """Simulates the recording's closed loop (its reference, controller and known external input) with ``params``.
 
@@ -152,8 +184,10 @@ def simulate(
         quantization: resolution of the simulated motor encoder (m); default the recording's ``position_resolution``.
         delay: extra actuation delay in samples.
         coulomb_eps: velocity scale of the Coulomb sign (m/s), 0 for the hard sign.
+        terms: extra model terms (:class:`Term`), whose parameters ``params`` must include.
+        backlash_gap: flexible model only: total width (m) of a dead zone in the coupling K12.
     """
-    names, vec, offset = params_vector(model, params, offset)
+    names, vec, offset = params_vector(model, params, offset, terms)
     if quantization is None:
         quantization = recording.position_resolution or 0.0
     for what, v in (("substeps", substeps), ("delay", delay)):
@@ -174,6 +208,8 @@ def simulate(
         delay=int(delay),
         coulomb_eps=float(coulomb_eps),
         offset=offset,
+        terms=_specs(terms),
+        backlash_gap=backlash_gap,
     )
     return SimResult(
         model=model,
@@ -186,4 +222,4 @@ def simulate(
     )
 
 
-__all__ = ["simulate", "SimResult", "param_names", "params_vector", "coulomb_sign", "MODELS", "DEFAULT_COULOMB_EPS"]
+__all__ = ["simulate", "SimResult", "Term", "TERM_KINDS", "param_names", "params_vector", "coulomb_sign", "MODELS", "DEFAULT_COULOMB_EPS"]

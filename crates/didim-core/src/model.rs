@@ -85,6 +85,24 @@ pub enum Basis {
     /// Spring between the motor dof `a` and the load dof `b` (N/m):
     /// `φ_a = q_a − q_b = −q2`, `φ_b = q_b − q_a = q2` (eq. (4), last column).
     Spring { a: usize, b: usize },
+    /// Direction-dependent viscous friction (N/(m/s)): `φ = |q̇|` (smoothed as
+    /// `q̇·coulomb_sign(q̇)`). With a `Viscous` term `Fv`, the slope is `Fv + dFv`
+    /// moving forward and `Fv − dFv` moving backward.
+    AbsViscous { dof: usize },
+    /// Direction-dependent Coulomb friction (N): `φ = |coulomb_sign(q̇)|`. With a
+    /// `Coulomb` term `Fc`, the level is `Fc + dFc` forward and `Fc − dFc` backward;
+    /// it acts only while moving (unlike an offset).
+    AbsCoulomb { dof: usize },
+    /// Stribeck friction (N): `φ = coulomb_sign(q̇)·exp(−(q̇/vs)²)`, extra friction
+    /// at low speed decaying over the Stribeck speed `vs` (m/s).
+    Stribeck { dof: usize, vs: f64 },
+    /// Position-periodic force (N): `φ = sin(2π q/period + phase)`, with the
+    /// period in m (cogging, ball-screw lead error, position-dependent friction).
+    Ripple { dof: usize, period: f64, phase: f64 },
+    /// Spring with a dead zone (backlash) of total width `gap` (m) between dofs
+    /// `a` and `b` (N/m): `φ_a = dz(q_a − q_b)`, `φ_b = −φ_a`, with
+    /// `dz(x) = sign(x)·max(|x| − gap/2, 0)`.
+    Backlash { a: usize, b: usize, gap: f64 },
 }
 
 impl Basis {
@@ -99,8 +117,28 @@ impl Basis {
             Basis::Inertia { dof }
             | Basis::Viscous { dof }
             | Basis::Coulomb { dof }
-            | Basis::Offset { dof } => (dof, None),
-            Basis::Spring { a, b } => (a, Some(b)),
+            | Basis::Offset { dof }
+            | Basis::AbsViscous { dof }
+            | Basis::AbsCoulomb { dof }
+            | Basis::Stribeck { dof, .. }
+            | Basis::Ripple { dof, .. } => (dof, None),
+            Basis::Spring { a, b } | Basis::Backlash { a, b, .. } => (a, Some(b)),
+        }
+    }
+
+    /// Checks the hyper-parameters (Stribeck speed, ripple period, gap).
+    fn check(&self) -> Result<()> {
+        match *self {
+            Basis::Stribeck { vs, .. } if !(vs.is_finite() && vs > 0.0) => {
+                Err(invalid!("the Stribeck speed vs must be finite and > 0 m/s, got {vs}"))
+            }
+            Basis::Ripple { period, phase, .. } if !(period.is_finite() && period > 0.0 && phase.is_finite()) => Err(
+                invalid!("a position ripple needs a finite period > 0 m and a finite phase, got {period} and {phase}"),
+            ),
+            Basis::Backlash { gap, .. } if !(gap.is_finite() && gap >= 0.0) => {
+                Err(invalid!("the backlash gap must be finite and >= 0 m, got {gap}"))
+            }
+            _ => Ok(()),
         }
     }
 
@@ -125,7 +163,34 @@ impl Basis {
                 out[a] += f;
                 out[b] -= f;
             }
+            Basis::AbsViscous { dof } => out[dof] += value * qd[dof] * coulomb_sign(qd[dof], eps),
+            Basis::AbsCoulomb { dof } => out[dof] += value * coulomb_sign(qd[dof], eps).abs(),
+            Basis::Stribeck { dof, vs } => {
+                let r = qd[dof] / vs;
+                out[dof] += value * coulomb_sign(qd[dof], eps) * (-r * r).exp();
+            }
+            Basis::Ripple { dof, period, phase } => {
+                out[dof] += value * (std::f64::consts::TAU * q[dof] / period + phase).sin()
+            }
+            Basis::Backlash { a, b, gap } => {
+                let f = value * dead_zone(q[a] - q[b], gap);
+                out[a] += f;
+                out[b] -= f;
+            }
         }
+    }
+}
+
+/// `sign(x)·max(|x| − gap/2, 0)`: the elongation of a coupling with backlash.
+#[inline]
+pub fn dead_zone(x: f64, gap: f64) -> f64 {
+    let h = 0.5 * gap;
+    if x > h {
+        x - h
+    } else if x < -h {
+        x + h
+    } else {
+        0.0
     }
 }
 
@@ -136,6 +201,7 @@ impl Basis {
     fn accumulate_partials<const N: usize>(
         &self,
         value: f64,
+        q: &SVector<f64, N>,
         qd: &SVector<f64, N>,
         eps: f64,
         dq: &mut SMatrix<f64, N, N>,
@@ -150,6 +216,34 @@ impl Basis {
                 dq[(a, b)] -= value;
                 dq[(b, a)] -= value;
                 dq[(b, b)] += value;
+            }
+            Basis::AbsViscous { dof } => {
+                let v = qd[dof];
+                dv[(dof, dof)] += value * (coulomb_sign(v, eps) + v * coulomb_sign_derivative(v, eps));
+            }
+            Basis::AbsCoulomb { dof } => {
+                let v = qd[dof];
+                dv[(dof, dof)] += value * coulomb_sign(v, eps).signum() * coulomb_sign_derivative(v, eps);
+            }
+            Basis::Stribeck { dof, vs } => {
+                let v = qd[dof];
+                let e = (-(v / vs) * (v / vs)).exp();
+                let ds = coulomb_sign_derivative(v, eps) * e - coulomb_sign(v, eps) * e * 2.0 * v / (vs * vs);
+                dv[(dof, dof)] += value * ds;
+            }
+            Basis::Ripple { dof, period, phase } => {
+                let w = std::f64::consts::TAU / period;
+                dq[(dof, dof)] += value * w * (w * q[dof] + phase).cos();
+            }
+            Basis::Backlash { a, b, gap } => {
+                // slope 1 outside the gap, 0 inside
+                let x = q[a] - q[b];
+                if x.abs() > 0.5 * gap {
+                    dq[(a, a)] += value;
+                    dq[(a, b)] -= value;
+                    dq[(b, a)] -= value;
+                    dq[(b, b)] += value;
+                }
             }
         }
     }
@@ -188,7 +282,8 @@ impl<const N: usize> Model<N> {
                     "term {name} refers to a degree of freedom outside this {N}-dof model"
                 ));
             }
-            if matches!(b, Basis::Spring { a, b } if a == b) {
+            b.check().map_err(|e| invalid!("term {name}: {e}"))?;
+            if matches!(b, Basis::Spring { a, b } | Basis::Backlash { a, b, .. } if a == b) {
                 return Err(invalid!("term {name}: a spring needs two different dofs"));
             }
             if names.contains(&name) {
@@ -231,6 +326,37 @@ impl<const N: usize> Model<N> {
         self.coulomb_eps
     }
 
+    /// Returns a copy with `extra` terms appended (e.g. a candidate effect of the doctor).
+    pub fn with_terms(&self, extra: Vec<(String, Basis)>) -> Result<Self> {
+        let mut terms: Vec<(String, Basis)> = self
+            .names
+            .iter()
+            .cloned()
+            .zip(self.basis.iter().copied())
+            .collect();
+        terms.extend(extra);
+        Self::new(terms, self.coulomb_eps)
+    }
+
+    /// Returns a copy where the parameter `name` gets another basis function
+    /// (e.g. the spring K12 replaced by a spring with backlash).
+    pub fn with_basis(&self, name: &str, basis: Basis) -> Result<Self> {
+        let Some(i) = self.names.iter().position(|n| n == name) else {
+            return Err(invalid!(
+                "the model has no parameter {name} ({})",
+                self.names.join(", ")
+            ));
+        };
+        let mut terms: Vec<(String, Basis)> = self
+            .names
+            .iter()
+            .cloned()
+            .zip(self.basis.iter().copied())
+            .collect();
+        terms[i].1 = basis;
+        Self::new(terms, self.coulomb_eps)
+    }
+
     /// Returns a copy with another Coulomb velocity scale.
     pub fn with_coulomb_eps(&self, coulomb_eps: f64) -> Result<Self> {
         let terms = self
@@ -263,7 +389,7 @@ impl<const N: usize> Model<N> {
                 Basis::Inertia { .. } if v <= 0.0 => {
                     return Err(invalid!("mass {name} must be > 0 kg, got {v}"))
                 }
-                Basis::Spring { .. } if v <= 0.0 => {
+                Basis::Spring { .. } | Basis::Backlash { .. } if v <= 0.0 => {
                     return Err(invalid!("stiffness {name} must be > 0 N/m, got {v}"))
                 }
                 _ => {}
@@ -327,12 +453,13 @@ impl<const N: usize> Model<N> {
         &self,
         chi: &[f64],
         inv_mass: &SVector<f64, N>,
+        q: &SVector<f64, N>,
         qd: &SVector<f64, N>,
     ) -> (SMatrix<f64, N, N>, SMatrix<f64, N, N>) {
         let mut dq = SMatrix::<f64, N, N>::zeros();
         let mut dv = SMatrix::<f64, N, N>::zeros();
         for (b, &v) in self.basis.iter().zip(chi) {
-            b.accumulate_partials(v, qd, self.coulomb_eps, &mut dq, &mut dv);
+            b.accumulate_partials(v, q, qd, self.coulomb_eps, &mut dq, &mut dv);
         }
         for d in 0..N {
             for e in 0..N {

@@ -268,7 +268,7 @@ impl<const N: usize> Tangent<N> for Sensitivity<N> {
                     self.stage_v[x] = self.sv[x] + f * self.kv[i - 1][x];
                 }
             }
-            let (aq, av) = model.accel_partials(chi, inv_mass, v);
+            let (aq, av) = model.accel_partials(chi, inv_mass, q, v);
             model.regressor_into(q, v, a, &mut self.phi);
             for d in 0..N {
                 for j in 0..p {

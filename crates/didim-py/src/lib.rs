@@ -10,7 +10,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use didim_core::error::Error;
 use didim_core::filter::{self as flt, Decimator, FilterForm};
 use didim_core::lstsq::{LstsqOptions, SigmaConvention};
-use didim_core::model::{self, Model, DEFAULT_COULOMB_EPS};
+use didim_core::model::{self, Basis, Model, DEFAULT_COULOMB_EPS};
 use didim_core::{lstsq as ls, sim, Controller};
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -71,10 +71,73 @@ enum AnyModel {
     Flexible(Model<2>),
 }
 
-fn make_model(kind: &str, offset: bool, coulomb_eps: f64) -> Result<AnyModel, Error> {
+/// Extra terms of a model: (name, kind, hyper-parameter), all on the motor dof.
+type Terms = Vec<(String, String, f64)>;
+
+fn extra_basis(kind: &str, hyper: f64) -> Result<Basis, Error> {
+    let dof = model::MOTOR;
+    Ok(match kind {
+        "offset" => Basis::Offset { dof },
+        "viscous" => Basis::Viscous { dof },
+        "coulomb" => Basis::Coulomb { dof },
+        "abs_viscous" => Basis::AbsViscous { dof },
+        "abs_coulomb" => Basis::AbsCoulomb { dof },
+        "stribeck" => Basis::Stribeck { dof, vs: hyper },
+        "ripple_sin" => Basis::Ripple {
+            dof,
+            period: hyper,
+            phase: 0.0,
+        },
+        "ripple_cos" => Basis::Ripple {
+            dof,
+            period: hyper,
+            phase: std::f64::consts::FRAC_PI_2,
+        },
+        other => {
+            return Err(Error::InvalidInput(format!(
+            "unknown term kind {other:?}: use offset, viscous, coulomb, abs_viscous, abs_coulomb, stribeck, \
+                 ripple_sin or ripple_cos"
+        )))
+        }
+    })
+}
+
+fn make_model(
+    kind: &str,
+    offset: bool,
+    coulomb_eps: f64,
+    terms: &[(String, String, f64)],
+    backlash_gap: Option<f64>,
+) -> Result<AnyModel, Error> {
+    let extra = terms
+        .iter()
+        .map(|(n, k, h)| Ok((n.clone(), extra_basis(k, *h)?)))
+        .collect::<Result<Vec<_>, Error>>()?;
     match kind {
-        "rigid" => Ok(AnyModel::Rigid(model::rigid(offset, coulomb_eps)?)),
-        "flexible" => Ok(AnyModel::Flexible(model::flexible_with(offset, coulomb_eps)?)),
+        "rigid" => {
+            if backlash_gap.is_some() {
+                return Err(Error::InvalidInput(
+                    "backlash needs the flexible model (a coupling)".into(),
+                ));
+            }
+            Ok(AnyModel::Rigid(
+                model::rigid(offset, coulomb_eps)?.with_terms(extra)?,
+            ))
+        }
+        "flexible" => {
+            let mut m = model::flexible_with(offset, coulomb_eps)?.with_terms(extra)?;
+            if let Some(gap) = backlash_gap {
+                m = m.with_basis(
+                    "K12",
+                    Basis::Backlash {
+                        a: model::MOTOR,
+                        b: model::LOAD,
+                        gap,
+                    },
+                )?;
+            }
+            Ok(AnyModel::Flexible(m))
+        }
         other => Err(Error::InvalidInput(format!(
             "unknown model {other:?}: use \"rigid\" or \"flexible\""
         ))),
@@ -118,9 +181,12 @@ fn make_controller(kind: &str, gains: &[f64]) -> Result<Controller, Error> {
 
 /// Parameter names of a model, in the order of the parameter vector.
 #[pyfunction]
-#[pyo3(signature = (model, offset=false))]
-fn param_names(py: Python<'_>, model: &str, offset: bool) -> PyResult<Vec<String>> {
-    let m = run(py, || make_model(model, offset, DEFAULT_COULOMB_EPS))?;
+#[pyo3(signature = (model, offset=false, terms=None))]
+fn param_names(py: Python<'_>, model: &str, offset: bool, terms: Option<Terms>) -> PyResult<Vec<String>> {
+    let terms = terms.unwrap_or_default();
+    let m = run(py, || {
+        make_model(model, offset, DEFAULT_COULOMB_EPS, &terms, None)
+    })?;
     Ok(match m {
         AnyModel::Rigid(m) => m.names().to_vec(),
         AnyModel::Flexible(m) => m.names().to_vec(),
@@ -129,7 +195,7 @@ fn param_names(py: Python<'_>, model: &str, offset: bool) -> PyResult<Vec<String
 
 /// Closed-loop simulation; returns a dict of arrays: force (n,), q, qd, qdd (ndof, n).
 #[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false))]
+#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, terms=None, backlash_gap=None))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -145,7 +211,10 @@ fn simulate<'py>(
     delay: usize,
     coulomb_eps: f64,
     offset: bool,
+    terms: Option<Terms>,
+    backlash_gap: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let terms = terms.unwrap_or_default();
     let chi = slice1(&params);
     let qr = slice1(&qr);
     let u = u_ext.as_ref().map(slice1);
@@ -158,7 +227,7 @@ fn simulate<'py>(
     let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
     let out = run(py, || {
         let c = make_controller(controller, &gains)?;
-        match make_model(model, offset, coulomb_eps)? {
+        match make_model(model, offset, coulomb_eps, &terms, backlash_gap)? {
             AnyModel::Rigid(m) => sim::simulate(&m, chi, &c, qr, u, &opts),
             AnyModel::Flexible(m) => sim::simulate(&m, chi, &c, qr, u, &opts),
         }
@@ -173,7 +242,8 @@ fn simulate<'py>(
 
 /// The IDM regressor of a trajectory: q, qd, qdd of shape (ndof, n) -> W of shape (ndof, n, p).
 #[pyfunction]
-#[pyo3(signature = (model, q, qd, qdd, *, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false))]
+#[pyo3(signature = (model, q, qd, qdd, *, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, terms=None, backlash_gap=None))]
+#[allow(clippy::too_many_arguments)]
 fn regressor<'py>(
     py: Python<'py>,
     model: &str,
@@ -182,12 +252,17 @@ fn regressor<'py>(
     qdd: PyReadonlyArray2<'py, f64>,
     coulomb_eps: f64,
     offset: bool,
+    terms: Option<Terms>,
+    backlash_gap: Option<f64>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let terms = terms.unwrap_or_default();
     let (q, qd, qdd) = (rows2(&q), rows2(&qd), rows2(&qdd));
     let n = q.first().map_or(0, |r| r.len());
-    let (ndof, p, w) = run(py, || match make_model(model, offset, coulomb_eps)? {
-        AnyModel::Rigid(m) => Ok((1, m.n_params(), m.regressor(&q, &qd, &qdd)?)),
-        AnyModel::Flexible(m) => Ok((2, m.n_params(), m.regressor(&q, &qd, &qdd)?)),
+    let (ndof, p, w) = run(py, || {
+        match make_model(model, offset, coulomb_eps, &terms, backlash_gap)? {
+            AnyModel::Rigid(m) => Ok((1, m.n_params(), m.regressor(&q, &qd, &qdd)?)),
+            AnyModel::Flexible(m) => Ok((2, m.n_params(), m.regressor(&q, &qd, &qdd)?)),
+        }
     })?;
     // core layout [dof][param][sample] -> numpy (ndof, p, n) -> view (ndof, n, p)
     let a = PyArray1::from_vec(py, w).reshape([ndof, p, n])?;
@@ -197,7 +272,7 @@ fn regressor<'py>(
 /// Closed-loop simulation with forward sensitivities; the dict of `simulate` plus
 /// dforce (p, n) and dq (ndof, p, n).
 #[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false))]
+#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, terms=None, backlash_gap=None))]
 #[allow(clippy::too_many_arguments)]
 fn simulate_sensitivity<'py>(
     py: Python<'py>,
@@ -213,7 +288,10 @@ fn simulate_sensitivity<'py>(
     delay: usize,
     coulomb_eps: f64,
     offset: bool,
+    terms: Option<Terms>,
+    backlash_gap: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let terms = terms.unwrap_or_default();
     let chi = slice1(&params);
     let qr = slice1(&qr);
     let u = u_ext.as_ref().map(slice1);
@@ -227,7 +305,7 @@ fn simulate_sensitivity<'py>(
     let n = qr.len();
     let (ndof, out) = run(py, || {
         let c = make_controller(controller, &gains)?;
-        match make_model(model, offset, coulomb_eps)? {
+        match make_model(model, offset, coulomb_eps, &terms, backlash_gap)? {
             AnyModel::Rigid(m) => Ok((1, sim::simulate_sensitivity(&m, chi, &c, qr, u, &opts)?)),
             AnyModel::Flexible(m) => Ok((2, sim::simulate_sensitivity(&m, chi, &c, qr, u, &opts)?)),
         }

@@ -336,3 +336,36 @@ fn sensitivities_match_finite_differences_for_the_rigid_model_with_delay() {
     let model = rigid(true, 1e-3).unwrap();
     check_sensitivities(&model, &[95.0, 203.0, 20.0, -3.0], 2);
 }
+
+#[test]
+fn sensitivities_of_the_doctor_terms_match_finite_differences() {
+    let base = rigid(true, 1e-3).unwrap();
+    let model = base
+        .with_terms(vec![
+            ("dFv".into(), Basis::AbsViscous { dof: 0 }),
+            ("dFc".into(), Basis::AbsCoulomb { dof: 0 }),
+            ("Fs".into(), Basis::Stribeck { dof: 0, vs: 0.01 }),
+            (
+                "Ar".into(),
+                Basis::Ripple {
+                    dof: 0,
+                    period: 0.013,
+                    phase: 0.3,
+                },
+            ),
+        ])
+        .unwrap();
+    check_sensitivities(&model, &[95.0, 203.0, 20.0, -3.0, 15.0, 2.0, 8.0, 4.0], 0);
+    let flex = flexible(1e-3)
+        .unwrap()
+        .with_basis(
+            "K12",
+            Basis::Backlash {
+                a: 0,
+                b: 1,
+                gap: 2e-5,
+            },
+        )
+        .unwrap();
+    check_sensitivities(&flex, &[68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5], 0);
+}

@@ -1,0 +1,145 @@
+"""Statistics that stay valid when residuals are autocorrelated: AR prewhitening, HAC (Newey-West) covariance,
+Wald tests of added regressors, Holm's correction for many tests, and the Diebold-Mariano test of two fits."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Optional, Sequence
+
+import numpy as np
+from scipy import stats as sst
+from scipy.signal import lfilter
+
+
+def ar_fit(x: np.ndarray, max_order: int = 8) -> np.ndarray:
+    """AR polynomial ``a`` (a[0] = 1) of the residual by Yule-Walker, order chosen by AIC up to ``max_order``."""
+    x = np.asarray(x, float) - np.mean(x)
+    n = len(x)
+    r = np.correlate(x, x, "full")[n - 1 : n + max_order] / n
+    best, best_aic = np.array([1.0]), n * math.log(max(r[0], 1e-300))
+    for p in range(1, max_order + 1):
+        from scipy.linalg import solve_toeplitz
+
+        try:
+            phi = solve_toeplitz(r[:p], r[1 : p + 1])
+        except np.linalg.LinAlgError:
+            break
+        s2 = r[0] - phi @ r[1 : p + 1]
+        if s2 <= 0:
+            break
+        aic = n * math.log(s2) + 2 * p
+        if aic < best_aic:
+            best, best_aic = np.concatenate([[1.0], -phi]), aic
+    return best
+
+
+def prewhiten(a: np.ndarray, *arrays: np.ndarray) -> List[np.ndarray]:
+    """Filters each array (along axis 0) by the AR polynomial ``a`` and drops the first len(a) − 1 samples."""
+    k = len(a) - 1
+    return [lfilter(a, [1.0], np.asarray(x, float), axis=0)[k:] for x in arrays]
+
+
+def newey_west_lag(n: int) -> int:
+    return int(math.floor(4 * (n / 100.0) ** (2.0 / 9.0)))
+
+
+def hac_covariance(x: np.ndarray, e: np.ndarray, lag: Optional[int] = None) -> np.ndarray:
+    """Newey-West covariance of the OLS coefficients of ``e`` on ``x`` (x: n × k, e: the OLS residual)."""
+    n, k = x.shape
+    lag = newey_west_lag(n) if lag is None else lag
+    u = x * e[:, None]
+    s = u.T @ u
+    for l in range(1, lag + 1):
+        w = 1 - l / (lag + 1)
+        g = u[l:].T @ u[:-l]
+        s += w * (g + g.T)
+    xtx_inv = np.linalg.pinv(x.T @ x)
+    return xtx_inv @ s @ xtx_inv
+
+
+@dataclass
+class WaldTest:
+    """Test that added regressors explain part of a residual."""
+
+    beta: np.ndarray
+    cov: np.ndarray
+    statistic: float
+    dof: int
+    p_value: float
+    explained: float  # fraction of the (prewhitened) residual's sum of squares explained
+
+
+def wald_added(r: np.ndarray, x: np.ndarray, a: Optional[np.ndarray] = None) -> WaldTest:
+    """Regresses the residual ``r`` on the (already orthogonalized) columns ``x`` after prewhitening both with the AR
+    polynomial ``a`` (fitted on ``r`` when None); Wald test with an F reference distribution."""
+    x = np.asarray(x, float)
+    if x.ndim == 1:
+        x = x[:, None]
+    if a is None:
+        a = ar_fit(r)
+    rw, xw = prewhiten(a, r, x)
+    scale = np.linalg.norm(xw, axis=0)
+    keep = scale > 1e-12 * max(float(np.max(scale)) if scale.size else 0.0, 1e-300)
+    if not np.any(keep):
+        return WaldTest(np.zeros(x.shape[1]), np.zeros((x.shape[1],) * 2), 0.0, x.shape[1], 1.0, 0.0)
+    xs = xw[:, keep] / scale[keep]
+    beta_s, *_ = np.linalg.lstsq(xs, rw, rcond=None)
+    e = rw - xs @ beta_s
+    k = int(keep.sum())
+    n = len(rw)
+    # After prewhitening the errors are close to white: the classical covariance σ²(XᵀX)⁻¹ with an F reference
+    # distribution keeps its size (a Newey-West covariance over-rejects with persistent regressors such as
+    # indicators of time or velocity bins: 5 % rejections at the 1 % level on white noise).
+    s2 = float(e @ e) / max(n - k, 1)
+    cov_s = s2 * np.linalg.pinv(xs.T @ xs)
+    try:
+        stat = float(beta_s @ np.linalg.solve(cov_s, beta_s))
+    except np.linalg.LinAlgError:
+        stat = float(beta_s @ np.linalg.pinv(cov_s) @ beta_s)
+    beta = np.zeros(x.shape[1])
+    beta[keep] = beta_s / scale[keep]
+    cov = np.zeros((x.shape[1], x.shape[1]))
+    cov[np.ix_(keep, keep)] = cov_s / np.outer(scale[keep], scale[keep])
+    explained = 1.0 - float(e @ e) / float(rw @ rw) if rw @ rw > 0 else 0.0
+    return WaldTest(beta, cov, stat, k, float(sst.f.sf(stat / k, k, max(n - k, 1))), explained)
+
+
+def holm(p_values: Sequence[float]) -> np.ndarray:
+    """Holm-Bonferroni adjusted p-values (family-wise error control for many candidates)."""
+    p = np.asarray(p_values, float)
+    m = len(p)
+    order = np.argsort(p)
+    adj = np.empty(m)
+    running = 0.0
+    for i, idx in enumerate(order):
+        running = max(running, min(1.0, (m - i) * p[idx]))
+        adj[idx] = running
+    return adj
+
+
+def diebold_mariano(e_before: np.ndarray, e_after: np.ndarray) -> tuple:
+    """One-sided test that the squared errors ``e_after`` are smaller than ``e_before`` on the same samples
+    (HAC variance of the loss differential). Returns (statistic, p-value, mean relative improvement)."""
+    d = np.asarray(e_before, float) ** 2 - np.asarray(e_after, float) ** 2
+    n = len(d)
+    lag = newey_west_lag(n)
+    dc = d - d.mean()
+    s = dc @ dc / n
+    for l in range(1, lag + 1):
+        s += 2 * (1 - l / (lag + 1)) * (dc[l:] @ dc[:-l]) / n
+    if s <= 0:
+        return 0.0, 1.0, 0.0
+    stat = d.mean() / math.sqrt(s / n)
+    return float(stat), float(sst.norm.sf(stat)), float(d.mean() / np.mean(np.asarray(e_before) ** 2))
+
+
+def orthogonalize(x: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The part of the columns of ``x`` orthogonal to the columns of ``w`` (least-squares projection)."""
+    if w.size == 0:
+        return x
+    q, _ = np.linalg.qr(w)
+    return x - q @ (q.T @ x)
+
+
+__all__ = ["ar_fit", "prewhiten", "hac_covariance", "wald_added", "WaldTest", "holm", "diebold_mariano", "orthogonalize"]
