@@ -12,6 +12,8 @@ from .signal import Decimation
 from .result import IdentificationResult, compare
 from .api import METHODS, identify
 from . import scenarios
+from .doctor import Diagnosis, Finding, doctor
+from .simulation import Term
 
 __version__ = "0.1.0"
 
@@ -35,4 +37,8 @@ __all__ = [
     "identify",
     "METHODS",
     "scenarios",
+    "doctor",
+    "Diagnosis",
+    "Finding",
+    "Term",
 ]

@@ -54,6 +54,24 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_doctor(args) -> int:
+    from . import load_mat
+    from ._io import write_text
+    from .doctor import doctor
+
+    rec = load_mat(args.file)
+    val = load_mat(args.validate) if args.validate else None
+    d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet))
+    print(d.summary())
+    if args.json:
+        write_text(args.json, d.to_json() + "\n")
+        print(f"wrote {args.json}")
+    if args.html:
+        write_text(args.html, d.to_html())
+        print(f"wrote {args.html}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="didim", description="Identify position-controlled drives from the motor force (DIDIM).")
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
@@ -70,6 +88,17 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--plot", metavar="PNG", help="write measured vs simulated force and the iterations")
     i.add_argument("--quiet", action="store_true", help="no progress messages")
     i.set_defaults(func=cmd_identify)
+
+    o = sub.add_parser("doctor", help="find what physics the model misses, model it and show the fit improve")
+    o.add_argument("file", help="MAT file (EMPS layout)")
+    o.add_argument("--validate", metavar="FILE", help="a recording the fit does not see (default: the last 30 %% of FILE)")
+    o.add_argument("--model", choices=["rigid", "flexible"], default="rigid")
+    o.add_argument("--apm", type=float, default=None, help="a priori total mass (kg)")
+    o.add_argument("--alpha", type=float, default=0.01, help="family-wise test level (default 0.01)")
+    o.add_argument("--json", metavar="OUT")
+    o.add_argument("--html", metavar="OUT", help="the report an engineer reads (plots embedded)")
+    o.add_argument("--quiet", action="store_true")
+    o.set_defaults(func=cmd_doctor)
 
     d = sub.add_parser("demo", help="simulated flexible EMPS with known truth: IDIM-LS, three-step DIDIM, exact-sensitivity OE")
     d.add_argument("--seed", type=int, default=0)

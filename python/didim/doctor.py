@@ -368,6 +368,9 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
         if best is None:
             raise SimulationError("the Stribeck refit failed")
         st, r, vs = best
+        if st.params["Fs"] * state.params.get("Fc", state.params.get("Fc1", 1.0)) <= 0:
+            raise SimulationError(f"the Stribeck friction came out with the sign opposite to the Coulomb friction "
+                                  f"(Fs = {st.params['Fs']:.3g} N): not a Stribeck effect")
         return st, r, {"Fs": st.params["Fs"], "vs": vs}, {"Fs": r.std.get("Fs", math.nan)}
     if c.effect == "position_ripple":
         P = c.hyper["period"]
@@ -424,6 +427,24 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
         st, r = _refit(data, st, {}, progress)
         return st, r, {"gap": g}, {}
     raise DataError(f"unknown effect {c.effect}")
+
+
+_TERM_NAMES = {"asymmetric_friction": ("dFv", "dFc"), "stribeck": ("Fs",), "position_ripple": ("Ar_sin", "Ar_cos")}
+
+
+def _without(state: State, effect: str) -> Optional[State]:
+    """The state with an accepted effect taken out again (None where it cannot be, e.g. flexibility)."""
+    if effect == "offset":
+        return replace(state, offset=False, params={k: v for k, v in state.params.items() if k != "OF"})
+    if effect in _TERM_NAMES:
+        names = _TERM_NAMES[effect]
+        return replace(state, terms=tuple(t for t in state.terms if t.name not in names),
+                       params={k: v for k, v in state.params.items() if k not in names})
+    if effect == "delay":
+        return replace(state, delay=0)
+    if effect == "backlash":
+        return replace(state, backlash_gap=None)
+    return None
 
 
 def _locate(data: _Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:
@@ -612,6 +633,25 @@ def doctor(
                 history.append((state, rt, rv, sim))
                 accepted = True
                 say(f"accepted {c.effect}: {evidence}")
+                # backward pass: an earlier finding the new one makes redundant is taken out again
+                for old in [x for x in findings[:-1] if x.effect != "unnamed"]:
+                    st_drop = _without(state, old.effect)
+                    if st_drop is None:
+                        continue
+                    try:
+                        st_drop, _ = _refit(data, st_drop, {}, progress)
+                        rt_d, rv_d, sim_d = data.errors(st_drop)
+                    except DidimError:
+                        continue
+                    _, p_keep, _ = diebold_mariano(rv_d, rv)
+                    if p_keep >= alpha:
+                        old.accepted = False
+                        old.evidence += f"; taken out again once {c.effect} was modelled (held-out error without it " \
+                                        f"{100 * data.rel(rv_d, False):.2f} %, Diebold-Mariano p = {p_keep:.2g})"
+                        findings.remove(old)
+                        rejected.append(old)
+                        state, rt, rv, sim = st_drop, rt_d, rv_d, sim_d
+                        say(f"removed {old.effect}: no longer improves the held-out fit")
                 break
             rejected.append(f)
             say(f"rejected {c.effect}: {evidence}")

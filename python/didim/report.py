@@ -1,0 +1,158 @@
+"""The doctor's HTML report: for each finding the plot where it shows (before and after), the numbers and a sentence
+of physics. Self-contained: images are embedded, it opens offline in any browser."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from typing import Any, Dict
+
+VIEW_OF = {"offset": "velocity", "asymmetric_friction": "velocity", "stribeck": "velocity", "load_friction": "velocity",
+           "position_ripple": "position", "flexibility": "spectrum", "delay": "spectrum", "backlash": "spectrum"}
+
+
+def _png(fig) -> str:
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _binned(ax, rows, label, color, mirror=False):
+    if not rows:
+        return
+    x = [r[0] for r in rows]
+    y = [r[1] for r in rows]
+    e = [r[2] for r in rows]
+    ax.errorbar(x, y, yerr=e, fmt="o-", ms=3, lw=1, capsize=2, color=color, label=label)
+
+
+def figure(diag, view: str):
+    """One view of the residual, before (the base model) and after (the final model), with 95 % bands."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    before, after = diag.locate["before"], diag.locate["after"]
+    if view in ("velocity", "position"):
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.4), sharey=True)
+        for ax, d in zip(axes, ("forward", "backward")):
+            _binned(ax, before[view][d], "before", "tab:red")
+            _binned(ax, after[view][d], "after", "tab:blue")
+            ax.axhline(0, color="k", lw=0.6)
+            ax.set_title(f"moving {d}")
+            ax.set_xlabel("speed |q̇| (m/s)" if view == "velocity" else "position q (m)")
+            ax.grid(True, alpha=0.3)
+        axes[0].set_ylabel("mean residual force (N)")
+        axes[0].legend()
+    elif view == "spectrum":
+        fig, ax = plt.subplots(figsize=(10, 3.4))
+        ax.semilogy(before["spectrum"]["f"], before["spectrum"]["psd"], color="tab:red", label="before")
+        ax.semilogy(after["spectrum"]["f"], after["spectrum"]["psd"], color="tab:blue", label="after")
+        ax.set_xlabel("frequency (Hz)")
+        ax.set_ylabel("residual PSD (N²/Hz)")
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+    else:  # time
+        fig, ax = plt.subplots(figsize=(10, 3.4))
+        _binned(ax, before["time"], "before", "tab:red")
+        _binned(ax, after["time"], "after", "tab:blue")
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("mean residual force (N)")
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+    fig.suptitle(f"residual against {view}: base model (red) and final model (blue), 95 % bands", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def fit_figure(diag):
+    """Measured against simulated force on the training data, base and final model, with the residuals."""
+    import matplotlib.pyplot as plt
+
+    ctx = diag._context
+    data, hist = ctx["data"], ctx["history"]
+    t = diag._context["data"].rec.t
+    (_, rt0, _, s0), (_, rt1, _, s1) = hist[0], hist[-1]
+    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
+    axes[0].plot(t, data.rec.force, color="tab:red", lw=0.6, label="measured")
+    axes[0].plot(t, s1.force, color="tab:blue", lw=0.6, label="simulated (final model)")
+    axes[0].set_ylabel("motor force (N)")
+    axes[0].legend(loc="upper right")
+    td = t[:: data.dec.factor][: len(rt0)]
+    axes[1].plot(td, rt0, color="tab:red", lw=0.6, label="residual, base model")
+    axes[1].plot(td, rt1, color="tab:blue", lw=0.6, label="residual, final model")
+    axes[1].set_xlabel("time (s)")
+    axes[1].set_ylabel("decimated residual (N)")
+    axes[1].legend(loc="upper right")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def diagnosis_html(diag) -> str:
+    e = html.escape
+    f = diag.fit
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'><title>didim doctor: " + e(diag.recording) + "</title>",
+        "<style>body{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;color:#222}"
+        "table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
+        "th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}.phys{font-style:italic;color:#444}"
+        "img{max-width:100%}.rej{color:#777}</style></head><body>",
+        f"<h1>didim doctor — {e(diag.recording)}</h1>",
+        f"<p>Base model: <b>{e(diag.model)}</b>. Validation: {e(str(diag.options.get('validation')))}. "
+        f"Tests at level α = {diag.options['alpha']} (Holm-corrected across candidates, held-out confirmation by "
+        f"Diebold–Mariano). Run time {diag.elapsed_s:.1f} s.</p>",
+        "<table><tr><th>relative force error</th><th>before</th><th>after</th></tr>",
+        f"<tr><td>training</td><td>{100 * f['train_before']:.2f} %</td><td>{100 * f['train_after']:.2f} %</td></tr>",
+        f"<tr><td>validation</td><td>{100 * f['valid_before']:.2f} %</td><td>{100 * f['valid_after']:.2f} %</td></tr></table>",
+        f"<img src='data:image/png;base64,{_png(fit_figure(diag))}'>",
+    ]
+    if not diag.findings:
+        parts.append("<h2>Nothing significant is missing</h2><p>The residual's structure is within what noise explains: "
+                     "no candidate effect passes the corrected tests, and no view of the residual (time, speed, "
+                     "position) shows significant structure.</p>")
+    for i, x in enumerate(diag.findings, 1):
+        view = VIEW_OF.get(x.effect, x.where.get("view", "time"))
+        parts.append(f"<h2>{i}. {e(x.effect)}</h2><p class='phys'>{e(x.physics)}</p><p>{e(x.evidence)}</p>")
+        if x.params:
+            parts.append("<table><tr><th>parameter</th><th>value</th><th>σ</th></tr>" + "".join(
+                f"<tr><td>{e(k)}</td><td>{v:.5g}</td><td>{x.std.get(k, float('nan')):.3g}</td></tr>" for k, v in x.params.items())
+                + "</table>")
+        parts.append(f"<img src='data:image/png;base64,{_png(figure(diag, view))}'>")
+    if diag.ambiguities:
+        parts.append("<h2>Effects this record cannot tell apart</h2><ul>" + "".join(
+            f"<li>{e(' / '.join(a['effects']))} ({a['shared_pct']:.0f} % shared): {e(a['experiment'])}</li>"
+            for a in diag.ambiguities) + "</ul>")
+    if diag.rejected:
+        parts.append("<h2 class='rej'>Candidates not kept</h2><ul class='rej'>" + "".join(
+            f"<li>{e(x.effect)}: {e(x.evidence)}</li>" for x in diag.rejected) + "</ul>")
+    parts.append("<h2>Parameters</h2><table><tr><th>parameter</th><th>base fit</th><th>final</th></tr>")
+    names = list(dict.fromkeys(list(diag.base.params) + list(diag.final_params)))
+    for n in names:
+        b, a = diag.base.params.get(n), diag.final_params.get(n)
+        parts.append(f"<tr><td>{e(n)}</td><td>{'' if b is None else f'{b:.5g}'}</td><td>{'' if a is None else f'{a:.5g}'}</td></tr>")
+    parts.append("</table><h2>Candidate ranking per round</h2>")
+    for r in diag.rounds:
+        parts.append(f"<h3>round {r['round']}</h3><table><tr><th>effect</th><th>hyper-parameter</th><th>Wald</th><th>dof</th>"
+                     "<th>p</th><th>p (adjusted)</th><th>explained %</th></tr>")
+        for c in r["candidates"]:
+            hyp = ", ".join(f"{k} = {v:.4g}" for k, v in c["hyper"].items())
+            parts.append(f"<tr><td>{e(c['effect'])}</td><td>{e(hyp)}</td><td>{c['wald']:.1f}</td><td>{c['dof']}</td>"
+                         f"<td>{c['p_value']:.2g}</td><td>{c['p_adjusted']:.2g}</td><td>{c['explained_pct']:.2f}</td></tr>")
+        parts.append("</table>")
+    for view in ("velocity", "position", "spectrum", "time"):
+        if not any(VIEW_OF.get(x.effect, x.where.get("view")) == view for x in diag.findings):
+            parts.append(f"<details><summary>residual against {view}</summary>"
+                         f"<img src='data:image/png;base64,{_png(figure(diag, view))}'></details>")
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+__all__ = ["diagnosis_html", "figure", "fit_figure"]
