@@ -380,9 +380,8 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
         return st, r, {"amplitude": amp, "period": P, "Ar_sin": st.params["Ar_sin"], "Ar_cos": st.params["Ar_cos"]}, {
             "Ar_sin": r.std.get("Ar_sin", math.nan), "Ar_cos": r.std.get("Ar_cos", math.nan)}
     if c.effect == "delay":
-        d0 = int(np.clip(round(abs(beta[0])), 1, 8))
         best = None
-        for d in sorted({max(1, d0 - 1), d0, d0 + 1}):
+        for d in range(1, 9):  # search the delay in whole samples
             st = replace(state, delay=d)
             try:
                 st, r = _refit(data, st, {}, progress)

@@ -1,0 +1,106 @@
+"""The model-mismatch doctor: statistics, the CI-sized concealed-effect benchmark, reports and the CLI."""
+
+import importlib.util
+import json
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+import didim
+from didim.stats import diebold_mariano, holm, wald_added
+
+BENCH = pathlib.Path(__file__).resolve().parents[1] / "benches" / "doctor_benchmark.py"
+
+
+def load_bench():
+    spec = importlib.util.spec_from_file_location("doctor_benchmark", BENCH)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_added_regressor_test_keeps_its_size_on_coloured_noise():
+    rng = np.random.default_rng(7)
+    n = 1200
+    idx = np.minimum((np.arange(n) * 10) // n, 9)
+    x = np.zeros((n, 10))
+    x[np.arange(n), idx] = 1.0  # persistent regressors: the hard case for HAC tests
+    p = np.array([wald_added(lfilter([1.0], [1.0, -0.6], rng.standard_normal(n)), x).p_value for _ in range(300)])
+    assert np.mean(p < 0.05) < 0.09  # nominal 5 %; 300 draws
+    assert np.mean(p < 0.01) < 0.03
+
+
+def test_added_regressor_test_detects_a_real_effect():
+    rng = np.random.default_rng(8)
+    n = 1200
+    x = np.sin(np.arange(n) / 7.0)
+    r = lfilter([1.0], [1.0, -0.6], rng.standard_normal(n)) + 0.6 * x
+    t = wald_added(r, x)
+    assert t.p_value < 1e-6 and t.beta[0] == pytest.approx(0.6, abs=0.1)
+
+
+def test_holm_and_diebold_mariano():
+    np.testing.assert_allclose(holm([0.01, 0.04, 0.03]), [0.03, 0.06, 0.06])
+    rng = np.random.default_rng(9)
+    e = rng.standard_normal(2000)
+    _, p_same, _ = diebold_mariano(e, e + 0.01 * rng.standard_normal(2000))
+    _, p_better, gain = diebold_mariano(e + 0.5, e)
+    assert p_same > 0.01 and p_better < 1e-6 and gain > 0.1
+
+
+@pytest.fixture(scope="module")
+def bench():
+    return load_bench()
+
+
+@pytest.mark.parametrize("effect, level", [("offset", 5.6), ("asymmetric_friction", 5.6), ("position_ripple", 8.0), ("delay", 3)])
+def test_doctor_names_and_recovers_a_concealed_effect(bench, effect, level):
+    r = bench.run_one((effect, level, "emps", bench.TEST_SEED0))
+    assert r["named"] == effect, r
+    tol = 0.5 if effect == "delay" else 0.05  # samples, or relative error of the hidden parameter
+    assert r["param_error"] is not None and r["param_error"] <= tol, r
+    assert r["fit"]["valid_after"] < 0.5 * r["fit"]["valid_before"]
+    assert r["fit"]["valid_after"] < 0.03  # down to the noise floor (2 N on ~55 N RMS)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_doctor_finds_nothing_when_nothing_is_hidden(bench, seed):
+    r = bench.run_one(("none", 0, "emps", bench.TEST_SEED0 + 10 + seed))
+    assert r["named"] == "none", r
+
+
+def test_doctor_finds_a_hidden_flexible_mode_and_its_frequency(bench):
+    rec, h, enr = bench.make("flexibility", 25.0, "emps", bench.TEST_SEED0)
+    d = didim.doctor(rec, "rigid", apM=80.0)
+    named = [f.effect for f in d.findings]
+    assert named and named[0] == "flexibility", d.summary()
+    assert d.findings[0].params["f_n_flex"] == pytest.approx(25.0, rel=0.03)
+
+
+def test_diagnosis_json_and_html_contract(bench, tmp_path):
+    rec, _, _ = bench.make("offset", 5.6, "emps", bench.TEST_SEED0 + 1)
+    d = didim.doctor(rec, "rigid", apM=80.0)
+    j = json.loads(d.to_json())
+    assert j["findings"] and j["findings"][0]["effect"] == "offset" and "OF" in j["findings"][0]["params"]
+    for k in ("train_before", "train_after", "valid_before", "valid_after"):
+        assert 0 < j["fit"][k] < 1
+    h = d.to_html()
+    assert h.count("data:image/png;base64,") >= 2 and "offset" in h and "<html" in h
+
+
+def test_doctor_cli_on_the_real_emps_records(emps_path, emps_pulses_path, tmp_path):
+    out, page = tmp_path / "d.json", tmp_path / "d.html"
+    p = subprocess.run([sys.executable, "-m", "didim", "doctor", str(emps_path), "--validate", str(emps_pulses_path),
+                        "--apm", "78", "--json", str(out), "--html", str(page), "--quiet"],
+                       capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr
+    d = json.loads(out.read_text())
+    assert set(d["fit"]) >= {"train_before", "train_after", "valid_before", "valid_after"}
+    from didim.doctor import EFFECTS
+    assert all(f["effect"] in EFFECTS for f in d["findings"])
+    assert d["fit"]["valid_after"] <= d["fit"]["valid_before"]
+    assert page.stat().st_size > 50_000
