@@ -104,3 +104,15 @@ def test_doctor_cli_on_the_real_emps_records(emps_path, emps_pulses_path, tmp_pa
     assert all(f["effect"] in EFFECTS for f in d["findings"])
     assert d["fit"]["valid_after"] <= d["fit"]["valid_before"]
     assert page.stat().st_size > 50_000
+
+
+def test_doctor_finds_load_friction_missing_from_a_flexible_model():
+    truth = didim.scenarios.TABLE3_TRUTH
+    rec = didim.scenarios.make_recording(truth, "flexible", force_noise=1.0, seed=105)
+    d = didim.doctor(rec, "flexible", apM=78.0)
+    named = [f.effect for f in d.findings]
+    assert named[:1] == ["load_friction"], d.summary()
+    f = d.findings[0]
+    assert f.params["Fv2"] == pytest.approx(truth["Fv2"], rel=0.1)
+    assert f.params["Fc2"] == pytest.approx(truth["Fc2"], rel=0.1)
+    assert d.fit["valid_after"] < 0.3 * d.fit["valid_before"]
