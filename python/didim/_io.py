@@ -3,9 +3,27 @@ leaves either the old file or the complete new one."""
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from contextlib import contextmanager
+
+import numpy as np
+
+
+def jsonable(x):
+    """Plain JSON types from numpy scalars and arrays, tuples and dicts; NaN and infinities become None."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return jsonable(x.tolist())
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
 
 
 @contextmanager

@@ -29,6 +29,7 @@ import numpy as np
 
 from . import _core
 from ._errors import DataError, DidimError, SimulationError
+from ._io import jsonable as _clean
 from .identification import didim as didim_fit
 from .identification import fit_flexible_mode, flexible_from_mode, reference_mass
 from .recording import Recording
@@ -89,20 +90,6 @@ class Finding:
             "effect": self.effect, "params": self.params, "std": self.std, "statistic": self.statistic,
             "evidence": self.evidence, "physics": self.physics, "fit": self.fit, "where": self.where,
         })
-
-
-def _clean(x):
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(float(x)) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    return x
 
 
 @dataclass

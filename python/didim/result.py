@@ -9,6 +9,8 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
+from ._io import jsonable
+
 #: Units of the paper's parameters (SI, load side).
 UNITS = {
     "M": "kg",
@@ -72,19 +74,6 @@ class IdentificationResult:
         """A JSON-ready dict with the contract keys: model, method, params, std, rel_std_pct, relative_error, iterations,
         simulations, elapsed_s (plus converged, message, initial, output_error, frozen, options, history)."""
 
-        def clean(x):
-            if isinstance(x, float) and not math.isfinite(x):
-                return None
-            if isinstance(x, dict):
-                return {k: clean(v) for k, v in x.items()}
-            if isinstance(x, (list, tuple)):
-                return [clean(v) for v in x]
-            if isinstance(x, (np.floating,)):
-                return clean(float(x))
-            if isinstance(x, np.integer):
-                return int(x)
-            return x
-
         d = {
             "model": self.model,
             "method": self.method,
@@ -105,7 +94,7 @@ class IdentificationResult:
             "steps": {k: v.to_dict() for k, v in self.steps.items()},
             "units": {k: UNITS.get(k, "") for k in self.params},
         }
-        return clean(d)
+        return jsonable(d)
 
     def to_json(self, **kw) -> str:
         return json.dumps(self.to_dict(), indent=2, **kw)
