@@ -385,7 +385,15 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
                                           if k in state.params} | ({"OF": state.params["OF"]} if state.offset else {}),
                                           std={}, rel_std_pct={}, relative_error=math.nan, iterations=0, simulations=0,
                                           elapsed_s=0.0)
-        r2 = fit_flexible_mode(data.rec, rigid_like, cutoff_hz=min(60.0, data.dec.cutoff_hz or 60.0))
+        # start the mode search at the residual's spectral peak (the rigid model cannot follow the resonance)
+        from scipy.signal import welch
+
+        rt, _, _ = data.errors(state)
+        fs_d = data.rec.fs / data.dec.factor
+        fr, pxx = welch(rt, fs=fs_d, nperseg=min(512, len(rt)))
+        band = (fr >= 5.0) & (fr <= 0.45 * fs_d)
+        f0 = float(fr[band][np.argmax(pxx[band])]) if band.any() else 40.0
+        r2 = fit_flexible_mode(data.rec, rigid_like, f0=max(f0, 10.0), cutoff_hz=60.0)
         lam, f = r2.params["lambda"], r2.params["f_n_flex"]
         init = flexible_from_mode(state.params["M"], lam, f)
         init.update({"Fv1": state.params["Fv"], "Fc1": state.params["Fc"]})
@@ -579,7 +587,12 @@ def doctor(
         if not significant:
             break
         accepted = False
-        for c in significant[:2]:
+        tries = significant[:2]
+        # a mode near the top of the analysed band looks like a delay (a phase lag): when the delay is the leading
+        # candidate of a rigid model, its partner in ambiguity is tried too, even when not significant on its own
+        if state.model == "rigid" and any(c.effect == "delay" for c in tries) and "flexibility" not in done:
+            tries += [c for c in ranked if c.effect == "flexibility"]
+        for c in tries:
             try:
                 st_new, res, params, std = _model_candidate(c, state, base, data, progress)
                 rt_n, rv_n, sim_n = data.errors(st_new)
