@@ -24,7 +24,9 @@ __all__ = [
     "sosfiltfilt",
 ]
 
-def param_names(model: str, offset: bool = False) -> List[str]: ...
+_Terms = Optional[Sequence[Tuple[str, str, float]]]
+
+def param_names(model: str, offset: bool = False, terms: _Terms = None) -> List[str]: ...
 def simulate(
     model: str,
     params: _F64,
@@ -39,6 +41,8 @@ def simulate(
     delay: int = 0,
     coulomb_eps: float = ...,
     offset: bool = False,
+    terms: _Terms = None,
+    backlash_gap: Optional[float] = None,
 ) -> Dict[str, _F64]: ...
 def simulate_sensitivity(
     model: str,
@@ -54,9 +58,19 @@ def simulate_sensitivity(
     delay: int = 0,
     coulomb_eps: float = ...,
     offset: bool = False,
+    terms: _Terms = None,
+    backlash_gap: Optional[float] = None,
 ) -> Dict[str, _F64]: ...
 def regressor(
-    model: str, q: _F64, qd: _F64, qdd: _F64, *, coulomb_eps: float = ..., offset: bool = False
+    model: str,
+    q: _F64,
+    qd: _F64,
+    qdd: _F64,
+    *,
+    coulomb_eps: float = ...,
+    offset: bool = False,
+    terms: _Terms = None,
+    backlash_gap: Optional[float] = None,
 ) -> _F64: ...
 def lstsq(w: _F64, y: _F64, *, rank_tol: Optional[float] = None, sigma: str = "paper") -> Dict[str, Any]: ...
 def butter(order: int, wn: float, *, sos: bool = False) -> Any: ...
