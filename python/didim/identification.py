@@ -24,7 +24,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from . import _core
+from . import _checks, _core
 from ._errors import DataError, DidimError, IdentifiabilityError, SimulationError
 from .recording import Recording
 from .result import IdentificationResult, Iteration
@@ -134,8 +134,14 @@ def idim_ls(
     flexible parameters once the excitation reaches tens of Hz. Off by default (the benchmark's recipe).
     """
     t0 = time.perf_counter()
+    _checks.options(lowpass_hz=lowpass_hz, lowpass_order=lowpass_order, border=border, coulomb_eps=coulomb_eps,
+                    zoh_align=zoh_align)
+    _checks.one_of("sigma", sigma, ("paper", "sample_std"))
     names = param_names(model, offset)
     dec = decimation or Decimation.matlab(10)
+    _checks.decimation_matches(dec, rec.fs)
+    _checks.record_long_enough(dec, rec.n - min(border, rec.n - 1), rec.dt, len(names), 2 if model == "flexible" else 1,
+                               "IDIM-LS")
     y, wd = _idim_system(rec, model, offset, lowpass_hz, lowpass_order, padding, border, dec, coulomb_eps, zoh_align)
     sol = _solve(wd, y, names, sigma)
     p = dict(zip(names, map(float, sol["params"])))
@@ -192,7 +198,10 @@ def didim(
     ``converged=False`` with a message saying what happened.
     """
     t0 = time.perf_counter()
-    frozen = dict(frozen or {})
+    _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps,
+                    divergence_factor=divergence_factor, cutoff_hz=cutoff_hz)
+    initial = _checks.physical(initial, "initial")
+    frozen = _checks.physical(dict(frozen or {}), "frozen")
     names = param_names(model, offset)
     unknown = [k for k in list(initial) + list(frozen) if k not in names]
     if unknown:
@@ -205,6 +214,8 @@ def didim(
         cutoff = cutoff_hz if cutoff_hz is not None else (RIGID_CUTOFF_HZ if model == "rigid" else FLEXIBLE_CUTOFF_HZ)
         decimation = Decimation.lowpass(cutoff, rec.fs)
     dec = decimation
+    _checks.decimation_matches(dec, rec.fs)
+    _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 2 if model == "flexible" else 1, f"{method} ({model})")
     fi = [names.index(n) for n in free]
     zi = [names.index(n) for n in frozen]
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
@@ -327,8 +338,7 @@ def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: bool = F
     """Step 1: rigid DIDIM from χ⁰ = (apM, 0, 0[, 0]), eq. (22), decimation cutoff 5 Hz by default."""
     if apM is None:
         apM = reference_mass(rec)
-    if not (math.isfinite(apM) and apM > 0):
-        raise DataError(f"the a priori mass apM must be > 0 kg, got {apM}")
+    apM = _checks.real("the a priori mass apM", apM, "kg", lo=0.0)
     init = {"M": float(apM), "Fv": 0.0, "Fc": 0.0}
     if offset:
         init["OF"] = 0.0
@@ -358,6 +368,8 @@ def fit_flexible_mode(
     from scipy.optimize import minimize
 
     t0 = time.perf_counter()
+    _checks.options(lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps,
+                    coulomb_eps=coulomb_eps)
     offset = "OF" in rigid.params
     m, fv, fc = rigid.params["M"], rigid.params["Fv"], rigid.params["Fc"]
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
@@ -438,6 +450,8 @@ def didim_flexible(
     steps 2 and 3 are biased and step 3 can drift: the result is then flagged ``converged=False`` with the reason,
     and :func:`didim.output_error.oe_gn` (exact sensitivities) is the method to use."""
     t0 = time.perf_counter()
+    _checks.options(lambda0=lambda0, f0=f0, rigid_cutoff_hz=rigid_cutoff_hz, cutoff_hz=cutoff_hz, tol=tol,
+                    max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
     common = dict(substeps=substeps, coulomb_eps=coulomb_eps)
     _say(progress, "step 1: rigid DIDIM")
     r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress, **common)

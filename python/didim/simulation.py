@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Dict, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _core
+from . import _checks, _core
 from ._errors import DataError
 from .recording import Recording
 
@@ -54,9 +53,14 @@ def params_vector(model: str, params: Params, offset: Optional[bool] = None):
                 + (f"; missing {', '.join(missing)}" if missing else "")
                 + (f"; unknown {', '.join(map(str, unknown))}" if unknown else "")
             )
-        vec = np.array([float(params[k]) for k in names])
+        vec = np.array([_checks.real(f"parameter {k}", params[k]) for k in names])
     else:
-        vec = np.asarray(params, dtype=float).ravel()
+        if isinstance(params, (str, bytes)) or np.iscomplexobj(params):
+            raise DataError(f"parameters must be a mapping name -> value or a sequence of real numbers, got {params!r}")
+        try:
+            vec = np.asarray(params, dtype=float).ravel()
+        except (TypeError, ValueError) as e:
+            raise DataError(f"parameters must be a mapping name -> value or a sequence of real numbers: {e}") from None
         if offset is None:
             offset = model == "rigid" and vec.size == 4
         names = param_names(model, offset)
@@ -153,14 +157,16 @@ def simulate(
         delay: extra actuation delay in samples.
         coulomb_eps: velocity scale of the Coulomb sign (m/s), 0 for the hard sign.
     """
+    if not isinstance(recording, Recording):
+        raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
+    if offset is not None:
+        offset = _checks.flag("offset", offset)
     names, vec, offset = params_vector(model, params, offset)
     if quantization is None:
         quantization = recording.position_resolution or 0.0
-    for what, v in (("substeps", substeps), ("delay", delay)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise DataError(f"{what} must be a whole number >= 0, got {v!r}")
-    if not (isinstance(coulomb_eps, (int, float)) and math.isfinite(coulomb_eps) and coulomb_eps >= 0):
-        raise DataError(f"coulomb_eps must be a finite velocity >= 0 m/s, got {coulomb_eps!r}")
+    quantization = _checks.real("quantization", quantization, "m", lo=0.0, lo_open=False, hint=" (0 for none)")
+    _checks.options(substeps=substeps, coulomb_eps=coulomb_eps)
+    delay = _checks.whole("delay", delay, lo=0, hi=recording.n - 1, hint=" (actuation delay in samples)")
     out = _core.simulate(
         model,
         vec,
