@@ -9,11 +9,32 @@ from __future__ import annotations
 import inspect
 import math
 import numbers
+import warnings
 from typing import Callable, Dict, Iterable, Mapping, Optional, Sequence
 
 import numpy as np
 
 from ._errors import DataError, IdentifiabilityError
+
+
+def real_array(name: str, x, ndims: Sequence[int] = (1,)) -> np.ndarray:
+    """``x`` as a float64 array with one of the dimensions ``ndims``, or a DataError saying what it is instead."""
+    if x is None:
+        raise DataError(f"{name} is missing (None)")
+    if isinstance(x, (str, bytes)):
+        raise DataError(f"{name} must be an array of real numbers, got a string")
+    if np.iscomplexobj(x):
+        raise DataError(f"{name} has complex values: it must be real")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError, OverflowError, Warning) as e:
+        raise DataError(f"{name} must be an array of real numbers: {e}") from None
+    if a.ndim not in ndims:
+        want = " or ".join(f"{d}-D" for d in ndims)
+        raise DataError(f"{name} must be a {want} array, got shape {a.shape}")
+    return a
 
 
 def whole(name: str, value, *, lo: int = 0, hi: Optional[int] = None, hint: str = "") -> int:
@@ -45,8 +66,8 @@ def real(name: str, value, unit: str = "", *, lo: Optional[float] = None, lo_ope
             parts.append(f"{'>' if lo_open else '>='} {lo:g}")
         if hi is not None:
             parts.append(f"{'<' if hi_open else '<='} {hi:g}")
-        cond = " and ".join(parts)
-        raise DataError(f"{name} must be a finite number{u}{' ' + cond if cond else ''}, got {value!r}{hint}")
+        cond = " and ".join(f"{c}{u}" for c in parts)
+        raise DataError(f"{name} must be a finite number{' ' + cond if cond else u and ' (' + unit + ')'}, got {value!r}{hint}")
     return v
 
 
@@ -146,6 +167,19 @@ def excitation(qr: np.ndarray, u_ext: Optional[np.ndarray], names: Sequence[str]
     )
 
 
+def measured_signal(name: str, norm: float, what: str) -> None:
+    """The (decimated) measured signal a method fits must be neither zero nor beyond float range."""
+    if norm == 0:
+        raise DataError(
+            f"the measured {name} is zero throughout (after the decimation of {what}): there is nothing to fit; "
+            "check that the right variable was loaded as the force"
+        )
+    if not math.isfinite(norm):
+        raise DataError(
+            f"the measured {name} is too large to fit (its norm overflows): check its units (N on the load side, m)"
+        )
+
+
 def record_long_enough(dec, n: int, dt: float, n_params: int, blocks: int, what: str) -> None:
     """The decimation filter needs more samples than its padding, and the decimated system more rows than
     parameters; raises a DataError about the record (not about an internal array) otherwise."""
@@ -173,5 +207,5 @@ def decimation_matches(dec, fs: float) -> None:
         )
 
 
-__all__ = ["whole", "real", "flag", "one_of", "options", "known_options", "physical", "excitation", "record_long_enough",
+__all__ = ["real_array", "whole", "real", "flag", "one_of", "options", "known_options", "physical", "excitation", "measured_signal", "record_long_enough",
            "decimation_matches"]

@@ -220,6 +220,7 @@ def didim(
     zi = [names.index(n) for n in frozen]
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
     yd_motor = dec(rec.force)
+    _checks.measured_signal("force", float(np.linalg.norm(yd_motor)), f"{method} ({model})")
     zero = np.zeros(rec.n)
 
     history: List[Iteration] = []
@@ -227,11 +228,13 @@ def didim(
     n_sim, worse, converged, message = 0, 0, False, ""
     rho_prev = None
     sol = None
+    stop: Optional[DidimError] = None  # the error that stopped the iterations, re-raised if there is no iterate
     for k in range(max_iter):
         try:
             sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps)
         except (SimulationError, DataError) as e:
             message = f"iteration {k}: the simulation with χ{k} failed ({e}); stopped"
+            stop = e
             break
         n_sim += 1
         out_err = _output_error(yd_motor, sim.force, dec)
@@ -260,6 +263,7 @@ def didim(
             sol = _solve(w_all, y_all, free)
         except IdentifiabilityError as e:
             message = f"iteration {k + 1}: {e}"
+            stop = e
             break
         chi = chi.copy()
         chi[fi] = sol["params"]
@@ -300,7 +304,7 @@ def didim(
     if not converged and best[2] is not None:
         final_out, chi, sol = best[0], best[1], best[2]
     elif not converged and sol is None:
-        raise SimulationError(f"DIDIM could not start: {message}")
+        raise (type(stop) if stop is not None else SimulationError)(f"DIDIM could not start: {message}")
 
     return IdentificationResult(
         model=model,
@@ -375,6 +379,7 @@ def fit_flexible_mode(
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     yd = dec(rec.force)
     ny = float(np.linalg.norm(yd))
+    _checks.measured_signal("force", ny, "step 2")
     count = {"sim": 0}
     trace: List[tuple] = []
 
@@ -456,7 +461,11 @@ def didim_flexible(
     _say(progress, "step 1: rigid DIDIM")
     r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress, **common)
     if not r1.converged:
-        raise SimulationError(f"step 1 (rigid DIDIM) did not converge: {r1.message}")
+        # nothing sensible to start steps 2 and 3 from: hand back step 1, flagged, with its history
+        r1.message = (f"step 1 (rigid DIDIM) did not converge, so steps 2 and 3 were not run and this is step 1's rigid "
+                      f"result: {r1.message}")
+        r1.elapsed_s = time.perf_counter() - t0
+        return r1
     _say(progress, "step 2: Nelder-Mead on (λ, f_n_flex)")
     r2 = fit_flexible_mode(rec, r1, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress, **common)
     _say(progress, "step 3: flexible DIDIM")
@@ -477,6 +486,8 @@ def didim_flexible(
         )
     elif not r3.converged:
         r3.message += f" (step 2's output error was {100 * r2.output_error:.2f} %); consider method='oe-gn'"
+    if not r2.converged:
+        r3.message = (r3.message + "; " if r3.message else "") + f"note: step 2 stopped without converging ({r2.message})"
     r3.simulations += r1.simulations + r2.simulations
     r3.elapsed_s = time.perf_counter() - t0
     r3.method = "didim"

@@ -70,6 +70,7 @@ def oe_nm(
     _checks.record_long_enough(dec, rec.n, rec.dt, len(names), 1, "oe-nm")
     yd = dec(_measured(rec, criterion))
     ny = float(np.linalg.norm(yd))
+    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-nm")
     count = {"sim": 0}
     history: List[Iteration] = []
 
@@ -137,6 +138,7 @@ def oe_gn(
     _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 1, "oe-gn")
     measured = _measured(rec, criterion)
     ny = float(np.linalg.norm(dec(measured)))
+    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-gn")
     ctrl = rec.controller
     n_sim = 0
 

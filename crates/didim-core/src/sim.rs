@@ -131,6 +131,7 @@ pub fn simulate_sensitivity<const N: usize>(
     opts: &SimOptions,
 ) -> Result<SensOutput> {
     let p = model.n_params();
+    check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
     let mut t = Sensitivity::<N>::new(p, qr.len(), opts.delay);
     let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
     Ok(SensOutput {
@@ -313,6 +314,28 @@ fn validate_signals(qr: &[f64], u_ext: Option<&[f64]>) -> Result<usize> {
     Ok(n)
 }
 
+/// Every check of the inputs of a simulation; returns the number of samples.
+fn check_inputs<const N: usize>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+) -> Result<usize> {
+    model.check_params(chi)?;
+    controller.validate()?;
+    opts.validate()?;
+    let n = validate_signals(qr, u_ext)?;
+    if opts.delay >= n {
+        return Err(invalid!(
+            "actuation delay of {} samples is not shorter than the record ({n} samples): no command would ever act",
+            opts.delay
+        ));
+    }
+    Ok(n)
+}
+
 /// The simulation loop shared by [`simulate`] and [`simulate_sensitivity`].
 fn run<const N: usize, T: Tangent<N>>(
     model: &Model<N>,
@@ -323,10 +346,7 @@ fn run<const N: usize, T: Tangent<N>>(
     opts: &SimOptions,
     tangent: &mut T,
 ) -> Result<SimOutput> {
-    model.check_params(chi)?;
-    controller.validate()?;
-    opts.validate()?;
-    let n = validate_signals(qr, u_ext)?;
+    let n = check_inputs(model, chi, controller, qr, u_ext, opts)?;
 
     let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
         (a.min(x), b.max(x))
