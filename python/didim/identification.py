@@ -47,13 +47,18 @@ def _solve(w: np.ndarray, y: np.ndarray, names: Sequence[str], sigma: str = "pap
     """QR least squares; raises IdentifiabilityError naming dependent columns."""
     sol = _core.lstsq(np.ascontiguousarray(w), np.ascontiguousarray(y), sigma=sigma)
     if sol["rank"] < len(names):
-        deps = []
+        deps, which = [], []
         for col, comb in sol["dependencies"]:
-            rhs = " + ".join(f"{c:.6g}·{names[i]}" for i, c in comb) or "0"
-            deps.append(f"column {names[col]} = {rhs}")
+            which.append(names[col])
+            if comb:
+                rhs = " + ".join(f"{c:.6g}·{names[i]}" for i, c in comb)
+                deps.append(f"column {names[col]} = {rhs}")
+            else:
+                deps.append(f"column {names[col]} is zero ({names[col]} has no effect on this record)")
         raise IdentifiabilityError(
-            f"the regressor has rank {sol['rank']} < {len(names)}: {'; '.join(deps)}. These parameters cannot be told "
-            "apart on this record: excite the axis more (other speeds, both directions, accelerations) or fix some of them"
+            f"the regressor has rank {sol['rank']} < {len(names)}: {'; '.join(deps)}. {', '.join(which)} cannot be "
+            "identified separately on this record: excite the axis more (other speeds, both directions, accelerations) "
+            "or fix some of them"
         )
     return sol
 

@@ -224,9 +224,9 @@ class Recording:
 
 
 #: Relative margin below the saturation at which a sample counts as saturated (:meth:`Recording.diagnose`).
-SATURATION_RTOL = 1e-3
+SATURATION_RTOL = 0.01
 #: Relative margin above the saturation beyond which the force is reported as exceeding it.
-SATURATION_OVER_RTOL = 0.01
+SATURATION_OVER_RTOL = 0.05
 #: A saturated stretch this long (s) is reported ...
 SATURATION_WARN_S = 0.05
 #: ... and so is a record saturated on this fraction of its samples.
@@ -272,7 +272,7 @@ def _time_step(t: np.ndarray, where: str) -> float:
     if not np.all(steps > 0):
         k = int(np.flatnonzero(~(steps > 0))[0])
         raise DataError(
-            f"{where}time t is not increasing (t[{k + 1}] = {t[k + 1]!r} <= t[{k}] = {t[k]!r}): sort the record and "
+            f"{where}time t is not increasing (t[{k + 1}] = {t[k + 1]:.9g} <= t[{k}] = {t[k]:.9g}): sort the record and "
             "remove repeated samples"
         )
     dt = float((t[-1] - t[0]) / (n - 1))

@@ -42,7 +42,7 @@ def _wn(cutoff_hz: float, fs_hz: float) -> float:
         raise DataError(f"sampling frequency must be > 0 Hz, got {fs_hz}")
     if not (math.isfinite(cutoff_hz) and 0 < cutoff_hz < fs_hz / 2):
         raise DataError(
-            f"cutoff {cutoff_hz} Hz must lie between 0 and the Nyquist frequency {fs_hz / 2:g} Hz: lower the cutoff"
+            f"cutoff {cutoff_hz:g} Hz must lie between 0 and the Nyquist frequency {fs_hz / 2:g} Hz: lower the cutoff"
         )
     return cutoff_hz / (fs_hz / 2)
 
