@@ -168,3 +168,9 @@ def test_outputs_hold_no_nan_tokens(tmp_path):
     r.save(tmp_path / "r.json")
     d = json.loads((tmp_path / "r.json").read_text(), parse_constant=lambda c: pytest.fail(f"non-JSON token {c}"))
     assert d["std"]["M"] is None and d["rel_std_pct"]["M"] is None
+
+
+def test_the_cli_checks_the_figure_format_before_the_work(tmp_path, emps_path):
+    p = _cli("identify", str(emps_path), "--plot", str(tmp_path / "fit.docx"))
+    assert p.returncode == 2 and "cannot write a figure as .docx" in p.stderr and ".png" in p.stderr
+    assert "identification" not in p.stdout and listing(tmp_path) == []

@@ -427,3 +427,29 @@ def test_load_mat_never_raises_undocumented(tmp_path_factory, content, cut, emps
     cut_file = folder / "cut.mat"
     cut_file.write_bytes(head)
     attempt(didim.load_mat, cut_file)
+
+
+@prop
+@given(data=st.data())
+def test_helpers_and_scenarios_never_raise_undocumented(data):
+    attempt(didim.coulomb_sign, data.draw(arrays(20)), data.draw(st.one_of(floats, st.just(1e-4))))
+    attempt(didim.param_names, data.draw(st.one_of(models, st.none())), data.draw(st.one_of(st.booleans(), st.integers())))
+    n = data.draw(st.integers(0, 50))
+    t = np.arange(n) * data.draw(st.sampled_from([1e-3, -1e-3, 0.0]))
+    if data.draw(st.booleans()):
+        t = data.draw(arrays(50))
+    attempt(didim.Recording.from_time, t, np.zeros(n), np.zeros(n), np.zeros(n),
+            dt=data.draw(st.one_of(st.none(), floats)))
+    valid = dict(truth=dict(sc_truth()), model="rigid", qr=0.05 * np.sin(np.arange(300) * 2e-2),
+                 force_noise=1.0, noise_corr=0.5, quantization=5e-8, seed=data.draw(st.integers(0, 10)))
+    hostile = dict(truth=st.dictionaries(st.sampled_from(["M", "Fv", "Fc", "K12"]), floats), model=models,
+                   qr=arrays(300), force_noise=floats, noise_corr=floats, quantization=st.one_of(floats, st.none()),
+                   seed=st.one_of(st.integers(), st.text(max_size=2)))
+    a = mutated(data, valid, hostile)
+    rec = attempt(didim.scenarios.make_recording, a.pop("truth"), a.pop("model"), a.pop("qr"), **a)
+    if rec is not None:
+        assert np.all(np.isfinite(rec.force))
+
+
+def sc_truth():
+    return dict(M=95.0, Fv=200.0, Fc=20.0)

@@ -17,8 +17,9 @@ import numpy as np
 from ._errors import DataError, IdentifiabilityError
 
 
-def real_array(name: str, x, ndims: Sequence[int] = (1,)) -> np.ndarray:
-    """``x`` as a float64 array with one of the dimensions ``ndims``, or a DataError saying what it is instead."""
+def real_array(name: str, x, ndims: Optional[Sequence[int]] = (1,)) -> np.ndarray:
+    """``x`` as a float64 array with one of the dimensions ``ndims`` (None: any), or a DataError saying what it is
+    instead."""
     if x is None:
         raise DataError(f"{name} is missing (None)")
     if isinstance(x, (str, bytes)):
@@ -31,7 +32,7 @@ def real_array(name: str, x, ndims: Sequence[int] = (1,)) -> np.ndarray:
             a = np.asarray(x, dtype=float)
     except (TypeError, ValueError, OverflowError, Warning) as e:
         raise DataError(f"{name} must be an array of real numbers: {e}") from None
-    if a.ndim not in ndims:
+    if ndims is not None and a.ndim not in ndims:
         want = " or ".join(f"{d}-D" for d in ndims)
         raise DataError(f"{name} must be a {want} array, got shape {a.shape}")
     return a

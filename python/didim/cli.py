@@ -23,6 +23,8 @@ def cmd_identify(args) -> int:
     from .plots import plot_fit
 
     _check_outputs(args.file, [args.json, args.plot])
+    if args.plot:
+        _check_figure_format(args.plot)
     rec = load_mat(args.file)
     opts = {}
     if args.apm is not None and args.method != "idim-ls":
@@ -67,6 +69,23 @@ def _check_outputs(source: str, outputs) -> None:
         check_writable(out)
 
 
+def _check_figure_format(path: str) -> None:
+    import os
+
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from ._errors import DataError
+
+    ext = os.path.splitext(path)[1].lstrip(".").lower() or "png"
+    formats = FigureCanvasAgg(Figure()).get_supported_filetypes()
+    if ext not in formats:
+        raise DataError(f"cannot write a figure as .{ext} ({path}): use one of {', '.join('.' + f for f in sorted(formats))}")
+
+
 def _one_line(msg: str) -> str:
     return " ".join(str(msg).split())
 
@@ -79,6 +98,10 @@ def cmd_demo(args) -> int:
     from ._io import write_text
     from .demo import demo_report, didim_case_report, run_demo, run_didim_case
 
+    if args.json:
+        from ._io import check_writable
+
+        check_writable(args.json)
     results = run_demo(seed=args.seed, progress=_progress(args.quiet))
     print(demo_report(results))
     print(didim_case_report(run_didim_case(seed=args.seed)))

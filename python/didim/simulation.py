@@ -21,9 +21,16 @@ Params = Union[Mapping[str, float], Sequence[float], np.ndarray]
 
 def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
     """The sign used by every Coulomb friction term, identical to the core's: ``v/sqrt(v²+eps²)``, hard sign for eps = 0."""
-    v = np.asarray(v, dtype=float)
+    v = _checks.real_array("v", v, None)
+    eps = _checks.real("eps", eps, "m/s", lo=0.0, lo_open=False)
     if eps > 0:
-        return v / np.sqrt(v * v + eps * eps)
+        with np.errstate(all="ignore"):
+            d = v * v + eps * eps
+            out = v / np.sqrt(d)
+            odd = ~(np.isfinite(d) & (d >= np.finfo(float).tiny))  # v² + eps² under- or overflows: as the core
+            if np.any(odd):
+                out = np.where(odd, np.where(np.isinf(v), np.sign(v), v / np.hypot(v, eps)), out)
+        return out
     return np.sign(v)
 
 

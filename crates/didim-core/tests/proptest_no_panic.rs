@@ -286,15 +286,19 @@ proptest! {
         for tf in [filter::butter(order, wn).ok(), Some(Tf { b: b.clone(), a: a.clone() })].into_iter().flatten() {
             if let Ok(y) = filter::filtfilt(&tf, &x, padlen) {
                 prop_assert_eq!(y.len(), x.len());
+                prop_assert!(y.iter().all(|v| v.is_finite()), "non-finite filtfilt output");
             }
         }
         if let Ok(sos) = filter::butter_sos(order, wn) {
             if let Ok(y) = filter::sosfiltfilt(&sos, &x, padlen) {
                 prop_assert_eq!(y.len(), x.len());
+                prop_assert!(y.iter().all(|v| v.is_finite()), "non-finite sosfiltfilt output");
             }
         }
         let hostile_sos = Sos(vec![[b.first().copied().unwrap_or(1.0), 0.0, 0.0, a.first().copied().unwrap_or(1.0), 0.5, 0.0]]);
-        let _ = filter::sosfiltfilt(&hostile_sos, &x, padlen);
+        if let Ok(y) = filter::sosfiltfilt(&hostile_sos, &x, padlen) {
+            prop_assert!(y.iter().all(|v| v.is_finite()), "non-finite sosfiltfilt output");
+        }
     }
 
     #[test]
@@ -319,10 +323,12 @@ proptest! {
             let _ = (d.factor(), d.order(), d.padlen(), d.min_input_len(), d.output_len(n), d.filter());
             if let Ok(out) = d.apply(&y) {
                 prop_assert_eq!(out.len(), d.output_len(n));
+                prop_assert!(out.iter().all(|v| v.is_finite()));
             }
             if let Ok((yd, wd)) = d.apply_parallel(&y, &w, ncols) {
                 prop_assert_eq!(yd.len(), d.output_len(n));
                 prop_assert_eq!(wd.len(), if n == 0 { 0 } else { d.output_len(n) * ncols });
+                prop_assert!(yd.iter().chain(&wd).all(|v| v.is_finite()));
             }
         }
         let _ = filter::default_factor(fs, cutoff);

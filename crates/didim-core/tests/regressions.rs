@@ -2,6 +2,7 @@
 //! error or a correct value.
 
 use didim_core::controller::Controller;
+use didim_core::filter::{self, Sos, Tf};
 use didim_core::model::{self, coulomb_sign, coulomb_sign_derivative};
 use didim_core::sim::{self, SimOptions};
 use didim_core::Error;
@@ -78,4 +79,21 @@ fn the_coulomb_sign_is_right_where_its_square_under_or_overflows() {
     // unchanged where it was right
     let (v, eps) = (3e-4f64, 1e-4f64);
     assert_eq!(coulomb_sign(v, eps), v / (v * v + eps * eps).sqrt());
+}
+
+/// A tiny `a[0]` (4.2e-199) scales the normalised numerator to 1e198: the two passes overflowed and `filtfilt`
+/// returned all NaN without an error.
+#[test]
+fn filtering_that_overflows_is_an_error_not_nan() {
+    let b = filter::butter(1, 0.5).unwrap().b;
+    let tf = Tf {
+        b,
+        a: vec![4.204551453322078e-199],
+    };
+    let x = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+    let e = filter::filtfilt(&tf, &x, None).unwrap_err();
+    assert!(e.to_string().contains("overflowed"), "{e}");
+    let sos = Sos(vec![[1e300, 0.0, 0.0, 1.0, 0.5, 0.0]]);
+    let e = filter::sosfiltfilt(&sos, &x, Some(2)).unwrap_err();
+    assert!(e.to_string().contains("overflowed"), "{e}");
 }
