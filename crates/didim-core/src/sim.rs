@@ -134,6 +134,25 @@ pub fn simulate_sensitivity<const N: usize>(
     check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
     let mut t = Sensitivity::<N>::new(p, qr.len(), opts.delay);
     let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
+    // finite states can still have non-finite sensitivities (e.g. a Coulomb force of 1e308 N at rest, whose
+    // derivative is 1e308/eps): an error, not NaN in the Jacobian
+    let n = qr.len();
+    let first_bad = t
+        .dforce
+        .iter()
+        .chain(&t.dq)
+        .enumerate()
+        .filter(|(_, v)| !v.is_finite())
+        .map(|(i, _)| i % n)
+        .min();
+    if let Some(k) = first_bad {
+        return Err(Error::Simulation(format!(
+            "the sensitivities of the closed loop are not finite from sample {k} (t = {:.6} s) with parameters {}: \
+             some parameter values are too large for f64 (or coulomb_eps too small); check their values and units",
+            k as f64 * opts.dt,
+            describe(model, chi)
+        )));
+    }
     Ok(SensOutput {
         sim,
         dforce: t.dforce,

@@ -183,6 +183,7 @@ proptest! {
                 check_sim(&out.sim, 2, n);
                 prop_assert_eq!(out.dforce.len(), 7 * n);
                 prop_assert_eq!(out.dq.len(), 2 * 7 * n);
+                prop_assert!(out.dforce.iter().chain(&out.dq).all(|v| v.is_finite()), "non-finite sensitivity");
             }
         } else {
             let m = model::rigid(false, 1e-4).unwrap();
@@ -191,6 +192,7 @@ proptest! {
                 check_sim(&out.sim, 1, n);
                 prop_assert_eq!(out.dforce.len(), 3 * n);
                 prop_assert_eq!(out.dq.len(), 3 * n);
+                prop_assert!(out.dforce.iter().chain(&out.dq).all(|v| v.is_finite()), "non-finite sensitivity");
             }
         }
     }

@@ -97,3 +97,27 @@ fn filtering_that_overflows_is_an_error_not_nan() {
     let e = filter::sosfiltfilt(&sos, &x, Some(2)).unwrap_err();
     assert!(e.to_string().contains("overflowed"), "{e}");
 }
+
+/// Fc2 = 1.8e308 N leaves the axis at rest (finite states) but its sensitivity, 1.8e308/eps, overflowed: the
+/// Jacobian came back full of NaN without an error.
+#[test]
+fn sensitivities_that_overflow_are_a_simulation_error() {
+    let m = model::flexible(1e-4).unwrap();
+    let chi = [0.1, 0.1, 0.1, 0.1, 0.1, f64::MAX, 1000.0];
+    let c = Controller::EmpsCascade {
+        kp: 1.0,
+        kv: 1.0,
+        gtau: 1.0,
+        vsat: 1.0,
+    };
+    let o = SimOptions {
+        substeps: 1,
+        ..SimOptions::new(1e-4)
+    };
+    assert!(sim::simulate(&m, &chi, &c, &[0.0, 0.0], None, &o).is_ok());
+    let e = sim::simulate_sensitivity(&m, &chi, &c, &[0.0, 0.0], None, &o).unwrap_err();
+    assert!(
+        matches!(&e, Error::Simulation(s) if s.contains("sensitivities") && s.contains("Fc2=")),
+        "{e}"
+    );
+}
