@@ -4,7 +4,7 @@ The DIDIM closed-loop output-error method (Gautier, Jubien, Janot, Robet) on a R
 simulation, parallel decimation and QR least squares. SI units on the load side everywhere.
 """
 
-from ._errors import DataError, DidimError, IdentifiabilityError, SimulationError
+from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .controllers import PD, EmpsCascade
 from .recording import Recording, load_mat
 from .simulation import DEFAULT_COULOMB_EPS, SimResult, coulomb_sign, param_names, simulate
@@ -22,6 +22,7 @@ __all__ = [
     "DataError",
     "SimulationError",
     "IdentifiabilityError",
+    "DidimWarning",
     "EmpsCascade",
     "PD",
     "Recording",

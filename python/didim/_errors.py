@@ -17,4 +17,10 @@ class IdentifiabilityError(DidimError):
     """The regressor is rank deficient: some parameters cannot be told apart on this record."""
 
 
-__all__ = ["DidimError", "DataError", "SimulationError", "IdentifiabilityError"]
+class DidimWarning(UserWarning):
+    """Something in the input looks wrong but need not be (a command saturating for long stretches, a force that
+    looks like volts where newtons are expected, ...). The message gives the evidence and what to check. Silence
+    them with ``warnings.simplefilter("ignore", didim.DidimWarning)`` or turn them into errors with "error"."""
+
+
+__all__ = ["DidimError", "DataError", "SimulationError", "IdentifiabilityError", "DidimWarning"]

@@ -1,14 +1,41 @@
-"""Output files are written to a temporary file beside the target and renamed into place, so an interrupted run
-leaves either the old file or the complete new one."""
+"""Every file didim writes (JSON, text tables, figures) goes through this module: the content is written to a temporary
+file beside the target, flushed to disk, and renamed into place, so an interrupted or failed run leaves either the
+old file or the complete new one, never a half-written file, and no temporary file behind."""
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import tempfile
 from contextlib import contextmanager
+from typing import Iterator
 
 import numpy as np
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _target(path) -> str:
+    """The file to replace: a symbolic link is followed, so the file it points to gets the new content."""
+    return os.path.realpath(os.fspath(path))
+
+
+def check_writable(path) -> None:
+    """Raises OSError naming ``path`` when it cannot be written (missing folder, no permission, a folder), so that a
+    long run fails before it starts rather than at the end."""
+    target = _target(path)
+    folder = os.path.dirname(target)
+    if os.path.isdir(target):
+        raise OSError(errno.EISDIR, f"cannot write {os.fspath(path)}: it is a folder")
+    if not os.path.isdir(folder):
+        raise OSError(errno.ENOENT, f"cannot write {os.fspath(path)}: the folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OSError(errno.EACCES, f"cannot write {os.fspath(path)}: no permission to write in {folder}")
 
 
 def jsonable(x):
@@ -27,34 +54,71 @@ def jsonable(x):
 
 
 @contextmanager
-def atomic_path(path):
-    """Yields a temporary path in the target's folder; on success it replaces ``path``, on error it is removed."""
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    base, ext = os.path.splitext(os.path.basename(path))
-    fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=f".tmp{ext}", dir=folder)
+def atomic_path(path) -> Iterator[str]:
+    """Yields a temporary path in the target's folder; when the block succeeds, the file written there is flushed to
+    disk and replaces ``path`` (keeping the old file's permissions, or the default ones for a new file); when it
+    fails, the temporary file is removed and ``path`` is untouched."""
+    shown = os.fspath(path)
+    target = _target(path)
+    folder = os.path.dirname(target)
+    base, ext = os.path.splitext(os.path.basename(target))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=f".tmp{ext}", dir=folder)
+    except OSError as e:
+        raise OSError(e.errno, f"cannot write {shown}: {e.strerror or e}") from None
     os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the permissions a plain open() would
     try:
         yield tmp
-        os.replace(tmp, path)
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        try:
+            mode = os.stat(target).st_mode & 0o7777
+        except FileNotFoundError:
+            mode = 0o666 & ~_umask()
+        os.chmod(tmp, mode)
+        os.replace(tmp, target)
+        _fsync_folder(folder)
     except BaseException:
-        if os.path.exists(tmp):
+        try:
             os.unlink(tmp)
+        except FileNotFoundError:
+            pass
         raise
 
 
+def _fsync_folder(folder: str) -> None:
+    """Makes the rename durable (best effort: not every platform can open a folder)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def write_text(path, text: str) -> None:
-    """Writes ``text`` to ``path`` atomically."""
+    """Writes ``text`` to ``path`` atomically (UTF-8)."""
     with atomic_path(path) as tmp:
         with open(tmp, "w", encoding="utf-8") as f:
             f.write(text)
 
 
+def write_bytes(path, data: bytes) -> None:
+    """Writes ``data`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            f.write(data)
+
+
 def save_figure(fig, path, **kw) -> None:
-    """Saves a matplotlib figure atomically (format from the extension)."""
-    fmt = os.path.splitext(os.fspath(path))[1].lstrip(".") or "png"
+    """Saves a matplotlib figure atomically (format from the extension: png, svg, pdf, ...)."""
+    fmt = os.path.splitext(os.fspath(path))[1].lstrip(".").lower() or "png"
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format=fmt, **kw)
+
+
+__all__ = ["atomic_path", "check_writable", "write_text", "write_bytes", "save_figure"]

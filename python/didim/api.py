@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Dict, Optional
 
-from ._errors import DataError
-from .identification import Progress, didim_flexible, didim_rigid, idim_ls, reference_mass
-from .output_error import oe_gn, oe_nm, pseudo_regular_initial
+from . import _checks
+from ._errors import DataError, DidimWarning
+from .identification import Progress, didim, didim_flexible, didim_rigid, idim_ls, reference_mass
+from .output_error import CRITERIA, oe_gn, oe_nm, pseudo_regular_initial
 from .recording import Recording
 from .result import IdentificationResult
-from .simulation import MODELS
+from .simulation import MODELS, param_names
 
 METHODS = ("idim-ls", "didim", "oe-nm", "oe-gn")
 
@@ -39,13 +41,47 @@ def identify(
     pseudo-regular values of eq. (33) built on a rigid DIDIM for the flexible one (its simulations are counted).
     ``apM`` is the a priori total mass (kg); by default a rough value from the reference is used. Other keyword
     options go to the method's function (e.g. ``cutoff_hz``, ``tol``, ``max_iter``, ``substeps``).
+
+    Raises :class:`DataError` for a bad option or parameter (an unknown option lists the accepted ones),
+    :class:`IdentifiabilityError` when the record excites nothing (constant reference) or the regressor is rank
+    deficient, :class:`SimulationError` when the loop diverges from the start. Issues a :class:`DidimWarning` for
+    each finding of :meth:`Recording.diagnose` (saturated command, force scale not matching the controller). A
+    method that stops without converging returns ``converged=False`` with a message and its history.
     """
-    if model not in MODELS:
+    if not isinstance(model, str) or model not in MODELS:
         raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)}")
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:
         raise DataError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
+    offset = _checks.flag("offset", offset)
+    if apM is not None:
+        if method == "idim-ls":
+            raise DataError("apM (a priori mass) is not used by idim-ls, which needs no initial values; leave it out")
+        apM = _checks.real("the a priori mass apM", apM, "kg", lo=0.0)
+    if initial is not None:
+        if method not in ("oe-nm", "oe-gn"):
+            start = "starts from apM" if method == "didim" else "needs no initial values"
+            raise DataError(f"initial values are used by the output-error methods (oe-nm, oe-gn); {method} {start}")
+        initial = _checks.physical(initial, "initial")
+        if offset and "OF" not in initial:
+            raise DataError("offset=True but initial has no OF: give its initial value (N), e.g. 0.0")
+    _checks.one_of("criterion", criterion, CRITERIA)
+    if criterion != "force" and method not in ("oe-nm", "oe-gn"):
+        raise DataError(f"criterion={criterion!r} applies to the output-error methods (oe-nm, oe-gn), not to {method}")
+    if progress is not None and not callable(progress):
+        raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
+    targets = {
+        "idim-ls": ([idim_ls], ("offset",)),
+        "didim": ([didim_rigid, didim] if model == "rigid" else [didim_flexible], ("offset", "progress", "frozen", "method")),
+        "oe-nm": ([oe_nm], ("criterion", "progress")),
+        "oe-gn": ([oe_gn], ("criterion", "progress")),
+    }
+    funcs, fixed = targets[method]
+    _checks.known_options(funcs, options, f"method {method!r} ({model} model)", skip=fixed)
+    _checks.excitation(recording.qr, recording.u_ext, param_names(model, offset))
+    for finding in recording.diagnose():
+        warnings.warn(f"{recording.name or 'record'}: {finding}", DidimWarning, stacklevel=2)
     if method == "idim-ls":
         return idim_ls(recording, model, offset=offset, **options)
     if method == "didim":

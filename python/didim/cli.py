@@ -22,12 +22,19 @@ def cmd_identify(args) -> int:
     from .api import identify
     from .plots import plot_fit
 
+    _check_outputs(args.file, [args.json, args.plot])
+    if args.plot:
+        _check_figure_format(args.plot)
     rec = load_mat(args.file)
     opts = {}
     if args.apm is not None and args.method != "idim-ls":
         opts["apM"] = args.apm
     if args.method in ("oe-nm", "oe-gn"):
         opts["criterion"] = args.criterion
+    if args.max_iter is not None:
+        opts["max_iter"] = args.max_iter
+    if args.tol is not None:
+        opts["tol"] = args.tol
     res = identify(rec, args.model, args.method, offset=args.offset, progress=_progress(args.quiet), **opts)
     print(res.summary())
     if args.json:
@@ -36,13 +43,65 @@ def cmd_identify(args) -> int:
     if args.plot:
         save_figure(plot_fit(rec, res), args.plot, dpi=110)
         print(f"wrote {args.plot}")
-    return 0 if res.converged else 1
+    if not res.converged:
+        print(f"didim: not converged: {_one_line(res.message)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _check_outputs(source: str, outputs) -> None:
+    """Fails before any work when an output cannot be written, or would overwrite the input record."""
+    import os
+
+    from ._errors import DataError
+    from ._io import check_writable
+
+    seen = {}
+    for out in outputs:
+        if not out:
+            continue
+        if os.path.exists(source) and os.path.exists(out) and os.path.samefile(source, out):
+            raise DataError(f"output {out} is the input record {source}: choose another name (inputs are never modified)")
+        real = os.path.realpath(out)
+        if real in seen:
+            raise DataError(f"outputs {seen[real]} and {out} are the same file: choose two names")
+        seen[real] = out
+        check_writable(out)
+
+
+def _check_figure_format(path: str) -> None:
+    import os
+
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from ._errors import DataError
+
+    ext = os.path.splitext(path)[1].lstrip(".").lower() or "png"
+    formats = FigureCanvasAgg(Figure()).get_supported_filetypes()
+    if ext not in formats:
+        raise DataError(f"cannot write a figure as .{ext} ({path}): use one of {', '.join('.' + f for f in sorted(formats))}")
+
+
+def _one_line(msg: str) -> str:
+    return " ".join(str(msg).split())
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"didim: warning: {_one_line(str(message))}", file=sys.stderr, flush=True)
 
 
 def cmd_demo(args) -> int:
     from ._io import write_text
     from .demo import demo_report, didim_case_report, run_demo, run_didim_case
 
+    if args.json:
+        from ._io import check_writable
+
+        check_writable(args.json)
     results = run_demo(seed=args.seed, progress=_progress(args.quiet))
     print(demo_report(results))
     print(didim_case_report(run_didim_case(seed=args.seed)))
@@ -84,6 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--offset", action="store_true", help="add a constant force OF (N)")
     i.add_argument("--apm", type=float, default=None, help="a priori total mass (kg) to start from")
     i.add_argument("--criterion", choices=["force", "position"], default="force", help="output-error criterion (eq. (32))")
+    i.add_argument("--max-iter", type=int, default=None, help="iteration limit of didim, oe-nm and oe-gn")
+    i.add_argument("--tol", type=float, default=None, help="stopping tolerance of didim and oe-gn (eq. (21))")
     i.add_argument("--json", metavar="OUT", help="write the result as JSON")
     i.add_argument("--plot", metavar="PNG", help="write measured vs simulated force and the iterations")
     i.add_argument("--quiet", action="store_true", help="no progress messages")
@@ -109,18 +170,31 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
+    """Runs the command line; returns 0 on success, 1 when a method did not converge, 2 for a user error (bad file,
+    option or parameter, a diverging simulation, nothing identifiable), 130 when interrupted."""
+    import warnings
+
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        return int(args.func(args))
-    except (DidimError, OSError) as e:
-        if args.debug:
-            raise
-        print(f"didim: error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("didim: interrupted", file=sys.stderr)
-        return 130
+    with warnings.catch_warnings():
+        if not args.debug:
+            warnings.showwarning = _show_warning  # one line per warning; restored by catch_warnings
+        try:
+            return int(args.func(args))
+        except (DidimError, OSError) as e:
+            if args.debug:
+                raise
+            print(f"didim: error: {_one_line(_describe_error(e))}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("didim: interrupted", file=sys.stderr)
+            return 130
+
+
+def _describe_error(e: BaseException) -> str:
+    if isinstance(e, OSError) and not isinstance(e, DidimError) and e.strerror:
+        return f"{e.filename}: {e.strerror}" if e.filename else e.strerror
+    return str(e)
 
 
 if __name__ == "__main__":  # pragma: no cover

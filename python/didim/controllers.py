@@ -14,9 +14,16 @@ from ._errors import DataError
 
 
 def _positive(name: str, value: float, allow_inf: bool = False) -> float:
-    value = float(value)
+    raw = value
+    try:
+        if isinstance(value, (bool, str, bytes, complex)):
+            raise TypeError
+        value = float(value)
+    except (TypeError, ValueError):
+        raise DataError(f"controller {name} must be a real number > 0, got {raw!r}") from None
     if math.isnan(value) or value <= 0 or (math.isinf(value) and not allow_inf):
-        raise DataError(f"controller {name} must be a finite number > 0, got {value}")
+        what = "a number > 0 (math.inf for no saturation)" if allow_inf else "a finite number > 0"
+        raise DataError(f"controller {name} must be {what}, got {value}: a zero or negative gain cannot run the loop")
     return value
 
 

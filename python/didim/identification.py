@@ -24,7 +24,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from . import _core
+from . import _checks, _core
 from ._errors import DataError, DidimError, IdentifiabilityError, SimulationError
 from .recording import Recording
 from .result import IdentificationResult, Iteration
@@ -47,13 +47,18 @@ def _solve(w: np.ndarray, y: np.ndarray, names: Sequence[str], sigma: str = "pap
     """QR least squares; raises IdentifiabilityError naming dependent columns."""
     sol = _core.lstsq(np.ascontiguousarray(w), np.ascontiguousarray(y), sigma=sigma)
     if sol["rank"] < len(names):
-        deps = []
+        deps, which = [], []
         for col, comb in sol["dependencies"]:
-            rhs = " + ".join(f"{c:.6g}·{names[i]}" for i, c in comb) or "0"
-            deps.append(f"column {names[col]} = {rhs}")
+            which.append(names[col])
+            if comb:
+                rhs = " + ".join(f"{c:.6g}·{names[i]}" for i, c in comb)
+                deps.append(f"column {names[col]} = {rhs}")
+            else:
+                deps.append(f"column {names[col]} is zero ({names[col]} has no effect on this record)")
         raise IdentifiabilityError(
-            f"the regressor has rank {sol['rank']} < {len(names)}: {'; '.join(deps)}. These parameters cannot be told "
-            "apart on this record: excite the axis more (other speeds, both directions, accelerations) or fix some of them"
+            f"the regressor has rank {sol['rank']} < {len(names)}: {'; '.join(deps)}. {', '.join(which)} cannot be "
+            "identified separately on this record: excite the axis more (other speeds, both directions, accelerations) "
+            "or fix some of them"
         )
     return sol
 
@@ -134,8 +139,14 @@ def idim_ls(
     flexible parameters once the excitation reaches tens of Hz. Off by default (the benchmark's recipe).
     """
     t0 = time.perf_counter()
+    _checks.options(lowpass_hz=lowpass_hz, lowpass_order=lowpass_order, border=border, coulomb_eps=coulomb_eps,
+                    zoh_align=zoh_align)
+    _checks.one_of("sigma", sigma, ("paper", "sample_std"))
     names = param_names(model, offset)
     dec = decimation or Decimation.matlab(10)
+    _checks.decimation_matches(dec, rec.fs)
+    _checks.record_long_enough(dec, rec.n - min(border, rec.n - 1), rec.dt, len(names), 2 if model == "flexible" else 1,
+                               "IDIM-LS")
     y, wd = _idim_system(rec, model, offset, lowpass_hz, lowpass_order, padding, border, dec, coulomb_eps, zoh_align)
     sol = _solve(wd, y, names, sigma)
     p = dict(zip(names, map(float, sol["params"])))
@@ -197,7 +208,10 @@ def didim(
     output errors to the first samples (the rest of the record is then held out for validation).
     """
     t0 = time.perf_counter()
-    frozen = dict(frozen or {})
+    _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps,
+                    divergence_factor=divergence_factor, cutoff_hz=cutoff_hz)
+    initial = _checks.physical(initial, "initial")
+    frozen = _checks.physical(dict(frozen or {}), "frozen")
     names = param_names(model, offset, terms)
     unknown = [k for k in list(initial) + list(frozen) if k not in names]
     if unknown:
@@ -210,11 +224,14 @@ def didim(
         cutoff = cutoff_hz if cutoff_hz is not None else (RIGID_CUTOFF_HZ if model == "rigid" else FLEXIBLE_CUTOFF_HZ)
         decimation = Decimation.lowpass(cutoff, rec.fs)
     dec = decimation
+    _checks.decimation_matches(dec, rec.fs)
+    _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 2 if model == "flexible" else 1, f"{method} ({model})")
     fi = [names.index(n) for n in free]
     zi = [names.index(n) for n in frozen]
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
     m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
     yd_motor = dec(rec.force)[:m_fit]
+    _checks.measured_signal("force", float(np.linalg.norm(yd_motor)), f"{method} ({model})")
     zero = np.zeros(rec.n)
 
     def cut(y, w):
@@ -225,12 +242,14 @@ def didim(
     n_sim, worse, converged, message = 0, 0, False, ""
     rho_prev = None
     sol = None
+    stop: Optional[DidimError] = None  # the error that stopped the iterations, re-raised if there is no iterate
     for k in range(max_iter):
         try:
             sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, terms=terms,
                            backlash_gap=backlash_gap, delay=delay)
         except (SimulationError, DataError) as e:
             message = f"iteration {k}: the simulation with χ{k} failed ({e}); stopped"
+            stop = e
             break
         n_sim += 1
         out_err = _output_error(yd_motor, sim.force, dec)
@@ -268,6 +287,7 @@ def didim(
             sol = _solve(w_all, y_all, free)
         except IdentifiabilityError as e:
             message = f"iteration {k + 1}: {e}"
+            stop = e
             break
         chi = chi.copy()
         chi[fi] = sol["params"]
@@ -309,7 +329,7 @@ def didim(
     if not converged and best[2] is not None:
         final_out, chi, sol = best[0], best[1], best[2]
     elif not converged and sol is None:
-        raise SimulationError(f"DIDIM could not start: {message}")
+        raise (type(stop) if stop is not None else SimulationError)(f"DIDIM could not start: {message}")
 
     return IdentificationResult(
         model=model,
@@ -348,8 +368,7 @@ def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: bool = F
     """Step 1: rigid DIDIM from χ⁰ = (apM, 0, 0[, 0]), eq. (22), decimation cutoff 5 Hz by default."""
     if apM is None:
         apM = reference_mass(rec)
-    if not (math.isfinite(apM) and apM > 0):
-        raise DataError(f"the a priori mass apM must be > 0 kg, got {apM}")
+    apM = _checks.real("the a priori mass apM", apM, "kg", lo=0.0)
     init = {"M": float(apM), "Fv": 0.0, "Fc": 0.0}
     if offset:
         init["OF"] = 0.0
@@ -379,11 +398,14 @@ def fit_flexible_mode(
     from scipy.optimize import minimize
 
     t0 = time.perf_counter()
+    _checks.options(lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps,
+                    coulomb_eps=coulomb_eps)
     offset = "OF" in rigid.params
     m, fv, fc = rigid.params["M"], rigid.params["Fv"], rigid.params["Fc"]
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     yd = dec(rec.force)
     ny = float(np.linalg.norm(yd))
+    _checks.measured_signal("force", ny, "step 2")
     count = {"sim": 0}
     trace: List[tuple] = []
 
@@ -459,11 +481,17 @@ def didim_flexible(
     steps 2 and 3 are biased and step 3 can drift: the result is then flagged ``converged=False`` with the reason,
     and :func:`didim.output_error.oe_gn` (exact sensitivities) is the method to use."""
     t0 = time.perf_counter()
+    _checks.options(lambda0=lambda0, f0=f0, rigid_cutoff_hz=rigid_cutoff_hz, cutoff_hz=cutoff_hz, tol=tol,
+                    max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
     common = dict(substeps=substeps, coulomb_eps=coulomb_eps)
     _say(progress, "step 1: rigid DIDIM")
     r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress, **common)
     if not r1.converged:
-        raise SimulationError(f"step 1 (rigid DIDIM) did not converge: {r1.message}")
+        # nothing sensible to start steps 2 and 3 from: hand back step 1, flagged, with its history
+        r1.message = (f"step 1 (rigid DIDIM) did not converge, so steps 2 and 3 were not run and this is step 1's rigid "
+                      f"result: {r1.message}")
+        r1.elapsed_s = time.perf_counter() - t0
+        return r1
     _say(progress, "step 2: Nelder-Mead on (λ, f_n_flex)")
     r2 = fit_flexible_mode(rec, r1, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress, **common)
     _say(progress, "step 3: flexible DIDIM")
@@ -484,6 +512,8 @@ def didim_flexible(
         )
     elif not r3.converged:
         r3.message += f" (step 2's output error was {100 * r2.output_error:.2f} %); consider method='oe-gn'"
+    if not r2.converged:
+        r3.message = (r3.message + "; " if r3.message else "") + f"note: step 2 stopped without converging ({r2.message})"
     r3.simulations += r1.simulations + r2.simulations
     r3.elapsed_s = time.perf_counter() - t0
     r3.method = "didim"

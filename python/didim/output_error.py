@@ -9,7 +9,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from . import _core
+from . import _checks, _core
 from ._errors import DataError, SimulationError
 from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say
 from .recording import Recording
@@ -59,13 +59,18 @@ def oe_nm(
     from scipy.optimize import minimize
 
     _check_criterion(criterion)
+    _checks.options(cutoff_hz=cutoff_hz, xatol=xatol, fatol=fatol, max_iter=max_iter, substeps=substeps,
+                    coulomb_eps=coulomb_eps)
+    initial = _checks.physical(initial, "initial")
     t0 = time.perf_counter()
     offset = "OF" in initial
     names, x0, offset = params_vector(model, initial, offset)
     scale = np.where(x0 != 0, np.abs(x0), 1.0)
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
+    _checks.record_long_enough(dec, rec.n, rec.dt, len(names), 1, "oe-nm")
     yd = dec(_measured(rec, criterion))
     ny = float(np.linalg.norm(yd))
+    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-nm")
     count = {"sim": 0}
     history: List[Iteration] = []
 
@@ -120,16 +125,20 @@ def oe_gn(
     (motor force, or motor position), from the forward sensitivity equations of the closed loop (controller
     included). Covariance: σ̂²(JᵀJ)⁻¹ at the solution, σ̂² = ‖r‖²/(m − p), from the same QR solver as DIDIM."""
     _check_criterion(criterion)
+    _checks.options(cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
+    initial = _checks.physical(initial, "initial")
     t0 = time.perf_counter()
-    frozen = dict(frozen or {})
+    frozen = _checks.physical(dict(frozen or {}), "frozen")
     offset = "OF" in initial or "OF" in frozen
     names = param_names(model, offset)
     full = {**initial, **frozen}
     names, chi, offset = params_vector(model, full, offset)
     free = [i for i, n in enumerate(names) if n not in frozen]
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
+    _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 1, "oe-gn")
     measured = _measured(rec, criterion)
     ny = float(np.linalg.norm(dec(measured)))
+    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-gn")
     ctrl = rec.controller
     n_sim = 0
 

@@ -4,23 +4,40 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import List, Optional
 
 import numpy as np
 
-from ._errors import DataError
+from ._errors import DataError, DidimWarning
 from .controllers import PD, Controller, EmpsCascade
 
 #: Relative tolerance on the sample-time jitter accepted by :func:`load_mat` (the EMPS logs ±2.5e-8 s on 1e-3 s).
 TIME_JITTER_RTOL = 1e-3
 
 
-def _signal(name: str, x, n: Optional[int] = None) -> np.ndarray:
+def _number(name: str, x, unit: str) -> float:
+    """A real number from a Python or numpy scalar, or a DataError naming it."""
+    if isinstance(x, (bool, np.bool_)) or isinstance(x, (complex, np.complexfloating)):
+        raise DataError(f"{name} must be a real number ({unit}), got {x!r}")
     try:
-        a = np.asarray(x, dtype=float)
-    except (TypeError, ValueError) as e:
-        raise DataError(f"{name} must be an array of numbers: {e}") from None
+        return float(x)
+    except (TypeError, ValueError):
+        raise DataError(f"{name} must be a real number ({unit}), got {x!r}") from None
+
+
+def _signal(name: str, x, n: Optional[int] = None) -> np.ndarray:
+    if x is None:
+        raise DataError(f"{name} is missing (None): give one value per sample")
+    if np.iscomplexobj(x):
+        raise DataError(f"{name} has complex values: a signal must be real (take the real part or the magnitude first)")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # e.g. numpy's ComplexWarning for complex objects in an object array
+            a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError, OverflowError, Warning) as e:
+        raise DataError(f"{name} must be an array of real numbers: {e}") from None
     a = np.squeeze(a) if a.ndim > 1 and sum(s > 1 for s in a.shape) <= 1 else a
     if a.ndim != 1:
         raise DataError(f"{name} must be a 1-D signal (one value per sample), got shape {a.shape}")
@@ -61,7 +78,7 @@ class Recording:
     name: str = ""
 
     def __post_init__(self) -> None:
-        dt = float(self.dt)
+        dt = _number("sample period dt", self.dt, "s")
         if not (math.isfinite(dt) and dt > 0):
             raise DataError(f"sample period dt must be a finite number of seconds > 0, got {self.dt}")
         object.__setattr__(self, "dt", dt)
@@ -69,6 +86,8 @@ class Recording:
         n = qr.shape[0]
         if n < 3:
             raise DataError(f"the record has {n} samples; at least 3 are needed")
+        if not 1.0 / dt < math.inf or not n * dt < math.inf:
+            raise DataError(f"sample period dt = {dt!r} s is not usable (its inverse or the record length overflows)")
         object.__setattr__(self, "qr", qr)
         object.__setattr__(self, "force", _signal("force", self.force, n))
         object.__setattr__(self, "qm", _signal("qm (motor position)", self.qm, n))
@@ -79,10 +98,23 @@ class Recording:
         if not isinstance(self.controller, (EmpsCascade, PD)):
             raise DataError(f"controller must be EmpsCascade or PD, got {type(self.controller).__name__}")
         if self.position_resolution is not None:
-            r = float(self.position_resolution)
+            r = _number("position_resolution", self.position_resolution, "m")
             if not (math.isfinite(r) and r > 0):
                 raise DataError(f"position_resolution must be a finite length > 0 m (or None), got {r}")
             object.__setattr__(self, "position_resolution", r)
+        if not isinstance(self.name, str):
+            raise DataError(f"name must be a string, got {type(self.name).__name__}")
+
+    @classmethod
+    def from_time(cls, t, qr, force, qm, *, dt: Optional[float] = None, **kw) -> "Recording":
+        """A recording from its time stamps ``t`` (s): checks that time increases with a constant step (within
+        :data:`TIME_JITTER_RTOL`) and, when ``dt`` is given, that the step is ``dt``. Other keywords as the
+        constructor (controller, ql, u_ext, position_resolution, name)."""
+        t = _signal("time t", t)
+        step = _time_step(t, "")
+        if dt is not None:
+            _check_expected_dt(step, dt, "")
+        return cls(dt=step, qr=qr, force=force, qm=qm, **kw)
 
     @property
     def n(self) -> int:
@@ -99,6 +131,88 @@ class Recording:
         """Sampling frequency (Hz)."""
         return 1.0 / self.dt
 
+    @property
+    def force_limit(self) -> float:
+        """The controller's saturation of the command in N (``gtau·vsat`` or ``tau_max``), ``inf`` for none."""
+        c = self.controller
+        return c.gtau * c.vsat if isinstance(c, EmpsCascade) else c.tau_max
+
+    def implied_command(self) -> np.ndarray:
+        """The force (N) the controller computes from the logged reference and motor position (and ``u_ext``), per
+        sample, with the controller's saturation: the evidence :meth:`diagnose` compares the measured force with.
+        The two samples before the start take the first position."""
+        c = self.controller
+        qm = self.qm
+        qm2 = np.concatenate([qm[:1], qm[:1], qm[:-2]])
+        u = self.u_ext if self.u_ext is not None else 0.0
+        with np.errstate(all="ignore"):
+            v_hat = (qm - qm2) / (2 * self.dt)
+            if isinstance(c, EmpsCascade):
+                vir = c.kv * (c.kp * (self.qr - qm) - v_hat) + u / c.gtau
+                return c.gtau * np.clip(vir, -c.vsat, c.vsat)
+            return np.clip(c.kp * (self.qr - qm) - c.kd * v_hat + u, -c.tau_max, c.tau_max)
+
+    def diagnose(self) -> List[str]:
+        """Things in the record that look wrong but need not be, each as a sentence with the evidence and what to
+        check: a command that saturates for long stretches (the loop is open there), and a force whose scale does not
+        match what the controller gains and the tracking error imply (volts instead of newtons, gtau applied twice,
+        wrong gains). :func:`didim.identify` issues them as :class:`didim.DidimWarning`."""
+        out: List[str] = []
+        n = self.n
+        force = self.force
+        limit = self.force_limit
+        with np.errstate(all="ignore"):
+            if math.isfinite(limit) and limit > 0:
+                mag = np.abs(force)
+                sat = (mag >= (1 - SATURATION_RTOL) * limit) & (mag <= (1 + SATURATION_OVER_RTOL) * limit)
+                total = int(np.count_nonzero(sat))
+                longest, start = _longest_run(sat)
+                if longest * self.dt >= SATURATION_WARN_S or total >= SATURATION_WARN_FRACTION * n:
+                    out.append(
+                        f"the command is at the controller's limit ±{limit:.4g} N on {total} samples "
+                        f"({100 * total / n:.1f} % of the record), the longest stretch {longest} samples "
+                        f"({longest * self.dt:.3g} s) from t = {start * self.dt:.4g} s: the loop is open while saturated, "
+                        "so the closed-loop simulation and the identification rely on the saturation level being right; "
+                        "check the limit (vsat, tau_max) or use a gentler reference"
+                    )
+                over = np.abs(force) > (1 + SATURATION_OVER_RTOL) * limit
+                if np.any(over):
+                    k = int(np.flatnonzero(over)[0])
+                    out.append(
+                        f"the force exceeds the controller's saturation ±{limit:.4g} N on {int(np.count_nonzero(over))} "
+                        f"samples (first at sample {k}: {force[k]:.4g} N): check the saturation (vsat, tau_max), gtau, "
+                        "and the force units"
+                    )
+            f, c = force[2:], self.implied_command()[2:]
+            fr, cr = _rms(f), _rms(c)
+            if fr > 0 and cr > 0 and math.isfinite(fr) and math.isfinite(cr):
+                fs, cs = f / fr, c / cr
+                corr = float(np.mean(fs * cs))
+                ratio = corr * fr / cr  # least-squares scale of the force on the implied command
+                if math.isfinite(ratio) and corr > SCALE_MIN_CORRELATION:
+                    ctrl = self.controller
+                    evidence = (
+                        f"its RMS is {fr:.4g} against the {cr:.4g} N RMS that the controller ({_describe(ctrl)}) and the "
+                        f"tracking error qr − qm imply (least-squares ratio {ratio:.4g}, correlation {corr:.3f})"
+                    )
+                    gtau = getattr(ctrl, "gtau", None)
+                    if gtau is not None and abs(math.log(gtau)) > math.log(2) and abs(ratio * gtau - 1) < SCALE_RTOL:
+                        out.append(
+                            f"the force looks like volts, not newtons: {evidence}, about 1/gtau = {1 / gtau:.4g}; "
+                            f"multiply the drive command by gtau = {gtau:.10g} N/V (load_mat does so for the EMPS layout)"
+                        )
+                    elif gtau is not None and abs(math.log(gtau)) > math.log(2) and abs(ratio / gtau - 1) < SCALE_RTOL:
+                        out.append(
+                            f"the force looks multiplied by gtau twice: {evidence}, about gtau = {gtau:.4g}; "
+                            "the drive command was probably already in newtons"
+                        )
+                    elif not (1 / SCALE_FACTOR_WARN < ratio < SCALE_FACTOR_WARN):
+                        out.append(
+                            f"the force does not have the scale the controller implies: {evidence}; check that it is in N "
+                            "on the load side and that the controller and its gains are the axis's"
+                        )
+        return out
+
     def __repr__(self) -> str:
         extra = [k for k in ("ql", "u_ext") if getattr(self, k) is not None]
         return (
@@ -109,9 +223,80 @@ class Recording:
         )
 
 
+#: Relative margin below the saturation at which a sample counts as saturated (:meth:`Recording.diagnose`).
+SATURATION_RTOL = 0.01
+#: Relative margin above the saturation beyond which the force is reported as exceeding it.
+SATURATION_OVER_RTOL = 0.05
+#: A saturated stretch this long (s) is reported ...
+SATURATION_WARN_S = 0.05
+#: ... and so is a record saturated on this fraction of its samples.
+SATURATION_WARN_FRACTION = 0.02
+#: The force-scale check needs at least this correlation between the force and the implied command ...
+SCALE_MIN_CORRELATION = 0.5
+#: ... and reports a force more than this factor off the implied command (either way) ...
+SCALE_FACTOR_WARN = 2.0
+#: ... or within this relative distance of 1/gtau (volts) or gtau (gtau applied twice).
+SCALE_RTOL = 0.3
+
+
+def _rms(x: np.ndarray) -> float:
+    with np.errstate(all="ignore"):
+        m = float(np.max(np.abs(x))) if x.size else 0.0
+        if m == 0 or not math.isfinite(m):
+            return m
+        return m * float(np.sqrt(np.mean((x / m) ** 2)))
+
+
+def _longest_run(mask: np.ndarray):
+    """Length and start of the longest run of True in ``mask`` (0, 0 for none)."""
+    if not mask.any():
+        return 0, 0
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    i = int(np.argmax(ends - starts))
+    return int(ends[i] - starts[i]), int(starts[i])
+
+
+def _describe(c: Controller) -> str:
+    if isinstance(c, EmpsCascade):
+        return f"EmpsCascade kp = {c.kp:g} 1/s, kv = {c.kv:g} V/(m/s), gtau = {c.gtau:.6g} N/V"
+    return f"PD kp = {c.kp:g} N/m, kd = {c.kd:g} N/(m/s)"
+
+
+def _time_step(t: np.ndarray, where: str) -> float:
+    """The constant sample period of time stamps ``t``, or a DataError saying where they are not uniform."""
+    n = t.shape[0]
+    if n < 3:
+        raise DataError(f"{where}the record has {n} samples; at least 3 are needed")
+    steps = np.diff(t)
+    if not np.all(steps > 0):
+        k = int(np.flatnonzero(~(steps > 0))[0])
+        raise DataError(
+            f"{where}time t is not increasing (t[{k + 1}] = {t[k + 1]:.9g} <= t[{k}] = {t[k]:.9g}): sort the record and "
+            "remove repeated samples"
+        )
+    dt = float((t[-1] - t[0]) / (n - 1))
+    worst = int(np.argmax(np.abs(steps - dt)))
+    if not (math.isfinite(dt) and dt > 0) or abs(steps[worst] - dt) > TIME_JITTER_RTOL * dt:
+        raise DataError(
+            f"{where}time t is not uniform: step {steps[worst]:.6g} s at sample {worst} against the mean {dt:.6g} s; "
+            "resample the record to a constant period"
+        )
+    return dt
+
+
+def _check_expected_dt(step: float, dt, where: str) -> None:
+    dt = _number("dt", dt, "s")
+    if not (math.isfinite(dt) and dt > 0) or abs(step - dt) > TIME_JITTER_RTOL * dt:
+        raise DataError(
+            f"{where}the sample period dt = {dt!r} s does not match the data, whose time t has a step of {step:.6g} s "
+            f"({1 / step:.6g} Hz): give the record's own period or resample it"
+        )
+
+
 def _scalar(d: dict, key: str, path: str) -> float:
     a = np.asarray(d[key])
-    if a.size != 1 or not np.issubdtype(a.dtype, np.number):
+    if a.size != 1 or not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a):
         raise DataError(f"{path}: variable {key!r} must be a single number, got shape {a.shape} of {a.dtype}")
     v = float(a.ravel()[0])
     if not math.isfinite(v):
@@ -119,40 +304,69 @@ def _scalar(d: dict, key: str, path: str) -> float:
     return v
 
 
-def load_mat(path, *, position_resolution: Optional[float] = None, name: Optional[str] = None) -> Recording:
-    """Loads a record in the EMPS benchmark layout (MATLAB v5 ``.mat``).
+def load_mat(
+    path, *, position_resolution: Optional[float] = None, name: Optional[str] = None, dt: Optional[float] = None
+) -> Recording:
+    """Loads a record in the EMPS benchmark layout (MATLAB v4/v5/v7 ``.mat``; not v7.3, which is HDF5).
 
     Variables: ``t`` (s), ``qm`` (m), ``qg`` (the reference, m), ``vir`` (the drive command, V), ``gtau`` (N/V),
     ``kp`` (1/s), ``kv`` (V/(m/s)); optional ``pulses_N``, the disturbance injected at the drive input (in V,
     despite its name; ``vir`` already contains it, so the measured force is ``gtau·vir`` and the known external
     force ``gtau·pulses_N``), optional ``ql``, the load position of an axis with a second encoder, and optional
-    ``vsat`` (V, 10 by default, the EMPS drive's limit).
+    ``vsat`` (V, 10 by default, the EMPS drive's limit). ``dt`` (s), when given, is the sample period the caller
+    expects: a file whose time step differs is refused.
 
-    Raises :class:`DataError` naming the file and the problem: missing or unreadable file, not a MAT file,
-    missing variable, wrong shape or type, non-uniform time.
+    Raises :class:`DataError` naming the file and the problem: missing, unreadable or truncated file, not a MAT
+    file, missing variable, wrong shape or type, time not increasing or not uniform, a period other than ``dt``.
+    The file is only read.
     """
     from scipy.io import loadmat
 
     path = os.fspath(path)
     if not os.path.exists(path):
         raise DataError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise DataError(f"{path}: is a folder, not a MAT file")
     try:
-        d = loadmat(path)
+        with open(path, "rb") as f:
+            head = f.read(128)
+    except OSError as e:
+        raise DataError(f"{path}: cannot be read ({e.strerror or e}): check its permissions") from None
+    size = os.path.getsize(path)
+    if size == 0:
+        raise DataError(f"{path}: the file is empty (0 bytes): copy it again from its source")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # scipy warns on odd headers before failing or succeeding
+            d = loadmat(path)
+    except PermissionError as e:
+        raise DataError(f"{path}: cannot be read ({e.strerror or e}): check its permissions") from None
+    except NotImplementedError:
+        raise DataError(
+            f"{path}: MATLAB v7.3 (HDF5) files are not supported: save it with save(..., '-v7') in MATLAB, or read "
+            "it with h5py and build a didim.Recording"
+        ) from None
     except Exception as e:  # scipy raises several types for corrupt files
+        if head.startswith(b"MATLAB") or head[:4] in _MAT4_HEADS:
+            raise DataError(
+                f"{path}: truncated or corrupt MAT file ({size} bytes; {type(e).__name__}: {e}): copy it again from "
+                "its source"
+            ) from None
         raise DataError(f"{path}: not a readable MATLAB .mat file ({type(e).__name__}: {e})") from None
     required = ("t", "qm", "qg", "vir", "gtau", "kp", "kv")
     missing = [k for k in required if k not in d]
     if missing:
         present = sorted(k for k in d if not k.startswith("__"))
+        hint = "; the file holds no variable at all: is it truncated?" if not present else ""
         raise DataError(
             f"{path}: missing variable(s) {', '.join(missing)}; the EMPS layout needs {', '.join(required)} "
-            f"(found: {', '.join(present) or 'none'})"
+            f"(found: {', '.join(present) or 'none'}){hint}"
         )
 
     def vec(key: str) -> np.ndarray:
         a = np.asarray(d[key])
-        if not np.issubdtype(a.dtype, np.number):
-            raise DataError(f"{path}: variable {key!r} must be numeric, got {a.dtype}")
+        if not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a):
+            raise DataError(f"{path}: variable {key!r} must be real numbers, got {_kind(a)}")
         if a.ndim != 2 or min(a.shape) != 1:
             raise DataError(f"{path}: variable {key!r} must be a vector (N x 1), got shape {a.shape}")
         return a.astype(float).ravel()
@@ -160,19 +374,9 @@ def load_mat(path, *, position_resolution: Optional[float] = None, name: Optiona
     try:
         t = _signal(f"{path}: t", vec("t"))
         n = t.shape[0]
-        if n < 3:
-            raise DataError(f"{path}: the record has {n} samples; at least 3 are needed")
-        steps = np.diff(t)
-        if not np.all(steps > 0):
-            k = int(np.flatnonzero(steps <= 0)[0])
-            raise DataError(f"{path}: time t is not increasing (t[{k + 1}] <= t[{k}])")
-        dt = float((t[-1] - t[0]) / (n - 1))
-        worst = int(np.argmax(np.abs(steps - dt)))
-        if abs(steps[worst] - dt) > TIME_JITTER_RTOL * dt:
-            raise DataError(
-                f"{path}: time t is not uniform: step {steps[worst]:.6g} s at sample {worst} against the mean {dt:.6g} s; "
-                "resample the record to a constant period"
-            )
+        step = _time_step(t, f"{path}: ")
+        if dt is not None:
+            _check_expected_dt(step, dt, f"{path}: ")
         gtau = _scalar(d, "gtau", path)
         ctrl = EmpsCascade(
             kp=_scalar(d, "kp", path),
@@ -184,7 +388,7 @@ def load_mat(path, *, position_resolution: Optional[float] = None, name: Optiona
         u_ext = gtau * _signal(f"{path}: pulses_N", vec("pulses_N"), n) if "pulses_N" in d else None
         ql = _signal(f"{path}: ql", vec("ql"), n) if "ql" in d else None
         return Recording(
-            dt=dt,
+            dt=step,
             qr=_signal(f"{path}: qg", vec("qg"), n),
             force=force,
             qm=_signal(f"{path}: qm", vec("qm"), n),
@@ -197,6 +401,20 @@ def load_mat(path, *, position_resolution: Optional[float] = None, name: Optiona
     except DataError as e:
         msg = str(e)
         raise DataError(msg if msg.startswith(path) else f"{path}: {msg}") from None
+
+
+#: First bytes of MATLAB v4 files (no text header): the type code of a double matrix, either byte order.
+_MAT4_HEADS = (b"\x00\x00\x00\x00", b"\xe8\x03\x00\x00", b"\x00\x00\x03\xe8")
+
+
+def _kind(a: np.ndarray) -> str:
+    if a.dtype.kind == "U":
+        return "text"
+    if a.dtype.kind == "O":
+        return "a cell array"
+    if a.dtype.names:
+        return "a struct"
+    return str(a.dtype)
 
 
 __all__ = ["Recording", "load_mat", "TIME_JITTER_RTOL"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import asdict, dataclass, field
 from typing import Any, Dict, List, Optional
 
@@ -98,6 +99,20 @@ class IdentificationResult:
 
     def to_json(self, **kw) -> str:
         return json.dumps(self.to_dict(), indent=2, **kw)
+
+    def save(self, path) -> None:
+        """Writes the result to ``path``: JSON for ``.json`` (the contract of :meth:`to_dict`), the summary table for
+        ``.txt``. Atomic: a failed write leaves the old file as it was."""
+        from ._errors import DataError
+        from ._io import write_text
+
+        ext = os.path.splitext(os.fspath(path))[1].lower()
+        if ext == ".json":
+            write_text(path, self.to_json() + "\n")
+        elif ext == ".txt":
+            write_text(path, self.summary() + "\n")
+        else:
+            raise DataError(f"cannot save a result as {ext or 'a file without extension'!r}: use .json or .txt")
 
     def summary(self) -> str:
         """A table in the paper's layout: χ⁰, χ̂ᵏ and %σ per parameter, then ‖Y − Wχ‖/‖Y‖."""

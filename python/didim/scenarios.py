@@ -12,6 +12,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
+from . import _checks
 from ._errors import DataError
 from .controllers import Controller, EmpsCascade
 from .recording import Recording
@@ -128,13 +129,17 @@ def make_recording(
 
     if qr is None:
         qr = trapezoid_chirp(dt=dt)
+    quantization = quantization or None  # 0 means no quantization, like None
     controller = controller or EmpsCascade()
     plan = Recording(dt=dt, qr=qr, force=np.zeros(len(qr)), qm=qr, controller=controller, u_ext=u_ext,
                      position_resolution=quantization, name=name)
+    noise_corr = _checks.real("noise correlation noise_corr", noise_corr, lo=0.0, lo_open=False, hi=1.0)
+    force_noise = _checks.real("force_noise", force_noise, "N", lo=0.0, lo_open=False, hint=" (RMS of the noise)")
     sim = simulate(plan, truth, model, substeps=substeps, coulomb_eps=coulomb_eps)
-    rng = np.random.default_rng(seed)
-    if not (0 <= noise_corr < 1):
-        raise DataError(f"noise correlation must be in [0, 1), got {noise_corr}")
+    try:
+        rng = np.random.default_rng(seed)
+    except (TypeError, ValueError) as e:
+        raise DataError(f"seed must be a whole number >= 0, got {seed!r} ({e})") from None
     white = rng.standard_normal(len(qr)) * force_noise * math.sqrt(1 - noise_corr**2)
     noise = lfilter([1.0], [1.0, -noise_corr], white)
 

@@ -8,7 +8,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from . import _core
+from . import _checks, _core
 from ._errors import DataError
 
 #: Padding conventions of the zero-phase filters: scipy's default (3·max(len(a), len(b))) or MATLAB's (3·(nfilt − 1)).
@@ -28,25 +28,29 @@ def lowpass(x, cutoff_hz: float, fs_hz: float, *, order: int = 4, padding: str =
 
     ``padding="matlab"`` reproduces MATLAB's ``filtfilt`` (pad length 3·order instead of scipy's 3·(order + 1)).
     """
-    x = np.ascontiguousarray(x, dtype=float)
+    x = np.ascontiguousarray(_checks.real_array("the signal to filter", x))
+    order = _checks.whole("order", order, lo=1, hi=20)
     wn = _wn(cutoff_hz, fs_hz)
-    b, a = _core.butter(int(order), wn)
+    b, a = _core.butter(order, wn)
     return _core.filtfilt(b, a, x, padlen=_padlen(padding, int(order)))
 
 
 def _wn(cutoff_hz: float, fs_hz: float) -> float:
+    fs_hz = _checks.real("sampling frequency", fs_hz, "Hz")
+    cutoff_hz = _checks.real("cutoff", cutoff_hz, "Hz")
     if not (math.isfinite(fs_hz) and fs_hz > 0):
         raise DataError(f"sampling frequency must be > 0 Hz, got {fs_hz}")
     if not (math.isfinite(cutoff_hz) and 0 < cutoff_hz < fs_hz / 2):
         raise DataError(
-            f"cutoff {cutoff_hz} Hz must lie between 0 and the Nyquist frequency {fs_hz / 2:g} Hz: lower the cutoff"
+            f"cutoff {cutoff_hz:g} Hz must lie between 0 and the Nyquist frequency {fs_hz / 2:g} Hz: lower the cutoff"
         )
     return cutoff_hz / (fs_hz / 2)
 
 
 def diffcent(x, dt: float) -> np.ndarray:
     """Central difference ``(x[k+1] − x[k−1]) / (2·dt)``, one-sided at both ends (the EMPS benchmark's ``diffcent``)."""
-    x = np.asarray(x, dtype=float)
+    x = _checks.real_array("the signal to differentiate", x, (1, 2))
+    dt = _checks.real("sample period dt", dt, "s", lo=0.0)
     if x.shape[-1] < 2:
         raise DataError("differentiation needs at least 2 samples")
     d = np.empty_like(x)
@@ -85,18 +89,22 @@ class Decimation:
         _wn(cutoff_hz, fs_hz)
         if factor is None:
             factor = default_factor(fs_hz, cutoff_hz)
-        return cls(factor=int(factor), kind="butter", cutoff_hz=float(cutoff_hz), fs_hz=float(fs_hz), order=int(order), form=form)
+        factor = _checks.whole("decimation factor", factor, lo=1, hint=" (keep one sample in factor)")
+        order = _checks.whole("order", order, lo=1, hi=20)
+        _checks.one_of("form", form, ("sos", "ba"))
+        return cls(factor=factor, kind="butter", cutoff_hz=float(cutoff_hz), fs_hz=float(fs_hz), order=order, form=form)
 
     @classmethod
     def matlab(cls, factor: int):
         """MATLAB's ``decimate(x, factor)`` convention."""
-        return cls(factor=int(factor), kind="matlab", order=8, form="ba")
+        factor = _checks.whole("decimation factor", factor, lo=1, hint=" (keep one sample in factor)")
+        return cls(factor=factor, kind="matlab", order=8, form="ba")
 
     def apply(self, y, w=None) -> Tuple[np.ndarray, Optional[np.ndarray]]:
         """Decimates ``y`` (n,) and, when given, every column of ``w`` (n, p) in parallel; returns (y_dec, w_dec)."""
-        y = np.ascontiguousarray(y, dtype=float)
+        y = np.ascontiguousarray(_checks.real_array("y", y))
         if w is not None:
-            w = np.asarray(w, dtype=float)
+            w = _checks.real_array("w", w, (1, 2))
             if w.ndim == 1:
                 w = w[:, None]
         return _core.decimate(

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Dict, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _core
+from . import _checks, _core
 from ._errors import DataError
 from .recording import Recording
 
@@ -51,9 +50,16 @@ def _specs(terms) -> Optional[list]:
 
 def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
     """The sign used by every Coulomb friction term, identical to the core's: ``v/sqrt(v²+eps²)``, hard sign for eps = 0."""
-    v = np.asarray(v, dtype=float)
+    v = _checks.real_array("v", v, None)
+    eps = _checks.real("eps", eps, "m/s", lo=0.0, lo_open=False)
     if eps > 0:
-        return v / np.sqrt(v * v + eps * eps)
+        with np.errstate(all="ignore"):
+            d = v * v + eps * eps
+            out = v / np.sqrt(d)
+            odd = ~(np.isfinite(d) & (d >= np.finfo(float).tiny))  # v² + eps² under- or overflows: as the core
+            if np.any(odd):
+                out = np.where(odd, np.where(np.isinf(v), np.sign(v), v / np.hypot(v, eps)), out)
+        return out
     return np.sign(v)
 
 
@@ -84,9 +90,14 @@ def params_vector(model: str, params: Params, offset: Optional[bool] = None, ter
                 + (f"; missing {', '.join(missing)}" if missing else "")
                 + (f"; unknown {', '.join(map(str, unknown))}" if unknown else "")
             )
-        vec = np.array([float(params[k]) for k in names])
+        vec = np.array([_checks.real(f"parameter {k}", params[k]) for k in names])
     else:
-        vec = np.asarray(params, dtype=float).ravel()
+        if isinstance(params, (str, bytes)) or np.iscomplexobj(params):
+            raise DataError(f"parameters must be a mapping name -> value or a sequence of real numbers, got {params!r}")
+        try:
+            vec = np.asarray(params, dtype=float).ravel()
+        except (TypeError, ValueError) as e:
+            raise DataError(f"parameters must be a mapping name -> value or a sequence of real numbers: {e}") from None
         if offset is None:
             offset = vec.size == len(param_names(model, False, terms)) + 1
         names = param_names(model, offset, terms)
@@ -187,14 +198,16 @@ def simulate(
         terms: extra model terms (:class:`Term`), whose parameters ``params`` must include.
         backlash_gap: flexible model only: total width (m) of a dead zone in the coupling K12.
     """
+    if not isinstance(recording, Recording):
+        raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
+    if offset is not None:
+        offset = _checks.flag("offset", offset)
     names, vec, offset = params_vector(model, params, offset, terms)
     if quantization is None:
         quantization = recording.position_resolution or 0.0
-    for what, v in (("substeps", substeps), ("delay", delay)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise DataError(f"{what} must be a whole number >= 0, got {v!r}")
-    if not (isinstance(coulomb_eps, (int, float)) and math.isfinite(coulomb_eps) and coulomb_eps >= 0):
-        raise DataError(f"coulomb_eps must be a finite velocity >= 0 m/s, got {coulomb_eps!r}")
+    quantization = _checks.real("quantization", quantization, "m", lo=0.0, lo_open=False, hint=" (0 for none)")
+    _checks.options(substeps=substeps, coulomb_eps=coulomb_eps)
+    delay = _checks.whole("delay", delay, lo=0, hi=recording.n - 1, hint=" (actuation delay in samples)")
     out = _core.simulate(
         model,
         vec,

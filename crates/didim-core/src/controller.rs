@@ -74,11 +74,9 @@ impl Controller {
         match *self {
             Controller::EmpsCascade { kp, kv, gtau, vsat } => {
                 let vir = kv * (kp * (qr - qm) - v_hat) + u_ext / gtau;
-                gtau * vir.clamp(-vsat, vsat)
+                gtau * saturate(vir, vsat)
             }
-            Controller::Pd { kp, kd, tau_max } => {
-                (kp * (qr - qm) - kd * v_hat + u_ext).clamp(-tau_max, tau_max)
-            }
+            Controller::Pd { kp, kd, tau_max } => saturate(kp * (qr - qm) - kd * v_hat + u_ext, tau_max),
         }
     }
 
@@ -107,6 +105,19 @@ impl Controller {
             Controller::EmpsCascade { kp, kv, gtau, .. } => kp * kv * gtau,
             Controller::Pd { kp, .. } => kp,
         }
+    }
+}
+
+/// `x` limited to `[-limit, limit]`; unlike `f64::clamp` it cannot panic (a NaN or
+/// negative limit, which [`Controller::validate`] refuses, leaves `x` or gives `±limit`).
+#[inline(always)]
+fn saturate(x: f64, limit: f64) -> f64 {
+    if x > limit {
+        limit
+    } else if x < -limit {
+        -limit
+    } else {
+        x
     }
 }
 

@@ -696,8 +696,9 @@ fn sosfilt_zi_checked(sos: &Sos) -> Result<Vec<[f64; 2]>> {
 /// `padlen = None` is scipy's default `3 * max(len(a), len(b))`; MATLAB's
 /// `filtfilt` uses `3 * (max(len(a), len(b)) - 1)`: pass `Some(that)` to
 /// reproduce it. Errors (`InvalidInput`) if `x.len() <= padlen` (record too
-/// short for this filter), if `x` has a non-finite value, or if `tf` is
-/// malformed or has a pole at `z = 1`. See the module documentation on the
+/// short for this filter), if `x` has a non-finite value, if `tf` is
+/// malformed or has a pole at `z = 1`, or if the output overflows (an unstable
+/// filter, or a gain or signal too large for `f64`): the result is always finite. See the module documentation on the
 /// conditioning of high-order ba filters at low cutoffs.
 pub fn filtfilt(tf: &Tf, x: &[f64], padlen: Option<usize>) -> Result<Vec<f64>> {
     validate_tf(tf)?;
@@ -711,7 +712,19 @@ pub fn filtfilt(tf: &Tf, x: &[f64], padlen: Option<usize>) -> Result<Vec<f64>> {
     )?;
     let zi = lfilter_zi_checked(&tf.b, &tf.a)?;
     let (b, a) = normalized_ba(&tf.b, &tf.a).ok_or_else(|| invalid!("filter coefficients are malformed"))?;
-    Ok(filtfilt_core(&b, &a, &zi, x, edge))
+    finite_output(filtfilt_core(&b, &a, &zi, x, edge), "x")
+}
+
+/// The filtered signal, or an error when it is not finite: the filter is unstable or its gain (after dividing by
+/// `a[0]`) is so large, or the signal so large, that the passes overflow. Never returns NaN silently.
+fn finite_output(y: Vec<f64>, name: &str) -> Result<Vec<f64>> {
+    match y.iter().position(|v| !v.is_finite()) {
+        None => Ok(y),
+        Some(i) => Err(invalid!(
+            "filtering {name} overflowed (non-finite output at index {i}): the filter is unstable, or its gain or the \
+             signal is too large for f64; check the coefficients (a[0] normalises them) and rescale the signal"
+        )),
+    }
 }
 
 /// Zero-phase filtering through second-order sections, exactly
@@ -728,7 +741,7 @@ pub fn sosfiltfilt(sos: &Sos, x: &[f64], padlen: Option<usize>) -> Result<Vec<f6
     let edge = padlen.unwrap_or_else(|| sos_default_padlen(&norm));
     check_record(x, edge, "x", &format!("{} second-order sections", norm.len()))?;
     let zi = sosfilt_zi_checked(sos)?;
-    Ok(sosfiltfilt_core(&norm, &zi, x, edge))
+    finite_output(sosfiltfilt_core(&norm, &zi, x, edge), "x")
 }
 
 fn sos_default_padlen(sos: &[[f64; 6]]) -> usize {
@@ -1072,12 +1085,12 @@ impl Decimator {
             Prepared::Ba { b, a, zi } => {
                 let desc = format!("order-{} ba filter, padlen {}", self.order, self.padlen);
                 check_record(x, self.padlen, name, &desc)?;
-                filtfilt_core(b, a, zi, x, self.padlen)
+                finite_output(filtfilt_core(b, a, zi, x, self.padlen), name)?
             }
             Prepared::Sos { sos, zi } => {
                 let desc = format!("order-{} sos filter, padlen {}", self.order, self.padlen);
                 check_record(x, self.padlen, name, &desc)?;
-                sosfiltfilt_core(sos, zi, x, self.padlen)
+                finite_output(sosfiltfilt_core(sos, zi, x, self.padlen), name)?
             }
         };
         let n = filtered.len();

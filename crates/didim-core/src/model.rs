@@ -46,10 +46,21 @@ pub const DEFAULT_COULOMB_EPS: f64 = 1e-4;
 /// `coulomb_eps`, so the dynamics that produce the states and the regressor that
 /// explains the force use the same friction law: a hard sign in the regressor
 /// against a smoothed sign in the dynamics would bias the friction estimates.
+///
+/// Robust for any input: where `v² + eps²` underflows or overflows (velocities or
+/// `eps` beyond about 1e±150) it divides by `hypot(v, eps)` instead, so the result
+/// stays within [-1, 1] (±1 for infinite `v`, NaN only for NaN `v`).
 #[inline]
 pub fn coulomb_sign(v: f64, eps: f64) -> f64 {
     if eps > 0.0 {
-        v / (v * v + eps * eps).sqrt()
+        let d = v * v + eps * eps;
+        if d.is_normal() {
+            v / d.sqrt()
+        } else if v.is_infinite() {
+            v.signum()
+        } else {
+            v / v.hypot(eps)
+        }
     } else if v > 0.0 {
         1.0
     } else if v < 0.0 {
@@ -65,7 +76,13 @@ pub fn coulomb_sign(v: f64, eps: f64) -> f64 {
 pub fn coulomb_sign_derivative(v: f64, eps: f64) -> f64 {
     if eps > 0.0 {
         let s = v * v + eps * eps;
-        eps * eps / (s * s.sqrt())
+        if s.is_normal() {
+            eps * eps / (s * s.sqrt())
+        } else {
+            let h = v.hypot(eps);
+            let r = eps / h;
+            r * r / h
+        }
     } else {
         0.0
     }

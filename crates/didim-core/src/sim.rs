@@ -131,8 +131,28 @@ pub fn simulate_sensitivity<const N: usize>(
     opts: &SimOptions,
 ) -> Result<SensOutput> {
     let p = model.n_params();
+    check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
     let mut t = Sensitivity::<N>::new(p, qr.len(), opts.delay);
     let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
+    // finite states can still have non-finite sensitivities (e.g. a Coulomb force of 1e308 N at rest, whose
+    // derivative is 1e308/eps): an error, not NaN in the Jacobian
+    let n = qr.len();
+    let first_bad = t
+        .dforce
+        .iter()
+        .chain(&t.dq)
+        .enumerate()
+        .filter(|(_, v)| !v.is_finite())
+        .map(|(i, _)| i % n)
+        .min();
+    if let Some(k) = first_bad {
+        return Err(Error::Simulation(format!(
+            "the sensitivities of the closed loop are not finite from sample {k} (t = {:.6} s) with parameters {}: \
+             some parameter values are too large for f64 (or coulomb_eps too small); check their values and units",
+            k as f64 * opts.dt,
+            describe(model, chi)
+        )));
+    }
     Ok(SensOutput {
         sim,
         dforce: t.dforce,
@@ -313,6 +333,28 @@ fn validate_signals(qr: &[f64], u_ext: Option<&[f64]>) -> Result<usize> {
     Ok(n)
 }
 
+/// Every check of the inputs of a simulation; returns the number of samples.
+fn check_inputs<const N: usize>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+) -> Result<usize> {
+    model.check_params(chi)?;
+    controller.validate()?;
+    opts.validate()?;
+    let n = validate_signals(qr, u_ext)?;
+    if opts.delay >= n {
+        return Err(invalid!(
+            "actuation delay of {} samples is not shorter than the record ({n} samples): no command would ever act",
+            opts.delay
+        ));
+    }
+    Ok(n)
+}
+
 /// The simulation loop shared by [`simulate`] and [`simulate_sensitivity`].
 fn run<const N: usize, T: Tangent<N>>(
     model: &Model<N>,
@@ -323,10 +365,7 @@ fn run<const N: usize, T: Tangent<N>>(
     opts: &SimOptions,
     tangent: &mut T,
 ) -> Result<SimOutput> {
-    model.check_params(chi)?;
-    controller.validate()?;
-    opts.validate()?;
-    let n = validate_signals(qr, u_ext)?;
+    let n = check_inputs(model, chi, controller, qr, u_ext, opts)?;
 
     let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
         (a.min(x), b.max(x))

@@ -3,7 +3,9 @@
 use std::borrow::Cow;
 
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::{PyOverflowError, PyTypeError};
 use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyInt};
 
 /// A 1-D array as a slice, borrowed when contiguous.
 pub fn slice1<'a>(a: &'a PyReadonlyArray1<'_, f64>) -> Cow<'a, [f64]> {
@@ -50,4 +52,81 @@ pub fn colmajor_to_array<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let a = PyArray1::from_vec(py, data).reshape([p, n])?;
     a.call_method0("transpose")
+}
+
+/// A whole-number argument (a count, an order, a factor, a padding). Any Python `int` is accepted at extraction, so
+/// that a negative or too large value becomes a `DataError` naming the argument ([`Whole::get`]) instead of an
+/// `OverflowError`; `bool` and non-integers are a `TypeError`.
+#[derive(Clone, Debug)]
+pub struct Whole(Result<usize, String>);
+
+impl Whole {
+    pub const fn new(v: usize) -> Self {
+        Whole(Ok(v))
+    }
+
+    /// The value, or the error message about argument `name`.
+    pub fn get(&self, name: &str) -> Result<usize, didim_core::Error> {
+        self.0.clone().map_err(|v| {
+            didim_core::Error::InvalidInput(format!(
+                "{name} must be a whole number between 0 and {}, got {v}",
+                usize::MAX
+            ))
+        })
+    }
+}
+
+impl<'a, 'py> FromPyObject<'a, 'py> for Whole {
+    type Error = PyErr;
+
+    fn extract(obj: Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        if !obj.is_instance_of::<PyInt>() || obj.is_instance_of::<PyBool>() {
+            // numpy integer scalars are not int subclasses but implement __index__ (numpy.bool does not)
+            if !obj.is_instance_of::<PyBool>() {
+                if let Ok(i) = obj.call_method0("__index__") {
+                    if i.is_instance_of::<PyInt>() {
+                        return Whole::extract(i.as_borrowed());
+                    }
+                }
+            }
+            return Err(PyTypeError::new_err(format!(
+                "expected a whole number (int), got {}",
+                obj.get_type().name()?
+            )));
+        }
+        Ok(Whole(obj.extract::<usize>().map_err(|_| {
+            obj.repr()
+                .map(|r| r.to_string())
+                .unwrap_or_else(|_| "an out-of-range int".into())
+        })))
+    }
+}
+
+/// A real-number argument: like `f64`, but an `int` too large for a float becomes ±infinity (refused by the
+/// validation with a `DataError` naming the argument) instead of an `OverflowError`.
+#[derive(Clone, Copy, Debug)]
+pub struct Real(pub f64);
+
+impl<'a, 'py> FromPyObject<'a, 'py> for Real {
+    type Error = PyErr;
+
+    fn extract(obj: Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        match obj.extract::<f64>() {
+            Ok(v) => Ok(Real(v)),
+            Err(e) if e.is_instance_of::<PyOverflowError>(obj.py()) => {
+                let negative = obj.lt(0).unwrap_or(false);
+                Ok(Real(if negative {
+                    f64::NEG_INFINITY
+                } else {
+                    f64::INFINITY
+                }))
+            }
+            Err(e) => Err(e),
+        }
+    }
+}
+
+/// A list of real numbers (see [`Real`]).
+pub fn reals(v: Vec<Real>) -> Vec<f64> {
+    v.into_iter().map(|r| r.0).collect()
 }

@@ -195,21 +195,24 @@ fn param_names(py: Python<'_>, model: &str, offset: bool, terms: Option<Terms>) 
 
 /// Closed-loop simulation; returns a dict of arrays: force (n,), q, qd, qdd (ndof, n).
 #[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, terms=None, backlash_gap=None))]
+#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None))]
+#[pyo3(
+    text_signature = "(model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, terms=None, backlash_gap=None)"
+)]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
     model: &str,
     params: PyReadonlyArray1<'py, f64>,
     qr: PyReadonlyArray1<'py, f64>,
-    dt: f64,
+    dt: Real,
     controller: &str,
-    gains: Vec<f64>,
+    gains: Vec<Real>,
     u_ext: Option<PyReadonlyArray1<'py, f64>>,
-    substeps: usize,
-    quantization: f64,
-    delay: usize,
-    coulomb_eps: f64,
+    substeps: Whole,
+    quantization: Real,
+    delay: Whole,
+    coulomb_eps: Real,
     offset: bool,
     terms: Option<Terms>,
     backlash_gap: Option<f64>,
@@ -218,11 +221,13 @@ fn simulate<'py>(
     let chi = slice1(&params);
     let qr = slice1(&qr);
     let u = u_ext.as_ref().map(slice1);
+    let gains = reals(gains);
+    let coulomb_eps = coulomb_eps.0;
     let opts = sim::SimOptions {
-        dt,
-        substeps,
-        quantization,
-        delay,
+        dt: dt.0,
+        substeps: substeps.get("substeps").map_err(|e| core_error(py, e))?,
+        quantization: quantization.0,
+        delay: delay.get("delay").map_err(|e| core_error(py, e))?,
     };
     let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
     let out = run(py, || {
@@ -242,7 +247,7 @@ fn simulate<'py>(
 
 /// The IDM regressor of a trajectory: q, qd, qdd of shape (ndof, n) -> W of shape (ndof, n, p).
 #[pyfunction]
-#[pyo3(signature = (model, q, qd, qdd, *, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, terms=None, backlash_gap=None))]
+#[pyo3(signature = (model, q, qd, qdd, *, coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None))]
 #[allow(clippy::too_many_arguments)]
 fn regressor<'py>(
     py: Python<'py>,
@@ -250,12 +255,13 @@ fn regressor<'py>(
     q: PyReadonlyArray2<'py, f64>,
     qd: PyReadonlyArray2<'py, f64>,
     qdd: PyReadonlyArray2<'py, f64>,
-    coulomb_eps: f64,
+    coulomb_eps: Real,
     offset: bool,
     terms: Option<Terms>,
     backlash_gap: Option<f64>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let terms = terms.unwrap_or_default();
+    let coulomb_eps = coulomb_eps.0;
     let (q, qd, qdd) = (rows2(&q), rows2(&qd), rows2(&qdd));
     let n = q.first().map_or(0, |r| r.len());
     let (ndof, p, w) = run(py, || {
@@ -272,21 +278,24 @@ fn regressor<'py>(
 /// Closed-loop simulation with forward sensitivities; the dict of `simulate` plus
 /// dforce (p, n) and dq (ndof, p, n).
 #[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, terms=None, backlash_gap=None))]
+#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None))]
+#[pyo3(
+    text_signature = "(model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, terms=None, backlash_gap=None)"
+)]
 #[allow(clippy::too_many_arguments)]
 fn simulate_sensitivity<'py>(
     py: Python<'py>,
     model: &str,
     params: PyReadonlyArray1<'py, f64>,
     qr: PyReadonlyArray1<'py, f64>,
-    dt: f64,
+    dt: Real,
     controller: &str,
-    gains: Vec<f64>,
+    gains: Vec<Real>,
     u_ext: Option<PyReadonlyArray1<'py, f64>>,
-    substeps: usize,
-    quantization: f64,
-    delay: usize,
-    coulomb_eps: f64,
+    substeps: Whole,
+    quantization: Real,
+    delay: Whole,
+    coulomb_eps: Real,
     offset: bool,
     terms: Option<Terms>,
     backlash_gap: Option<f64>,
@@ -295,11 +304,13 @@ fn simulate_sensitivity<'py>(
     let chi = slice1(&params);
     let qr = slice1(&qr);
     let u = u_ext.as_ref().map(slice1);
+    let gains = reals(gains);
+    let coulomb_eps = coulomb_eps.0;
     let opts = sim::SimOptions {
-        dt,
-        substeps,
-        quantization,
-        delay,
+        dt: dt.0,
+        substeps: substeps.get("substeps").map_err(|e| core_error(py, e))?,
+        quantization: quantization.0,
+        delay: delay.get("delay").map_err(|e| core_error(py, e))?,
     };
     let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
     let n = qr.len();
@@ -328,9 +339,10 @@ fn lstsq<'py>(
     py: Python<'py>,
     w: PyReadonlyArray2<'py, f64>,
     y: PyReadonlyArray1<'py, f64>,
-    rank_tol: Option<f64>,
+    rank_tol: Option<Real>,
     sigma: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let rank_tol = rank_tol.map(|r| r.0);
     let sigma = match sigma {
         "paper" => SigmaConvention::Paper,
         "sample_std" => SigmaConvention::SampleStd,
@@ -376,7 +388,9 @@ fn lstsq<'py>(
 /// Butterworth low-pass design: (b, a), or the sos array (n, 6) with `sos=True`.
 #[pyfunction]
 #[pyo3(signature = (order, wn, *, sos=false))]
-fn butter<'py>(py: Python<'py>, order: usize, wn: f64, sos: bool) -> PyResult<Bound<'py, PyAny>> {
+fn butter<'py>(py: Python<'py>, order: Whole, wn: Real, sos: bool) -> PyResult<Bound<'py, PyAny>> {
+    let order = order.get("order").map_err(|e| core_error(py, e))?;
+    let wn = wn.0;
     design(
         py,
         sos,
@@ -388,7 +402,15 @@ fn butter<'py>(py: Python<'py>, order: usize, wn: f64, sos: bool) -> PyResult<Bo
 /// Chebyshev type I low-pass design: (b, a), or the sos array (n, 6) with `sos=True`.
 #[pyfunction]
 #[pyo3(signature = (order, rp_db, wn, *, sos=false))]
-fn cheby1<'py>(py: Python<'py>, order: usize, rp_db: f64, wn: f64, sos: bool) -> PyResult<Bound<'py, PyAny>> {
+fn cheby1<'py>(
+    py: Python<'py>,
+    order: Whole,
+    rp_db: Real,
+    wn: Real,
+    sos: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let order = order.get("order").map_err(|e| core_error(py, e))?;
+    let (rp_db, wn) = (rp_db.0, wn.0);
     design(
         py,
         sos,
@@ -421,11 +443,16 @@ fn design<'py>(
 #[pyo3(signature = (b, a, x, *, padlen=None))]
 fn filtfilt<'py>(
     py: Python<'py>,
-    b: Vec<f64>,
-    a: Vec<f64>,
+    b: Vec<Real>,
+    a: Vec<Real>,
     x: PyReadonlyArray1<'py, f64>,
-    padlen: Option<usize>,
+    padlen: Option<Whole>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (b, a) = (reals(b), reals(a));
+    let padlen = padlen
+        .map(|p| p.get("padlen"))
+        .transpose()
+        .map_err(|e| core_error(py, e))?;
     let x = slice1(&x);
     let x: &[f64] = &x;
     let tf = flt::Tf { b, a };
@@ -439,8 +466,12 @@ fn sosfiltfilt<'py>(
     py: Python<'py>,
     sos: PyReadonlyArray2<'py, f64>,
     x: PyReadonlyArray1<'py, f64>,
-    padlen: Option<usize>,
+    padlen: Option<Whole>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let padlen = padlen
+        .map(|p| p.get("padlen"))
+        .transpose()
+        .map_err(|e| core_error(py, e))?;
     let rows = rows2(&sos);
     let x = slice1(&x);
     let x: &[f64] = &x;
@@ -466,19 +497,25 @@ type Decimated<'py> = (Bound<'py, PyArray1<f64>>, Option<Bound<'py, PyAny>>);
 /// Parallel decimation of y (n,) and of every column of w (n, p): the same zero-phase low-pass and
 /// down-sampling. kind "butter" (order, cutoff_hz, fs_hz, form "sos"|"ba") or "matlab" (MATLAB's decimate).
 #[pyfunction]
-#[pyo3(signature = (y, w=None, *, factor, kind="butter", order=4, cutoff_hz=None, fs_hz=None, form="sos"))]
+#[pyo3(signature = (y, w=None, *, factor, kind="butter", order=Whole::new(4), cutoff_hz=None, fs_hz=None, form="sos"))]
+#[pyo3(
+    text_signature = "(y, w=None, *, factor, kind='butter', order=4, cutoff_hz=None, fs_hz=None, form='sos')"
+)]
 #[allow(clippy::too_many_arguments)]
 fn decimate<'py>(
     py: Python<'py>,
     y: PyReadonlyArray1<'py, f64>,
     w: Option<PyReadonlyArray2<'py, f64>>,
-    factor: usize,
+    factor: Whole,
     kind: &str,
-    order: usize,
-    cutoff_hz: Option<f64>,
-    fs_hz: Option<f64>,
+    order: Whole,
+    cutoff_hz: Option<Real>,
+    fs_hz: Option<Real>,
     form: &str,
 ) -> PyResult<Decimated<'py>> {
+    let factor = factor.get("factor").map_err(|e| core_error(py, e))?;
+    let order = order.get("order").map_err(|e| core_error(py, e))?;
+    let (cutoff_hz, fs_hz) = (cutoff_hz.map(|r| r.0), fs_hz.map(|r| r.0));
     let y = slice1(&y);
     let y: &[f64] = &y;
     let (wc, n, p) = match &w {
@@ -530,8 +567,8 @@ fn decimate<'py>(
 
 /// Down-sampling factor keeping the cutoff at 80 % of the new Nyquist frequency.
 #[pyfunction]
-fn default_factor(fs_hz: f64, cutoff_hz: f64) -> usize {
-    flt::default_factor(fs_hz, cutoff_hz)
+fn default_factor(fs_hz: Real, cutoff_hz: Real) -> usize {
+    flt::default_factor(fs_hz.0, cutoff_hz.0)
 }
 
 /// The compiled core of didim. Use the `didim` package, not this module.

@@ -1,0 +1,123 @@
+//! Inputs that crashed or misbehaved before, found by the property tests of `proptest_no_panic.rs`; each is now an
+//! error or a correct value.
+
+use didim_core::controller::Controller;
+use didim_core::filter::{self, Sos, Tf};
+use didim_core::model::{self, coulomb_sign, coulomb_sign_derivative};
+use didim_core::sim::{self, SimOptions};
+use didim_core::Error;
+
+fn ramp(n: usize) -> Vec<f64> {
+    (0..n).map(|k| 1e-4 * k as f64).collect()
+}
+
+/// A delay of 2^40 samples made the simulator allocate 8 TB for its command buffer and abort the process (an abort
+/// cannot be caught, so it would have killed the Python interpreter); `usize::MAX` overflowed the capacity (a panic).
+#[test]
+fn a_delay_not_shorter_than_the_record_is_an_error_before_any_allocation() {
+    let m = model::flexible(1e-4).unwrap();
+    let chi = [68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5];
+    for delay in [10, 1 << 40, usize::MAX] {
+        let o = SimOptions {
+            delay,
+            ..SimOptions::new(1e-3)
+        };
+        let e = sim::simulate(&m, &chi, &Controller::EMPS, &ramp(10), None, &o).unwrap_err();
+        assert!(
+            matches!(&e, Error::InvalidInput(m) if m.contains("delay") && m.contains("not shorter than the record"))
+        );
+        let e = sim::simulate_sensitivity(&m, &chi, &Controller::EMPS, &ramp(10), None, &o).unwrap_err();
+        assert!(matches!(e, Error::InvalidInput(_)));
+    }
+    let o = SimOptions {
+        delay: 9,
+        ..SimOptions::new(1e-3)
+    };
+    assert!(sim::simulate(&m, &chi, &Controller::EMPS, &ramp(10), None, &o).is_ok());
+}
+
+/// `f64::clamp` panics when the limit is NaN or negative; `Controller::command` used it and is public.
+#[test]
+fn the_controller_command_does_not_panic_on_a_bad_saturation() {
+    for vsat in [f64::NAN, -10.0, 0.0] {
+        let c = Controller::EmpsCascade {
+            kp: 160.18,
+            kv: 243.45,
+            gtau: 35.15,
+            vsat,
+        };
+        assert!(c.validate().is_err());
+        let _ = c.command(0.1, 0.0, 0.0, 1e-3, 0.0);
+        let c = Controller::Pd {
+            kp: 1e4,
+            kd: 100.0,
+            tau_max: vsat,
+        };
+        let _ = c.command_with_partials(0.1, 0.0, 0.0, 1e-3, 0.0);
+    }
+    let c = Controller::Pd {
+        kp: 1e4,
+        kd: 100.0,
+        tau_max: 5.0,
+    };
+    assert_eq!(c.command(1.0, 0.0, 0.0, 1e-3, 0.0), 5.0);
+    assert_eq!(c.command(-1.0, 0.0, 0.0, 1e-3, 0.0), -5.0);
+}
+
+/// `v / sqrt(v² + eps²)` returned +inf when v² + eps² underflowed to 0 (v = eps = 2.2e-308) and 0 when it
+/// overflowed (v = 1e200): the sign must stay within [-1, 1] with the sign of v.
+#[test]
+fn the_coulomb_sign_is_right_where_its_square_under_or_overflows() {
+    let tiny = f64::MIN_POSITIVE;
+    assert!((coulomb_sign(tiny, tiny) - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-15);
+    assert_eq!(coulomb_sign(1e200, 1e-4), 1.0);
+    assert_eq!(coulomb_sign(-1e200, 1e-4), -1.0);
+    assert_eq!(coulomb_sign(f64::INFINITY, 1e-4), 1.0);
+    assert_eq!(coulomb_sign(-1e-200, 1e-200), -std::f64::consts::FRAC_1_SQRT_2);
+    assert!((coulomb_sign_derivative(1e-200, 1e-200) * 1e-200 - 0.5f64.powf(1.5)).abs() < 1e-12);
+    assert_eq!(coulomb_sign_derivative(1e200, 1e-4), 0.0);
+    // unchanged where it was right
+    let (v, eps) = (3e-4f64, 1e-4f64);
+    assert_eq!(coulomb_sign(v, eps), v / (v * v + eps * eps).sqrt());
+}
+
+/// A tiny `a[0]` (4.2e-199) scales the normalised numerator to 1e198: the two passes overflowed and `filtfilt`
+/// returned all NaN without an error.
+#[test]
+fn filtering_that_overflows_is_an_error_not_nan() {
+    let b = filter::butter(1, 0.5).unwrap().b;
+    let tf = Tf {
+        b,
+        a: vec![4.204551453322078e-199],
+    };
+    let x = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+    let e = filter::filtfilt(&tf, &x, None).unwrap_err();
+    assert!(e.to_string().contains("overflowed"), "{e}");
+    let sos = Sos(vec![[1e300, 0.0, 0.0, 1.0, 0.5, 0.0]]);
+    let e = filter::sosfiltfilt(&sos, &x, Some(2)).unwrap_err();
+    assert!(e.to_string().contains("overflowed"), "{e}");
+}
+
+/// Fc2 = 1.8e308 N leaves the axis at rest (finite states) but its sensitivity, 1.8e308/eps, overflowed: the
+/// Jacobian came back full of NaN without an error.
+#[test]
+fn sensitivities_that_overflow_are_a_simulation_error() {
+    let m = model::flexible(1e-4).unwrap();
+    let chi = [0.1, 0.1, 0.1, 0.1, 0.1, f64::MAX, 1000.0];
+    let c = Controller::EmpsCascade {
+        kp: 1.0,
+        kv: 1.0,
+        gtau: 1.0,
+        vsat: 1.0,
+    };
+    let o = SimOptions {
+        substeps: 1,
+        ..SimOptions::new(1e-4)
+    };
+    assert!(sim::simulate(&m, &chi, &c, &[0.0, 0.0], None, &o).is_ok());
+    let e = sim::simulate_sensitivity(&m, &chi, &c, &[0.0, 0.0], None, &o).unwrap_err();
+    assert!(
+        matches!(&e, Error::Simulation(s) if s.contains("sensitivities") && s.contains("Fc2=")),
+        "{e}"
+    );
+}

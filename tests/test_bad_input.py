@@ -1,0 +1,403 @@
+"""The bad-input catalogue: every bad file, signal, parameter or option gets an exception of the documented class whose
+message names the problem (and what to do), every suspicious record a DidimWarning with the evidence, and numerical
+trouble a SimulationError, an IdentifiabilityError or a result flagged not converged."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+import scipy.io
+
+import didim
+from didim import scenarios as sc
+
+EMPS_REF = dict(M=95.1089, Fv=203.5034, Fc=20.3935, OF=-3.1648)
+
+
+def emps_vars(path):
+    d = scipy.io.loadmat(path)
+    return {k: v for k, v in d.items() if not k.startswith("__")}
+
+
+def save(tmp_path, name, d):
+    p = tmp_path / name
+    scipy.io.savemat(p, d)
+    return p
+
+
+def short_record(n=3000, **kw):
+    """A small simulated rigid record (EMPS controller, 1 kHz), moving from the first sample."""
+    qr = 0.05 * np.sin(2 * np.pi * np.arange(n) * 1e-3)
+    return sc.make_recording(sc.EMPS_RIGID, "rigid", qr=qr, force_noise=0.5, seed=3, **kw)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Files
+# ---------------------------------------------------------------------------------------------------------------------
+
+
+def test_missing_file_is_named(tmp_path):
+    with pytest.raises(didim.DataError, match=r"absent\.mat: no such file"):
+        didim.load_mat(tmp_path / "absent.mat")
+
+
+def test_a_folder_is_not_a_mat_file(tmp_path):
+    with pytest.raises(didim.DataError, match="is a folder, not a MAT file"):
+        didim.load_mat(tmp_path)
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root reads files whatever their mode")
+def test_unreadable_file_says_permission(tmp_path, emps_path):
+    p = tmp_path / "locked.mat"
+    p.write_bytes(emps_path.read_bytes())
+    p.chmod(0)
+    with pytest.raises(didim.DataError, match=r"locked\.mat: cannot be read .*permission"):
+        didim.load_mat(p)
+
+
+def test_unreadable_file_says_permission_even_as_root(tmp_path, emps_path, monkeypatch):
+    import didim.recording
+
+    def denied(*a, **k):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(didim.recording, "open", denied, raising=False)  # the module's `open` shadows the builtin
+    with pytest.raises(didim.DataError, match=r"DATA_EMPS\.mat: cannot be read \(Permission denied\): check its permissions"):
+        didim.load_mat(emps_path)
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (b"", "the file is empty"),
+        (b"t,qm,qg\n0,0,0\n" * 20, "not a readable MATLAB .mat file"),
+        (bytes(range(256)) * 3, "not a readable MATLAB .mat file"),
+    ],
+)
+def test_not_a_mat_file(tmp_path, content, match):
+    p = tmp_path / "data.mat"
+    p.write_bytes(content)
+    with pytest.raises(didim.DataError, match=match):
+        didim.load_mat(p)
+
+
+def test_matlab_v73_files_are_refused_with_the_way_out(tmp_path):
+    head = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 .".ljust(116, b" ") + b"\0" * 8 + b"\x00\x02IM"
+    p = tmp_path / "v73.mat"
+    p.write_bytes(head + b"\0" * 512)
+    with pytest.raises(didim.DataError, match=r"v7\.3 \(HDF5\).*'-v7'"):
+        didim.load_mat(p)
+
+
+def test_mat_without_the_needed_variables_lists_missing_and_found(tmp_path):
+    p = save(tmp_path, "partial.mat", {"t": np.arange(10.0), "qm": np.zeros(10), "extra": 1.0})
+    with pytest.raises(didim.DataError, match=r"missing variable\(s\) qg, vir, gtau, kp, kv.*found: extra, qm, t"):
+        didim.load_mat(p)
+
+
+@pytest.mark.parametrize("cut", [200, 5_000, 300_000, 626_000])
+def test_truncated_file_is_called_truncated(tmp_path, emps_path, cut):
+    p = tmp_path / "cut.mat"
+    p.write_bytes(emps_path.read_bytes()[:cut])
+    with pytest.raises(didim.DataError, match=rf"cut\.mat: truncated or corrupt MAT file \({cut} bytes"):
+        didim.load_mat(p)
+
+
+def test_header_only_file_hints_at_truncation(tmp_path, emps_path):
+    p = tmp_path / "head.mat"
+    p.write_bytes(emps_path.read_bytes()[:128])
+    with pytest.raises(didim.DataError, match="holds no variable at all: is it truncated"):
+        didim.load_mat(p)
+
+
+@pytest.mark.parametrize(
+    "key, value, match",
+    [
+        ("qm", lambda n: np.zeros((n // 2, 2)), r"'qm' must be a vector \(N x 1\), got shape"),
+        ("t", lambda n: "a text", r"'t' must be real numbers, got text"),
+        ("vir", lambda n: np.ones((n, 1)) * 1j, r"'vir' must be real numbers, got complex128"),
+        ("qg", lambda n: np.array([[1, 2]], dtype=object), r"'qg' must be real numbers, got a cell array"),
+        ("kp", lambda n: np.ones(3), r"'kp' must be a single number, got shape \(1, 3\)"),
+        ("vir", lambda n: np.zeros((n - 5, 1)), "vir has 24836 samples but the reference has 24841"),
+    ],
+)
+def test_variables_of_the_wrong_shape_or_type_are_named(tmp_path, emps_path, key, value, match):
+    d = emps_vars(emps_path)
+    d[key] = value(d["t"].shape[0])
+    with pytest.raises(didim.DataError, match=match):
+        didim.load_mat(save(tmp_path, "bad.mat", d))
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Signals
+# ---------------------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_sample_is_located(tmp_path, emps_path, bad):
+    d = emps_vars(emps_path)
+    d["qm"] = d["qm"].copy()
+    d["qm"][1234] = bad
+    with pytest.raises(didim.DataError, match=r"qm has 1 non-finite value\(s\), the first at sample 1234: clean or cut"):
+        didim.load_mat(save(tmp_path, "nan.mat", d))
+    n = 50
+    with pytest.raises(didim.DataError, match="force has 1 non-finite value.*sample 7"):
+        didim.Recording(dt=1e-3, qr=np.zeros(n), force=np.where(np.arange(n) == 7, bad, 0.0), qm=np.zeros(n))
+
+
+def test_time_not_increasing_is_located(tmp_path, emps_path):
+    d = emps_vars(emps_path)
+    d["t"] = d["t"].copy()
+    d["t"][500] = d["t"][499]
+    with pytest.raises(didim.DataError, match=r"time t is not increasing \(t\[500\].*<= t\[499\].*remove repeated"):
+        didim.load_mat(save(tmp_path, "repeat.mat", d))
+    t = np.arange(100) * 1e-3
+    with pytest.raises(didim.DataError, match=r"not increasing \(t\[52\] = 0.098 <= t\[51\] = 0.099\)"):
+        didim.Recording.from_time(np.concatenate([t[:51], t[51:][::-1]]), np.zeros(100), np.zeros(100), np.zeros(100))
+
+
+def test_time_not_uniform_is_located():
+    t = np.arange(100) * 1e-3
+    t[60:] += 4e-4
+    with pytest.raises(didim.DataError, match="not uniform: step 0.0014 s at sample 59.*resample"):
+        didim.Recording.from_time(t, np.zeros(100), np.zeros(100), np.zeros(100))
+
+
+def test_arrays_of_different_lengths_are_named():
+    with pytest.raises(didim.DataError, match="qm \\(motor position\\) has 99 samples but the reference has 100"):
+        didim.Recording(dt=1e-3, qr=np.zeros(100), force=np.zeros(100), qm=np.zeros(99))
+    with pytest.raises(didim.DataError, match="ql \\(load position\\) has 101 samples"):
+        didim.Recording(dt=1e-3, qr=np.zeros(100), force=np.zeros(100), qm=np.zeros(100), ql=np.zeros(101))
+
+
+def test_record_too_short_for_the_decimation_filter():
+    rec = short_record(n=10)
+    with pytest.raises(didim.DataError, match=r"too short for the decimation filter of didim \(rigid\): 10 samples"):
+        didim.identify(rec, "rigid", "didim", apM=90.0)
+    with pytest.raises(didim.DataError, match=r"too short for the decimation filter of IDIM-LS"):
+        didim.identify(rec, "rigid", "idim-ls")
+    rec = short_record(n=200)
+    with pytest.raises(didim.DataError, match=r"decimated by 80 leave 3 equations for 3 parameters; record at least"):
+        didim.identify(rec, "rigid", "didim", apM=90.0)
+
+
+def test_constant_reference_says_which_parameters_and_why():
+    n = 2000
+    rec = didim.Recording(dt=1e-3, qr=np.full(n, 0.1), force=np.random.default_rng(0).normal(0, 1, n), qm=np.full(n, 0.1))
+    for method in ("idim-ls", "didim", "oe-gn"):
+        with pytest.raises(didim.IdentifiabilityError) as e:
+            didim.identify(rec, "rigid", method, offset=True)
+        msg = str(e.value)
+        assert "reference qr is constant (0.1 m)" in msg
+        assert "M (needs accelerations), Fv (needs velocities), Fc (needs motion in both directions)" in msg
+        assert "OF alone would only be the mean force" in msg
+    with pytest.raises(didim.IdentifiabilityError, match=r"K12 \(needs the spring to be loaded"):
+        didim.identify(rec, "flexible", "didim")
+
+
+def test_a_command_saturating_for_long_stretches_is_warned_with_the_evidence():
+    qr = sc.trapezoid(speeds=(0.2,), a_max=5.0)
+    rec = sc.make_recording(sc.EMPS_RIGID, "rigid", qr=qr, controller=didim.PD(4e4, 600.0, 250.0), quantization=None)
+    with pytest.warns(didim.DidimWarning, match=r"at the controller's limit ±250 N on \d+ samples .*longest stretch \d+ "
+                                                 r"samples \(0\.1\d+ s\) from t = 0\.3\d+ s"):
+        r = didim.identify(rec, "rigid", "didim", apM=80.0, offset=True, max_iter=3)
+    assert not r.converged  # what saturation does to DIDIM here; the warning says why to look
+
+
+def test_force_in_volts_is_warned_with_the_rms_evidence(emps):
+    volts = didim.Recording(dt=emps.dt, qr=emps.qr, force=emps.force / emps.controller.gtau, qm=emps.qm)
+    with pytest.warns(didim.DidimWarning) as w:
+        didim.identify(volts, "rigid", "idim-ls")
+    msg = str(w[0].message)
+    assert "looks like volts, not newtons" in msg
+    assert "RMS is 1.539 against the 54.1 N RMS that the controller" in msg
+    assert "multiply the drive command by gtau = 35.15065188 N/V" in msg
+    twice = didim.Recording(dt=emps.dt, qr=emps.qr, force=emps.force * emps.controller.gtau, qm=emps.qm)
+    assert any("multiplied by gtau twice" in f for f in twice.diagnose())
+    c = emps.controller  # the cascade is a PD of kp·kv·gtau N/m and kv·gtau N/(m/s); here with gains 100 times too low
+    pd = didim.PD(c.kp * c.kv * c.gtau / 100, c.kv * c.gtau / 100)
+    gains = didim.Recording(dt=emps.dt, qr=emps.qr, force=emps.force, qm=emps.qm, controller=pd)
+    assert any("does not have the scale the controller implies" in f and "ratio 99.99" in f for f in gains.diagnose())
+
+
+def test_clean_records_raise_no_warning(emps, emps_pulses):
+    assert emps.diagnose() == [] and emps_pulses.diagnose() == []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", didim.DidimWarning)
+        didim.identify(emps, "rigid", "idim-ls", offset=True)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Parameters and options
+# ---------------------------------------------------------------------------------------------------------------------
+
+
+def test_non_positive_masses_and_stiffness_are_named(emps):
+    with pytest.raises(didim.DataError, match="mass M must be > 0 kg, got 0"):
+        didim.simulate(emps, dict(M=0.0, Fv=1.0, Fc=1.0))
+    flex = dict(M1=68.0, Fv1=104.0, Fc1=10.0, M2=38.0, Fv2=96.5, Fc2=9.5, K12=-8.8e5)
+    with pytest.raises(didim.DataError, match="stiffness K12 must be > 0 N/m, got -880000"):
+        didim.simulate(emps, flex, "flexible")
+    with pytest.raises(didim.DataError, match=r"initial: mass M2 must be a finite number > 0 kg, got -38.0; a mass must "
+                                               r"be positive \(check the sign and the units\)"):
+        didim.identify(emps, "flexible", "oe-gn", initial={**flex, "K12": 8.8e5, "M2": -38.0})
+    with pytest.raises(didim.DataError, match="the a priori mass apM must be a finite number > 0 kg, got -78"):
+        didim.identify(emps, "rigid", "didim", apM=-78.0)
+
+
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (lambda: didim.EmpsCascade(kp=0.0), "controller kp must be a finite number > 0, got 0.0: a zero or negative gain"),
+        (lambda: didim.EmpsCascade(kv=-243.45), "controller kv must be a finite number > 0, got -243.45"),
+        (lambda: didim.PD(kp=4e4, kd=-1.0), "controller kd must be a finite number > 0"),
+        (lambda: didim.PD(kp=4e4, kd=600.0, tau_max=0.0), r"controller tau_max must be a number > 0 \(math.inf for no"),
+        (lambda: didim.EmpsCascade(gtau="35"), "controller gtau must be a real number > 0, got '35'"),
+    ],
+)
+def test_zero_or_negative_gains_are_named(make, match):
+    with pytest.raises(didim.DataError, match=match):
+        make()
+
+
+def test_zero_gain_in_a_file_names_the_file_and_the_gain(tmp_path, emps_path):
+    d = emps_vars(emps_path)
+    d["kv"] = np.array([[0.0]])
+    with pytest.raises(didim.DataError, match=r"zero_kv\.mat: controller kv must be a finite number > 0, got 0.0"):
+        didim.load_mat(save(tmp_path, "zero_kv.mat", d))
+
+
+def test_sample_period_that_does_not_match_the_data(emps_path, emps):
+    with pytest.raises(didim.DataError, match=r"dt = 0.002 s does not match the data, whose time t has a step of 0.001 s"):
+        didim.load_mat(emps_path, dt=2e-3)
+    assert didim.load_mat(emps_path, dt=1e-3).dt == pytest.approx(1e-3)
+    t = np.arange(100) * 1e-3
+    with pytest.raises(didim.DataError, match="dt = 0.0005 s does not match the data"):
+        didim.Recording.from_time(t, np.zeros(100), np.zeros(100), np.zeros(100), dt=5e-4)
+    dec = didim.Decimation.lowpass(5.0, 2000.0)
+    with pytest.raises(didim.DataError, match=r"designed for a sampling frequency of 2000 Hz, but the record's sample "
+                                               r"period gives 1000 Hz"):
+        didim.identify(emps, "rigid", "didim", apM=78.0, decimation=dec)
+
+
+def test_decimation_cutoff_above_nyquist(emps):
+    with pytest.raises(didim.DataError, match="cutoff 600 Hz must lie between 0 and the Nyquist frequency 500 Hz"):
+        didim.identify(emps, "rigid", "didim", apM=78.0, cutoff_hz=600.0)
+    with pytest.raises(didim.DataError, match="Nyquist frequency 500 Hz"):
+        didim.identify(emps, "rigid", "idim-ls", lowpass_hz=700.0)
+    with pytest.raises(didim.DataError, match="Nyquist"):
+        didim.Decimation.lowpass(500.0, 1000.0)
+
+
+def test_zero_substeps(emps):
+    with pytest.raises(didim.DataError, match="substeps must be between 1 and 100000, got 0; the simulator integrates"):
+        didim.simulate(emps, EMPS_REF, substeps=0)
+    with pytest.raises(didim.DataError, match="substeps must be between 1 and 100000, got 0"):
+        didim.identify(emps, "rigid", "didim", apM=78.0, substeps=0)
+    with pytest.raises(didim.DataError, match="substeps must be a whole number between 0 and"):
+        didim._core.simulate("rigid", np.ones(3), emps.qr, 1e-3, "emps", [1.0, 1.0, 1.0, 1.0], substeps=-1)
+
+
+def test_unknown_and_unused_options_are_refused_with_the_accepted_ones(emps):
+    with pytest.raises(didim.DataError, match=r"unknown option\(s\) 'cuttoff_hz' for method 'didim' \(rigid model\); it "
+                                               r"accepts cutoff_hz, decimation, tol, max_iter"):
+        didim.identify(emps, "rigid", "didim", apM=78.0, cuttoff_hz=5.0)
+    with pytest.raises(didim.DataError, match="apM .* is not used by idim-ls"):
+        didim.identify(emps, "rigid", "idim-ls", apM=78.0)
+    with pytest.raises(didim.DataError, match="criterion='position' applies to the output-error methods"):
+        didim.identify(emps, "rigid", "didim", criterion="position")
+    with pytest.raises(didim.DataError, match="tol must be a finite number > 0"):
+        didim.identify(emps, "rigid", "didim", apM=78.0, tol=0.0)
+    with pytest.raises(didim.DataError, match="max_iter must be >= 1, got 0"):
+        didim.identify(emps, "rigid", "didim", apM=78.0, max_iter=0)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Numerical trouble
+# ---------------------------------------------------------------------------------------------------------------------
+
+
+def test_unstable_loop_names_the_parameter_set_and_the_sample(emps):
+    stiff = didim.Recording(dt=emps.dt, qr=emps.qr, force=emps.force, qm=emps.qm, controller=didim.PD(1e6, 1e4))
+    with pytest.raises(didim.SimulationError, match=r"diverged at sample \d+ \(t = [\d.]+ s\).*with parameters M=0.01, "
+                                                     r"Fv=0, Fc=0; check the parameter values"):
+        didim.simulate(stiff, dict(M=0.01, Fv=0.0, Fc=0.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        with pytest.raises(didim.SimulationError, match=r"DIDIM could not start: iteration 0: the simulation with χ0 "
+                                                         r"failed \(closed-loop simulation diverged at sample \d+.*M=0.01"):
+            didim.identify(stiff, "rigid", "didim", apM=0.01)
+        with pytest.raises(didim.SimulationError, match=r"oe-gn: the simulation with the initial parameters failed.*"
+                                                         r"M=0.01"):
+            didim.identify(stiff, "rigid", "oe-gn", initial=dict(M=0.01, Fv=0.0, Fc=0.0))
+
+
+def test_rank_deficient_regressor_names_the_dependent_columns(emps):
+    rigid_load = didim.Recording(dt=emps.dt, qr=emps.qr, force=emps.force, qm=emps.qm, ql=emps.qm)
+    with pytest.raises(didim.IdentifiabilityError, match=r"rank 6 < 7: column K12 is zero \(K12 has no effect on this "
+                                                          r"record\)\. K12 cannot be identified separately"):
+        didim.identify(rigid_load, "flexible", "idim-ls")
+    from didim.identification import _solve
+
+    rng = np.random.default_rng(0)
+    w = rng.normal(size=(50, 3))
+    w[:, 2] = 2 * w[:, 0] - w[:, 1]
+    with pytest.raises(didim.IdentifiabilityError, match=r"column Fc = 2·M \+ -1·Fv\. Fc cannot be identified"):
+        _solve(w, rng.normal(size=50), ["M", "Fv", "Fc"])
+    sol = didim._core.lstsq(w, rng.normal(size=50))  # the core reports the base parameters instead
+    assert sol["rank"] == 2 and sol["base_columns"] == [0, 1]
+    assert sol["dependencies"][0][0] == 2
+
+
+def test_non_convergence_is_a_flagged_result_with_history(emps):
+    r = didim.identify(emps, "rigid", "didim", apM=78.0, max_iter=1)
+    assert r.converged is False
+    assert r.message == "no convergence in 1 iterations (criterion (21) with tol = 0.001)"
+    assert len(r.history) == 1 and r.history[0].params["M"] > 0
+    assert "NOT CONVERGED: no convergence in 1 iterations" in r.summary()
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "didim", *args], capture_output=True, text=True, timeout=600)
+
+
+def test_cli_non_convergence_exits_1_with_one_clear_line(emps_path):
+    p = _cli("identify", str(emps_path), "--method", "didim", "--apm", "78", "--max-iter", "1", "--quiet")
+    assert p.returncode == 1
+    assert p.stderr == "didim: not converged: no convergence in 1 iterations (criterion (21) with tol = 0.001)\n"
+    assert "NOT CONVERGED" in p.stdout
+
+
+@pytest.mark.parametrize(
+    "args, match",
+    [
+        (["--method", "idim-ls", "--max-iter", "3"], "unknown option(s) 'max_iter' for method 'idim-ls'"),
+        (["--apm", "-5"], "apM must be a finite number > 0 kg, got -5.0"),
+        (["--tol", "nan"], "tol must be a finite number > 0"),
+    ],
+)
+def test_cli_user_errors_exit_2_with_one_line(emps_path, args, match):
+    p = _cli("identify", str(emps_path), "--quiet", *args)
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.count("\n") == 1 and p.stderr.startswith("didim: error: ")
+    assert match in p.stderr and "Traceback" not in p.stderr
+
+
+def test_cli_debug_shows_the_traceback(tmp_path):
+    p = _cli("--debug", "identify", str(tmp_path / "missing.mat"))
+    assert p.returncode != 0 and "Traceback" in p.stderr and "DataError" in p.stderr
+
+
+def test_cli_warnings_are_one_line_each(tmp_path, emps_path):
+    d = emps_vars(emps_path)
+    d["vir"] = d["vir"] * d["gtau"]  # vir in newtons, as the benchmark's PDF says: load_mat multiplies by gtau again
+    p = _cli("identify", str(save(tmp_path, "g1.mat", d)), "--method", "idim-ls", "--quiet")
+    lines = [l for l in p.stderr.splitlines() if l]
+    assert p.returncode == 0
+    assert lines and all(l.startswith("didim: warning: g1: ") for l in lines), p.stderr
+    assert any("multiplied by gtau twice" in l for l in lines)

@@ -1,0 +1,101 @@
+"""Reproducible: the same input and options give bit-identical results, run after run and whatever the number of
+threads of the parallel paths (rayon decimation of Y and the columns of W, the parallel QR of large regressors).
+A new parallel path (e.g. a batch of simulations) gets its line in SCRIPT."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import didim
+from didim import _core
+from didim import scenarios as sc
+
+
+def fingerprint(r: didim.IdentificationResult) -> str:
+    """Every number of a result except the wall time, as exact text (repr of floats is exact)."""
+    d = r.to_dict()
+    d.pop("elapsed_s")
+    for s in d.get("steps", {}).values():
+        s.pop("elapsed_s")
+    cov = b"" if r.covariance is None else np.ascontiguousarray(r.covariance).tobytes()
+    return hashlib.sha256(json.dumps(d, sort_keys=True).encode() + cov).hexdigest()
+
+
+def test_identification_twice_gives_the_same_bits(emps):
+    for method in ("idim-ls", "didim", "oe-gn"):
+        kw = {} if method == "idim-ls" else dict(apM=78.0)
+        a = didim.identify(emps, "rigid", method, offset=True, **kw)
+        b = didim.identify(emps, "rigid", method, offset=True, **kw)
+        assert fingerprint(a) == fingerprint(b), method
+
+
+def test_simulated_records_are_reproducible_from_their_seed():
+    a = sc.make_recording(sc.TABLE3_TRUTH, "flexible", qr=sc.chirp(duration_s=2.0), seed=5)
+    b = sc.make_recording(sc.TABLE3_TRUTH, "flexible", qr=sc.chirp(duration_s=2.0), seed=5)
+    assert a.force.tobytes() == b.force.tobytes() and a.qm.tobytes() == b.qm.tobytes()
+    c = sc.make_recording(sc.TABLE3_TRUTH, "flexible", qr=sc.chirp(duration_s=2.0), seed=6)
+    assert c.force.tobytes() != a.force.tobytes()
+
+
+#: Runs every parallel path of the core and prints one hash per path.
+SCRIPT = textwrap.dedent(
+    """
+    import hashlib, json, sys, warnings
+    import numpy as np
+    import didim
+    from didim import _core, scenarios as sc
+
+    def h(*arrays):
+        m = hashlib.sha256()
+        for a in arrays:
+            m.update(np.ascontiguousarray(a, dtype=float).tobytes())
+        return m.hexdigest()[:16]
+
+    rec = didim.load_mat(sys.argv[1])
+    out = {}
+    rng = np.random.default_rng(1)
+    w = rng.standard_normal((rec.n, 12)) * np.array([10.0 ** k for k in range(-6, 6)])
+    for kind in ("butter", "matlab"):
+        dec = didim.Decimation.lowpass(5.0, rec.fs) if kind == "butter" else didim.Decimation.matlab(10)
+        yd, wd = dec.apply(rec.force, w)
+        out["decimate " + kind] = h(yd, wd)
+    big = rng.standard_normal((40000, 8))  # 320000 entries: the QR and Q^T y run on rayon
+    sol = _core.lstsq(big, big @ np.arange(8.0) + rng.standard_normal(40000))
+    out["lstsq (parallel QR)"] = h(sol["params"], sol["covariance"], sol["residual"])
+    sim = didim.simulate(rec, dict(M=95.1089, Fv=203.5034, Fc=20.3935, OF=-3.1648))
+    out["simulate"] = h(sim.force, sim.q, sim.qd, sim.qdd)
+    s = _core.simulate_sensitivity("flexible", np.array(list(sc.TABLE3_TRUTH.values())), rec.qr, rec.dt, "emps",
+                                   list(rec.controller.gains))
+    out["sensitivities"] = h(*s.values())
+    r = didim.identify(rec, "rigid", "didim", apM=78.0, offset=True)
+    out["didim"] = h(list(r.params.values()), r.covariance, [x.output_error for x in r.history])
+    r = didim.identify(rec, "rigid", "oe-gn", apM=78.0, offset=True)
+    out["oe-gn"] = h(list(r.params.values()), r.covariance)
+    print(json.dumps(out))
+    """
+)
+
+
+def run_with_threads(threads: int, emps_path) -> dict:
+    env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
+    p = subprocess.run([sys.executable, "-c", SCRIPT, str(emps_path)], capture_output=True, text=True, env=env,
+                       timeout=900)
+    assert p.returncode == 0, p.stderr
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def test_parallel_paths_give_the_same_bits_with_one_two_and_three_threads(emps_path):
+    one = run_with_threads(1, emps_path)
+    for n in (2, 3):
+        other = run_with_threads(n, emps_path)
+        differ = [k for k in one if one[k] != other.get(k)]
+        assert not differ, f"results depend on the thread count ({n} vs 1): {differ}"
+    assert {"decimate butter", "decimate matlab", "lstsq (parallel QR)", "didim", "oe-gn"} <= set(one)
