@@ -116,6 +116,36 @@ fn make_controller(kind: &str, gains: &[f64]) -> Result<Controller, Error> {
     Ok(c)
 }
 
+fn parse_integrator(name: &str) -> Result<sim::Integrator, Error> {
+    match name {
+        "exponential" => Ok(sim::Integrator::Exponential),
+        "rk4" => Ok(sim::Integrator::Rk4),
+        other => Err(Error::InvalidInput(format!(
+            "unknown integrator {other:?}: use \"exponential\" (default) or \"rk4\""
+        ))),
+    }
+}
+
+fn sim_options(
+    py: Python<'_>,
+    dt: f64,
+    substeps: usize,
+    quantization: f64,
+    delay: usize,
+    integrator: &str,
+    tol: f64,
+) -> PyResult<sim::SimOptions> {
+    let integrator = parse_integrator(integrator).map_err(|e| core_error(py, e))?;
+    Ok(sim::SimOptions {
+        dt,
+        substeps,
+        quantization,
+        delay,
+        integrator,
+        tol,
+    })
+}
+
 /// Parameter names of a model, in the order of the parameter vector.
 #[pyfunction]
 #[pyo3(signature = (model, offset=false))]
@@ -129,7 +159,7 @@ fn param_names(py: Python<'_>, model: &str, offset: bool) -> PyResult<Vec<String
 
 /// Closed-loop simulation; returns a dict of arrays: force (n,), q, qd, qdd (ndof, n).
 #[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false))]
+#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, integrator="exponential", tol=sim::DEFAULT_TOL))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -145,16 +175,13 @@ fn simulate<'py>(
     delay: usize,
     coulomb_eps: f64,
     offset: bool,
+    integrator: &str,
+    tol: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     let chi = slice1(&params);
     let qr = slice1(&qr);
     let u = u_ext.as_ref().map(slice1);
-    let opts = sim::SimOptions {
-        dt,
-        substeps,
-        quantization,
-        delay,
-    };
+    let opts = sim_options(py, dt, substeps, quantization, delay, integrator, tol)?;
     let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
     let out = run(py, || {
         let c = make_controller(controller, &gains)?;
@@ -197,7 +224,7 @@ fn regressor<'py>(
 /// Closed-loop simulation with forward sensitivities; the dict of `simulate` plus
 /// dforce (p, n) and dq (ndof, p, n).
 #[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false))]
+#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, integrator="exponential", tol=sim::DEFAULT_TOL))]
 #[allow(clippy::too_many_arguments)]
 fn simulate_sensitivity<'py>(
     py: Python<'py>,
@@ -213,16 +240,13 @@ fn simulate_sensitivity<'py>(
     delay: usize,
     coulomb_eps: f64,
     offset: bool,
+    integrator: &str,
+    tol: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     let chi = slice1(&params);
     let qr = slice1(&qr);
     let u = u_ext.as_ref().map(slice1);
-    let opts = sim::SimOptions {
-        dt,
-        substeps,
-        quantization,
-        delay,
-    };
+    let opts = sim_options(py, dt, substeps, quantization, delay, integrator, tol)?;
     let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
     let n = qr.len();
     let (ndof, out) = run(py, || {
