@@ -29,7 +29,7 @@ from ._errors import DataError, DidimError, IdentifiabilityError, SimulationErro
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation, diffcent, lowpass
-from .simulation import DEFAULT_COULOMB_EPS, param_names, simulate
+from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, param_names, params_vector, problem
 
 Progress = Optional[Callable[[str], None]]
 
@@ -161,8 +161,29 @@ def idim_ls(
 # --------------------------------------------------------------------------------------------------------------------
 
 
-def _output_error(yd: np.ndarray, sim_force: np.ndarray, dec: Decimation) -> float:
-    return float(np.linalg.norm(yd - dec(sim_force)) / np.linalg.norm(yd))
+def nelder_mead_simplex(x0) -> np.ndarray:
+    """scipy's default initial simplex for ``minimize(method="Nelder-Mead")``: x0 and, per coordinate, x0 with that
+    coordinate times 1.05 (0.00025 where it is 0)."""
+    x0 = np.atleast_1d(np.asarray(x0, dtype=float)).ravel()
+    sim = np.tile(x0, (x0.size + 1, 1))
+    for k in range(x0.size):
+        sim[k + 1, k] = 1.05 * x0[k] if x0[k] != 0 else 0.00025
+    return sim
+
+
+def prefetch(cost, cost_batch, points) -> Callable:
+    """``cost`` with the values at ``points`` computed beforehand in one parallel batch (``cost_batch``): the first
+    call at each of those points returns the stored value. Used to evaluate a Nelder-Mead initial simplex on all
+    cores; the minimizer sees exactly the values it would have computed itself."""
+    cache = {}
+    for x, v in zip(points, cost_batch(np.asarray(points, dtype=float))):
+        cache.setdefault(tuple(map(float, x)), float(v))
+
+    def f(x):
+        v = cache.pop(tuple(map(float, np.ravel(x))), None)
+        return cost(x) if v is None else v
+
+    return f
 
 
 def didim(
@@ -181,6 +202,8 @@ def didim(
     divergence_factor: float = 1.02,
     progress: Progress = None,
     method: str = "didim",
+    integrator: str = "exponential",
+    sim_tol: float = DEFAULT_TOL,
 ) -> IdentificationResult:
     """DIDIM iterations, eqs. (16)-(21): simulate the closed loop with χᵏ, build the IDM regressor of the simulated
     (noise-free) states, decimate Y and W in parallel, solve by QR for χᵏ⁺¹; stop when
@@ -189,7 +212,8 @@ def didim(
     ``initial`` gives χ⁰ for the estimated parameters, ``frozen`` the parameters held at fixed values. Divergence
     (the simulated output error growing beyond ``divergence_factor`` times its best value twice in a row, or a
     simulation that fails) stops the iteration: the result then holds the iterate with the lowest output error and
-    ``converged=False`` with a message saying what happened.
+    ``converged=False`` with a message saying what happened. ``integrator``, ``sim_tol`` and ``substeps`` choose the
+    simulator's scheme (see :func:`didim.simulate`).
     """
     t0 = time.perf_counter()
     frozen = dict(frozen or {})
@@ -206,10 +230,10 @@ def didim(
         decimation = Decimation.lowpass(cutoff, rec.fs)
     dec = decimation
     fi = [names.index(n) for n in free]
-    zi = [names.index(n) for n in frozen]
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
+    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, tol=sim_tol)
     yd_motor = dec(rec.force)
-    zero = np.zeros(rec.n)
+    ny = float(np.linalg.norm(yd_motor))
 
     history: List[Iteration] = []
     best = (math.inf, chi.copy(), None)  # (output error, χ, solution)
@@ -217,13 +241,14 @@ def didim(
     rho_prev = None
     sol = None
     for k in range(max_iter):
+        # one call: simulate with χᵏ, build W of the simulated states, decimate Y, W and the simulated force
         try:
-            sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps)
+            y_all, w_all, force_dec = pb.didim_system(chi, rec.force, fi, dec.core)
         except (SimulationError, DataError) as e:
             message = f"iteration {k}: the simulation with χ{k} failed ({e}); stopped"
             break
         n_sim += 1
-        out_err = _output_error(yd_motor, sim.force, dec)
+        out_err = float(np.linalg.norm(yd_motor - force_dec)) / ny
         if history:
             history[-1].output_error = out_err
         if out_err < best[0]:
@@ -237,14 +262,6 @@ def didim(
                     "probably too far from the truth, or the model misses a physical effect"
                 )
                 break
-        w = _core.regressor(model, sim.q, sim.qd, sim.qdd, coulomb_eps=coulomb_eps, offset=offset)
-        rows = []
-        for d in range(w.shape[0]):
-            y = rec.force if d == 0 else zero
-            if zi:
-                y = y - w[d][:, zi] @ chi[zi]
-            rows.append((y, w[d][:, fi]))
-        y_all, w_all = _stack_rows(rows, dec)
         try:
             sol = _solve(w_all, y_all, free)
         except IdentifiabilityError as e:
@@ -274,9 +291,8 @@ def didim(
     final_out = float("nan")
     if converged:
         try:
-            sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps)
+            final_out = math.sqrt(pb.output_error(chi, yd_motor, dec.core)) / ny
             n_sim += 1
-            final_out = _output_error(yd_motor, sim.force, dec)
             history[-1].output_error = final_out
             if final_out > divergence_factor * best[0]:
                 converged = False
@@ -307,7 +323,8 @@ def didim(
         initial={n: float(initial[n]) for n in free},
         frozen=frozen,
         history=history,
-        options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset),
+        options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset,
+                     integrator=integrator),
         covariance=sol["covariance"],
     )
 
@@ -352,6 +369,8 @@ def fit_flexible_mode(
     substeps: int = 10,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
     progress: Progress = None,
+    integrator: str = "exponential",
+    sim_tol: float = DEFAULT_TOL,
 ) -> IdentificationResult:
     """Step 2: Nelder-Mead on (λ, f_n_flex) with M_tot, Fv_tot, Fc_tot frozen from step 1, eqs. (23)-(28):
     M1 = λ M_tot, M2 = (1 − λ) M_tot, K12 = 4π²(1 − λ) f² M_tot, Fv1 = Fv_tot, Fc1 = Fc_tot, Fv2 = Fc2 = 0."""
@@ -373,26 +392,42 @@ def fit_flexible_mode(
             d["OF"] = rigid.params["OF"]
         return d
 
+    pb = problem(rec, "flexible", offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
+                 tol=sim_tol)
+    penalty = 1e3 * ny**2
+
+    def vector(lam, f):
+        return params_vector("flexible", chi(lam, f), offset)[1]
+
     def cost(x):
         lam, f = float(x[0]), float(x[1])
         if not (0.0 < lam < 1.0 and f > 0.0):
-            return 1e3 * ny**2
+            return penalty
+        count["sim"] += 1
         try:
-            s = simulate(rec, chi(lam, f), "flexible", substeps=substeps, coulomb_eps=coulomb_eps)
+            return pb.output_error(vector(lam, f), yd, dec.core)
         except (SimulationError, DataError):
-            return 1e3 * ny**2
-        finally:
-            count["sim"] += 1
-        e = yd - dec(s.force)
-        return float(e @ e)
+            return penalty
+
+    def cost_batch(xs):
+        ok = [(0.0 < x[0] < 1.0 and x[1] > 0.0) for x in xs]
+        out = np.full(len(xs), penalty)
+        if any(ok):
+            pts = np.array([vector(float(x[0]), float(x[1])) for x, g in zip(xs, ok) if g])
+            count["sim"] += len(pts)
+            vals, _ = pb.output_error_batch(pts, yd, dec.core)
+            out[np.flatnonzero(ok)] = np.where(np.isfinite(vals), vals, penalty)
+        return out
 
     def callback(xk):
         trace.append((float(xk[0]), float(xk[1])))
         _say(progress, f"step 2 iteration {len(trace)}: λ = {xk[0]:.4f}, f_n_flex = {xk[1]:.3f} Hz")
 
-    j0 = cost([lambda0, f0])
-    res = minimize(cost, [lambda0, f0], method="Nelder-Mead", callback=callback,
-                   options=dict(xatol=1e-4, fatol=tol * j0, maxiter=max_iter))
+    simplex = nelder_mead_simplex([lambda0, f0])
+    vals = cost_batch(simplex)
+    j0 = float(vals[0])
+    res = minimize(prefetch(cost, lambda xs: vals, simplex), [lambda0, f0], method="Nelder-Mead", callback=callback,
+                   options=dict(xatol=1e-4, fatol=tol * j0, maxiter=max_iter, initial_simplex=simplex))
     lam, f = map(float, res.x)
     j = float(res.fun)
     history = [Iteration(k=i + 1, params={"lambda": a, "f_n_flex": b}, rel_std_pct={}, relative_error=float("nan"),
@@ -413,7 +448,7 @@ def fit_flexible_mode(
         initial={"lambda": lambda0, "f_n_flex": f0},
         frozen={k: v for k, v in chi(lam, f).items()},
         history=history,
-        options=dict(decimation=dec.describe(), tol=tol),
+        options=dict(decimation=dec.describe(), tol=tol, integrator=integrator),
     )
 
 
@@ -431,6 +466,8 @@ def didim_flexible(
     substeps: int = 10,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
     progress: Progress = None,
+    integrator: str = "exponential",
+    sim_tol: float = DEFAULT_TOL,
 ) -> IdentificationResult:
     """The three-step procedure of section V: rigid DIDIM (step 1), Nelder-Mead on (λ, f_n_flex) (step 2), DIDIM on
     the flexible model initialised by eqs. (29)-(30) (step 3). Fv2 and Fc2 are held at zero (the paper's choice) and
@@ -438,7 +475,7 @@ def didim_flexible(
     steps 2 and 3 are biased and step 3 can drift: the result is then flagged ``converged=False`` with the reason,
     and :func:`didim.output_error.oe_gn` (exact sensitivities) is the method to use."""
     t0 = time.perf_counter()
-    common = dict(substeps=substeps, coulomb_eps=coulomb_eps)
+    common = dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, sim_tol=sim_tol)
     _say(progress, "step 1: rigid DIDIM")
     r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress, **common)
     if not r1.converged:

@@ -100,7 +100,10 @@ impl Basis {
     /// [`Basis::accumulate`], so a new nonlinear term is handled correctly without
     /// changes to the integrator.
     pub fn is_affine(&self) -> bool {
-        matches!(self, Basis::Viscous { .. } | Basis::Offset { .. } | Basis::Spring { .. })
+        matches!(
+            self,
+            Basis::Viscous { .. } | Basis::Offset { .. } | Basis::Spring { .. }
+        )
     }
 
     /// The degrees of freedom this basis function touches.

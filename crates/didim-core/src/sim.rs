@@ -73,7 +73,8 @@ impl SimOptions {
         }
     }
 
-    fn validate(&self) -> Result<()> {
+    /// Checks the options (errors name the option and the accepted range).
+    pub fn validate(&self) -> Result<()> {
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return Err(invalid!(
                 "sample period dt must be finite and > 0 s, got {}",
@@ -137,7 +138,9 @@ pub fn simulate<const N: usize>(
     opts: &SimOptions,
 ) -> Result<SimOutput> {
     match opts.integrator {
-        Integrator::Exponential => expint::run(model, chi, controller, qr, u_ext, opts, None, &mut expint::NoHook),
+        Integrator::Exponential => {
+            expint::run(model, chi, controller, qr, u_ext, opts, None, &mut expint::NoHook)
+        }
         Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, &mut NoTangent),
     }
 }
@@ -154,9 +157,16 @@ pub fn simulate_with_stats<const N: usize>(
 ) -> Result<(SimOutput, StepStats)> {
     let mut stats = StepStats::default();
     let out = match opts.integrator {
-        Integrator::Exponential => {
-            expint::run(model, chi, controller, qr, u_ext, opts, Some(&mut stats), &mut expint::NoHook)?
-        }
+        Integrator::Exponential => expint::run(
+            model,
+            chi,
+            controller,
+            qr,
+            u_ext,
+            opts,
+            Some(&mut stats),
+            &mut expint::NoHook,
+        )?,
         Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)?,
     };
     Ok((out, stats))

@@ -8,7 +8,7 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use didim_core::error::Error;
-use didim_core::filter::{self as flt, Decimator, FilterForm};
+use didim_core::filter as flt;
 use didim_core::lstsq::{LstsqOptions, SigmaConvention};
 use didim_core::model::{self, Model, DEFAULT_COULOMB_EPS};
 use didim_core::{lstsq as ls, sim, Controller};
@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyType};
 
 mod convert;
+mod problem;
 use convert::*;
 
 /// Runs a core computation without the interpreter lock, turning panics into errors.
@@ -432,31 +433,7 @@ fn decimate<'py>(
         None => (Vec::new(), y.len(), 0),
     };
     let (yd, wd) = run(py, || {
-        let dec = match (kind, cutoff_hz, fs_hz) {
-            ("matlab", _, _) => Decimator::matlab(factor)?,
-            ("butter", Some(c), Some(fs)) => {
-                let form = match form {
-                    "sos" => FilterForm::Sos,
-                    "ba" => FilterForm::Ba,
-                    other => {
-                        return Err(Error::InvalidInput(format!(
-                            "unknown filter form {other:?}: use \"sos\" or \"ba\""
-                        )))
-                    }
-                };
-                Decimator::butterworth(order, c, fs, factor, form)?
-            }
-            ("butter", _, _) => {
-                return Err(Error::InvalidInput(
-                    "a Butterworth decimation needs cutoff_hz and fs_hz".into(),
-                ))
-            }
-            (other, _, _) => {
-                return Err(Error::InvalidInput(format!(
-                    "unknown decimation kind {other:?}: use \"butter\" or \"matlab\""
-                )))
-            }
-        };
+        let dec = problem::make_decimator(factor, kind, order, cutoff_hz, fs_hz, form)?;
         if p > 0 && n != y.len() {
             return Err(Error::InvalidInput(format!(
                 "w has {n} rows but y has {} samples",
@@ -484,6 +461,7 @@ fn default_factor(fs_hz: f64, cutoff_hz: f64) -> usize {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_COULOMB_EPS", DEFAULT_COULOMB_EPS)?;
+    m.add("DEFAULT_TOL", sim::DEFAULT_TOL)?;
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(regressor, m)?)?;
@@ -495,5 +473,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sosfiltfilt, m)?)?;
     m.add_function(wrap_pyfunction!(decimate, m)?)?;
     m.add_function(wrap_pyfunction!(default_factor, m)?)?;
+    m.add_class::<problem::Decimator>()?;
+    m.add_class::<problem::Problem>()?;
     Ok(())
 }

@@ -173,7 +173,8 @@ impl<const N: usize> Plant<N> {
     /// Reads `E`, `h φ1 B`, `h φ2 B` from the first `2N` rows of `x` starting at column `c0`.
     fn blocks(x: &DMatrix<f64>, c0: usize, h: f64) -> Level<N> {
         let n2 = 2 * N;
-        let block = |r0: usize, c: usize, scale: f64| Mat::<N>::from_fn(|i, j| scale * x[(r0 + i, c0 + c + j)]);
+        let block =
+            |r0: usize, c: usize, scale: f64| Mat::<N>::from_fn(|i, j| scale * x[(r0 + i, c0 + c + j)]);
         Level {
             h,
             eqq: block(0, 0, 1.0),
@@ -401,7 +402,15 @@ pub(super) struct Step<const N: usize> {
 /// for `simulate_sensitivity`.
 pub(super) trait StepHook<const N: usize> {
     /// Step of level `l` accepted from `(q, v)` with `g_n = gn`.
-    fn step(&mut self, plant: &Plant<N>, l: usize, q: &V<N>, v: &V<N>, gn: &V<N>, step: &Step<N>) -> Result<()>;
+    fn step(
+        &mut self,
+        plant: &Plant<N>,
+        l: usize,
+        q: &V<N>,
+        v: &V<N>,
+        gn: &V<N>,
+        step: &Step<N>,
+    ) -> Result<()>;
 }
 
 /// The hook of a plain simulation.
@@ -512,7 +521,10 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
         tangent.command(k, dtau_dqm, dtau_dqm2, tau);
         let mut b = V::<N>::zeros();
         b[0] = tau * plant.inv_mass[0];
-        let a = plant.accel(&q, &v, &b, &g);
+        // The output acceleration is the direct model's at the recorded state (g re-evaluated
+        // there, not the step's carried end value), so that the IDM of the outputs reproduces
+        // the applied force to rounding.
+        let a = plant.accel(&q, &v, &b, &plant.g(&q, &v));
         force[k] = tau_cmd;
         for d in 0..N {
             oq[d][k] = q[d];
@@ -652,7 +664,10 @@ impl<const N: usize> Sens<N> {
             let d = self
                 .da
                 .iter()
-                .map(|x| x.as_ref().map(|(daq, dav)| plant.propagator_derivatives(h, daq, dav)))
+                .map(|x| {
+                    x.as_ref()
+                        .map(|(daq, dav)| plant.propagator_derivatives(h, daq, dav))
+                })
                 .collect();
             self.dlevels[l] = Some(d);
         }
@@ -738,7 +753,15 @@ impl<const N: usize> Tangent<N> for Sens<N> {
 }
 
 impl<const N: usize> StepHook<N> for Sens<N> {
-    fn step(&mut self, plant: &Plant<N>, l: usize, q: &V<N>, v: &V<N>, gn: &V<N>, st: &Step<N>) -> Result<()> {
+    fn step(
+        &mut self,
+        plant: &Plant<N>,
+        l: usize,
+        q: &V<N>,
+        v: &V<N>,
+        gn: &V<N>,
+        st: &Step<N>,
+    ) -> Result<()> {
         self.dlevel(plant, l);
         let lv = *plant.level(l);
         // Where g_{n+1} was evaluated: the predictor (quick step) or the end state (implicit).
@@ -750,7 +773,9 @@ impl<const N: usize> StepHook<N> for Sens<N> {
         } else {
             (Mat::<N>::identity() - gq * lv.p2q - gv * lv.p2v)
                 .try_inverse()
-                .ok_or_else(|| Error::Simulation("singular implicit step in the sensitivity equations".into()))?
+                .ok_or_else(|| {
+                    Error::Simulation("singular implicit step in the sensitivity equations".into())
+                })?
         };
         self.g_chi(plant, &qe, &ve, &ge);
         let dl = self.dlevels[l].as_ref().expect("computed above");

@@ -352,4 +352,3 @@ fn sensitivities_match_finite_differences_for_the_rigid_model_with_delay() {
     check_sensitivities(&model, &[95.0, 203.0, 20.0, -3.0], 2, Integrator::Exponential);
     check_sensitivities(&model, &[95.0, 203.0, 20.0, -3.0], 2, Integrator::Rk4);
 }
-
