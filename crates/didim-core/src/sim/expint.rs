@@ -423,6 +423,24 @@ impl<const N: usize> StepHook<N> for NoHook {
     }
 }
 
+/// The nearest multiple of `step` (ties away from zero, like [`f64::round`]) without the
+/// libm call `round` compiles to on baseline x86-64: adding and removing 1.5·2⁵² rounds to
+/// the nearest integer (ties to even), exact ties are then moved away from zero, and the
+/// sign of zero is kept.
+#[inline(always)]
+fn round_to(x: f64, step: f64) -> f64 {
+    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+    let y = x / step;
+    if y.abs() >= 4_503_599_627_370_496.0 {
+        return y.round() * step; // beyond 2^52 every double is an integer already
+    }
+    let mut r = (y + MAGIC) - MAGIC;
+    if (r - y).abs() == 0.5 {
+        r = y + 0.5 * y.signum();
+    }
+    r.copysign(y) * step
+}
+
 /// Position tolerance of one step (m): `tol` times the reference stroke (1 m if flat).
 pub(super) fn step_tolerance(qr: &[f64], tol: f64) -> f64 {
     let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
@@ -488,7 +506,7 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
     let mut plant = Plant::new(model, chi, opts.dt, step_tolerance(qr, opts.tol))?;
     let quantize = |x: f64| {
         if opts.quantization > 0.0 {
-            (x / opts.quantization).round() * opts.quantization
+            round_to(x, opts.quantization)
         } else {
             x
         }
@@ -805,5 +823,23 @@ impl<const N: usize> StepHook<N> for Sens<N> {
             self.dg[j] = dw;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::round_to;
+
+    #[test]
+    fn round_to_matches_f64_round_including_ties() {
+        for &step in &[5e-8, 1.0, 0.1, 3e-3] {
+            for i in -2000..2000 {
+                let x = i as f64 * 0.37e-3 * step / 5e-8 + 1e-3 * (i as f64).sin();
+                assert_eq!(round_to(x, step), (x / step).round() * step, "{x} {step}");
+            }
+        }
+        for x in [0.5, -0.5, 1.5, -1.5, 2.5, -2.5, 0.49999999999999994, -0.0, 0.0, 4.6e15, -9.1e15] {
+            assert_eq!(round_to(x, 1.0).to_bits(), x.round().to_bits(), "{x}");
+        }
     }
 }
