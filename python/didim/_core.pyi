@@ -6,11 +6,15 @@ import numpy as np
 import numpy.typing as npt
 
 DEFAULT_COULOMB_EPS: float
+DEFAULT_TOL: float
 
 _F64 = npt.NDArray[np.float64]
 
 __all__ = [
     "DEFAULT_COULOMB_EPS",
+    "DEFAULT_TOL",
+    "Decimator",
+    "Problem",
     "butter",
     "cheby1",
     "decimate",
@@ -39,6 +43,8 @@ def simulate(
     delay: int = 0,
     coulomb_eps: float = ...,
     offset: bool = False,
+    integrator: str = "exponential",
+    tol: float = ...,
 ) -> Dict[str, _F64]: ...
 def simulate_sensitivity(
     model: str,
@@ -54,6 +60,8 @@ def simulate_sensitivity(
     delay: int = 0,
     coulomb_eps: float = ...,
     offset: bool = False,
+    integrator: str = "exponential",
+    tol: float = ...,
 ) -> Dict[str, _F64]: ...
 def regressor(
     model: str, q: _F64, qd: _F64, qdd: _F64, *, coulomb_eps: float = ..., offset: bool = False
@@ -75,3 +83,54 @@ def decimate(
     form: str = "sos",
 ) -> Tuple[_F64, Optional[_F64]]: ...
 def default_factor(fs_hz: float, cutoff_hz: float) -> int: ...
+
+class Decimator:
+    def __init__(
+        self,
+        factor: int,
+        *,
+        kind: str = "butter",
+        order: int = 4,
+        cutoff_hz: Optional[float] = None,
+        fs_hz: Optional[float] = None,
+        form: str = "sos",
+    ) -> None: ...
+    def output_len(self, n: int) -> int: ...
+    def apply(self, y: _F64, w: Optional[_F64] = None) -> Tuple[_F64, Optional[_F64]]: ...
+
+class Problem:
+    def __init__(
+        self,
+        model: str,
+        qr: _F64,
+        dt: float,
+        controller: str,
+        gains: Sequence[float],
+        *,
+        u_ext: Optional[_F64] = None,
+        substeps: int = 10,
+        quantization: float = 0.0,
+        delay: int = 0,
+        coulomb_eps: float = ...,
+        offset: bool = False,
+        integrator: str = "exponential",
+        tol: float = ...,
+    ) -> None: ...
+    @property
+    def n_params(self) -> int: ...
+    @property
+    def ndof(self) -> int: ...
+    @property
+    def n(self) -> int: ...
+    def simulate(self, params: _F64) -> Dict[str, _F64]: ...
+    def simulate_batch(self, params: _F64, *, states: bool = False) -> Dict[str, Any]: ...
+    def output_error(self, params: _F64, measured_dec: _F64, decimator: Decimator, *, output: str = "force") -> float: ...
+    def output_error_batch(
+        self, params: _F64, measured_dec: _F64, decimator: Decimator, *, output: str = "force"
+    ) -> Tuple[_F64, List[Optional[str]]]: ...
+    def didim_system(
+        self, params: _F64, force: _F64, free: Sequence[int], decimator: Decimator
+    ) -> Tuple[_F64, _F64, _F64]: ...
+    def linearize(
+        self, params: _F64, measured: _F64, free: Sequence[int], decimator: Decimator, *, output: str = "force"
+    ) -> Tuple[_F64, _F64]: ...

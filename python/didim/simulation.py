@@ -9,7 +9,7 @@ from typing import Dict, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from . import _core
-from ._errors import DataError, SimulationError
+from ._errors import DataError, DidimError
 from .recording import Recording
 
 MODELS = ("rigid", "flexible")
@@ -232,7 +232,8 @@ class BatchResult:
 
     ``params`` is (m, p) in the order of ``names``; ``force`` (m, n); ``q`` (m, ndof, n); ``qd`` and ``qdd`` likewise
     when the batch was run with ``states=True`` (else None). ``errors[i]`` is None when member i succeeded, else the
-    message of its :class:`SimulationError` (its rows are NaN).
+    message of its error (a diverging loop or an invalid parameter set); its rows are NaN. ``batch[i]`` is member i
+    as a :class:`SimResult` (raises :class:`DidimError` for a failed member).
     """
 
     model: str
@@ -259,7 +260,7 @@ class BatchResult:
 
     def __getitem__(self, i: int) -> SimResult:
         if self.errors[i] is not None:
-            raise SimulationError(self.errors[i])
+            raise DidimError(f"member {i} of the batch failed: {self.errors[i]}")
         nan = np.full_like(self.q[i], np.nan)
         return SimResult(model=self.model, params=dict(zip(self.names, map(float, self.params[i]))), t=self.t,
                          force=self.force[i], q=self.q[i], qd=self.qd[i] if self.qd is not None else nan,
