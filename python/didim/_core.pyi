@@ -4,6 +4,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import numpy.typing as npt
+from typing_extensions import final
 
 DEFAULT_COULOMB_EPS: float
 DEFAULT_TOL: float
@@ -84,9 +85,10 @@ def decimate(
 ) -> Tuple[_F64, Optional[_F64]]: ...
 def default_factor(fs_hz: float, cutoff_hz: float) -> int: ...
 
+@final
 class Decimator:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         factor: int,
         *,
         kind: str = "butter",
@@ -94,13 +96,14 @@ class Decimator:
         cutoff_hz: Optional[float] = None,
         fs_hz: Optional[float] = None,
         form: str = "sos",
-    ) -> None: ...
+    ) -> "Decimator": ...
     def output_len(self, n: int) -> int: ...
     def apply(self, y: _F64, w: Optional[_F64] = None) -> Tuple[_F64, Optional[_F64]]: ...
 
+@final
 class Problem:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         model: str,
         qr: _F64,
         dt: float,
@@ -115,7 +118,7 @@ class Problem:
         offset: bool = False,
         integrator: str = "exponential",
         tol: float = ...,
-    ) -> None: ...
+    ) -> "Problem": ...
     @property
     def n_params(self) -> int: ...
     @property

@@ -354,7 +354,12 @@ fn sensitivities_match_finite_differences_for_the_rigid_model_with_delay() {
 }
 
 fn rel_err(a: &[f64], b: &[f64]) -> f64 {
-    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt();
+    let num: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f64>()
+        .sqrt();
     num / b.iter().map(|y| y * y).sum::<f64>().sqrt()
 }
 
@@ -373,7 +378,11 @@ fn emps_like(n: usize, dt: f64) -> Vec<f64> {
         if hold > 0 {
             hold -= 1;
             if hold == 0 {
-                target = if q < 0.1 { speeds[phase % 3] } else { -speeds[phase % 3] };
+                target = if q < 0.1 {
+                    speeds[phase % 3]
+                } else {
+                    -speeds[phase % 3]
+                };
                 phase += 1;
             }
         } else {
@@ -451,7 +460,10 @@ fn exponential_integrator_is_exact_without_nonlinear_terms() {
     let chi = [68.0, 104.0, 38.0, 96.5, 8.8e5, -3.0];
     let c = Controller::EMPS;
     let (fast, stats) = simulate_with_stats(&model, &chi, &c, &qr, None, &SimOptions::new(dt)).unwrap();
-    assert_eq!((stats.steps, stats.rejected, stats.implicit), (qr.len() - 1, 0, 0));
+    assert_eq!(
+        (stats.steps, stats.rejected, stats.implicit),
+        (qr.len() - 1, 0, 0)
+    );
     let fine = SimOptions {
         integrator: Integrator::Rk4,
         substeps: 200,
@@ -492,7 +504,14 @@ fn bad_tolerance_and_integrator_options_are_invalid_input() {
             tol,
             ..SimOptions::new(1e-3)
         };
-        match simulate(&model, &[95.0, 200.0, 20.0], &Controller::EMPS, &[0.0; 10], None, &o) {
+        match simulate(
+            &model,
+            &[95.0, 200.0, 20.0],
+            &Controller::EMPS,
+            &[0.0; 10],
+            None,
+            &o,
+        ) {
             Err(Error::InvalidInput(m)) => assert!(m.contains("tol"), "{m}"),
             other => panic!("{other:?}"),
         }
