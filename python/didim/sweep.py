@@ -257,18 +257,22 @@ class SweepResult:
     def _src(self, r, step):
         return r.get("steps", {}).get(step) if step else r
 
+    def converged(self, step: Optional[str] = None) -> List[bool]:
+        """Per run: the method's (or the step's) own convergence flag."""
+        return [bool((self._src(r, step) or {}).get("converged")) for r in self.results]
+
     def consensus(self, step: Optional[str] = None) -> Dict[str, float]:
         """Median of each estimate over the converged runs."""
-        conv = [self._src(r, step) for r in self.results if r.get("converged") and self._src(r, step)]
+        conv = [self._src(r, step) for r, c in zip(self.results, self.converged(step)) if c]
         return {n: _median([c["params"][n] for c in conv]) for n in self.params(step)}
 
     def agrees(self, step: Optional[str] = None) -> List[bool]:
         """Per run: converged and every estimate within ``agree_rtol`` of the consensus."""
         cons = self.consensus(step)
         out = []
-        for r in self.results:
+        for r, c in zip(self.results, self.converged(step)):
             src = self._src(r, step)
-            ok = bool(r.get("converged")) and src is not None
+            ok = c
             if ok:
                 for n, c in cons.items():
                     v = src["params"].get(n, float("nan"))
@@ -276,15 +280,15 @@ class SweepResult:
             out.append(ok)
         return out
 
-    def convergence_rate(self) -> float:
-        return float(np.mean([bool(r.get("converged")) for r in self.results]))
+    def convergence_rate(self, step: Optional[str] = None) -> float:
+        return float(np.mean(self.converged(step)))
 
     def rates_by(self, key: str, step: Optional[str] = None) -> List[tuple]:
         """(value, runs, converged, agreeing) per value of ``key``."""
         agree = self.agrees(step)
         groups: Dict[str, list] = {}
-        for p, r, a in zip(self.points, self.results, agree):
-            groups.setdefault(json.dumps(p.get(key), default=str), []).append((p.get(key), bool(r.get("converged")), a))
+        for p, c, a in zip(self.points, self.converged(step), agree):
+            groups.setdefault(json.dumps(p.get(key), default=str), []).append((p.get(key), c, a))
         rows = []
         for _, items in groups.items():
             rows.append((items[0][0], len(items), sum(c for _, c, _ in items), sum(a for _, _, a in items)))
@@ -295,14 +299,22 @@ class SweepResult:
         return rows
 
     def spread(self, step: Optional[str] = None) -> List[Dict[str, float]]:
-        """Per parameter, over the converged runs: truth, consensus, spread (sample std), mean predicted σ, spread/σ,
-        and RMS of (estimate − truth)/σ when the truth is known."""
-        conv = [(r, self._src(r, step)) for r in self.results if r.get("converged") and self._src(r, step)]
+        """Per parameter, over the runs that reached the consensus: truth, consensus, spread (sample std), mean
+        predicted σ, spread/σ, and RMS of (estimate − truth)/σ when the truth is known. A rigid identification of a
+        flexible record is compared with the rigid totals (see :func:`step_truth`)."""
+        conv = [(r, self._src(r, step)) for r, a in zip(self.results, self.agrees(step)) if a]
+        names = self.params(step)
+        if step is None and "M" in names:
+            step_of_truth: Optional[str] = "rigid"
+        elif step is None and "lambda" in names:
+            step_of_truth = "mode"
+        else:
+            step_of_truth = step
         rows = []
-        for n in self.params(step):
+        for n in names:
             est = np.array([c["params"][n] for _, c in conv], dtype=float)
             sig = np.array([c.get("std", {}).get(n, np.nan) for _, c in conv], dtype=float)
-            truth = step_truth(conv[0][0].get("truth"), step) if conv else None
+            truth = step_truth(conv[0][0].get("truth"), step_of_truth) if conv else None
             tv = truth.get(n) if truth else None
             mean_sig = float(np.nanmean(sig)) if sig.size and np.isfinite(sig).any() else float("nan")
             spread = float(np.std(est, ddof=1)) if est.size > 1 else float("nan")
@@ -316,7 +328,7 @@ class SweepResult:
 
     def summary(self, step: Optional[str] = None) -> str:
         n = len(self.results)
-        conv = sum(bool(r.get("converged")) for r in self.results)
+        conv = sum(self.converged(step))
         agree = sum(self.agrees(step))
         errs = sum(r.get("error") is not None for r in self.results)
         lines = [f"{n} runs in {self.elapsed_s:.1f} s on {self.workers} worker(s): {conv} converged "
@@ -361,7 +373,7 @@ class SweepResult:
         keys = [k for k in self.varied() if k != "seed"] or self.varied()
         names = list(params or self.params(step))
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-        conv = np.array([bool(r.get("converged")) for r in self.results])
+        conv = np.array(self.converged(step))
         agree = np.array(self.agrees(step))
         color = np.where(agree, "tab:green", np.where(conv, "tab:orange", "tab:red"))
         ax = axes[0]
@@ -408,8 +420,8 @@ class SweepResult:
             ax.set_yscale("symlog", linthresh=1.0)
         ax.grid(True, alpha=0.3)
         ax.legend(ncol=3, fontsize=8)
-        fig.suptitle(self.meta.get("title", "sweep") + f" — {len(self.results)} runs, "
-                     f"{100 * self.convergence_rate():.0f} % converged", fontsize=10)
+        fig.suptitle(self.meta.get("title", "sweep") + (f", step {step}" if step else "") + f" — {len(self.results)} "
+                     f"runs, {100 * self.convergence_rate(step):.0f} % converged", fontsize=10)
         fig.tight_layout()
         return fig
 
