@@ -160,3 +160,27 @@ def test_identification_results_do_not_depend_on_the_integrator(emps):
     gb = didim.identify(rec, "flexible", "oe-gn", apM=78.0, integrator="rk4")
     for name in ga.params:
         assert ga.params[name] == pytest.approx(gb.params[name], rel=1e-3), name
+
+
+def test_exact_sensitivities_agree_with_central_differences_from_one_batch(emps_plain):
+    from didim.output_error import check_sensitivities
+
+    err = check_sensitivities(emps_plain, TABLE3, "flexible")
+    assert max(err.values()) < 1e-3, err
+    err = check_sensitivities(emps_plain, EMPS_REF, "rigid", output="position")
+    assert max(err.values()) < 1e-3, err
+
+
+def test_step_2_grid_start_finds_the_mode_from_a_start_where_nelder_mead_alone_fails():
+    from didim.demo import MOTOR_FRICTION_TRUTH
+    from didim.identification import fit_flexible_mode
+
+    rec = sc.make_recording(MOTOR_FRICTION_TRUTH, "flexible", force_noise=1.0, seed=0)
+    r1 = didim_rigid(rec, 78.0)
+    f_true = np.sqrt(38 / 38 * 8.8e5 / 38) / (2 * np.pi)
+    plain = fit_flexible_mode(rec, r1, lambda0=0.55, f0=5.0)
+    assert abs(plain.params["f_n_flex"] / f_true - 1) > 0.1  # the paper's step 2 from 5 Hz ends elsewhere
+    grid = fit_flexible_mode(rec, r1, lambda0=0.55, f0=5.0, grid_start=True)
+    assert grid.params["f_n_flex"] == pytest.approx(f_true, rel=0.01)
+    assert grid.params["lambda"] == pytest.approx(68 / 106, abs=0.01)
+    assert grid.initial == {"lambda": 0.55, "f_n_flex": 5.0} and grid.simulations > 90

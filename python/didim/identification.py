@@ -371,9 +371,14 @@ def fit_flexible_mode(
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
+    grid_start: bool = False,
 ) -> IdentificationResult:
     """Step 2: Nelder-Mead on (λ, f_n_flex) with M_tot, Fv_tot, Fc_tot frozen from step 1, eqs. (23)-(28):
-    M1 = λ M_tot, M2 = (1 − λ) M_tot, K12 = 4π²(1 − λ) f² M_tot, Fv1 = Fv_tot, Fc1 = Fc_tot, Fv2 = Fc2 = 0."""
+    M1 = λ M_tot, M2 = (1 − λ) M_tot, K12 = 4π²(1 − λ) f² M_tot, Fv1 = Fv_tot, Fc1 = Fc_tot, Fv2 = Fc2 = 0.
+
+    ``grid_start=True`` (not in the paper) first evaluates the criterion on a coarse grid, λ in 0.1..0.9 (9 values)
+    times f_n_flex in 3..2·cutoff_hz Hz (10 values, geometric), in one parallel batch with (λ⁰, f⁰), and starts the
+    Nelder-Mead from the best of them: the result then no longer depends on (λ⁰, f⁰) (see docs/robustness.md)."""
     from scipy.optimize import minimize
 
     t0 = time.perf_counter()
@@ -423,6 +428,13 @@ def fit_flexible_mode(
         trace.append((float(xk[0]), float(xk[1])))
         _say(progress, f"step 2 iteration {len(trace)}: λ = {xk[0]:.4f}, f_n_flex = {xk[1]:.3f} Hz")
 
+    initial = (lambda0, f0)
+    if grid_start:
+        pts = np.array([(a, b) for a in np.linspace(0.1, 0.9, 9) for b in np.geomspace(3.0, 2 * cutoff_hz, 10)]
+                       + [(lambda0, f0)])
+        g = cost_batch(pts)
+        lambda0, f0 = map(float, pts[int(np.argmin(g))])
+        _say(progress, f"step 2 grid start: {len(pts)} points, best λ = {lambda0:.3f}, f_n_flex = {f0:.2f} Hz")
     simplex = nelder_mead_simplex([lambda0, f0])
     vals = cost_batch(simplex)
     j0 = float(vals[0])
@@ -445,10 +457,11 @@ def fit_flexible_mode(
         elapsed_s=time.perf_counter() - t0,
         converged=bool(res.success),
         message="" if res.success else str(res.message),
-        initial={"lambda": lambda0, "f_n_flex": f0},
+        initial={"lambda": initial[0], "f_n_flex": initial[1]},
         frozen={k: v for k, v in chi(lam, f).items()},
         history=history,
-        options=dict(decimation=dec.describe(), tol=tol, integrator=integrator),
+        options=dict(decimation=dec.describe(), tol=tol, integrator=integrator, grid_start=grid_start,
+                     nelder_mead_start={"lambda": lambda0, "f_n_flex": f0}),
     )
 
 
@@ -468,6 +481,7 @@ def didim_flexible(
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
+    grid_start: bool = False,
 ) -> IdentificationResult:
     """The three-step procedure of section V: rigid DIDIM (step 1), Nelder-Mead on (λ, f_n_flex) (step 2), DIDIM on
     the flexible model initialised by eqs. (29)-(30) (step 3). Fv2 and Fc2 are held at zero (the paper's choice) and
@@ -481,7 +495,8 @@ def didim_flexible(
     if not r1.converged:
         raise SimulationError(f"step 1 (rigid DIDIM) did not converge: {r1.message}")
     _say(progress, "step 2: Nelder-Mead on (λ, f_n_flex)")
-    r2 = fit_flexible_mode(rec, r1, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress, **common)
+    r2 = fit_flexible_mode(rec, r1, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress,
+                           grid_start=grid_start, **common)
     _say(progress, "step 3: flexible DIDIM")
     init = flexible_from_mode(r1.params["M"], r2.params["lambda"], r2.params["f_n_flex"])
     init.update({"Fv1": 0.0, "Fc1": 0.0})

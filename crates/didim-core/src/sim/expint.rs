@@ -77,6 +77,9 @@ pub(super) struct Plant<const N: usize> {
     pub rejected: usize,
     /// Steps that needed the implicit solve.
     pub implicit: std::cell::Cell<usize>,
+    /// The change of `g` over the last accepted step and that step's length.
+    last_dg: std::cell::Cell<V<N>>,
+    last_h: std::cell::Cell<f64>,
 }
 
 impl<const N: usize> Plant<N> {
@@ -133,6 +136,8 @@ impl<const N: usize> Plant<N> {
             steps: 0,
             rejected: 0,
             implicit: std::cell::Cell::new(0),
+            last_dg: std::cell::Cell::new(V::<N>::zeros()),
+            last_h: std::cell::Cell::new(dt),
         };
         plant.ensure(0)?;
         plant.ensure(1)?;
@@ -251,12 +256,15 @@ impl<const N: usize> Plant<N> {
 
     /// One step of level `l` from `(q, v)` with `g_n = gn`, input accelerations `b`.
     ///
-    /// The explicit predictor `x_p = E x + h φ1 (b + a0 + g_n)` (first-order exponential
-    /// Euler) gives `r0 = g(x_p) − g_n`, the change of `g` over the step. When that change
-    /// moves the state by less than a tenth of the tolerance, `g` is so close to constant
-    /// over the step that its curvature cannot matter, and the corrector `x_p + h φ2 r0`
-    /// (second order) is the step ("quick" step). Otherwise the implicit equation is solved
-    /// by Newton and the midpoint defect decides.
+    /// Quick path: the change of `g` over the step is predicted from the previous step's
+    /// (`c · Δg_prev`, `c` the ratio of the step lengths), the state follows from it,
+    /// `x_1 = E x + h φ1 (b + a0 + g_n) + h φ2 Δg_pred`, and `g_1 = g(x_1)` is evaluated
+    /// there. When the prediction was right to a tenth of the tolerance (`g` nearly linear in
+    /// time over the two steps), the step is taken; it is then the second-order scheme with
+    /// the end value extrapolated, and costs one evaluation of `g`. Otherwise the implicit
+    /// equation is solved by Newton and the midpoint defect decides. Either way the step ends
+    /// with `g_1 = g(x_1)` exactly, so the next step and the output accelerations use the
+    /// direct model at the state itself.
     #[inline(always)]
     pub fn try_step(&self, l: usize, q: &V<N>, v: &V<N>, gn: &V<N>, b: &V<N>) -> Step<N> {
         let lv = self.level(l);
@@ -264,25 +272,29 @@ impl<const N: usize> Plant<N> {
         let f = b + self.a0 + gn;
         let qp = lv.eqq * q + lv.eqv * v + lv.p1q * f;
         let vp = lv.evq * q + lv.evv * v + lv.p1v * f;
+        let c = h / self.last_h.get();
+        let pred = self.last_dg.get() * c;
+        let q1 = qp + lv.p2q * pred;
+        let v1 = vp + lv.p2v * pred;
+        let g1 = self.g(&q1, &v1);
         let scale = self.atol / (h * self.dt);
-        let dw = self.g(&qp, &vp) - gn;
-        if dw.amax() <= 0.1 * scale {
+        if (g1 - gn - pred).amax() <= 0.1 * scale {
             return Step {
-                q1: qp + lv.p2q * dw,
-                v1: vp + lv.p2v * dw,
-                dw,
+                q1,
+                v1,
+                g1,
+                dw: pred,
                 err: 0.0,
                 quick: true,
+                c,
                 f,
-                qp,
-                vp,
             };
         }
-        self.implicit_step(l, q, v, gn, f, qp, vp, dw, scale)
+        self.implicit_step(l, q, v, gn, f, qp, vp, g1 - gn, scale)
     }
 
-    /// The Newton solve and the midpoint test of [`Plant::try_step`], from the first
-    /// fixed-point iterate `dw = g(x_p) − g_n`.
+    /// The Newton solve and the midpoint test of [`Plant::try_step`], from the fixed-point
+    /// iterate `dw = g(x(Δg_pred)) − g_n`.
     #[inline(never)]
     #[allow(clippy::too_many_arguments)]
     fn implicit_step(
@@ -300,13 +312,24 @@ impl<const N: usize> Plant<N> {
         let lv = self.level(l);
         self.implicit.set(self.implicit.get() + 1);
         let small = 1e-2 * scale;
+        let mut step = Step {
+            q1: qp,
+            v1: vp,
+            g1: *gn,
+            dw,
+            err: f64::INFINITY,
+            quick: false,
+            c: 0.0,
+            f,
+        };
         let mut converged = false;
         for _ in 0..MAX_NEWTON {
             let q1 = qp + lv.p2q * dw;
             let v1 = vp + lv.p2v * dw;
-            let r = self.g(&q1, &v1) - gn - dw;
+            let g1 = self.g(&q1, &v1);
+            let r = g1 - gn - dw;
+            (step.q1, step.v1, step.g1, step.dw) = (q1, v1, g1, dw);
             if r.amax() <= small {
-                dw += r;
                 converged = true;
                 break;
             }
@@ -317,16 +340,6 @@ impl<const N: usize> Plant<N> {
                 None => break,
             }
         }
-        let mut step = Step {
-            q1: qp + lv.p2q * dw,
-            v1: vp + lv.p2v * dw,
-            dw,
-            err: f64::INFINITY,
-            quick: false,
-            f,
-            qp,
-            vp,
-        };
         if converged {
             // Midpoint defect of the linear interpolation of g.
             let lm = self.level(l + 1);
@@ -354,9 +367,11 @@ impl<const N: usize> Plant<N> {
         let step = self.try_step(l, q, v, g, b);
         if step.err <= 1.0 || l == MAX_LEVEL {
             hook.step(self, l, q, v, g, &step)?;
+            self.last_dg.set(step.g1 - *g);
+            self.last_h.set(self.level(l).h);
             *q = step.q1;
             *v = step.v1;
-            *g += step.dw;
+            *g = step.g1;
             self.steps += 1;
             return Ok(());
         }
@@ -380,22 +395,25 @@ impl<const N: usize> Plant<N> {
     }
 }
 
-/// One attempted step: the end state, the change of `g`, the error ratio (≤ 1: accept),
-/// and what the tangent needs to differentiate it.
+/// One attempted step: the end state and `g` there, the change of `g` the state was
+/// computed with, the error ratio (≤ 1: accept), and what the tangent needs to
+/// differentiate it.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Step<const N: usize> {
     pub q1: V<N>,
     pub v1: V<N>,
-    /// `g_{n+1} − g_n`.
+    /// `g(q1, v1)`.
+    pub g1: V<N>,
+    /// The change of `g` in the state formula: the prediction (quick step) or the Newton
+    /// iterate (implicit step).
     pub dw: V<N>,
     pub err: f64,
-    /// Explicit corrector (`g_{n+1} = g(x_p)`) rather than the implicit solve.
+    /// Quick step (`dw = c · Δg_prev`) rather than the implicit solve.
     pub quick: bool,
+    /// Ratio of this step's length to the previous one's (quick step).
+    pub c: f64,
     /// `b + a0 + g_n`.
     pub f: V<N>,
-    /// The predictor `x_p`.
-    pub qp: V<N>,
-    pub vp: V<N>,
 }
 
 /// What rides along accepted steps: nothing for a plain simulation, the sensitivities
@@ -539,10 +557,10 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
         tangent.command(k, dtau_dqm, dtau_dqm2, tau);
         let mut b = V::<N>::zeros();
         b[0] = tau * plant.inv_mass[0];
-        // The output acceleration is the direct model's at the recorded state (g re-evaluated
-        // there, not the step's carried end value), so that the IDM of the outputs reproduces
-        // the applied force to rounding.
-        let a = plant.accel(&q, &v, &b, &plant.g(&q, &v));
+        // Every step ends with g evaluated at its end state, so this is the direct model's
+        // acceleration at the recorded state: the IDM of the outputs reproduces the applied
+        // force to rounding.
+        let a = plant.accel(&q, &v, &b, &g);
         force[k] = tau_cmd;
         for d in 0..N {
             oq[d][k] = q[d];
@@ -613,6 +631,8 @@ pub(super) struct Sens<const N: usize> {
     sv: Vec<V<N>>,
     /// `∂g_n/∂χ_j`.
     dg: Vec<V<N>>,
+    /// Tangent of the change of `g` over the last accepted step.
+    dlast: Vec<V<N>>,
     gchi: Vec<V<N>>,
     tau: f64,
     /// Sensitivity of the force applied over the current period.
@@ -646,6 +666,7 @@ impl<const N: usize> Sens<N> {
             sq: vec![V::<N>::zeros(); p],
             sv: vec![V::<N>::zeros(); p],
             dg: vec![V::<N>::zeros(); p],
+            dlast: vec![V::<N>::zeros(); p],
             gchi: vec![V::<N>::zeros(); p],
             tau: 0.0,
             dtau: vec![0.0; p],
@@ -777,15 +798,12 @@ impl<const N: usize> StepHook<N> for Sens<N> {
         l: usize,
         q: &V<N>,
         v: &V<N>,
-        gn: &V<N>,
+        _gn: &V<N>,
         st: &Step<N>,
     ) -> Result<()> {
         self.dlevel(plant, l);
         let lv = *plant.level(l);
-        // Where g_{n+1} was evaluated: the predictor (quick step) or the end state (implicit).
-        let (qe, ve) = if st.quick { (st.qp, st.vp) } else { (st.q1, st.v1) };
-        let ge = gn + st.dw;
-        let (gq, gv) = plant.g_partials(&qe, &ve);
+        let (gq, gv) = plant.g_partials(&st.q1, &st.v1);
         let jinv = if st.quick {
             Mat::<N>::identity()
         } else {
@@ -795,32 +813,36 @@ impl<const N: usize> StepHook<N> for Sens<N> {
                     Error::Simulation("singular implicit step in the sensitivity equations".into())
                 })?
         };
-        self.g_chi(plant, &qe, &ve, &ge);
+        self.g_chi(plant, &st.q1, &st.v1, &st.g1);
         let dl = self.dlevels[l].as_ref().expect("computed above");
         for j in 0..self.p {
             let mut df = self.da0[j] + self.dg[j];
             df[0] += self.dinv[j][0] * self.tau + plant.inv_mass[0] * self.dtau[j];
             let (sq, sv) = (self.sq[j], self.sv[j]);
-            let mut dqp = lv.eqq * sq + lv.eqv * sv + lv.p1q * df;
-            let mut dvp = lv.evq * sq + lv.evv * sv + lv.p1v * df;
-            let mut yq = -(lv.p2q * self.dg[j]);
-            let mut yv = -(lv.p2v * self.dg[j]);
+            // tangent of x_p = E x + h φ1 f, plus that of h φ2 along the step's Δg
+            let mut yq = lv.eqq * sq + lv.eqv * sv + lv.p1q * df;
+            let mut yv = lv.evq * sq + lv.evv * sv + lv.p1v * df;
             if let Some(d) = &dl[j] {
-                dqp += d.eqq * q + d.eqv * v + d.p1q * st.f;
-                dvp += d.evq * q + d.evv * v + d.p1v * st.f;
-                yq += d.p2q * st.dw;
-                yv += d.p2v * st.dw;
+                yq += d.eqq * q + d.eqv * v + d.p1q * st.f + d.p2q * st.dw;
+                yv += d.evq * q + d.evv * v + d.p1v * st.f + d.p2v * st.dw;
             }
-            yq += dqp;
-            yv += dvp;
-            let dw = if st.quick {
-                gq * dqp + gv * dvp + self.gchi[j]
+            let (q1, v1, dg1) = if st.quick {
+                // x1 = x_p + h φ2 c Δg_prev, g1 = g(x1)
+                let dpred = self.dlast[j] * st.c;
+                let q1 = yq + lv.p2q * dpred;
+                let v1 = yv + lv.p2v * dpred;
+                (q1, v1, gq * q1 + gv * v1 + self.gchi[j])
             } else {
-                jinv * (gq * yq + gv * yv + self.gchi[j])
+                // x1 = x_p + h φ2 (g1 − g_n), g1 = g(x1): implicit function theorem
+                yq -= lv.p2q * self.dg[j];
+                yv -= lv.p2v * self.dg[j];
+                let dw = jinv * (gq * yq + gv * yv + self.gchi[j]);
+                (yq + lv.p2q * dw, yv + lv.p2v * dw, dw)
             };
-            self.sq[j] = yq + lv.p2q * dw;
-            self.sv[j] = yv + lv.p2v * dw;
-            self.dg[j] = dw;
+            self.dlast[j] = dg1 - self.dg[j];
+            self.sq[j] = q1;
+            self.sv[j] = v1;
+            self.dg[j] = dg1;
         }
         Ok(())
     }
