@@ -7,7 +7,8 @@ simulation, parallel decimation and QR least squares. SI units on the load side 
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .controllers import PD, EmpsCascade
 from .recording import Recording, load_mat
-from .simulation import DEFAULT_COULOMB_EPS, SimResult, coulomb_sign, param_names, simulate
+from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, INTEGRATORS, BatchResult, SimResult, coulomb_sign, param_names,
+                         simulate, simulate_batch)
 from .signal import Decimation
 from .result import IdentificationResult, compare
 from .api import METHODS, identify
@@ -28,7 +29,11 @@ __all__ = [
     "Recording",
     "load_mat",
     "simulate",
+    "simulate_batch",
     "SimResult",
+    "BatchResult",
+    "INTEGRATORS",
+    "DEFAULT_TOL",
     "param_names",
     "coulomb_sign",
     "DEFAULT_COULOMB_EPS",

@@ -4,13 +4,18 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import numpy.typing as npt
+from typing_extensions import final
 
 DEFAULT_COULOMB_EPS: float
+DEFAULT_TOL: float
 
 _F64 = npt.NDArray[np.float64]
 
 __all__ = [
     "DEFAULT_COULOMB_EPS",
+    "DEFAULT_TOL",
+    "Decimator",
+    "Problem",
     "butter",
     "cheby1",
     "decimate",
@@ -43,6 +48,8 @@ def simulate(
     offset: bool = False,
     terms: _Terms = None,
     backlash_gap: Optional[float] = None,
+    integrator: str = "exponential",
+    tol: float = ...,
 ) -> Dict[str, _F64]: ...
 def simulate_sensitivity(
     model: str,
@@ -60,6 +67,8 @@ def simulate_sensitivity(
     offset: bool = False,
     terms: _Terms = None,
     backlash_gap: Optional[float] = None,
+    integrator: str = "exponential",
+    tol: float = ...,
 ) -> Dict[str, _F64]: ...
 def regressor(
     model: str,
@@ -89,3 +98,58 @@ def decimate(
     form: str = "sos",
 ) -> Tuple[_F64, Optional[_F64]]: ...
 def default_factor(fs_hz: float, cutoff_hz: float) -> int: ...
+
+@final
+class Decimator:
+    def __new__(
+        cls,
+        factor: int,
+        *,
+        kind: str = "butter",
+        order: int = 4,
+        cutoff_hz: Optional[float] = None,
+        fs_hz: Optional[float] = None,
+        form: str = "sos",
+    ) -> "Decimator": ...
+    def output_len(self, n: int) -> int: ...
+    def apply(self, y: _F64, w: Optional[_F64] = None) -> Tuple[_F64, Optional[_F64]]: ...
+
+@final
+class Problem:
+    def __new__(
+        cls,
+        model: str,
+        qr: _F64,
+        dt: float,
+        controller: str,
+        gains: Sequence[float],
+        *,
+        u_ext: Optional[_F64] = None,
+        substeps: int = 10,
+        quantization: float = 0.0,
+        delay: int = 0,
+        coulomb_eps: float = ...,
+        offset: bool = False,
+        integrator: str = "exponential",
+        tol: float = ...,
+        terms: _Terms = None,
+        backlash_gap: Optional[float] = None,
+    ) -> "Problem": ...
+    @property
+    def n_params(self) -> int: ...
+    @property
+    def ndof(self) -> int: ...
+    @property
+    def n(self) -> int: ...
+    def simulate(self, params: _F64) -> Dict[str, _F64]: ...
+    def simulate_batch(self, params: _F64, *, states: bool = False) -> Dict[str, Any]: ...
+    def output_error(self, params: _F64, measured_dec: _F64, decimator: Decimator, *, output: str = "force") -> float: ...
+    def output_error_batch(
+        self, params: _F64, measured_dec: _F64, decimator: Decimator, *, output: str = "force"
+    ) -> Tuple[_F64, List[Optional[str]]]: ...
+    def didim_system(
+        self, params: _F64, force: _F64, free: Sequence[int], decimator: Decimator
+    ) -> Tuple[_F64, _F64, _F64]: ...
+    def linearize(
+        self, params: _F64, measured: _F64, free: Sequence[int], decimator: Decimator, *, output: str = "force"
+    ) -> Tuple[_F64, _F64]: ...

@@ -1,4 +1,4 @@
-"""Command line: ``didim identify``, ``didim demo``. User errors exit with status 2 and one line on stderr
+"""Command line: ``didim identify``, ``didim demo``, ``didim sweep``. User errors exit with status 2 and one line on stderr
 (``--debug`` shows the traceback)."""
 
 from __future__ import annotations
@@ -131,6 +131,68 @@ def cmd_doctor(args) -> int:
     return 0
 
 
+def _keyvals(items, parse) -> dict:
+    from ._errors import DataError
+
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise DataError(f"expected KEY=VALUE, got {item!r}")
+        k, v = item.split("=", 1)
+        out[k.strip()] = parse(v.strip())
+    return out
+
+
+def cmd_sweep(args) -> int:
+    from ._errors import DataError
+    from ._io import save_figure, write_text
+    from .sweep import grid_points, parse_values, random_points, sweep
+
+    fixed = {k: (v[0] if len(v) == 1 else v) for k, v in _keyvals(args.set, parse_values).items()}
+    if args.record:
+        fixed["record"] = args.record
+    elif args.scenario:
+        fixed["scenario"] = args.scenario
+    else:
+        raise DataError("give a record file or --scenario (see didim.sweep.SCENARIOS)")
+    fixed.setdefault("model", args.model)
+    fixed.setdefault("method", args.method)
+    if args.offset:
+        fixed["offset"] = True
+    grid = _keyvals(args.grid, parse_values)
+    if args.seeds:
+        grid["seed"] = list(range(args.seeds))
+    if args.draws:
+        ranges = {}
+        for k, v in _keyvals(args.draw, str).items():
+            parts = v.split(":")
+            ranges[k] = (float(parts[0]), float(parts[1])) + ((parts[2],) if len(parts) > 2 else ())
+        points = [dict(p, **g) for g in (grid_points(grid) if grid else [{}])
+                  for p in random_points(ranges, args.draws, seed=args.draw_seed, fixed=fixed)]
+    else:
+        if not grid:
+            raise DataError("nothing to sweep: give --grid KEY=VALUES, --seeds N or --draws N with --draw")
+        points = grid_points(grid, fixed)
+    executor = None
+    if args.dask:
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise DataError("--dask needs the optional extra: pip install 'didim[dask]'") from None
+        executor = Client(LocalCluster(n_workers=args.workers or None, threads_per_worker=1)) if args.dask == "local" \
+            else Client(args.dask)
+    res = sweep(points, workers=args.workers, executor=executor, progress=not args.quiet, agree_rtol=args.agree_rtol)
+    res.meta["title"] = args.title or f"{fixed.get('method')} {fixed.get('model')} on {args.record or args.scenario}"
+    print(res.summary(args.step))
+    if args.json:
+        write_text(args.json, res.to_json() + "\n")
+        print(f"wrote {args.json}")
+    if args.plot:
+        save_figure(res.plot(args.step), args.plot, dpi=110)
+        print(f"wrote {args.plot}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="didim", description="Identify position-controlled drives from the motor force (DIDIM).")
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
@@ -166,6 +228,32 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--json", metavar="OUT")
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_demo)
+
+    w = sub.add_parser("sweep", help="re-run an identification over a grid or random draws of initial values and noise "
+                                     "seeds, in parallel; convergence rate, spread against σ, plot")
+    w.add_argument("record", nargs="?", help="MAT file to identify (else --scenario)")
+    w.add_argument("--scenario", help="simulated record with known truth: flexible-motor-friction, flexible-table3, "
+                                      "rigid-emps")
+    w.add_argument("--model", choices=["rigid", "flexible"], default="flexible")
+    w.add_argument("--method", choices=["idim-ls", "didim", "oe-nm", "oe-gn"], default="didim")
+    w.add_argument("--offset", action="store_true")
+    w.add_argument("--grid", action="append", metavar="KEY=VALUES",
+                   help="swept values: a,b,c or start:stop:count[:log] (e.g. apM=25:1000:12:log, lambda0=0.25:0.95:8)")
+    w.add_argument("--seeds", type=int, default=0, help="noise seeds 0..N-1 (simulated records)")
+    w.add_argument("--draws", type=int, default=0, help="random draws instead of (or times) the grid")
+    w.add_argument("--draw", action="append", metavar="KEY=LO:HI[:log]", help="range of a random draw")
+    w.add_argument("--draw-seed", type=int, default=0)
+    w.add_argument("--set", action="append", metavar="KEY=VALUE", help="fixed option of every run (e.g. apM=78)")
+    w.add_argument("--workers", type=int, default=None, help="parallel workers (default: all cores)")
+    w.add_argument("--dask", metavar="ADDRESS", help="run on a Dask cluster ('local' starts one); needs didim[dask]")
+    w.add_argument("--step", choices=["rigid", "mode"], default=None,
+                   help="report a step of the three-step DIDIM instead of its result")
+    w.add_argument("--agree-rtol", type=float, default=0.01, help="distance to the consensus counted as agreeing")
+    w.add_argument("--title", default=None)
+    w.add_argument("--json", metavar="OUT")
+    w.add_argument("--plot", metavar="PNG")
+    w.add_argument("--quiet", action="store_true")
+    w.set_defaults(func=cmd_sweep)
     return p
 
 

@@ -29,7 +29,7 @@ from ._errors import DataError, DidimError, IdentifiabilityError, SimulationErro
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation, diffcent, lowpass
-from .simulation import DEFAULT_COULOMB_EPS, param_names, simulate
+from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, param_names, params_vector, problem
 
 Progress = Optional[Callable[[str], None]]
 
@@ -176,6 +176,31 @@ def _output_error(yd: np.ndarray, sim_force: np.ndarray, dec: Decimation) -> flo
     return float(np.linalg.norm(yd - dec(sim_force)[: len(yd)]) / np.linalg.norm(yd))
 
 
+def nelder_mead_simplex(x0) -> np.ndarray:
+    """scipy's default initial simplex for ``minimize(method="Nelder-Mead")``: x0 and, per coordinate, x0 with that
+    coordinate times 1.05 (0.00025 where it is 0)."""
+    x0 = np.atleast_1d(np.asarray(x0, dtype=float)).ravel()
+    sim = np.tile(x0, (x0.size + 1, 1))
+    for k in range(x0.size):
+        sim[k + 1, k] = 1.05 * x0[k] if x0[k] != 0 else 0.00025
+    return sim
+
+
+def prefetch(cost, cost_batch, points) -> Callable:
+    """``cost`` with the values at ``points`` computed beforehand in one parallel batch (``cost_batch``): the first
+    call at each of those points returns the stored value. Used to evaluate a Nelder-Mead initial simplex on all
+    cores; the minimizer sees exactly the values it would have computed itself."""
+    cache = {}
+    for x, v in zip(points, cost_batch(np.asarray(points, dtype=float))):
+        cache.setdefault(tuple(map(float, x)), float(v))
+
+    def f(x):
+        v = cache.pop(tuple(map(float, np.ravel(x))), None)
+        return cost(x) if v is None else v
+
+    return f
+
+
 def didim(
     rec: Recording,
     model: str,
@@ -196,6 +221,8 @@ def didim(
     backlash_gap: Optional[float] = None,
     delay: int = 0,
     fit_samples: Optional[int] = None,
+    integrator: str = "exponential",
+    sim_tol: float = DEFAULT_TOL,
 ) -> IdentificationResult:
     """DIDIM iterations, eqs. (16)-(21): simulate the closed loop with χᵏ, build the IDM regressor of the simulated
     (noise-free) states, decimate Y and W in parallel, solve by QR for χᵏ⁺¹; stop when
@@ -205,7 +232,9 @@ def didim(
     (the simulated output error growing beyond ``divergence_factor`` times its best value twice in a row, or a
     simulation that fails) stops the iteration: the result then holds the iterate with the lowest output error and
     ``converged=False`` with a message saying what happened. ``fit_samples`` restricts the regression and the
-    output errors to the first samples (the rest of the record is then held out for validation).
+    output errors to the first samples (the rest of the record is then held out for validation). ``integrator``,
+    ``sim_tol`` and ``substeps`` choose the simulator's scheme (see :func:`didim.simulate`); ``terms``,
+    ``backlash_gap`` and ``delay`` extend the model (see :func:`didim.simulate`).
     """
     t0 = time.perf_counter()
     _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps,
@@ -227,15 +256,16 @@ def didim(
     _checks.decimation_matches(dec, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 2 if model == "flexible" else 1, f"{method} ({model})")
     fi = [names.index(n) for n in free]
-    zi = [names.index(n) for n in frozen]
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
+    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, tol=sim_tol,
+                 terms=terms, backlash_gap=backlash_gap, delay=delay)
     m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
     yd_motor = dec(rec.force)[:m_fit]
-    _checks.measured_signal("force", float(np.linalg.norm(yd_motor)), f"{method} ({model})")
-    zero = np.zeros(rec.n)
-
-    def cut(y, w):
-        return (y, w) if m_fit is None else (y[:m_fit], w[:m_fit])
+    ny = float(np.linalg.norm(yd_motor))
+    _checks.measured_signal("force", ny, f"{method} ({model})")
+    y_motor = rec.force
+    if delay:  # the states answer the force applied, which is the command `delay` samples earlier
+        y_motor = np.concatenate([np.zeros(delay), rec.force[:-delay]])
 
     history: List[Iteration] = []
     best = (math.inf, chi.copy(), None)  # (output error, χ, solution)
@@ -244,15 +274,19 @@ def didim(
     sol = None
     stop: Optional[DidimError] = None  # the error that stopped the iterations, re-raised if there is no iterate
     for k in range(max_iter):
+        # one call: simulate with χᵏ, build W of the simulated states, decimate Y, W and the simulated force
         try:
-            sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, terms=terms,
-                           backlash_gap=backlash_gap, delay=delay)
+            y_all, w_all, force_dec = pb.didim_system(chi, y_motor, fi, dec.core)
+            if m_fit is not None:  # keep the training rows of each dof's block
+                m = len(force_dec)
+                keep = np.concatenate([np.arange(d * m, d * m + m_fit) for d in range(len(y_all) // m)])
+                y_all, w_all, force_dec = y_all[keep], w_all[keep], force_dec[:m_fit]
         except (SimulationError, DataError) as e:
             message = f"iteration {k}: the simulation with χ{k} failed ({e}); stopped"
             stop = e
             break
         n_sim += 1
-        out_err = _output_error(yd_motor, sim.force, dec)
+        out_err = float(np.linalg.norm(yd_motor - force_dec)) / ny
         if history:
             history[-1].output_error = out_err
         if out_err < best[0]:
@@ -266,23 +300,6 @@ def didim(
                     "probably too far from the truth, or the model misses a physical effect"
                 )
                 break
-        w = _core.regressor(model, sim.q, sim.qd, sim.qdd, coulomb_eps=coulomb_eps, offset=offset,
-                            terms=[t.spec() for t in terms] or None, backlash_gap=backlash_gap)
-        rows = []
-        y_motor = rec.force
-        if delay:  # the states answer the force applied, which is the command `delay` samples earlier
-            y_motor = np.concatenate([np.zeros(delay), rec.force[:-delay]])
-        for d in range(w.shape[0]):
-            y = y_motor if d == 0 else zero
-            if zi:
-                y = y - w[d][:, zi] @ chi[zi]
-            rows.append((y, w[d][:, fi]))
-        ys, ws = [], []
-        for y, wb in rows:
-            yd_, wd_ = cut(*dec.apply(y, wb))
-            ys.append(yd_)
-            ws.append(wd_)
-        y_all, w_all = np.concatenate(ys), np.vstack(ws)
         try:
             sol = _solve(w_all, y_all, free)
         except IdentifiabilityError as e:
@@ -313,10 +330,11 @@ def didim(
     final_out = float("nan")
     if converged:
         try:
-            sim = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, terms=terms,
-                           backlash_gap=backlash_gap, delay=delay)
+            if m_fit is None:
+                final_out = math.sqrt(pb.output_error(chi, yd_motor, dec.core)) / ny
+            else:
+                final_out = float(np.linalg.norm(yd_motor - dec(pb.simulate(chi)["force"])[:m_fit])) / ny
             n_sim += 1
-            final_out = _output_error(yd_motor, sim.force, dec)
             history[-1].output_error = final_out
             if final_out > divergence_factor * best[0]:
                 converged = False
@@ -348,7 +366,7 @@ def didim(
         frozen=frozen,
         history=history,
         options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset,
-                     terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay),
+                     terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, integrator=integrator),
         covariance=sol["covariance"],
     )
 
@@ -392,9 +410,16 @@ def fit_flexible_mode(
     substeps: int = 10,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
     progress: Progress = None,
+    integrator: str = "exponential",
+    sim_tol: float = DEFAULT_TOL,
+    grid_start: bool = False,
 ) -> IdentificationResult:
     """Step 2: Nelder-Mead on (λ, f_n_flex) with M_tot, Fv_tot, Fc_tot frozen from step 1, eqs. (23)-(28):
-    M1 = λ M_tot, M2 = (1 − λ) M_tot, K12 = 4π²(1 − λ) f² M_tot, Fv1 = Fv_tot, Fc1 = Fc_tot, Fv2 = Fc2 = 0."""
+    M1 = λ M_tot, M2 = (1 − λ) M_tot, K12 = 4π²(1 − λ) f² M_tot, Fv1 = Fv_tot, Fc1 = Fc_tot, Fv2 = Fc2 = 0.
+
+    ``grid_start=True`` (not in the paper) first evaluates the criterion on a coarse grid, λ in 0.1..0.9 (9 values)
+    times f_n_flex in 3..2·cutoff_hz Hz (10 values, geometric), in one parallel batch with (λ⁰, f⁰), and starts the
+    Nelder-Mead from the best of them: the result then no longer depends on (λ⁰, f⁰) (see docs/robustness.md)."""
     from scipy.optimize import minimize
 
     t0 = time.perf_counter()
@@ -416,26 +441,49 @@ def fit_flexible_mode(
             d["OF"] = rigid.params["OF"]
         return d
 
+    pb = problem(rec, "flexible", offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
+                 tol=sim_tol)
+    penalty = 1e3 * ny**2
+
+    def vector(lam, f):
+        return params_vector("flexible", chi(lam, f), offset)[1]
+
     def cost(x):
         lam, f = float(x[0]), float(x[1])
         if not (0.0 < lam < 1.0 and f > 0.0):
-            return 1e3 * ny**2
+            return penalty
+        count["sim"] += 1
         try:
-            s = simulate(rec, chi(lam, f), "flexible", substeps=substeps, coulomb_eps=coulomb_eps)
+            return pb.output_error(vector(lam, f), yd, dec.core)
         except (SimulationError, DataError):
-            return 1e3 * ny**2
-        finally:
-            count["sim"] += 1
-        e = yd - dec(s.force)
-        return float(e @ e)
+            return penalty
+
+    def cost_batch(xs):
+        ok = [(0.0 < x[0] < 1.0 and x[1] > 0.0) for x in xs]
+        out = np.full(len(xs), penalty)
+        if any(ok):
+            pts = np.array([vector(float(x[0]), float(x[1])) for x, g in zip(xs, ok) if g])
+            count["sim"] += len(pts)
+            vals, _ = pb.output_error_batch(pts, yd, dec.core)
+            out[np.flatnonzero(ok)] = np.where(np.isfinite(vals), vals, penalty)
+        return out
 
     def callback(xk):
         trace.append((float(xk[0]), float(xk[1])))
         _say(progress, f"step 2 iteration {len(trace)}: λ = {xk[0]:.4f}, f_n_flex = {xk[1]:.3f} Hz")
 
-    j0 = cost([lambda0, f0])
-    res = minimize(cost, [lambda0, f0], method="Nelder-Mead", callback=callback,
-                   options=dict(xatol=1e-4, fatol=tol * j0, maxiter=max_iter))
+    initial = (lambda0, f0)
+    if grid_start:
+        pts = np.array([(a, b) for a in np.linspace(0.1, 0.9, 9) for b in np.geomspace(3.0, 2 * cutoff_hz, 10)]
+                       + [(lambda0, f0)])
+        g = cost_batch(pts)
+        lambda0, f0 = map(float, pts[int(np.argmin(g))])
+        _say(progress, f"step 2 grid start: {len(pts)} points, best λ = {lambda0:.3f}, f_n_flex = {f0:.2f} Hz")
+    simplex = nelder_mead_simplex([lambda0, f0])
+    vals = cost_batch(simplex)
+    j0 = float(vals[0])
+    res = minimize(prefetch(cost, lambda xs: vals, simplex), [lambda0, f0], method="Nelder-Mead", callback=callback,
+                   options=dict(xatol=1e-4, fatol=tol * j0, maxiter=max_iter, initial_simplex=simplex))
     lam, f = map(float, res.x)
     j = float(res.fun)
     history = [Iteration(k=i + 1, params={"lambda": a, "f_n_flex": b}, rel_std_pct={}, relative_error=float("nan"),
@@ -453,10 +501,11 @@ def fit_flexible_mode(
         elapsed_s=time.perf_counter() - t0,
         converged=bool(res.success),
         message="" if res.success else str(res.message),
-        initial={"lambda": lambda0, "f_n_flex": f0},
+        initial={"lambda": initial[0], "f_n_flex": initial[1]},
         frozen={k: v for k, v in chi(lam, f).items()},
         history=history,
-        options=dict(decimation=dec.describe(), tol=tol),
+        options=dict(decimation=dec.describe(), tol=tol, integrator=integrator, grid_start=grid_start,
+                     nelder_mead_start={"lambda": lambda0, "f_n_flex": f0}),
     )
 
 
@@ -474,6 +523,9 @@ def didim_flexible(
     substeps: int = 10,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
     progress: Progress = None,
+    integrator: str = "exponential",
+    sim_tol: float = DEFAULT_TOL,
+    grid_start: bool = False,
 ) -> IdentificationResult:
     """The three-step procedure of section V: rigid DIDIM (step 1), Nelder-Mead on (λ, f_n_flex) (step 2), DIDIM on
     the flexible model initialised by eqs. (29)-(30) (step 3). Fv2 and Fc2 are held at zero (the paper's choice) and
@@ -483,7 +535,7 @@ def didim_flexible(
     t0 = time.perf_counter()
     _checks.options(lambda0=lambda0, f0=f0, rigid_cutoff_hz=rigid_cutoff_hz, cutoff_hz=cutoff_hz, tol=tol,
                     max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
-    common = dict(substeps=substeps, coulomb_eps=coulomb_eps)
+    common = dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, sim_tol=sim_tol)
     _say(progress, "step 1: rigid DIDIM")
     r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress, **common)
     if not r1.converged:
@@ -493,7 +545,8 @@ def didim_flexible(
         r1.elapsed_s = time.perf_counter() - t0
         return r1
     _say(progress, "step 2: Nelder-Mead on (λ, f_n_flex)")
-    r2 = fit_flexible_mode(rec, r1, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress, **common)
+    r2 = fit_flexible_mode(rec, r1, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress,
+                           grid_start=grid_start, **common)
     _say(progress, "step 3: flexible DIDIM")
     init = flexible_from_mode(r1.params["M"], r2.params["lambda"], r2.params["f_n_flex"])
     init.update({"Fv1": 0.0, "Fc1": 0.0})

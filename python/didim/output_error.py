@@ -11,11 +11,11 @@ import numpy as np
 
 from . import _checks, _core
 from ._errors import DataError, SimulationError
-from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say
+from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_simplex, prefetch
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation
-from .simulation import DEFAULT_COULOMB_EPS, param_names, params_vector, simulate
+from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, param_names, params_vector, problem, sim_options
 
 CRITERIA = ("force", "position")
 
@@ -52,6 +52,8 @@ def oe_nm(
     substeps: int = 10,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
     progress: Progress = None,
+    integrator: str = "exponential",
+    sim_tol: float = DEFAULT_TOL,
 ) -> IdentificationResult:
     """Nelder-Mead (scipy's) on all parameters with J_τ = ‖τ_ddm − τ‖² or J_q = ‖q1_ddm − q1‖² (eq. (32)) on
     decimated signals. Variables are scaled by their initial values (all nonzero with eq. (33)), so ``xatol`` is
@@ -74,16 +76,22 @@ def oe_nm(
     count = {"sim": 0}
     history: List[Iteration] = []
 
+    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
+                 tol=sim_tol)
+    output = "force" if criterion == "force" else "position"
+    penalty = 1e3 * ny**2
+
     def cost(z):
-        chi = z * scale
+        count["sim"] += 1
         try:
-            s = simulate(rec, chi, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps)
+            return pb.output_error(np.asarray(z, dtype=float) * scale, yd, dec.core, output=output)
         except (SimulationError, DataError):
-            return 1e3 * ny**2
-        finally:
-            count["sim"] += 1
-        e = yd - dec(s.force if criterion == "force" else s.q1)
-        return float(e @ e)
+            return penalty
+
+    def cost_batch(zs):
+        count["sim"] += len(zs)
+        vals, _ = pb.output_error_batch(np.ascontiguousarray(zs * scale), yd, dec.core, output=output)
+        return np.where(np.isfinite(vals), vals, penalty)
 
     def callback(zk):
         history.append(Iteration(k=len(history) + 1, params=dict(zip(names, map(float, zk * scale))), rel_std_pct={},
@@ -91,9 +99,13 @@ def oe_nm(
         if len(history) % 25 == 0:
             _say(progress, f"oe-nm iteration {len(history)}, {count['sim']} simulations")
 
-    j0 = cost(np.ones_like(x0))
-    res = minimize(cost, np.ones_like(x0), method="Nelder-Mead", callback=callback,
-                   options=dict(xatol=xatol, fatol=fatol * j0, maxiter=max_iter, maxfev=4 * max_iter))
+    # the initial simplex (scipy's construction) is simulated in one parallel batch
+    simplex = nelder_mead_simplex(np.ones_like(x0))
+    vals = cost_batch(simplex)
+    j0 = float(vals[0])
+    res = minimize(prefetch(cost, lambda zs: vals, simplex), np.ones_like(x0), method="Nelder-Mead", callback=callback,
+                   options=dict(xatol=xatol, fatol=fatol * j0, maxiter=max_iter, maxfev=4 * max_iter,
+                                initial_simplex=simplex))
     chi = res.x * scale
     out = math.sqrt(float(res.fun)) / ny
     nan = {n: float("nan") for n in names}
@@ -103,7 +115,7 @@ def oe_nm(
         relative_error=out, output_error=out, iterations=int(res.nit), simulations=count["sim"],
         elapsed_s=time.perf_counter() - t0, converged=bool(res.success), message="" if res.success else str(res.message),
         initial=dict(initial), history=history,
-        options=dict(criterion=criterion, decimation=dec.describe(), xatol=xatol, fatol=fatol),
+        options=dict(criterion=criterion, decimation=dec.describe(), xatol=xatol, fatol=fatol, integrator=integrator),
     )
 
 
@@ -120,6 +132,8 @@ def oe_gn(
     substeps: int = 10,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
     progress: Progress = None,
+    integrator: str = "exponential",
+    sim_tol: float = DEFAULT_TOL,
 ) -> IdentificationResult:
     """Closed-loop output error by Levenberg-Marquardt with the exact Jacobian of the decimated simulated output
     (motor force, or motor position), from the forward sensitivity equations of the closed loop (controller
@@ -139,21 +153,17 @@ def oe_gn(
     measured = _measured(rec, criterion)
     ny = float(np.linalg.norm(dec(measured)))
     _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-gn")
-    ctrl = rec.controller
+    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
+                 tol=sim_tol)
+    output = "force" if criterion == "force" else "position"
     n_sim = 0
 
     def evaluate(x):
+        # one call: simulation with forward sensitivities, residual measured − simulated and ∂(simulated)/∂χ,
+        # decimated alike
         nonlocal n_sim
         n_sim += 1
-        s = _core.simulate_sensitivity(
-            model, x, rec.qr, rec.dt, ctrl.kind, list(ctrl.gains), u_ext=rec.u_ext, substeps=substeps,
-            quantization=float(rec.position_resolution or 0.0), coulomb_eps=coulomb_eps, offset=offset)
-        if criterion == "force":
-            out, sens = s["force"], s["dforce"]
-        else:
-            out, sens = s["q"][0], s["dq"][0]
-        # residual (decimated measured − simulated) and ∂(simulated)/∂χ, decimated alike
-        return dec.apply(measured - out, sens[free].T)
+        return pb.linearize(x, measured, free, dec.core, output=output)
 
     try:
         r, jac = evaluate(chi)
@@ -166,10 +176,13 @@ def oe_gn(
     for it in range(max_iter):
         d = np.sqrt(np.sum(jac**2, axis=0))
         d[d == 0] = 1.0
+        # ‖J δ − r‖² = ‖R δ − Qᵀr‖² + const: the damped steps solve small (2p × p) problems on R
+        qmat, rmat = np.linalg.qr(jac)
+        qtr = qmat.T @ r
         step_ok = False
         for _ in range(20):
-            a = np.vstack([jac, math.sqrt(mu) * np.diag(d)])
-            b = np.concatenate([r, np.zeros(len(free))])
+            a = np.vstack([rmat, math.sqrt(mu) * np.diag(d)])
+            b = np.concatenate([qtr, np.zeros(len(free))])
             delta = np.linalg.lstsq(a, b, rcond=None)[0]
             trial = chi.copy()
             trial[free] += delta
@@ -209,7 +222,44 @@ def oe_gn(
         relative_error=math.sqrt(cost) / ny, output_error=math.sqrt(cost) / ny,
         iterations=len(history), simulations=n_sim, elapsed_s=time.perf_counter() - t0,
         converged=converged, message=message, initial=dict(initial), frozen=frozen, history=history,
-        options=dict(criterion=criterion, decimation=dec.describe(), tol=tol,
+        options=dict(criterion=criterion, decimation=dec.describe(), tol=tol, integrator=integrator,
                      condition_number=float(sol["condition_number"])),
         covariance=sol["covariance"],
     )
+
+
+def check_sensitivities(
+    rec: Recording,
+    params,
+    model: str = "flexible",
+    *,
+    offset: Optional[bool] = None,
+    output: str = "force",
+    rel_step: float = 1e-6,
+    **sim_kw,
+) -> Dict[str, float]:
+    """Checks the exact forward sensitivities against central differences of the simulated ``output`` ("force" or
+    "position"): the 2p perturbed simulations run as one parallel batch. Returns, per parameter, the largest
+    difference relative to the largest sensitivity. With the exponential integrator a perturbation that changes the
+    integrator's step sequence shows up as a local spike; ``rel_step`` of 1e-6 rarely does.
+    """
+    from .simulation import simulate_batch
+
+    names, chi, offset = params_vector(model, params, offset)
+    if output not in ("force", "position"):
+        raise DataError(f"output must be 'force' or 'position', got {output!r}")
+    sens = _core.simulate_sensitivity(
+        model, chi, rec.qr, rec.dt, rec.controller.kind, list(rec.controller.gains), u_ext=rec.u_ext, offset=offset,
+        **sim_options(rec, **sim_kw))
+    exact = sens["dforce"] if output == "force" else sens["dq"][0]
+    h = rel_step * np.maximum(np.abs(chi), 1e-3)
+    sets = np.vstack([chi + np.diag(h), chi - np.diag(h)])
+    b = simulate_batch(rec, sets, model, offset=offset, **sim_kw)
+    if not all(e is None for e in b.errors):
+        raise SimulationError(f"a perturbed simulation failed: {next(e for e in b.errors if e)}")
+    sim = b.force if output == "force" else b.q[:, 0, :]
+    p = len(names)
+    fd = (sim[:p] - sim[p:]) / (2 * h[:, None])
+    scale = np.maximum(np.max(np.abs(fd), axis=1), 1e-300)
+    return {n: float(np.max(np.abs(fd[j] - exact[j])) / scale[j]) for j, n in enumerate(names)}
+

@@ -100,16 +100,34 @@ class Decimation:
         factor = _checks.whole("decimation factor", factor, lo=1, hint=" (keep one sample in factor)")
         return cls(factor=factor, kind="matlab", order=8, form="ba")
 
+    @property
+    def core(self) -> "_core.Decimator":
+        """The design held by the Rust core (made once per instance)."""
+        d = self.__dict__.get("_core_decimator")
+        if d is None:
+            d = _core.Decimator(
+                self.factor, kind=self.kind, order=self.order, cutoff_hz=self.cutoff_hz, fs_hz=self.fs_hz, form=self.form
+            )
+            object.__setattr__(self, "_core_decimator", d)
+        return d
+
+    def __getstate__(self):
+        return {k: v for k, v in self.__dict__.items() if k != "_core_decimator"}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+
     def apply(self, y, w=None) -> Tuple[np.ndarray, Optional[np.ndarray]]:
-        """Decimates ``y`` (n,) and, when given, every column of ``w`` (n, p) in parallel; returns (y_dec, w_dec)."""
+        """Decimates ``y`` (n,) and, when given, every column of ``w`` (n, p) in parallel; returns (y_dec, w_dec).
+
+        The columns go through the filter four at a time (interleaved), each with exactly the one-column arithmetic.
+        """
         y = np.ascontiguousarray(_checks.real_array("y", y))
         if w is not None:
             w = _checks.real_array("w", w, (1, 2))
             if w.ndim == 1:
                 w = w[:, None]
-        return _core.decimate(
-            y, w, factor=self.factor, kind=self.kind, order=self.order, cutoff_hz=self.cutoff_hz, fs_hz=self.fs_hz, form=self.form
-        )
+        return self.core.apply(y, w)
 
     def __call__(self, x) -> np.ndarray:
         """Decimates one signal."""

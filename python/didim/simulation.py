@@ -2,19 +2,28 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Dict, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
 from . import _checks, _core
-from ._errors import DataError
+from ._errors import DataError, DidimError
 from .recording import Recording
 
 MODELS = ("rigid", "flexible")
 
+#: Integration schemes of the simulator: "exponential" (exact discretization of the affine part of the model, the
+#: Coulomb terms by implicit second-order exponential time differencing with step control; the default) and "rk4"
+#: (classical RK4 with ``substeps`` fixed substeps per sample, the reference).
+INTEGRATORS = ("exponential", "rk4")
+
 #: Default velocity scale of the smoothed Coulomb sign (m/s); see :func:`coulomb_sign`.
 DEFAULT_COULOMB_EPS: float = _core.DEFAULT_COULOMB_EPS
+
+#: Default local tolerance of the exponential integrator, as a fraction of the reference stroke per step.
+DEFAULT_TOL: float = _core.DEFAULT_TOL
 
 Params = Union[Mapping[str, float], Sequence[float], np.ndarray]
 
@@ -171,6 +180,41 @@ class SimResult:
         return fig
 
 
+def sim_options(
+    recording: Recording,
+    *,
+    substeps: int = 10,
+    quantization: Optional[float] = None,
+    delay: int = 0,
+    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    integrator: str = "exponential",
+    tol: float = DEFAULT_TOL,
+) -> dict:
+    """Validated simulator keyword options for the core, with the recording's encoder resolution by default."""
+    if quantization is None:
+        quantization = recording.position_resolution or 0.0
+    quantization = _checks.real("quantization", quantization, "m", lo=0.0, lo_open=False, hint=" (0 for none)")
+    _checks.options(substeps=substeps, coulomb_eps=coulomb_eps)
+    delay = _checks.whole("delay", delay, lo=0, hi=recording.n - 1, hint=" (actuation delay in samples)")
+    if integrator not in INTEGRATORS:
+        raise DataError(f"unknown integrator {integrator!r}: use one of {', '.join(INTEGRATORS)}")
+    if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0 < tol < 1):
+        raise DataError(f"tol must be a fraction of the stroke between 0 and 1, got {tol!r}")
+    return dict(substeps=int(substeps), quantization=float(quantization), delay=int(delay),
+                coulomb_eps=float(coulomb_eps), integrator=integrator, tol=float(tol))
+
+
+def problem(recording: Recording, model: str = "rigid", *, offset: bool = False, terms: Sequence[Term] = (),
+            backlash_gap: Optional[float] = None, **sim_kw) -> "_core.Problem":
+    """The recording's closed loop held by the Rust core (reference, controller, external input, model structure and
+    simulator options), for repeated simulations with varying parameters. ``sim_kw`` as for :func:`simulate`."""
+    _check_model(model)
+    opts = sim_options(recording, **sim_kw)
+    return _core.Problem(model, recording.qr, recording.dt, recording.controller.kind, list(recording.controller.gains),
+                         u_ext=recording.u_ext, offset=bool(offset), terms=_specs(terms), backlash_gap=backlash_gap,
+                         **opts)
+
+
 def simulate(
     recording: Recording,
     params: Params,
@@ -183,6 +227,8 @@ def simulate(
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
     terms: Sequence[Term] = (),
     backlash_gap: Optional[float] = None,
+    integrator: str = "exponential",
+    tol: float = DEFAULT_TOL,
 ) -> SimResult:
     """Simulates the recording's closed loop (its reference, controller and known external input) with ``params``.
 
@@ -191,23 +237,23 @@ def simulate(
         params: a mapping name → value (SI units, load side) or a sequence in the order of :func:`param_names`.
         model: "rigid" (eq. (6)) or "flexible" (eq. (2)).
         offset: rigid model with a constant force OF; by default, when params names OF or has 4 values.
-        substeps: RK4 substeps per sample period.
+        substeps: RK4 substeps per sample period (``integrator="rk4"`` only).
         quantization: resolution of the simulated motor encoder (m); default the recording's ``position_resolution``.
         delay: extra actuation delay in samples.
         coulomb_eps: velocity scale of the Coulomb sign (m/s), 0 for the hard sign.
         terms: extra model terms (:class:`Term`), whose parameters ``params`` must include.
         backlash_gap: flexible model only: total width (m) of a dead zone in the coupling K12.
+        integrator: "exponential" (default: exact for the affine part of the model, adaptive where the Coulomb sign
+            bends) or "rk4" (fixed substeps, the reference).
+        tol: local tolerance of the exponential integrator per step, as a fraction of the reference stroke.
     """
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
     if offset is not None:
         offset = _checks.flag("offset", offset)
     names, vec, offset = params_vector(model, params, offset, terms)
-    if quantization is None:
-        quantization = recording.position_resolution or 0.0
-    quantization = _checks.real("quantization", quantization, "m", lo=0.0, lo_open=False, hint=" (0 for none)")
-    _checks.options(substeps=substeps, coulomb_eps=coulomb_eps)
-    delay = _checks.whole("delay", delay, lo=0, hi=recording.n - 1, hint=" (actuation delay in samples)")
+    opts = sim_options(recording, substeps=substeps, quantization=quantization, delay=delay, coulomb_eps=coulomb_eps,
+                       integrator=integrator, tol=tol)
     out = _core.simulate(
         model,
         vec,
@@ -216,13 +262,10 @@ def simulate(
         recording.controller.kind,
         list(recording.controller.gains),
         u_ext=recording.u_ext,
-        substeps=int(substeps),
-        quantization=float(quantization),
-        delay=int(delay),
-        coulomb_eps=float(coulomb_eps),
         offset=offset,
         terms=_specs(terms),
         backlash_gap=backlash_gap,
+        **opts,
     )
     return SimResult(
         model=model,
@@ -235,4 +278,82 @@ def simulate(
     )
 
 
-__all__ = ["simulate", "SimResult", "Term", "TERM_KINDS", "param_names", "params_vector", "coulomb_sign", "MODELS", "DEFAULT_COULOMB_EPS"]
+@dataclass(frozen=True)
+class BatchResult:
+    """Simulations of many parameter sets against one recording (time is the last axis).
+
+    ``params`` is (m, p) in the order of ``names``; ``force`` (m, n); ``q`` (m, ndof, n); ``qd`` and ``qdd`` likewise
+    when the batch was run with ``states=True`` (else None). ``errors[i]`` is None when member i succeeded, else the
+    message of its error (a diverging loop or an invalid parameter set); its rows are NaN. ``batch[i]`` is member i
+    as a :class:`SimResult` (raises :class:`DidimError` for a failed member).
+    """
+
+    model: str
+    names: list
+    params: np.ndarray
+    t: np.ndarray
+    force: np.ndarray
+    q: np.ndarray
+    qd: Optional[np.ndarray]
+    qdd: Optional[np.ndarray]
+    errors: list
+
+    def __len__(self) -> int:
+        return int(self.params.shape[0])
+
+    @property
+    def ok(self) -> np.ndarray:
+        """Boolean mask of the members that simulated without error."""
+        return np.array([e is None for e in self.errors], dtype=bool)
+
+    def relative_errors(self, recording: Recording) -> np.ndarray:
+        """``‖τ − τ_sim‖ / ‖τ‖`` of each member against the recording's measured force (NaN for failed members)."""
+        return np.linalg.norm(recording.force[None, :] - self.force, axis=1) / np.linalg.norm(recording.force)
+
+    def __getitem__(self, i: int) -> SimResult:
+        if self.errors[i] is not None:
+            raise DidimError(f"member {i} of the batch failed: {self.errors[i]}")
+        nan = np.full_like(self.q[i], np.nan)
+        return SimResult(model=self.model, params=dict(zip(self.names, map(float, self.params[i]))), t=self.t,
+                         force=self.force[i], q=self.q[i], qd=self.qd[i] if self.qd is not None else nan,
+                         qdd=self.qdd[i] if self.qdd is not None else nan)
+
+
+def simulate_batch(
+    recording: Recording,
+    params,
+    model: str = "rigid",
+    *,
+    offset: Optional[bool] = None,
+    states: bool = False,
+    **sim_kw,
+) -> BatchResult:
+    """Simulates many parameter sets against one recording in one call, spread over the cores (Rust threads, no Python
+    in the loop); the result is in input order and does not depend on the number of threads.
+
+    Args:
+        params: an (m, p) array in the order of :func:`param_names`, or a sequence of name → value mappings.
+        states: also return the velocities and accelerations (memory: 2·m·ndof·n more values).
+        sim_kw: simulator options as for :func:`simulate` (integrator, tol, substeps, quantization, delay, coulomb_eps).
+
+    A member whose simulation fails does not fail the batch: its message is in ``errors`` and its rows are NaN.
+    """
+    if isinstance(params, Mapping):
+        raise DataError("simulate_batch takes a sequence of parameter sets; use simulate for one")
+    rows = list(params) if not isinstance(params, np.ndarray) else params
+    if isinstance(rows, np.ndarray) and rows.ndim == 1:
+        raise DataError("params must be 2-D, one parameter set per row (use simulate for one set)")
+    if len(rows) == 0:
+        raise DataError("params holds no parameter set")
+    vecs = [params_vector(model, r, offset) for r in rows]
+    names, _, offset = vecs[0]
+    if any(v[2] != offset for v in vecs):
+        raise DataError("all parameter sets of a batch must have the same parameters (with or without OF)")
+    mat = np.ascontiguousarray(np.array([v[1] for v in vecs], dtype=float))
+    out = problem(recording, model, offset=offset, **sim_kw).simulate_batch(mat, states=bool(states))
+    return BatchResult(model=model, names=names, params=mat, t=recording.t, force=out["force"], q=out["q"],
+                       qd=out.get("qd"), qdd=out.get("qdd"), errors=list(out["errors"]))
+
+
+__all__ = ["simulate", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
+           "params_vector", "coulomb_sign", "MODELS", "INTEGRATORS", "DEFAULT_COULOMB_EPS", "DEFAULT_TOL"]

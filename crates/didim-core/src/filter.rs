@@ -64,6 +64,8 @@ use crate::error::{invalid, Error, Result};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
+mod lanes;
+
 /// Highest filter order accepted by the design functions.
 pub const MAX_ORDER: usize = 20;
 
@@ -1128,25 +1130,91 @@ impl Decimator {
                 w.len()
             ));
         }
-        let (yd, wd) = rayon::join(
-            || self.apply_named(y, "y"),
-            || -> Result<Vec<f64>> {
-                if ncols == 0 || n == 0 {
-                    return Ok(Vec::new());
+        let mut cols: Vec<&[f64]> = Vec::with_capacity(ncols + 1);
+        cols.push(y);
+        if n > 0 {
+            cols.extend(w.chunks(n));
+        }
+        let mut out = self.apply_columns(&cols, |j| {
+            if j == 0 {
+                "y".into()
+            } else {
+                format!("w column {}", j - 1)
+            }
+        })?;
+        let yd = out.remove(0);
+        Ok((yd, out.concat()))
+    }
+
+    /// Decimates equal-length columns alike, [`lanes::LANES`] columns at a time through
+    /// the filter (column-interleaved, bit-for-bit the result of [`Decimator::apply`]),
+    /// the groups in parallel with rayon. `name(j)` names column `j` in errors.
+    pub fn apply_columns(&self, cols: &[&[f64]], name: impl Fn(usize) -> String) -> Result<Vec<Vec<f64>>> {
+        let Some(n) = cols.first().map(|c| c.len()) else {
+            return Ok(Vec::new());
+        };
+        let edge = match self.prepared {
+            Prepared::Identity => 0,
+            _ => self.padlen,
+        };
+        for (j, c) in cols.iter().enumerate() {
+            if c.len() != n {
+                return Err(invalid!(
+                    "{} has {} samples but the first column has {n}; all columns must have the same length",
+                    name(j),
+                    c.len()
+                ));
+            }
+            match &self.prepared {
+                Prepared::Identity => {
+                    if c.is_empty() {
+                        return Err(invalid!(
+                            "{} is empty; the decimator needs at least 1 sample",
+                            name(j)
+                        ));
+                    }
+                    check_record(c, 0, &name(j), "identity")?;
                 }
-                let cols: Vec<Result<Vec<f64>>> = w
-                    .par_chunks(n)
-                    .enumerate()
-                    .map(|(j, col)| self.apply_named(col, &format!("w column {j}")))
-                    .collect();
-                let mut out = Vec::with_capacity(self.output_len(n) * ncols);
-                for c in cols {
-                    out.extend(c?);
-                }
-                Ok(out)
-            },
-        );
-        Ok((yd?, wd?))
+                Prepared::Ba { .. } => check_record(
+                    c,
+                    edge,
+                    &name(j),
+                    &format!("order-{} ba filter, padlen {}", self.order, self.padlen),
+                )?,
+                Prepared::Sos { .. } => check_record(
+                    c,
+                    edge,
+                    &name(j),
+                    &format!("order-{} sos filter, padlen {}", self.order, self.padlen),
+                )?,
+            }
+        }
+        let start = self.start_index(n);
+        let r = self.factor;
+        let groups: Vec<Vec<Vec<f64>>> = cols
+            .par_chunks(lanes::LANES)
+            .map(|g| lanes::filtfilt_slice(&self.prepared, g, edge, start, r))
+            .collect();
+        // never NaN silently: an overflowing pass is an error naming the column
+        groups
+            .into_iter()
+            .flatten()
+            .enumerate()
+            .map(|(j, c)| finite_output(c, &name(j)))
+            .collect()
+    }
+
+    /// First kept sample of a filtered record of `n` samples.
+    fn start_index(&self, n: usize) -> usize {
+        match self.alignment {
+            Alignment::First => 0,
+            // MATLAB: nbeg (1-based) = r - (r*nout - n), i.e. the last sample
+            // n - 1 is kept and the first is (n - 1) - (nout - 1) r.
+            Alignment::Last => {
+                let skipped = self.output_len(n).saturating_sub(1).saturating_mul(self.factor);
+                n.saturating_sub(1).saturating_sub(skipped)
+            }
+        }
     }
 }
 

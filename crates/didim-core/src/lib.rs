@@ -5,10 +5,12 @@
 //!
 //! - [`model`]: linear-in-parameters models, one definition for the direct dynamics,
 //!   the inverse dynamic model and its regressor;
-//! - [`controller`] and [`sim`]: the fixed-step closed-loop simulator (digital
-//!   controller with zero-order hold, RK4 plant);
+//! - [`controller`] and [`sim`]: the closed-loop simulator (digital controller with
+//!   zero-order hold; exponential integrator by default, RK4 as the reference);
 //! - [`filter`]: zero-phase filters and parallel decimation (paper section III);
-//! - [`lstsq`]: QR least squares with base parameters and covariance (eqs. (11)-(15)).
+//! - [`lstsq`]: QR least squares with base parameters and covariance (eqs. (11)-(15));
+//! - [`objective`]: output errors, DIDIM systems and Jacobians computed in one call, and
+//!   their batched parallel forms.
 //!
 //! Pure Rust: no Python types. SI units on the load side throughout.
 
@@ -20,6 +22,7 @@ pub mod error;
 pub mod filter;
 pub mod lstsq;
 pub mod model;
+pub mod objective;
 pub mod sim;
 
 pub use controller::Controller;

@@ -128,6 +128,19 @@ impl Basis {
         matches!(self, Basis::Inertia { .. })
     }
 
+    /// True for the non-inertial terms whose basis function is affine in the state
+    /// `(q, q̇)` (viscous, offset, spring): the exponential integrator
+    /// (`sim::Integrator::Exponential`) propagates them exactly. Every other term —
+    /// Coulomb, and any term not listed here — is integrated numerically from
+    /// [`Basis::accumulate`], so a new nonlinear term is handled correctly without
+    /// changes to the integrator.
+    pub fn is_affine(&self) -> bool {
+        matches!(
+            self,
+            Basis::Viscous { .. } | Basis::Offset { .. } | Basis::Spring { .. }
+        )
+    }
+
     /// The degrees of freedom this basis function touches.
     fn dofs(&self) -> (usize, Option<usize>) {
         match *self {
@@ -161,7 +174,7 @@ impl Basis {
 
     /// Adds `value · φ(q, q̇, q̈)` to `out`, one entry per dof.
     #[inline(always)]
-    fn accumulate<const N: usize>(
+    pub(crate) fn accumulate<const N: usize>(
         &self,
         value: f64,
         q: &SVector<f64, N>,
@@ -215,7 +228,7 @@ impl Basis {
     /// Adds `value · ∂φ/∂q` to `dq` and `value · ∂φ/∂q̇` to `dv` (`[row dof, column dof]`),
     /// for the non-inertial terms; used by the sensitivity equations.
     #[inline(always)]
-    fn accumulate_partials<const N: usize>(
+    pub(crate) fn accumulate_partials<const N: usize>(
         &self,
         value: f64,
         q: &SVector<f64, N>,

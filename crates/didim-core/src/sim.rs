@@ -3,9 +3,11 @@
 //! Every sample period `T` the controller reads the (optionally quantized)
 //! motor position and computes a force held constant over the period
 //! (zero-order hold), optionally delayed by a whole number of samples. The
-//! continuous plant is integrated with classical RK4 over `substeps` equal
-//! substeps per period. The simulation starts at rest at the first reference
-//! position (spring unloaded).
+//! continuous plant is integrated by the exponential integrator of [`expint`]
+//! (exact for the affine part of the model, adaptive where the Coulomb sign is
+//! curved; the default) or by classical RK4 over `substeps` equal substeps per
+//! period ([`Integrator::Rk4`], the reference). The simulation starts at rest at
+//! the first reference position (spring unloaded).
 //!
 //! Per sample `k` (time `t_k = k·T`) it outputs the commanded force (what the
 //! drive logs, after saturation) and the noise-free states at `t_k`: positions,
@@ -18,18 +20,44 @@ use crate::error::{invalid, Error, Result};
 use crate::model::Model;
 use nalgebra::SVector;
 
+mod expint;
+pub use expint::StepStats;
+
+/// How the plant is integrated over each sample period.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Integrator {
+    /// Exact discretization of the affine part of the model (masses, viscous
+    /// friction, springs, offsets, the held force) with the nonlinear terms
+    /// (Coulomb) by second-order implicit exponential time differencing, one step
+    /// per sample period where that meets [`SimOptions::tol`], halved where not
+    /// (see `sim::expint`). The default.
+    #[default]
+    Exponential,
+    /// Classical RK4 with [`SimOptions::substeps`] equal substeps per period.
+    Rk4,
+}
+
+/// Default local tolerance of the exponential integrator, relative to the reference
+/// stroke (see [`SimOptions::tol`]).
+pub const DEFAULT_TOL: f64 = 1e-9;
+
 /// Options of the simulator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SimOptions {
     /// Sample period of the controller and of the outputs (s).
     pub dt: f64,
-    /// RK4 substeps per sample period (default 10).
+    /// RK4 substeps per sample period (default 10); used by [`Integrator::Rk4`] only.
     pub substeps: usize,
     /// Resolution of the measured motor position (m); 0 for none. EMPS: 5e-8 m.
     pub quantization: f64,
     /// Extra actuation delay in samples: the force applied over `[t_k, t_{k+1})`
     /// is the command of sample `k − delay` (0 before the first command).
     pub delay: usize,
+    /// The integration scheme (default [`Integrator::Exponential`]).
+    pub integrator: Integrator,
+    /// Local error tolerance of the exponential integrator per step, as a fraction
+    /// of the reference stroke (default [`DEFAULT_TOL`]).
+    pub tol: f64,
 }
 
 impl SimOptions {
@@ -40,10 +68,13 @@ impl SimOptions {
             substeps: 10,
             quantization: 0.0,
             delay: 0,
+            integrator: Integrator::Exponential,
+            tol: DEFAULT_TOL,
         }
     }
 
-    fn validate(&self) -> Result<()> {
+    /// Checks the options (errors name the option and the accepted range).
+    pub fn validate(&self) -> Result<()> {
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return Err(invalid!(
                 "sample period dt must be finite and > 0 s, got {}",
@@ -57,6 +88,12 @@ impl SimOptions {
             return Err(invalid!(
                 "substeps = {} is unreasonably large (at most 100000)",
                 self.substeps
+            ));
+        }
+        if !(self.tol.is_finite() && self.tol > 0.0 && self.tol < 1.0) {
+            return Err(invalid!(
+                "tol must be a finite fraction of the stroke between 0 and 1 (default {DEFAULT_TOL:e}), got {}",
+                self.tol
             ));
         }
         if !(self.quantization.is_finite() && self.quantization >= 0.0) {
@@ -100,7 +137,39 @@ pub fn simulate<const N: usize>(
     u_ext: Option<&[f64]>,
     opts: &SimOptions,
 ) -> Result<SimOutput> {
-    run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)
+    match opts.integrator {
+        Integrator::Exponential => {
+            expint::run(model, chi, controller, qr, u_ext, opts, None, &mut expint::NoHook)
+        }
+        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, &mut NoTangent),
+    }
+}
+
+/// Like [`simulate`], also returning the step counts of the exponential integrator
+/// (zeros for RK4).
+pub fn simulate_with_stats<const N: usize>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+) -> Result<(SimOutput, StepStats)> {
+    let mut stats = StepStats::default();
+    let out = match opts.integrator {
+        Integrator::Exponential => expint::run(
+            model,
+            chi,
+            controller,
+            qr,
+            u_ext,
+            opts,
+            Some(&mut stats),
+            &mut expint::NoHook,
+        )?,
+        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)?,
+    };
+    Ok((out, stats))
 }
 
 /// Output of [`simulate_sensitivity`]: the simulation and the derivatives of its
@@ -130,17 +199,22 @@ pub fn simulate_sensitivity<const N: usize>(
     u_ext: Option<&[f64]>,
     opts: &SimOptions,
 ) -> Result<SensOutput> {
-    let p = model.n_params();
     check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
-    let mut t = Sensitivity::<N>::new(p, qr.len(), opts.delay);
-    let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
+    let (sim, dforce, dq) = if opts.integrator == Integrator::Exponential {
+        let mut t = expint::Sens::<N>::new(model, qr.len(), opts.delay);
+        let sim = expint::run(model, chi, controller, qr, u_ext, opts, None, &mut t)?;
+        (sim, t.dforce, t.dq)
+    } else {
+        let mut t = Sensitivity::<N>::new(model.n_params(), qr.len(), opts.delay);
+        let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
+        (sim, t.dforce, t.dq)
+    };
     // finite states can still have non-finite sensitivities (e.g. a Coulomb force of 1e308 N at rest, whose
     // derivative is 1e308/eps): an error, not NaN in the Jacobian
     let n = qr.len();
-    let first_bad = t
-        .dforce
+    let first_bad = dforce
         .iter()
-        .chain(&t.dq)
+        .chain(&dq)
         .enumerate()
         .filter(|(_, v)| !v.is_finite())
         .map(|(i, _)| i % n)
@@ -153,11 +227,7 @@ pub fn simulate_sensitivity<const N: usize>(
             describe(model, chi)
         )));
     }
-    Ok(SensOutput {
-        sim,
-        dforce: t.dforce,
-        dq: t.dq,
-    })
+    Ok(SensOutput { sim, dforce, dq })
 }
 
 /// One RK4 stage of the state: position, velocity, acceleration.

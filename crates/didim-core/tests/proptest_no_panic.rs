@@ -9,7 +9,7 @@ use didim_core::controller::Controller;
 use didim_core::filter::{self, Decimator, FilterForm, Sos, Tf};
 use didim_core::lstsq::{lstsq, lstsq_full_rank, LstsqOptions, SigmaConvention};
 use didim_core::model::{self, Basis, Model};
-use didim_core::sim::{self, SimOptions};
+use didim_core::sim::{self, Integrator, SimOptions, DEFAULT_TOL};
 use didim_core::Error;
 use proptest::prelude::*;
 
@@ -95,13 +95,19 @@ fn sim_options() -> impl Strategy<Value = SimOptions> {
         prop_oneof![4 => 0usize..16, 1 => prop::sample::select(vec![100_001usize, usize::MAX])],
         prop_oneof![3 => Just(0.0), 1 => mostly(0.0, 1e-3)],
         prop_oneof![4 => 0usize..6, 1 => prop::sample::select(vec![200usize, usize::MAX, 1 << 40])],
+        prop_oneof![Just(Integrator::Exponential), Just(Integrator::Rk4)],
+        prop_oneof![4 => Just(DEFAULT_TOL), 1 => hostile()],
     )
-        .prop_map(|(dt, substeps, quantization, delay)| SimOptions {
-            dt,
-            substeps,
-            quantization,
-            delay,
-        })
+        .prop_map(
+            |(dt, substeps, quantization, delay, integrator, tol)| SimOptions {
+                dt,
+                substeps,
+                quantization,
+                delay,
+                integrator,
+                tol,
+            },
+        )
 }
 
 fn params(n: usize) -> impl Strategy<Value = Vec<f64>> {

@@ -8,7 +8,7 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use didim_core::error::Error;
-use didim_core::filter::{self as flt, Decimator, FilterForm};
+use didim_core::filter as flt;
 use didim_core::lstsq::{LstsqOptions, SigmaConvention};
 use didim_core::model::{self, Basis, Model, DEFAULT_COULOMB_EPS};
 use didim_core::{lstsq as ls, sim, Controller};
@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyType};
 
 mod convert;
+mod problem;
 use convert::*;
 
 /// Runs a core computation without the interpreter lock, turning panics into errors.
@@ -72,7 +73,7 @@ enum AnyModel {
 }
 
 /// Extra terms of a model: (name, kind, hyper-parameter), all on the motor dof.
-type Terms = Vec<(String, String, f64)>;
+pub(crate) type Terms = Vec<(String, String, f64)>;
 
 fn extra_basis(kind: &str, hyper: f64) -> Result<Basis, Error> {
     let dof = model::MOTOR;
@@ -179,6 +180,36 @@ fn make_controller(kind: &str, gains: &[f64]) -> Result<Controller, Error> {
     Ok(c)
 }
 
+fn parse_integrator(name: &str) -> Result<sim::Integrator, Error> {
+    match name {
+        "exponential" => Ok(sim::Integrator::Exponential),
+        "rk4" => Ok(sim::Integrator::Rk4),
+        other => Err(Error::InvalidInput(format!(
+            "unknown integrator {other:?}: use \"exponential\" (default) or \"rk4\""
+        ))),
+    }
+}
+
+fn sim_options(
+    py: Python<'_>,
+    dt: f64,
+    substeps: usize,
+    quantization: f64,
+    delay: usize,
+    integrator: &str,
+    tol: f64,
+) -> PyResult<sim::SimOptions> {
+    let integrator = parse_integrator(integrator).map_err(|e| core_error(py, e))?;
+    Ok(sim::SimOptions {
+        dt,
+        substeps,
+        quantization,
+        delay,
+        integrator,
+        tol,
+    })
+}
+
 /// Parameter names of a model, in the order of the parameter vector.
 #[pyfunction]
 #[pyo3(signature = (model, offset=false, terms=None))]
@@ -195,9 +226,9 @@ fn param_names(py: Python<'_>, model: &str, offset: bool, terms: Option<Terms>) 
 
 /// Closed-loop simulation; returns a dict of arrays: force (n,), q, qd, qdd (ndof, n).
 #[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None))]
+#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None, integrator="exponential", tol=Real(sim::DEFAULT_TOL)))]
 #[pyo3(
-    text_signature = "(model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, terms=None, backlash_gap=None)"
+    text_signature = "(model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, terms=None, backlash_gap=None, integrator='exponential', tol=...)"
 )]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
@@ -216,6 +247,8 @@ fn simulate<'py>(
     offset: bool,
     terms: Option<Terms>,
     backlash_gap: Option<f64>,
+    integrator: &str,
+    tol: Real,
 ) -> PyResult<Bound<'py, PyDict>> {
     let terms = terms.unwrap_or_default();
     let chi = slice1(&params);
@@ -223,12 +256,15 @@ fn simulate<'py>(
     let u = u_ext.as_ref().map(slice1);
     let gains = reals(gains);
     let coulomb_eps = coulomb_eps.0;
-    let opts = sim::SimOptions {
-        dt: dt.0,
-        substeps: substeps.get("substeps").map_err(|e| core_error(py, e))?,
-        quantization: quantization.0,
-        delay: delay.get("delay").map_err(|e| core_error(py, e))?,
-    };
+    let opts = sim_options(
+        py,
+        dt.0,
+        substeps.get("substeps").map_err(|e| core_error(py, e))?,
+        quantization.0,
+        delay.get("delay").map_err(|e| core_error(py, e))?,
+        integrator,
+        tol.0,
+    )?;
     let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
     let out = run(py, || {
         let c = make_controller(controller, &gains)?;
@@ -278,9 +314,9 @@ fn regressor<'py>(
 /// Closed-loop simulation with forward sensitivities; the dict of `simulate` plus
 /// dforce (p, n) and dq (ndof, p, n).
 #[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None))]
+#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None, integrator="exponential", tol=Real(sim::DEFAULT_TOL)))]
 #[pyo3(
-    text_signature = "(model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, terms=None, backlash_gap=None)"
+    text_signature = "(model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, terms=None, backlash_gap=None, integrator='exponential', tol=...)"
 )]
 #[allow(clippy::too_many_arguments)]
 fn simulate_sensitivity<'py>(
@@ -299,6 +335,8 @@ fn simulate_sensitivity<'py>(
     offset: bool,
     terms: Option<Terms>,
     backlash_gap: Option<f64>,
+    integrator: &str,
+    tol: Real,
 ) -> PyResult<Bound<'py, PyDict>> {
     let terms = terms.unwrap_or_default();
     let chi = slice1(&params);
@@ -306,12 +344,15 @@ fn simulate_sensitivity<'py>(
     let u = u_ext.as_ref().map(slice1);
     let gains = reals(gains);
     let coulomb_eps = coulomb_eps.0;
-    let opts = sim::SimOptions {
-        dt: dt.0,
-        substeps: substeps.get("substeps").map_err(|e| core_error(py, e))?,
-        quantization: quantization.0,
-        delay: delay.get("delay").map_err(|e| core_error(py, e))?,
-    };
+    let opts = sim_options(
+        py,
+        dt.0,
+        substeps.get("substeps").map_err(|e| core_error(py, e))?,
+        quantization.0,
+        delay.get("delay").map_err(|e| core_error(py, e))?,
+        integrator,
+        tol.0,
+    )?;
     let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
     let n = qr.len();
     let (ndof, out) = run(py, || {
@@ -523,31 +564,7 @@ fn decimate<'py>(
         None => (Vec::new(), y.len(), 0),
     };
     let (yd, wd) = run(py, || {
-        let dec = match (kind, cutoff_hz, fs_hz) {
-            ("matlab", _, _) => Decimator::matlab(factor)?,
-            ("butter", Some(c), Some(fs)) => {
-                let form = match form {
-                    "sos" => FilterForm::Sos,
-                    "ba" => FilterForm::Ba,
-                    other => {
-                        return Err(Error::InvalidInput(format!(
-                            "unknown filter form {other:?}: use \"sos\" or \"ba\""
-                        )))
-                    }
-                };
-                Decimator::butterworth(order, c, fs, factor, form)?
-            }
-            ("butter", _, _) => {
-                return Err(Error::InvalidInput(
-                    "a Butterworth decimation needs cutoff_hz and fs_hz".into(),
-                ))
-            }
-            (other, _, _) => {
-                return Err(Error::InvalidInput(format!(
-                    "unknown decimation kind {other:?}: use \"butter\" or \"matlab\""
-                )))
-            }
-        };
+        let dec = problem::make_decimator(factor, kind, order, cutoff_hz, fs_hz, form)?;
         if p > 0 && n != y.len() {
             return Err(Error::InvalidInput(format!(
                 "w has {n} rows but y has {} samples",
@@ -575,6 +592,7 @@ fn default_factor(fs_hz: Real, cutoff_hz: Real) -> usize {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_COULOMB_EPS", DEFAULT_COULOMB_EPS)?;
+    m.add("DEFAULT_TOL", sim::DEFAULT_TOL)?;
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(regressor, m)?)?;
@@ -586,5 +604,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sosfiltfilt, m)?)?;
     m.add_function(wrap_pyfunction!(decimate, m)?)?;
     m.add_function(wrap_pyfunction!(default_factor, m)?)?;
+    m.add_class::<problem::Decimator>()?;
+    m.add_class::<problem::Problem>()?;
     Ok(())
 }

@@ -1,0 +1,876 @@
+//! The exponential integrator of the closed loop ([`Integrator::Exponential`], the default).
+//!
+//! With `x = (q, q̇)` the direct model (eqs. (5), (9)) splits into an affine part and
+//! the rest:
+//!
+//! `ẋ = A x + b(τ) + (0, g(x))`, `g(q, q̇) = −M⁻¹ Σ_{non-affine j} χ_j φ_j(q, q̇)`,
+//!
+//! where `A` and `b` hold every [`Basis::is_affine`] term (viscous friction, springs,
+//! offsets) and the held command `τ`, and `g` every other non-inertial term (the smooth
+//! Coulomb sign, and any nonlinear term a model adds). Over a step `h` the affine part is
+//! propagated exactly by `E = e^{Ah}` and the held force by `h φ1(Ah)` (the exact
+//! zero-order-hold discretization), and `g` enters through the variation-of-constants
+//! formula with `g` interpolated linearly in time between the ends of the step (the
+//! second-order exponential time-differencing scheme, implicit in the end value):
+//!
+//! `x_{n+1} = E x_n + h φ1(Ah) (b + g_n) + h φ2(Ah) (g_{n+1} − g_n)`, `g_{n+1} = g(x_{n+1})`,
+//!
+//! solved by Newton on `g_{n+1}` with the partial derivatives of the same basis functions
+//! ([`Basis::accumulate_partials`]). The matrices `E`, `h φ1(Ah)`, `h φ2(Ah)` come from one
+//! matrix exponential per parameter set and step length. Being implicit, the scheme is not
+//! limited by the stiff slope of the Coulomb sign at rest (`Fc / (ε M)`, about 2000 1/s on
+//! the EMPS); being exact for the affine part, it is exact for a model without nonlinear
+//! term, whatever the step.
+//!
+//! Step control: a sample period is integrated in one step when `g` is close to linear in
+//! time over it, judged by `g` at the midpoint of the step against the mean of its end
+//! values (defect `d`); the quadratic part of `g` that the scheme ignores moves the state by
+//! about `h²/3·|d|` (positions) and `2h/3·|d|` (velocities). When `2h/3·|d|·T` exceeds
+//! `tol` times the reference stroke, the step is halved, recursively down to `T / 2^12`.
+//! The steps depend only on the inputs, so a simulation is deterministic.
+
+use super::{describe, SimOptions, SimOutput};
+use crate::controller::Controller;
+use crate::error::{invalid, Error, Result};
+use crate::model::{Basis, Model};
+use nalgebra::{DMatrix, SMatrix, SVector};
+
+type V<const N: usize> = SVector<f64, N>;
+type Mat<const N: usize> = SMatrix<f64, N, N>;
+
+/// Deepest halving of the sample period (`T / 4096`).
+pub(super) const MAX_LEVEL: usize = 12;
+const MAX_NEWTON: usize = 8;
+
+/// The propagators of one step length `h`, split in `N × N` blocks:
+/// `E = [[eqq, eqv], [evq, evv]]`, `h φ1(Ah) B = [p1q; p1v]`, `h φ2(Ah) B = [p2q; p2v]`
+/// with `B = (0, I)` (the inputs act on the accelerations).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Level<const N: usize> {
+    pub h: f64,
+    pub eqq: Mat<N>,
+    pub eqv: Mat<N>,
+    pub evq: Mat<N>,
+    pub evv: Mat<N>,
+    pub p1q: Mat<N>,
+    pub p1v: Mat<N>,
+    pub p2q: Mat<N>,
+    pub p2v: Mat<N>,
+}
+
+/// The plant of one parameter set, split for the exponential integrator.
+pub(super) struct Plant<const N: usize> {
+    pub inv_mass: V<N>,
+    /// `q̈_affine = aq q + av q̇ + a0` (without the command).
+    pub aq: Mat<N>,
+    pub av: Mat<N>,
+    pub a0: V<N>,
+    /// The non-affine, non-inertial terms with their values.
+    pub terms: Vec<(Basis, f64)>,
+    pub eps: f64,
+    pub dt: f64,
+    /// Absolute position tolerance of one step (m).
+    pub atol: f64,
+    levels: Vec<Option<Level<N>>>,
+    /// Steps taken and steps rejected (halved), for diagnostics.
+    pub steps: usize,
+    pub rejected: usize,
+    /// Steps that needed the implicit solve.
+    pub implicit: std::cell::Cell<usize>,
+    /// The change of `g` over the last accepted step and that step's length.
+    last_dg: std::cell::Cell<V<N>>,
+    last_h: std::cell::Cell<f64>,
+}
+
+impl<const N: usize> Plant<N> {
+    pub fn new(model: &Model<N>, chi: &[f64], dt: f64, atol: f64) -> Result<Self> {
+        let inv_mass = model.masses(chi).map(|m| 1.0 / m);
+        let eps = model.coulomb_eps();
+        let zero = V::<N>::zeros();
+        let affine: Vec<(Basis, f64)> = model
+            .basis()
+            .iter()
+            .zip(chi)
+            .filter(|(b, _)| b.is_affine())
+            .map(|(b, &x)| (*b, x))
+            .collect();
+        let terms: Vec<(Basis, f64)> = model
+            .basis()
+            .iter()
+            .zip(chi)
+            .filter(|(b, _)| !b.is_affine() && !b.is_inertia())
+            .map(|(b, &x)| (*b, x))
+            .collect();
+        // The affine forces F(q, q̇) = Kq q + Kv q̇ + c, read off the basis functions.
+        let force = |q: &V<N>, v: &V<N>| {
+            let mut f = V::<N>::zeros();
+            for (b, x) in &affine {
+                b.accumulate(*x, q, v, &zero, eps, &mut f);
+            }
+            f
+        };
+        let c = force(&zero, &zero);
+        let mut aq = Mat::<N>::zeros();
+        let mut av = Mat::<N>::zeros();
+        for e in 0..N {
+            let mut unit = zero;
+            unit[e] = 1.0;
+            let fq = force(&unit, &zero) - c;
+            let fv = force(&zero, &unit) - c;
+            for d in 0..N {
+                aq[(d, e)] = -inv_mass[d] * fq[d];
+                av[(d, e)] = -inv_mass[d] * fv[d];
+            }
+        }
+        let a0 = -c.component_mul(&inv_mass);
+        let mut plant = Self {
+            inv_mass,
+            aq,
+            av,
+            a0,
+            terms,
+            eps,
+            dt,
+            atol,
+            levels: vec![None; MAX_LEVEL + 2],
+            steps: 0,
+            rejected: 0,
+            implicit: std::cell::Cell::new(0),
+            last_dg: std::cell::Cell::new(V::<N>::zeros()),
+            last_h: std::cell::Cell::new(dt),
+        };
+        plant.ensure(0)?;
+        plant.ensure(1)?;
+        Ok(plant)
+    }
+
+    /// Computes the propagators of level `l` (step `dt / 2^l`) if not done yet.
+    pub fn ensure(&mut self, l: usize) -> Result<()> {
+        if self.levels[l].is_none() {
+            self.levels[l] = Some(self.propagators(self.dt / (1u64 << l) as f64)?);
+        }
+        Ok(())
+    }
+
+    pub fn level(&self, l: usize) -> &Level<N> {
+        self.levels[l].as_ref().expect("level computed by ensure")
+    }
+
+    /// The block matrix `Z = [[Ah, B, 0], [0, 0, I], [0, 0, 0]]` (size `4N`), whose
+    /// exponential has the first block row `[e^{Ah}, φ1(Ah) B, φ2(Ah) B]`.
+    fn augmented(aq: &Mat<N>, av: &Mat<N>, h: f64, with_inputs: bool) -> DMatrix<f64> {
+        let n2 = 2 * N;
+        let mut m = DMatrix::<f64>::zeros(4 * N, 4 * N);
+        for d in 0..N {
+            if with_inputs {
+                m[(d, N + d)] = h; // q̇ row block of A h
+                m[(N + d, n2 + d)] = 1.0; // B
+                m[(n2 + d, n2 + N + d)] = 1.0; // I
+            }
+            for e in 0..N {
+                m[(N + d, e)] = h * aq[(d, e)];
+                m[(N + d, N + e)] = h * av[(d, e)];
+            }
+        }
+        m
+    }
+
+    /// Reads `E`, `h φ1 B`, `h φ2 B` from the first `2N` rows of `x` starting at column `c0`.
+    fn blocks(x: &DMatrix<f64>, c0: usize, h: f64) -> Level<N> {
+        let n2 = 2 * N;
+        let block =
+            |r0: usize, c: usize, scale: f64| Mat::<N>::from_fn(|i, j| scale * x[(r0 + i, c0 + c + j)]);
+        Level {
+            h,
+            eqq: block(0, 0, 1.0),
+            eqv: block(0, N, 1.0),
+            evq: block(N, 0, 1.0),
+            evv: block(N, N, 1.0),
+            p1q: block(0, n2, h),
+            p1v: block(N, n2, h),
+            p2q: block(0, n2 + N, h),
+            p2v: block(N, n2 + N, h),
+        }
+    }
+
+    /// `E`, `h φ1(Ah) B`, `h φ2(Ah) B` for a step `h`.
+    fn propagators(&self, h: f64) -> Result<Level<N>> {
+        let x = Self::augmented(&self.aq, &self.av, h, true).exp();
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(invalid!(
+                "the exponential of the linear part of the model is not finite for a step of {h} s; \
+                 check the parameter values and units"
+            ));
+        }
+        Ok(Self::blocks(&x, 0, h))
+    }
+
+    /// Derivatives of the propagators of a step `h` along a change `(daq, dav)` of the
+    /// linear part: the upper right block of `exp([[Z, dZ], [0, Z]])` (Fréchet derivative
+    /// of the exponential).
+    fn propagator_derivatives(&self, h: f64, daq: &Mat<N>, dav: &Mat<N>) -> Level<N> {
+        let z = Self::augmented(&self.aq, &self.av, h, true);
+        let dz = Self::augmented(daq, dav, h, false);
+        let s = 4 * N;
+        let mut big = DMatrix::<f64>::zeros(2 * s, 2 * s);
+        big.view_mut((0, 0), (s, s)).copy_from(&z);
+        big.view_mut((s, s), (s, s)).copy_from(&z);
+        big.view_mut((0, s), (s, s)).copy_from(&dz);
+        let x = big.exp();
+        Self::blocks(&x, s, h)
+    }
+
+    /// `g(q, q̇)`: accelerations of the non-affine terms.
+    #[inline(always)]
+    pub fn g(&self, q: &V<N>, v: &V<N>) -> V<N> {
+        let zero = V::<N>::zeros();
+        let mut f = V::<N>::zeros();
+        for (b, x) in &self.terms {
+            b.accumulate(*x, q, v, &zero, self.eps, &mut f);
+        }
+        -f.component_mul(&self.inv_mass)
+    }
+
+    /// `(∂g/∂q, ∂g/∂q̇)` (the basis partials depend on the velocities only so far).
+    #[inline(always)]
+    pub fn g_partials(&self, q: &V<N>, v: &V<N>) -> (Mat<N>, Mat<N>) {
+        let mut dq = Mat::<N>::zeros();
+        let mut dv = Mat::<N>::zeros();
+        for (b, x) in &self.terms {
+            b.accumulate_partials(*x, q, v, self.eps, &mut dq, &mut dv);
+        }
+        for d in 0..N {
+            for e in 0..N {
+                dq[(d, e)] *= -self.inv_mass[d];
+                dv[(d, e)] *= -self.inv_mass[d];
+            }
+        }
+        (dq, dv)
+    }
+
+    /// Accelerations of the full direct model for the input accelerations `b` (= M⁻¹ u).
+    #[inline(always)]
+    pub fn accel(&self, q: &V<N>, v: &V<N>, b: &V<N>, g: &V<N>) -> V<N> {
+        self.aq * q + self.av * v + self.a0 + b + g
+    }
+
+    /// One step of level `l` from `(q, v)` with `g_n = gn`, input accelerations `b`.
+    ///
+    /// Quick path: the change of `g` over the step is predicted from the previous step's
+    /// (`c · Δg_prev`, `c` the ratio of the step lengths), the state follows from it,
+    /// `x_1 = E x + h φ1 (b + a0 + g_n) + h φ2 Δg_pred`, and `g_1 = g(x_1)` is evaluated
+    /// there. When the prediction was right to a tenth of the tolerance (`g` nearly linear in
+    /// time over the two steps), the step is taken; it is then the second-order scheme with
+    /// the end value extrapolated, and costs one evaluation of `g`. Otherwise the implicit
+    /// equation is solved by Newton and the midpoint defect decides. Either way the step ends
+    /// with `g_1 = g(x_1)` exactly, so the next step and the output accelerations use the
+    /// direct model at the state itself.
+    #[inline(always)]
+    pub fn try_step(&self, l: usize, q: &V<N>, v: &V<N>, gn: &V<N>, b: &V<N>) -> Step<N> {
+        let lv = self.level(l);
+        let h = lv.h;
+        let f = b + self.a0 + gn;
+        let qp = lv.eqq * q + lv.eqv * v + lv.p1q * f;
+        let vp = lv.evq * q + lv.evv * v + lv.p1v * f;
+        let c = h / self.last_h.get();
+        let pred = self.last_dg.get() * c;
+        let q1 = qp + lv.p2q * pred;
+        let v1 = vp + lv.p2v * pred;
+        let g1 = self.g(&q1, &v1);
+        let scale = self.atol / (h * self.dt);
+        if (g1 - gn - pred).amax() <= 0.1 * scale {
+            return Step {
+                q1,
+                v1,
+                g1,
+                dw: pred,
+                err: 0.0,
+                quick: true,
+                c,
+                f,
+            };
+        }
+        self.implicit_step(l, q, v, gn, f, qp, vp, g1 - gn, scale)
+    }
+
+    /// The Newton solve and the midpoint test of [`Plant::try_step`], from the fixed-point
+    /// iterate `dw = g(x(Δg_pred)) − g_n`.
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    fn implicit_step(
+        &self,
+        l: usize,
+        q: &V<N>,
+        v: &V<N>,
+        gn: &V<N>,
+        f: V<N>,
+        qp: V<N>,
+        vp: V<N>,
+        mut dw: V<N>,
+        scale: f64,
+    ) -> Step<N> {
+        let lv = self.level(l);
+        self.implicit.set(self.implicit.get() + 1);
+        let small = 1e-2 * scale;
+        let mut step = Step {
+            q1: qp,
+            v1: vp,
+            g1: *gn,
+            dw,
+            err: f64::INFINITY,
+            quick: false,
+            c: 0.0,
+            f,
+        };
+        let mut converged = false;
+        for _ in 0..MAX_NEWTON {
+            let q1 = qp + lv.p2q * dw;
+            let v1 = vp + lv.p2v * dw;
+            let g1 = self.g(&q1, &v1);
+            let r = g1 - gn - dw;
+            (step.q1, step.v1, step.g1, step.dw) = (q1, v1, g1, dw);
+            if r.amax() <= small {
+                converged = true;
+                break;
+            }
+            let (gq, gv) = self.g_partials(&q1, &v1);
+            let jac = gq * lv.p2q + gv * lv.p2v - Mat::<N>::identity();
+            match jac.try_inverse() {
+                Some(ji) => dw -= ji * r,
+                None => break,
+            }
+        }
+        if converged {
+            // Midpoint defect of the linear interpolation of g.
+            let lm = self.level(l + 1);
+            let half = dw * 0.5;
+            let qm = lm.eqq * q + lm.eqv * v + lm.p1q * f + lm.p2q * half;
+            let vm = lm.evq * q + lm.evv * v + lm.p1v * f + lm.p2v * half;
+            let d = self.g(&qm, &vm) - gn - half;
+            step.err = d.amax() * (2.0 / 3.0) / scale;
+        }
+        step
+    }
+
+    /// Advances `(q, v, g)` over one step of level `l`, halving it while the error is too
+    /// large; `hook` sees every accepted step.
+    #[inline(always)]
+    pub fn advance<H: StepHook<N>>(
+        &mut self,
+        l: usize,
+        q: &mut V<N>,
+        v: &mut V<N>,
+        g: &mut V<N>,
+        b: &V<N>,
+        hook: &mut H,
+    ) -> Result<()> {
+        let step = self.try_step(l, q, v, g, b);
+        if step.err <= 1.0 || l == MAX_LEVEL {
+            hook.step(self, l, q, v, g, &step)?;
+            self.last_dg.set(step.g1 - *g);
+            self.last_h.set(self.level(l).h);
+            *q = step.q1;
+            *v = step.v1;
+            *g = step.g1;
+            self.steps += 1;
+            return Ok(());
+        }
+        self.subdivide(l, q, v, g, b, hook)
+    }
+
+    #[inline(never)]
+    fn subdivide<H: StepHook<N>>(
+        &mut self,
+        l: usize,
+        q: &mut V<N>,
+        v: &mut V<N>,
+        g: &mut V<N>,
+        b: &V<N>,
+        hook: &mut H,
+    ) -> Result<()> {
+        self.rejected += 1;
+        self.ensure(l + 2)?;
+        self.advance(l + 1, q, v, g, b, hook)?;
+        self.advance(l + 1, q, v, g, b, hook)
+    }
+}
+
+/// One attempted step: the end state and `g` there, the change of `g` the state was
+/// computed with, the error ratio (≤ 1: accept), and what the tangent needs to
+/// differentiate it.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Step<const N: usize> {
+    pub q1: V<N>,
+    pub v1: V<N>,
+    /// `g(q1, v1)`.
+    pub g1: V<N>,
+    /// The change of `g` in the state formula: the prediction (quick step) or the Newton
+    /// iterate (implicit step).
+    pub dw: V<N>,
+    pub err: f64,
+    /// Quick step (`dw = c · Δg_prev`) rather than the implicit solve.
+    pub quick: bool,
+    /// Ratio of this step's length to the previous one's (quick step).
+    pub c: f64,
+    /// `b + a0 + g_n`.
+    pub f: V<N>,
+}
+
+/// What rides along accepted steps: nothing for a plain simulation, the sensitivities
+/// for `simulate_sensitivity`.
+pub(super) trait StepHook<const N: usize> {
+    /// Step of level `l` accepted from `(q, v)` with `g_n = gn`.
+    fn step(
+        &mut self,
+        plant: &Plant<N>,
+        l: usize,
+        q: &V<N>,
+        v: &V<N>,
+        gn: &V<N>,
+        step: &Step<N>,
+    ) -> Result<()>;
+}
+
+/// The hook of a plain simulation.
+pub(super) struct NoHook;
+
+impl<const N: usize> StepHook<N> for NoHook {
+    #[inline(always)]
+    fn step(&mut self, _: &Plant<N>, _: usize, _: &V<N>, _: &V<N>, _: &V<N>, _: &Step<N>) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// The nearest multiple of `step` (ties away from zero, like [`f64::round`]) without the
+/// libm call `round` compiles to on baseline x86-64: adding and removing 1.5·2⁵² rounds to
+/// the nearest integer (ties to even), exact ties are then moved away from zero, and the
+/// sign of zero is kept.
+#[inline(always)]
+fn round_to(x: f64, step: f64) -> f64 {
+    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+    let y = x / step;
+    if y.abs() >= 4_503_599_627_370_496.0 {
+        return y.round() * step; // beyond 2^52 every double is an integer already
+    }
+    let mut r = (y + MAGIC) - MAGIC;
+    if (r - y).abs() == 0.5 {
+        r = y + 0.5 * y.signum();
+    }
+    r.copysign(y) * step
+}
+
+/// Position tolerance of one step (m): `tol` times the reference stroke (1 m if flat).
+pub(super) fn step_tolerance(qr: &[f64], tol: f64) -> f64 {
+    let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+        (a.min(x), b.max(x))
+    });
+    let stroke = hi - lo;
+    tol * if stroke > 0.0 { stroke } else { 1.0 }
+}
+
+/// Diagnostics of an exponential-integrator run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepStats {
+    /// Steps taken.
+    pub steps: usize,
+    /// Steps rejected and halved.
+    pub rejected: usize,
+    /// Steps (taken or rejected) that needed the implicit solve.
+    pub implicit: usize,
+}
+
+/// What rides along the samples: the command's sensitivity and the recorded outputs.
+pub(super) trait Tangent<const N: usize>: StepHook<N> {
+    /// Sets up the tangent for the plant (initial state `(q, v)` with `g = g0`).
+    fn start(&mut self, plant: &Plant<N>, q: &V<N>, v: &V<N>, g0: &V<N>);
+    /// The command of sample `k` has been computed, with derivatives `dtau_dqm`, `dtau_dqm2`
+    /// with respect to the measurements at `k` and `k − 2`; `tau` is the force applied over
+    /// the coming period (after the delay).
+    fn command(&mut self, k: usize, dtau_dqm: f64, dtau_dqm2: f64, tau: f64);
+    /// Records the outputs of sample `k`.
+    fn record(&mut self, k: usize);
+}
+
+impl<const N: usize> Tangent<N> for NoHook {
+    #[inline(always)]
+    fn start(&mut self, _: &Plant<N>, _: &V<N>, _: &V<N>, _: &V<N>) {}
+    #[inline(always)]
+    fn command(&mut self, _: usize, _: f64, _: f64, _: f64) {}
+    #[inline(always)]
+    fn record(&mut self, _: usize) {}
+}
+
+/// The closed-loop simulation with the exponential integrator (see the module documentation).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run<const N: usize, T: Tangent<N>>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+    stats: Option<&mut StepStats>,
+    tangent: &mut T,
+) -> Result<SimOutput> {
+    let n = super::check_inputs(model, chi, controller, qr, u_ext, opts)?;
+
+    let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+        (a.min(x), b.max(x))
+    });
+    let bound = 10.0 * (hi - lo) + 1.0;
+    let mut plant = Plant::new(model, chi, opts.dt, step_tolerance(qr, opts.tol))?;
+    let quantize = |x: f64| {
+        if opts.quantization > 0.0 {
+            round_to(x, opts.quantization)
+        } else {
+            x
+        }
+    };
+
+    let mut q = V::<N>::repeat(qr[0]);
+    let mut v = V::<N>::zeros();
+    let mut g = plant.g(&q, &v);
+    tangent.start(&plant, &q, &v, &g);
+    let q0m = quantize(q[0]);
+    let (mut qm1, mut qm2) = (q0m, q0m);
+    let mut pending = vec![0.0; opts.delay];
+
+    let mut force = vec![0.0; n];
+    let mut oq = vec![vec![0.0; n]; N];
+    let mut oqd = vec![vec![0.0; n]; N];
+    let mut oqdd = vec![vec![0.0; n]; N];
+
+    for k in 0..n {
+        let qm = quantize(q[0]);
+        let (tau_cmd, dtau_dqm, dtau_dqm2) =
+            controller.command_with_partials(qr[k], qm, qm2, opts.dt, u_ext.map_or(0.0, |u| u[k]));
+        qm2 = qm1;
+        qm1 = qm;
+        let tau = if opts.delay == 0 {
+            tau_cmd
+        } else {
+            std::mem::replace(&mut pending[k % opts.delay], tau_cmd)
+        };
+        tangent.command(k, dtau_dqm, dtau_dqm2, tau);
+        let mut b = V::<N>::zeros();
+        b[0] = tau * plant.inv_mass[0];
+        // Every step ends with g evaluated at its end state, so this is the direct model's
+        // acceleration at the recorded state: the IDM of the outputs reproduces the applied
+        // force to rounding.
+        let a = plant.accel(&q, &v, &b, &g);
+        force[k] = tau_cmd;
+        for d in 0..N {
+            oq[d][k] = q[d];
+            oqd[d][k] = v[d];
+            oqdd[d][k] = a[d];
+        }
+        tangent.record(k);
+        if k + 1 == n {
+            break;
+        }
+        plant.advance(0, &mut q, &mut v, &mut g, &b, tangent)?;
+
+        let err = (q[0] - qr[k + 1]).abs();
+        if !(q.iter().chain(v.iter()).all(|x| x.is_finite()) && err <= bound) {
+            return Err(Error::Simulation(format!(
+                "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
+                 (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller gains",
+                k + 1,
+                (k + 1) as f64 * opts.dt,
+                err,
+                bound,
+                describe(model, chi)
+            )));
+        }
+    }
+    if let Some(s) = stats {
+        s.steps = plant.steps;
+        s.rejected = plant.rejected;
+        s.implicit = plant.implicit.get();
+    }
+    Ok(SimOutput {
+        force,
+        q: oq,
+        qd: oqd,
+        qdd: oqdd,
+    })
+}
+
+/// How a parameter enters the split model.
+#[derive(Clone, Copy, Debug)]
+enum Role {
+    /// A mass of dof `dof`: scales the whole row `dof` of the direct model.
+    Inertia { dof: usize },
+    /// An affine term: enters `A` and `a0`.
+    Affine(Basis),
+    /// Any other term: enters `g`.
+    Nonlinear(Basis),
+}
+
+/// Forward sensitivities of the exponential integrator: the exact derivatives of the
+/// computed discrete trajectory with respect to the parameters (every accepted step
+/// differentiated, the propagators by the Fréchet derivative of the matrix exponential,
+/// the implicit solve by the implicit function theorem). The quantizer is treated as the
+/// identity and the step sequence as fixed.
+pub(super) struct Sens<const N: usize> {
+    p: usize,
+    n: usize,
+    role: Vec<Role>,
+    /// `∂(M⁻¹)/∂χ_j` (diagonal).
+    dinv: Vec<V<N>>,
+    /// `∂a0/∂χ_j`.
+    da0: Vec<V<N>>,
+    /// `∂(aq, av)/∂χ_j`, `None` where zero.
+    da: Vec<Option<(Mat<N>, Mat<N>)>>,
+    /// Propagator derivatives per level and parameter, computed on first use.
+    dlevels: Vec<Option<Vec<Option<Level<N>>>>>,
+    sq: Vec<V<N>>,
+    sv: Vec<V<N>>,
+    /// `∂g_n/∂χ_j`.
+    dg: Vec<V<N>>,
+    /// Tangent of the change of `g` over the last accepted step.
+    dlast: Vec<V<N>>,
+    gchi: Vec<V<N>>,
+    tau: f64,
+    /// Sensitivity of the force applied over the current period.
+    dtau: Vec<f64>,
+    sq1_hist: [Vec<f64>; 2],
+    pending: Vec<Vec<f64>>,
+    pub dforce: Vec<f64>,
+    pub dq: Vec<f64>,
+}
+
+impl<const N: usize> Sens<N> {
+    pub fn new(model: &Model<N>, n: usize, delay: usize) -> Self {
+        let p = model.n_params();
+        let role = model
+            .basis()
+            .iter()
+            .map(|b| match *b {
+                Basis::Inertia { dof } => Role::Inertia { dof },
+                b if b.is_affine() => Role::Affine(b),
+                b => Role::Nonlinear(b),
+            })
+            .collect();
+        Self {
+            p,
+            n,
+            role,
+            dinv: vec![V::<N>::zeros(); p],
+            da0: vec![V::<N>::zeros(); p],
+            da: vec![None; p],
+            dlevels: vec![None; MAX_LEVEL + 2],
+            sq: vec![V::<N>::zeros(); p],
+            sv: vec![V::<N>::zeros(); p],
+            dg: vec![V::<N>::zeros(); p],
+            dlast: vec![V::<N>::zeros(); p],
+            gchi: vec![V::<N>::zeros(); p],
+            tau: 0.0,
+            dtau: vec![0.0; p],
+            sq1_hist: [vec![0.0; p], vec![0.0; p]],
+            pending: vec![vec![0.0; p]; delay],
+            dforce: vec![0.0; p * n],
+            dq: vec![0.0; N * p * n],
+        }
+    }
+
+    /// `∂g/∂χ_j` at `(q, v)` where `g = ge`, into `self.gchi`.
+    fn g_chi(&mut self, plant: &Plant<N>, q: &V<N>, v: &V<N>, ge: &V<N>) {
+        let zero = V::<N>::zeros();
+        for j in 0..self.p {
+            self.gchi[j] = match self.role[j] {
+                Role::Inertia { dof } => {
+                    let mut x = V::<N>::zeros();
+                    x[dof] = -ge[dof] * plant.inv_mass[dof];
+                    x
+                }
+                Role::Affine(_) => zero,
+                Role::Nonlinear(b) => {
+                    let mut f = V::<N>::zeros();
+                    b.accumulate(1.0, q, v, &zero, plant.eps, &mut f);
+                    -f.component_mul(&plant.inv_mass)
+                }
+            };
+        }
+    }
+
+    fn dlevel(&mut self, plant: &Plant<N>, l: usize) {
+        if self.dlevels[l].is_none() {
+            let h = plant.level(l).h;
+            let d = self
+                .da
+                .iter()
+                .map(|x| {
+                    x.as_ref()
+                        .map(|(daq, dav)| plant.propagator_derivatives(h, daq, dav))
+                })
+                .collect();
+            self.dlevels[l] = Some(d);
+        }
+    }
+}
+
+impl<const N: usize> Tangent<N> for Sens<N> {
+    fn start(&mut self, plant: &Plant<N>, q: &V<N>, v: &V<N>, g0: &V<N>) {
+        let zero = V::<N>::zeros();
+        for j in 0..self.p {
+            match self.role[j] {
+                Role::Inertia { dof } => {
+                    let m = 1.0 / plant.inv_mass[dof];
+                    self.dinv[j][dof] = -1.0 / (m * m);
+                    self.da0[j][dof] = -plant.a0[dof] / m;
+                    let mut daq = Mat::<N>::zeros();
+                    let mut dav = Mat::<N>::zeros();
+                    for e in 0..N {
+                        daq[(dof, e)] = -plant.aq[(dof, e)] / m;
+                        dav[(dof, e)] = -plant.av[(dof, e)] / m;
+                    }
+                    self.da[j] = Some((daq, dav));
+                }
+                Role::Affine(b) => {
+                    let force = |q: &V<N>, v: &V<N>| {
+                        let mut f = V::<N>::zeros();
+                        b.accumulate(1.0, q, v, &zero, plant.eps, &mut f);
+                        f
+                    };
+                    let c = force(&zero, &zero);
+                    self.da0[j] = -c.component_mul(&plant.inv_mass);
+                    let mut daq = Mat::<N>::zeros();
+                    let mut dav = Mat::<N>::zeros();
+                    for e in 0..N {
+                        let mut unit = zero;
+                        unit[e] = 1.0;
+                        let fq = force(&unit, &zero) - c;
+                        let fv = force(&zero, &unit) - c;
+                        for d in 0..N {
+                            daq[(d, e)] = -plant.inv_mass[d] * fq[d];
+                            dav[(d, e)] = -plant.inv_mass[d] * fv[d];
+                        }
+                    }
+                    if daq.amax() > 0.0 || dav.amax() > 0.0 {
+                        self.da[j] = Some((daq, dav));
+                    }
+                }
+                Role::Nonlinear(_) => {}
+            }
+        }
+        self.g_chi(plant, q, v, g0);
+        self.dg.copy_from_slice(&self.gchi);
+    }
+
+    fn command(&mut self, k: usize, dtau_dqm: f64, dtau_dqm2: f64, tau: f64) {
+        let (p, n, d) = (self.p, self.n, self.pending.len());
+        self.tau = tau;
+        let cmd = if d == 0 {
+            &mut self.dtau
+        } else {
+            let slot = &mut self.pending[k % d];
+            std::mem::swap(&mut self.dtau, slot);
+            slot
+        };
+        for j in 0..p {
+            cmd[j] = dtau_dqm * self.sq[j][0] + dtau_dqm2 * self.sq1_hist[1][j];
+            self.dforce[j * n + k] = cmd[j];
+        }
+        self.sq1_hist.swap(0, 1);
+        for j in 0..p {
+            self.sq1_hist[0][j] = self.sq[j][0];
+        }
+    }
+
+    fn record(&mut self, k: usize) {
+        let (p, n) = (self.p, self.n);
+        for d in 0..N {
+            for j in 0..p {
+                self.dq[(d * p + j) * n + k] = self.sq[j][d];
+            }
+        }
+    }
+}
+
+impl<const N: usize> StepHook<N> for Sens<N> {
+    fn step(
+        &mut self,
+        plant: &Plant<N>,
+        l: usize,
+        q: &V<N>,
+        v: &V<N>,
+        _gn: &V<N>,
+        st: &Step<N>,
+    ) -> Result<()> {
+        self.dlevel(plant, l);
+        let lv = *plant.level(l);
+        let (gq, gv) = plant.g_partials(&st.q1, &st.v1);
+        let jinv = if st.quick {
+            Mat::<N>::identity()
+        } else {
+            (Mat::<N>::identity() - gq * lv.p2q - gv * lv.p2v)
+                .try_inverse()
+                .ok_or_else(|| {
+                    Error::Simulation("singular implicit step in the sensitivity equations".into())
+                })?
+        };
+        self.g_chi(plant, &st.q1, &st.v1, &st.g1);
+        let dl = self.dlevels[l].as_ref().expect("computed above");
+        for j in 0..self.p {
+            let mut df = self.da0[j] + self.dg[j];
+            df[0] += self.dinv[j][0] * self.tau + plant.inv_mass[0] * self.dtau[j];
+            let (sq, sv) = (self.sq[j], self.sv[j]);
+            // tangent of x_p = E x + h φ1 f, plus that of h φ2 along the step's Δg
+            let mut yq = lv.eqq * sq + lv.eqv * sv + lv.p1q * df;
+            let mut yv = lv.evq * sq + lv.evv * sv + lv.p1v * df;
+            if let Some(d) = &dl[j] {
+                yq += d.eqq * q + d.eqv * v + d.p1q * st.f + d.p2q * st.dw;
+                yv += d.evq * q + d.evv * v + d.p1v * st.f + d.p2v * st.dw;
+            }
+            let (q1, v1, dg1) = if st.quick {
+                // x1 = x_p + h φ2 c Δg_prev, g1 = g(x1)
+                let dpred = self.dlast[j] * st.c;
+                let q1 = yq + lv.p2q * dpred;
+                let v1 = yv + lv.p2v * dpred;
+                (q1, v1, gq * q1 + gv * v1 + self.gchi[j])
+            } else {
+                // x1 = x_p + h φ2 (g1 − g_n), g1 = g(x1): implicit function theorem
+                yq -= lv.p2q * self.dg[j];
+                yv -= lv.p2v * self.dg[j];
+                let dw = jinv * (gq * yq + gv * yv + self.gchi[j]);
+                (yq + lv.p2q * dw, yv + lv.p2v * dw, dw)
+            };
+            self.dlast[j] = dg1 - self.dg[j];
+            self.sq[j] = q1;
+            self.sv[j] = v1;
+            self.dg[j] = dg1;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::round_to;
+
+    #[test]
+    fn round_to_matches_f64_round_including_ties() {
+        for &step in &[5e-8, 1.0, 0.1, 3e-3] {
+            for i in -2000..2000 {
+                let x = i as f64 * 0.37e-3 * step / 5e-8 + 1e-3 * (i as f64).sin();
+                assert_eq!(round_to(x, step), (x / step).round() * step, "{x} {step}");
+            }
+        }
+        for x in [
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.5,
+            0.49999999999999994,
+            -0.0,
+            0.0,
+            4.6e15,
+            -9.1e15,
+        ] {
+            assert_eq!(round_to(x, 1.0).to_bits(), x.round().to_bits(), "{x}");
+        }
+    }
+}

@@ -1,0 +1,405 @@
+//! `Decimator` and `Problem`: a decimation design and a record's closed loop held on the
+//! Rust side, so that an identification builds them once and then iterates with one call
+//! per step (simulation, decimation, residuals and regressors stay in Rust).
+
+use didim_core::error::Error;
+use didim_core::filter::{Decimator as CoreDecimator, FilterForm};
+use didim_core::model::{Model, DEFAULT_COULOMB_EPS};
+use didim_core::objective::{split_errors, Output, Problem as CoreProblem};
+use didim_core::sim::{self, SimOutput};
+use didim_core::Controller;
+use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::convert::*;
+use crate::{core_error, make_controller, make_model, run, sim_options, AnyModel, Decimated, Terms};
+
+type Arr<'py> = Bound<'py, PyArray1<f64>>;
+type Costs<'py> = (Arr<'py>, Vec<Option<String>>);
+type System<'py> = (Arr<'py>, Bound<'py, PyAny>, Arr<'py>);
+
+/// Builds a core decimator from the keyword options of `decimate`.
+pub fn make_decimator(
+    factor: usize,
+    kind: &str,
+    order: usize,
+    cutoff_hz: Option<f64>,
+    fs_hz: Option<f64>,
+    form: &str,
+) -> Result<CoreDecimator, Error> {
+    match (kind, cutoff_hz, fs_hz) {
+        ("matlab", _, _) => CoreDecimator::matlab(factor),
+        ("butter", Some(c), Some(fs)) => {
+            let form = match form {
+                "sos" => FilterForm::Sos,
+                "ba" => FilterForm::Ba,
+                other => {
+                    return Err(Error::InvalidInput(format!(
+                        "unknown filter form {other:?}: use \"sos\" or \"ba\""
+                    )))
+                }
+            };
+            CoreDecimator::butterworth(order, c, fs, factor, form)
+        }
+        ("butter", _, _) => Err(Error::InvalidInput(
+            "a Butterworth decimation needs cutoff_hz and fs_hz".into(),
+        )),
+        (other, _, _) => Err(Error::InvalidInput(format!(
+            "unknown decimation kind {other:?}: use \"butter\" or \"matlab\""
+        ))),
+    }
+}
+
+/// A decimation design (zero-phase low-pass and down-sampling), designed once.
+#[pyclass(frozen, module = "didim._core")]
+pub struct Decimator {
+    pub inner: CoreDecimator,
+}
+
+#[pymethods]
+impl Decimator {
+    #[new]
+    #[pyo3(signature = (factor, *, kind="butter", order=4, cutoff_hz=None, fs_hz=None, form="sos"))]
+    fn new(
+        py: Python<'_>,
+        factor: usize,
+        kind: &str,
+        order: usize,
+        cutoff_hz: Option<f64>,
+        fs_hz: Option<f64>,
+        form: &str,
+    ) -> PyResult<Self> {
+        let inner =
+            make_decimator(factor, kind, order, cutoff_hz, fs_hz, form).map_err(|e| core_error(py, e))?;
+        Ok(Self { inner })
+    }
+
+    /// Number of samples kept from `n`.
+    fn output_len(&self, n: usize) -> usize {
+        self.inner.output_len(n)
+    }
+
+    /// Decimates y (n,) and, when given, every column of w (n, p) alike; returns (y_dec, w_dec).
+    #[pyo3(signature = (y, w=None))]
+    fn apply<'py>(
+        &self,
+        py: Python<'py>,
+        y: PyReadonlyArray1<'py, f64>,
+        w: Option<PyReadonlyArray2<'py, f64>>,
+    ) -> PyResult<Decimated<'py>> {
+        let y = slice1(&y);
+        let y: &[f64] = &y;
+        let (wc, n, p) = match &w {
+            Some(w) => columns2(w),
+            None => (Vec::new(), y.len(), 0),
+        };
+        let (yd, wd) = run(py, || {
+            if p > 0 && n != y.len() {
+                return Err(Error::InvalidInput(format!(
+                    "w has {n} rows but y has {} samples",
+                    y.len()
+                )));
+            }
+            self.inner.apply_parallel(y, &wc, p)
+        })?;
+        let m = yd.len();
+        let wd = match w {
+            Some(_) => Some(colmajor_to_array(py, wd, m, p)?),
+            None => None,
+        };
+        Ok((yd.into_pyarray(py), wd))
+    }
+}
+
+fn parse_output(output: &str) -> Result<Output, Error> {
+    match output {
+        "force" => Ok(Output::Force),
+        "position" => Ok(Output::MotorPosition),
+        other => Err(Error::InvalidInput(format!(
+            "unknown output {other:?}: use \"force\" or \"position\""
+        ))),
+    }
+}
+
+/// A record's closed loop (model structure, controller, reference, external input,
+/// simulator options), for repeated simulations with varying parameters.
+#[pyclass(frozen, module = "didim._core")]
+pub struct Problem {
+    model: AnyModel,
+    controller: Controller,
+    qr: Vec<f64>,
+    u_ext: Option<Vec<f64>>,
+    opts: sim::SimOptions,
+}
+
+/// Runs `f` with the core problem of the right number of dofs.
+macro_rules! with_problem {
+    ($self:ident, $pb:ident => $body:expr) => {
+        match &$self.model {
+            AnyModel::Rigid(m) => {
+                let $pb = $self.core(m);
+                $body
+            }
+            AnyModel::Flexible(m) => {
+                let $pb = $self.core(m);
+                $body
+            }
+        }
+    };
+}
+
+impl Problem {
+    fn core<'a, const N: usize>(&'a self, model: &'a Model<N>) -> CoreProblem<'a, N> {
+        CoreProblem {
+            model,
+            controller: self.controller,
+            qr: &self.qr,
+            u_ext: self.u_ext.as_deref(),
+            opts: self.opts,
+        }
+    }
+
+    fn n_params_(&self) -> usize {
+        match &self.model {
+            AnyModel::Rigid(m) => m.n_params(),
+            AnyModel::Flexible(m) => m.n_params(),
+        }
+    }
+
+    fn ndof_(&self) -> usize {
+        match &self.model {
+            AnyModel::Rigid(_) => 1,
+            AnyModel::Flexible(_) => 2,
+        }
+    }
+}
+
+fn sim_dict<'py>(py: Python<'py>, out: SimOutput) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("force", out.force.into_pyarray(py))?;
+    d.set_item("q", rows_to_array(py, out.q)?)?;
+    d.set_item("qd", rows_to_array(py, out.qd)?)?;
+    d.set_item("qdd", rows_to_array(py, out.qdd)?)?;
+    Ok(d)
+}
+
+#[pymethods]
+impl Problem {
+    #[new]
+    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, integrator="exponential", tol=sim::DEFAULT_TOL, terms=None, backlash_gap=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        model: &str,
+        qr: PyReadonlyArray1<'_, f64>,
+        dt: f64,
+        controller: &str,
+        gains: Vec<f64>,
+        u_ext: Option<PyReadonlyArray1<'_, f64>>,
+        substeps: usize,
+        quantization: f64,
+        delay: usize,
+        coulomb_eps: f64,
+        offset: bool,
+        integrator: &str,
+        tol: f64,
+        terms: Option<Terms>,
+        backlash_gap: Option<f64>,
+    ) -> PyResult<Self> {
+        let terms = terms.unwrap_or_default();
+        let opts = sim_options(py, dt, substeps, quantization, delay, integrator, tol)?;
+        let qr = slice1(&qr).into_owned();
+        let u_ext = u_ext.as_ref().map(|u| slice1(u).into_owned());
+        let (model, controller) = run(py, || {
+            opts.validate()?;
+            Ok((
+                make_model(model, offset, coulomb_eps, &terms, backlash_gap)?,
+                make_controller(controller, &gains)?,
+            ))
+        })?;
+        Ok(Self {
+            model,
+            controller,
+            qr,
+            u_ext,
+            opts,
+        })
+    }
+
+    /// Number of parameters of the model.
+    #[getter]
+    fn n_params(&self) -> usize {
+        self.n_params_()
+    }
+
+    /// Number of degrees of freedom (1 rigid, 2 flexible).
+    #[getter]
+    fn ndof(&self) -> usize {
+        self.ndof_()
+    }
+
+    /// Number of samples of the reference.
+    #[getter]
+    fn n(&self) -> usize {
+        self.qr.len()
+    }
+
+    /// One simulation: dict of force (n,), q, qd, qdd (ndof, n).
+    fn simulate<'py>(
+        &self,
+        py: Python<'py>,
+        params: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let chi = slice1(&params);
+        let chi: &[f64] = &chi;
+        let out = run(py, || with_problem!(self, pb => pb.simulate(chi)))?;
+        sim_dict(py, out)
+    }
+
+    /// Simulations of the rows of params (m, p) in parallel: dict of force (m, n), q (m, ndof, n),
+    /// with states=True also qd and qdd, and errors (a list, None where the simulation succeeded;
+    /// the rows of a failed member are NaN).
+    #[pyo3(signature = (params, *, states=false))]
+    fn simulate_batch<'py>(
+        &self,
+        py: Python<'py>,
+        params: PyReadonlyArray2<'py, f64>,
+        states: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let chis = rows2(&params);
+        let (n, ndof) = (self.qr.len(), self.ndof_());
+        let m = chis.len();
+        let results = run(py, || Ok(with_problem!(self, pb => pb.simulate_batch(&chis))))?;
+        let (outs, errs) = split_errors(results);
+        let mut force = vec![f64::NAN; m * n];
+        let mut q = vec![f64::NAN; m * ndof * n];
+        let (mut qd, mut qdd) = if states {
+            (vec![f64::NAN; m * ndof * n], vec![f64::NAN; m * ndof * n])
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        for (i, o) in outs.into_iter().enumerate() {
+            if let Some(o) = o {
+                force[i * n..(i + 1) * n].copy_from_slice(&o.force);
+                for d in 0..ndof {
+                    let at = (i * ndof + d) * n;
+                    q[at..at + n].copy_from_slice(&o.q[d]);
+                    if states {
+                        qd[at..at + n].copy_from_slice(&o.qd[d]);
+                        qdd[at..at + n].copy_from_slice(&o.qdd[d]);
+                    }
+                }
+            }
+        }
+        let d = PyDict::new(py);
+        d.set_item("force", PyArray1::from_vec(py, force).reshape([m, n])?)?;
+        d.set_item("q", PyArray1::from_vec(py, q).reshape([m, ndof, n])?)?;
+        if states {
+            d.set_item("qd", PyArray1::from_vec(py, qd).reshape([m, ndof, n])?)?;
+            d.set_item("qdd", PyArray1::from_vec(py, qdd).reshape([m, ndof, n])?)?;
+        }
+        let errors: Vec<Option<String>> = errs.into_iter().map(|e| e.map(|e| e.to_string())).collect();
+        d.set_item("errors", errors)?;
+        Ok(d)
+    }
+
+    /// ‖measured_dec − decimator(simulated output)‖² (output "force" or "position").
+    #[pyo3(signature = (params, measured_dec, decimator, *, output="force"))]
+    fn output_error(
+        &self,
+        py: Python<'_>,
+        params: PyReadonlyArray1<'_, f64>,
+        measured_dec: PyReadonlyArray1<'_, f64>,
+        decimator: &Decimator,
+        output: &str,
+    ) -> PyResult<f64> {
+        let chi = slice1(&params);
+        let meas = slice1(&measured_dec);
+        let (chi, meas): (&[f64], &[f64]) = (&chi, &meas);
+        run(py, || {
+            let out = parse_output(output)?;
+            with_problem!(self, pb => pb.output_error(chi, out, meas, &decimator.inner))
+        })
+    }
+
+    /// output_error of the rows of params (m, p) in parallel: (costs (m,), errors), NaN cost where
+    /// the simulation failed.
+    #[pyo3(signature = (params, measured_dec, decimator, *, output="force"))]
+    fn output_error_batch<'py>(
+        &self,
+        py: Python<'py>,
+        params: PyReadonlyArray2<'py, f64>,
+        measured_dec: PyReadonlyArray1<'py, f64>,
+        decimator: &Decimator,
+        output: &str,
+    ) -> PyResult<Costs<'py>> {
+        let chis = rows2(&params);
+        let meas = slice1(&measured_dec);
+        let meas: &[f64] = &meas;
+        let results = run(py, || {
+            let out = parse_output(output)?;
+            Ok(with_problem!(self, pb => pb.output_error_batch(&chis, out, meas, &decimator.inner)))
+        })?;
+        let (vals, errs) = split_errors(results);
+        let costs: Vec<f64> = vals.into_iter().map(|v| v.unwrap_or(f64::NAN)).collect();
+        Ok((
+            costs.into_pyarray(py),
+            errs.into_iter().map(|e| e.map(|e| e.to_string())).collect(),
+        ))
+    }
+
+    /// DIDIM's decimated system at params: (y (r,), w (r, len(free)), force_dec) with the rows of
+    /// every dof stacked (motor row against force minus the frozen terms, the others against minus
+    /// the frozen terms).
+    fn didim_system<'py>(
+        &self,
+        py: Python<'py>,
+        params: PyReadonlyArray1<'py, f64>,
+        force: PyReadonlyArray1<'py, f64>,
+        free: Vec<usize>,
+        decimator: &Decimator,
+    ) -> PyResult<System<'py>> {
+        let chi = slice1(&params);
+        let f = slice1(&force);
+        let (chi, f): (&[f64], &[f64]) = (&chi, &f);
+        let nfree = free.len();
+        let sys = run(
+            py,
+            || with_problem!(self, pb => pb.didim_system(chi, f, &free, &decimator.inner)),
+        )?;
+        let rows = sys.y.len();
+        Ok((
+            sys.y.into_pyarray(py),
+            colmajor_to_array(py, sys.w, rows, nfree)?,
+            sys.force_dec.into_pyarray(py),
+        ))
+    }
+
+    /// The decimated residual dec(measured − simulated) and Jacobian dec(∂simulated/∂χ_free)
+    /// (r, len(free)) from the exact sensitivities.
+    #[pyo3(signature = (params, measured, free, decimator, *, output="force"))]
+    fn linearize<'py>(
+        &self,
+        py: Python<'py>,
+        params: PyReadonlyArray1<'py, f64>,
+        measured: PyReadonlyArray1<'py, f64>,
+        free: Vec<usize>,
+        decimator: &Decimator,
+        output: &str,
+    ) -> PyResult<(Arr<'py>, Bound<'py, PyAny>)> {
+        let chi = slice1(&params);
+        let meas = slice1(&measured);
+        let (chi, meas): (&[f64], &[f64]) = (&chi, &meas);
+        let nfree = free.len();
+        let lin = run(py, || {
+            let out = parse_output(output)?;
+            with_problem!(self, pb => pb.linearize(chi, out, meas, &free, &decimator.inner))
+        })?;
+        let rows = lin.residual.len();
+        Ok((
+            lin.residual.into_pyarray(py),
+            colmajor_to_array(py, lin.jacobian, rows, nfree)?,
+        ))
+    }
+}
