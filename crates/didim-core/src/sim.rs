@@ -100,7 +100,28 @@ pub fn simulate<const N: usize>(
     u_ext: Option<&[f64]>,
     opts: &SimOptions,
 ) -> Result<SimOutput> {
-    run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)
+    let out = run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)?;
+    finite_force(out, model, chi, opts)
+}
+
+/// The output, or an error when a logged command is not finite. The states are checked as they are integrated,
+/// but a command that overflows (absurd gains, e.g. `gtau·vsat` beyond f64) late in the record, or held back by the
+/// delay, never reaches them.
+fn finite_force<const N: usize>(
+    out: SimOutput,
+    model: &Model<N>,
+    chi: &[f64],
+    opts: &SimOptions,
+) -> Result<SimOutput> {
+    match out.force.iter().position(|f| !f.is_finite()) {
+        None => Ok(out),
+        Some(k) => Err(Error::Simulation(format!(
+            "the commanded force is not finite at sample {k} (t = {:.6} s) with parameters {}: the controller's gains \
+             or saturation are too large for f64; check their values and units",
+            k as f64 * opts.dt,
+            describe(model, chi)
+        ))),
+    }
 }
 
 /// Output of [`simulate_sensitivity`]: the simulation and the derivatives of its
@@ -133,7 +154,12 @@ pub fn simulate_sensitivity<const N: usize>(
     let p = model.n_params();
     check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
     let mut t = Sensitivity::<N>::new(p, qr.len(), opts.delay);
-    let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
+    let sim = finite_force(
+        run(model, chi, controller, qr, u_ext, opts, &mut t)?,
+        model,
+        chi,
+        opts,
+    )?;
     // finite states can still have non-finite sensitivities (e.g. a Coulomb force of 1e308 N at rest, whose
     // derivative is 1e308/eps): an error, not NaN in the Jacobian
     let n = qr.len();

@@ -121,3 +121,28 @@ fn sensitivities_that_overflow_are_a_simulation_error() {
         "{e}"
     );
 }
+
+/// gtau = 1.8e308 makes the saturated command gtau·vsat infinite; with a delay the infinite commands of the last
+/// samples never reached the states, so the simulation returned an infinite force without an error.
+#[test]
+fn an_infinite_command_is_a_simulation_error() {
+    let m = model::rigid(true, 1e-4).unwrap();
+    let c = Controller::EmpsCascade {
+        kp: 1.0,
+        kv: 1.0,
+        gtau: f64::MAX,
+        vsat: 12.395229657568873,
+    };
+    let o = SimOptions {
+        substeps: 1,
+        delay: 2,
+        ..SimOptions::new(1e-4)
+    };
+    let qr = [0.7362795948266236, 0.0, -0.512781346536688, 0.0];
+    let e = sim::simulate(&m, &[0.1; 4], &c, &qr, None, &o).unwrap_err();
+    assert!(
+        matches!(&e, Error::Simulation(s) if s.contains("commanded force is not finite at sample")),
+        "{e}"
+    );
+    assert!(sim::simulate_sensitivity(&m, &[0.1; 4], &c, &qr, None, &o).is_err());
+}
