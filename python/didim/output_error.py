@@ -10,7 +10,7 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from . import _checks, _core
-from ._errors import DataError, SimulationError
+from ._errors import DataError, DidimError, SimulationError
 from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say
 from .recording import Recording
 from .result import IdentificationResult, Iteration
@@ -164,13 +164,21 @@ def oe_gn(
     history: List[Iteration] = []
     converged, message = False, ""
     for it in range(max_iter):
-        d = np.sqrt(np.sum(jac**2, axis=0))
+        with np.errstate(all="ignore"):
+            d = np.sqrt(np.sum(jac**2, axis=0))
         d[d == 0] = 1.0
-        step_ok = False
+        step_ok, stuck = False, ""
         for _ in range(20):
             a = np.vstack([jac, math.sqrt(mu) * np.diag(d)])
             b = np.concatenate([r, np.zeros(len(free))])
-            delta = np.linalg.lstsq(a, b, rcond=None)[0]
+            try:
+                if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+                    raise np.linalg.LinAlgError("non-finite entries")
+                delta = np.linalg.lstsq(a, b, rcond=None)[0]
+            except np.linalg.LinAlgError as e:
+                stuck = (f"stopped at iteration {it + 1}: the Levenberg-Marquardt step cannot be computed ({e}): the "
+                         "Jacobian overflows or is degenerate; check the parameter values and scales")
+                break
             trial = chi.copy()
             trial[free] += delta
             try:
@@ -182,6 +190,9 @@ def oe_gn(
                 step_ok = True
                 break
             mu *= 4.0
+        if stuck:
+            message = stuck
+            break
         if not step_ok:
             message = "converged: no step decreases the criterion any further"
             converged = True
@@ -198,8 +209,13 @@ def oe_gn(
             break
     else:
         message = f"no convergence in {max_iter} iterations"
-    sol = _core.lstsq(np.ascontiguousarray(jac), np.ascontiguousarray(r))
     fnames = [names[i] for i in free]
+    try:
+        sol = _core.lstsq(np.ascontiguousarray(jac), np.ascontiguousarray(r))
+    except DidimError as e:  # no covariance at this point (e.g. a zero Jacobian): the estimate still stands
+        nan = np.full(len(fnames), np.nan)
+        sol = dict(std=nan, covariance=None, condition_number=np.nan)
+        message = (message + "; " if message else "") + f"no covariance: {e}"
     return IdentificationResult(
         model=model, method=f"oe-gn ({'J_tau' if criterion == 'force' else 'J_q'})",
         params={n: float(chi[i]) for i, n in enumerate(names) if i in free},

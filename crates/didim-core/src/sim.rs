@@ -101,23 +101,38 @@ pub fn simulate<const N: usize>(
     opts: &SimOptions,
 ) -> Result<SimOutput> {
     let out = run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)?;
-    finite_force(out, model, chi, opts)
+    finite_outputs(out, model, chi, opts)
 }
 
-/// The output, or an error when a logged command is not finite. The states are checked as they are integrated,
-/// but a command that overflows (absurd gains, e.g. `gtau·vsat` beyond f64) late in the record, or held back by the
-/// delay, never reaches them.
-fn finite_force<const N: usize>(
+/// The output, or an error when a logged value is not finite. The positions and velocities are checked as they are
+/// integrated, but a command or an acceleration that overflows at the last sample (or a command held back by the
+/// delay) never reaches them: absurd gains (`gtau·vsat` beyond f64) or masses (1e-308 kg).
+fn finite_outputs<const N: usize>(
     out: SimOutput,
     model: &Model<N>,
     chi: &[f64],
     opts: &SimOptions,
 ) -> Result<SimOutput> {
-    match out.force.iter().position(|f| !f.is_finite()) {
+    let first = |x: &[f64]| x.iter().position(|v| !v.is_finite());
+    let mut bad: Option<(usize, &str)> = first(&out.force).map(|k| (k, "commanded force"));
+    for (what, rows) in [
+        ("position", &out.q),
+        ("velocity", &out.qd),
+        ("acceleration", &out.qdd),
+    ] {
+        for r in rows.iter() {
+            if let Some(k) = first(r) {
+                if bad.is_none_or(|(b, _)| k < b) {
+                    bad = Some((k, what));
+                }
+            }
+        }
+    }
+    match bad {
         None => Ok(out),
-        Some(k) => Err(Error::Simulation(format!(
-            "the commanded force is not finite at sample {k} (t = {:.6} s) with parameters {}: the controller's gains \
-             or saturation are too large for f64; check their values and units",
+        Some((k, what)) => Err(Error::Simulation(format!(
+            "the simulated {what} is not finite at sample {k} (t = {:.6} s) with parameters {}: some parameter \
+             values (a mass too small?) or controller gains are beyond f64; check their values and units",
             k as f64 * opts.dt,
             describe(model, chi)
         ))),
@@ -154,7 +169,7 @@ pub fn simulate_sensitivity<const N: usize>(
     let p = model.n_params();
     check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
     let mut t = Sensitivity::<N>::new(p, qr.len(), opts.delay);
-    let sim = finite_force(
+    let sim = finite_outputs(
         run(model, chi, controller, qr, u_ext, opts, &mut t)?,
         model,
         chi,

@@ -146,3 +146,27 @@ fn an_infinite_command_is_a_simulation_error() {
     );
     assert!(sim::simulate_sensitivity(&m, &[0.1; 4], &c, &qr, None, &o).is_err());
 }
+
+/// M = 2.1e-308 kg: the acceleration of the last sample (where the loop stops before checking the state) was
+/// infinite in an Ok result.
+#[test]
+fn an_infinite_acceleration_at_the_last_sample_is_a_simulation_error() {
+    let m = model::rigid(false, 1e-4).unwrap();
+    let c = Controller::EmpsCascade {
+        kp: 1.0,
+        kv: 278.80050037214704,
+        gtau: 1.0,
+        vsat: 10.496181331336428,
+    };
+    let o = SimOptions {
+        substeps: 1,
+        delay: 5,
+        ..SimOptions::new(1e-4)
+    };
+    let qr = [0.0, -0.5193288921026687, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let e = sim::simulate(&m, &[2.1458939827553693e-308, 0.1, 0.1], &c, &qr, None, &o).unwrap_err();
+    assert!(
+        matches!(&e, Error::Simulation(s) if s.contains("acceleration is not finite at sample 6")),
+        "{e}"
+    );
+}
