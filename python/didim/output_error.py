@@ -10,7 +10,7 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from . import _checks, _core
-from ._errors import DataError, SimulationError
+from ._errors import DataError, DidimError, SimulationError
 from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_simplex, prefetch
 from .recording import Recording
 from .result import IdentificationResult, Iteration
@@ -174,16 +174,31 @@ def oe_gn(
     history: List[Iteration] = []
     converged, message = False, ""
     for it in range(max_iter):
-        d = np.sqrt(np.sum(jac**2, axis=0))
+        with np.errstate(all="ignore"):
+            d = np.sqrt(np.sum(jac**2, axis=0))
         d[d == 0] = 1.0
         # ‖J δ − r‖² = ‖R δ − Qᵀr‖² + const: the damped steps solve small (2p × p) problems on R
-        qmat, rmat = np.linalg.qr(jac)
-        qtr = qmat.T @ r
-        step_ok = False
-        for _ in range(20):
+        step_ok, stuck = False, ""
+        try:
+            if not (np.all(np.isfinite(jac)) and np.all(np.isfinite(r))):
+                raise np.linalg.LinAlgError("non-finite entries")
+            qmat, rmat = np.linalg.qr(jac)
+            qtr = qmat.T @ r
+        except np.linalg.LinAlgError as e:
+            stuck = (f"stopped at iteration {it + 1}: the Levenberg-Marquardt step cannot be computed ({e}): the "
+                     "Jacobian overflows or is degenerate; check the parameter values and scales")
+            qmat = rmat = qtr = None
+        for _ in range(0 if stuck else 20):
             a = np.vstack([rmat, math.sqrt(mu) * np.diag(d)])
             b = np.concatenate([qtr, np.zeros(len(free))])
-            delta = np.linalg.lstsq(a, b, rcond=None)[0]
+            try:
+                if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+                    raise np.linalg.LinAlgError("non-finite entries")
+                delta = np.linalg.lstsq(a, b, rcond=None)[0]
+            except np.linalg.LinAlgError as e:
+                stuck = (f"stopped at iteration {it + 1}: the Levenberg-Marquardt step cannot be computed ({e}): the "
+                         "Jacobian overflows or is degenerate; check the parameter values and scales")
+                break
             trial = chi.copy()
             trial[free] += delta
             try:
@@ -195,6 +210,9 @@ def oe_gn(
                 step_ok = True
                 break
             mu *= 4.0
+        if stuck:
+            message = stuck
+            break
         if not step_ok:
             message = "converged: no step decreases the criterion any further"
             converged = True
@@ -211,8 +229,13 @@ def oe_gn(
             break
     else:
         message = f"no convergence in {max_iter} iterations"
-    sol = _core.lstsq(np.ascontiguousarray(jac), np.ascontiguousarray(r))
     fnames = [names[i] for i in free]
+    try:
+        sol = _core.lstsq(np.ascontiguousarray(jac), np.ascontiguousarray(r))
+    except DidimError as e:  # no covariance at this point (e.g. a zero Jacobian): the estimate still stands
+        nan = np.full(len(fnames), np.nan)
+        sol = dict(std=nan, covariance=None, condition_number=np.nan)
+        message = (message + "; " if message else "") + f"no covariance: {e}"
     return IdentificationResult(
         model=model, method=f"oe-gn ({'J_tau' if criterion == 'force' else 'J_q'})",
         params={n: float(chi[i]) for i, n in enumerate(names) if i in free},

@@ -129,6 +129,7 @@ def make_recording(
 
     if qr is None:
         qr = trapezoid_chirp(dt=dt)
+    qr = _checks.real_array("qr (position reference)", qr)
     quantization = quantization or None  # 0 means no quantization, like None
     controller = controller or EmpsCascade()
     plan = Recording(dt=dt, qr=qr, force=np.zeros(len(qr)), qm=qr, controller=controller, u_ext=u_ext,

@@ -137,12 +137,13 @@ pub fn simulate<const N: usize>(
     u_ext: Option<&[f64]>,
     opts: &SimOptions,
 ) -> Result<SimOutput> {
-    match opts.integrator {
+    let out = match opts.integrator {
         Integrator::Exponential => {
-            expint::run(model, chi, controller, qr, u_ext, opts, None, &mut expint::NoHook)
+            expint::run(model, chi, controller, qr, u_ext, opts, None, &mut expint::NoHook)?
         }
-        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, &mut NoTangent),
-    }
+        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)?,
+    };
+    finite_outputs(out, model, chi, opts)
 }
 
 /// Like [`simulate`], also returning the step counts of the exponential integrator
@@ -169,7 +170,42 @@ pub fn simulate_with_stats<const N: usize>(
         )?,
         Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)?,
     };
-    Ok((out, stats))
+    Ok((finite_outputs(out, model, chi, opts)?, stats))
+}
+
+/// The output, or an error when a logged value is not finite. The positions and velocities are checked as they are
+/// integrated, but a command or an acceleration that overflows at the last sample (or a command held back by the
+/// delay) never reaches them: absurd gains (`gtau·vsat` beyond f64) or masses (1e-308 kg).
+fn finite_outputs<const N: usize>(
+    out: SimOutput,
+    model: &Model<N>,
+    chi: &[f64],
+    opts: &SimOptions,
+) -> Result<SimOutput> {
+    let first = |x: &[f64]| x.iter().position(|v| !v.is_finite());
+    let mut bad: Option<(usize, &str)> = first(&out.force).map(|k| (k, "commanded force"));
+    for (what, rows) in [
+        ("position", &out.q),
+        ("velocity", &out.qd),
+        ("acceleration", &out.qdd),
+    ] {
+        for r in rows.iter() {
+            if let Some(k) = first(r) {
+                if bad.is_none_or(|(b, _)| k < b) {
+                    bad = Some((k, what));
+                }
+            }
+        }
+    }
+    match bad {
+        None => Ok(out),
+        Some((k, what)) => Err(Error::Simulation(format!(
+            "the simulated {what} is not finite at sample {k} (t = {:.6} s) with parameters {}: some parameter \
+             values (a mass too small?) or controller gains are beyond f64; check their values and units",
+            k as f64 * opts.dt,
+            describe(model, chi)
+        ))),
+    }
 }
 
 /// Output of [`simulate_sensitivity`]: the simulation and the derivatives of its
@@ -209,6 +245,7 @@ pub fn simulate_sensitivity<const N: usize>(
         let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
         (sim, t.dforce, t.dq)
     };
+    let sim = finite_outputs(sim, model, chi, opts)?;
     // finite states can still have non-finite sensitivities (e.g. a Coulomb force of 1e308 N at rest, whose
     // derivative is 1e308/eps): an error, not NaN in the Jacobian
     let n = qr.len();

@@ -127,6 +127,99 @@ fn stiffness_params() -> impl Strategy<Value = Vec<f64>> {
     ]
 }
 
+/// One simulation's inputs: parameters, controller, reference, external input, options.
+type SimCase = (Vec<f64>, Controller, Vec<f64>, Option<Vec<f64>>, SimOptions);
+
+/// Valid inputs for a model with `n_params` parameters (flexible when 7): the simulation runs to its end or
+/// diverges (a `Simulation` error), so these cases exercise the loop itself.
+fn valid_case(n_params: usize, max_len: usize) -> impl Strategy<Value = SimCase> {
+    let chi = if n_params == 7 {
+        (prop::collection::vec(0.1..200.0f64, 6..=6), 1e3..1e7f64)
+            .prop_map(|(v, k)| vec![v[0], v[1], v[2] / 4.0, v[3], v[4], v[5] / 4.0, k])
+            .boxed()
+    } else {
+        (0.1..200.0f64, 0.0..300.0f64, 0.0..50.0f64, -10.0..10.0f64)
+            .prop_map(move |(m, fv, fc, of)| [m, fv, fc, of][..n_params].to_vec())
+            .boxed()
+    };
+    let ctrl = prop_oneof![
+        (
+            1.0..500.0f64,
+            1.0..500.0f64,
+            0.1..100.0f64,
+            prop_oneof![0.1..20.0f64, Just(f64::INFINITY)]
+        )
+            .prop_map(|(kp, kv, gtau, vsat)| Controller::EmpsCascade { kp, kv, gtau, vsat }),
+        (
+            1e2..1e6f64,
+            1.0..1e4f64,
+            prop_oneof![1.0..1e4f64, Just(f64::INFINITY)]
+        )
+            .prop_map(|(kp, kd, tau_max)| Controller::Pd { kp, kd, tau_max }),
+    ];
+    let qr = prop::collection::vec(-1e-3..1e-3f64, 4..max_len).prop_map(|steps| {
+        steps
+            .iter()
+            .scan(0.0, |q, d| {
+                *q += d;
+                Some(*q)
+            })
+            .collect::<Vec<f64>>()
+    });
+    (
+        chi,
+        ctrl,
+        qr,
+        any::<bool>(),
+        1e-4..1e-2f64,
+        1usize..16,
+        any::<bool>(),
+        0usize..4,
+    )
+        .prop_map(|(chi, c, qr, with_u, dt, substeps, quantized, delay)| {
+            let u = with_u.then(|| qr.iter().map(|q| 1e4 * q).collect());
+            let quantization = if quantized { 1e-7 } else { 0.0 };
+            (
+                chi,
+                c,
+                qr,
+                u,
+                SimOptions {
+                    dt,
+                    substeps,
+                    quantization,
+                    delay,
+                    // valid cases alternate the integrators
+                    integrator: if substeps % 2 == 0 {
+                        Integrator::Exponential
+                    } else {
+                        Integrator::Rk4
+                    },
+                    tol: DEFAULT_TOL,
+                },
+            )
+        })
+}
+
+/// Half valid cases, half hostile ones (any of the inputs may be absurd).
+fn sim_case(n_params: usize, max_len: usize) -> impl Strategy<Value = SimCase> {
+    let chi = if n_params == 7 {
+        stiffness_params().boxed()
+    } else {
+        params(n_params).boxed()
+    };
+    prop_oneof![
+        valid_case(n_params, max_len),
+        (
+            chi,
+            controller(),
+            signal(max_len),
+            prop::option::of(signal(max_len)),
+            sim_options()
+        ),
+    ]
+}
+
 fn check_sim(out: &sim::SimOutput, ndof: usize, n: usize) {
     assert_eq!(out.force.len(), n);
     for rows in [&out.q, &out.qd, &out.qdd] {
@@ -154,9 +247,10 @@ proptest! {
 
     #[test]
     fn simulate_rigid_never_panics(
-        chi in params(4), offset in any::<bool>(), eps in prop_oneof![3 => Just(1e-4), 1 => hostile()],
-        c in controller(), qr in signal(120), u in prop::option::of(signal(120)), o in sim_options(),
+        (chi, c, qr, u, o) in sim_case(4, 120), offset in any::<bool>(),
+        eps in prop_oneof![3 => Just(1e-4), 1 => Just(0.0), 1 => hostile()],
     ) {
+        let chi = if offset { chi } else { chi[..chi.len().min(3)].to_vec() };
         if let Ok(m) = model::rigid(offset, eps) {
             match sim::simulate(&m, &chi, &c, &qr, u.as_deref(), &o) {
                 Ok(out) => check_sim(&out, 1, qr.len()),
@@ -166,10 +260,7 @@ proptest! {
     }
 
     #[test]
-    fn simulate_flexible_never_panics(
-        chi in stiffness_params(), c in controller(), qr in signal(120), u in prop::option::of(signal(120)),
-        o in sim_options(),
-    ) {
+    fn simulate_flexible_never_panics((chi, c, qr, u, o) in sim_case(7, 120)) {
         let m = model::flexible(1e-4).unwrap();
         match sim::simulate(&m, &chi, &c, &qr, u.as_deref(), &o) {
             Ok(out) => check_sim(&out, 2, qr.len()),
@@ -178,10 +269,7 @@ proptest! {
     }
 
     #[test]
-    fn simulate_sensitivity_never_panics(
-        flexible in any::<bool>(), chi in stiffness_params(), c in controller(), qr in signal(80),
-        u in prop::option::of(signal(80)), o in sim_options(),
-    ) {
+    fn simulate_sensitivity_never_panics(flexible in any::<bool>(), (chi, c, qr, u, o) in sim_case(7, 80)) {
         let n = qr.len();
         if flexible {
             let m = model::flexible(1e-4).unwrap();
@@ -378,4 +466,54 @@ proptest! {
         prop_assert!(s.is_nan() || s.abs() <= 1.0 + 1e-12);
         let _ = model::coulomb_sign_derivative(v, eps);
     }
+}
+
+/// How deep the generated cases reach: the share of results (not errors) per function, printed for a campaign
+/// report (`cargo test -p didim-core --test proptest_no_panic -- --ignored --nocapture`).
+#[test]
+#[ignore]
+fn outcome_mix() {
+    use proptest::strategy::ValueTree;
+    use proptest::test_runner::TestRunner;
+    let cases = config(2000).cases;
+    let mut runner = TestRunner::new(config(cases));
+    let strat = (sim_case(4, 120), any::<bool>());
+    let (mut ok, mut total) = (0, 0);
+    for _ in 0..cases {
+        let ((chi, c, qr, u, o), offset) = strat.new_tree(&mut runner).unwrap().current();
+        let chi = if offset {
+            chi
+        } else {
+            chi[..chi.len().min(3)].to_vec()
+        };
+        let m = model::rigid(offset, 1e-4).unwrap();
+        total += 1;
+        ok += sim::simulate(&m, &chi, &c, &qr, u.as_deref(), &o).is_ok() as usize;
+    }
+    eprintln!("simulate (rigid): {ok} results in {total} cases");
+    let strat = sim_case(7, 80);
+    let (mut ok, mut total) = (0, 0);
+    for _ in 0..cases {
+        let (chi, c, qr, u, o) = strat.new_tree(&mut runner).unwrap().current();
+        let m = model::flexible(1e-4).unwrap();
+        total += 1;
+        ok += sim::simulate_sensitivity(&m, &chi, &c, &qr, u.as_deref(), &o).is_ok() as usize;
+    }
+    eprintln!("simulate_sensitivity (flexible): {ok} results in {total} cases");
+    let strat = (
+        whole(),
+        mostly(1.0, 200.0),
+        mostly(100.0, 2000.0),
+        whole(),
+        signal(300),
+    );
+    let (mut ok, mut total) = (0, 0);
+    for _ in 0..cases {
+        let (order, cutoff, fs, factor, y) = strat.new_tree(&mut runner).unwrap().current();
+        if let Ok(d) = Decimator::butterworth(order, cutoff, fs, factor, FilterForm::Sos) {
+            total += 1;
+            ok += d.apply(&y).is_ok() as usize;
+        }
+    }
+    eprintln!("Decimator::apply (valid decimators): {ok} results in {total} cases");
 }

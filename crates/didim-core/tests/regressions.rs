@@ -127,3 +127,60 @@ fn sensitivities_that_overflow_are_a_simulation_error() {
         "{e}"
     );
 }
+
+/// gtau = 1.8e308 makes the saturated command gtau·vsat infinite; with a delay the infinite commands of the last
+/// samples never reached the states, so the simulation returned an infinite force without an error.
+#[test]
+fn an_infinite_command_is_a_simulation_error() {
+    let m = model::rigid(true, 1e-4).unwrap();
+    let c = Controller::EmpsCascade {
+        kp: 1.0,
+        kv: 1.0,
+        gtau: f64::MAX,
+        vsat: 12.395229657568873,
+    };
+    let o = SimOptions {
+        substeps: 1,
+        delay: 2,
+        ..SimOptions::new(1e-4)
+    };
+    let qr = [0.7362795948266236, 0.0, -0.512781346536688, 0.0];
+    let e = sim::simulate(&m, &[0.1; 4], &c, &qr, None, &o).unwrap_err();
+    assert!(
+        matches!(&e, Error::Simulation(s) if s.contains("commanded force is not finite at sample")),
+        "{e}"
+    );
+    assert!(sim::simulate_sensitivity(&m, &[0.1; 4], &c, &qr, None, &o).is_err());
+}
+
+/// M = 2.1e-308 kg: the acceleration of the last sample (where the loop stops before checking the state) was
+/// infinite in an Ok result.
+#[test]
+fn an_infinite_acceleration_at_the_last_sample_is_a_simulation_error() {
+    let m = model::rigid(false, 1e-4).unwrap();
+    let c = Controller::EmpsCascade {
+        kp: 1.0,
+        kv: 278.80050037214704,
+        gtau: 1.0,
+        vsat: 10.496181331336428,
+    };
+    let qr = [0.0, -0.5193288921026687, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let chi = [2.1458939827553693e-308, 0.1, 0.1];
+    // the exponential integrator refuses the mass earlier (its matrix exponential is not finite)
+    let ex = SimOptions {
+        delay: 5,
+        ..SimOptions::new(1e-4)
+    };
+    assert!(sim::simulate(&m, &chi, &c, &qr, None, &ex).is_err());
+    let o = SimOptions {
+        substeps: 1,
+        delay: 5,
+        integrator: sim::Integrator::Rk4,
+        ..SimOptions::new(1e-4)
+    };
+    let e = sim::simulate(&m, &chi, &c, &qr, None, &o).unwrap_err();
+    assert!(
+        matches!(&e, Error::Simulation(s) if s.contains("acceleration is not finite at sample 6")),
+        "{e}"
+    );
+}
