@@ -160,6 +160,10 @@ def main() -> int:
     doc.append("| claim | inside the paper's range | outside it |\n|---|---|---|")
     doc.append(f"| rigid step converges from apM in 25..1000 kg | {a_in}/{n_in} runs | {a_out}/{n_out} runs "
                f"(apM = {', '.join(f'{v:g}' for v in apm if not in_apm(v))} kg) |")
+    if s1r is not None:
+        r_in, rn_in = inside_rate(s1r, lambda p: in_apm(p["apM"]))
+        r_out, rn_out = inside_rate(s1r, lambda p: not in_apm(p["apM"]))
+        doc.append(f"| the same on the real EMPS record (DATA_EMPS, with OF) | {r_in}/{rn_in} runs | {r_out}/{rn_out} runs |")
     doc.append(f"| step 2 converges from λ⁰ in 0.25..0.95, f⁰ in 15..50 Hz | {b_in}/{m_in} runs | {b_out}/{m_out} runs |")
     doc.append(f"| the three-step result (step 3) from those step-2 starts | {c_in}/{k_in} runs | {c_out}/{k_out} runs |")
     doc.append(f"| step 2 with didim's grid start (`grid_start=True`, not in the paper) | {g_in}/{h_in} runs | "

@@ -39,7 +39,10 @@ pub fn columns2(a: &PyReadonlyArray2<'_, f64>) -> (Vec<f64>, usize, usize) {
 pub fn rows_to_array<'py>(py: Python<'py>, rows: Vec<Vec<f64>>) -> PyResult<Bound<'py, PyAny>> {
     let r = rows.len();
     let n = rows.first().map_or(0, |x| x.len());
-    let flat: Vec<f64> = rows.into_iter().flatten().collect();
+    let mut flat: Vec<f64> = Vec::with_capacity(r * n);
+    for row in &rows {
+        flat.extend_from_slice(row);
+    }
     Ok(PyArray1::from_vec(py, flat).reshape([r, n])?.into_any())
 }
 
