@@ -32,7 +32,7 @@ def save(tmp_path, name, d):
 
 def short_record(n=3000, **kw):
     """A small simulated rigid record (EMPS controller, 1 kHz), moving from the first sample."""
-    qr = 0.05 * np.sin(2 * np.pi * np.arange(n) * 1e-3)
+    qr = 0.02 * (1 - np.cos(2 * np.pi * np.arange(n) * 1e-3))  # starts at rest: no saturated start-up
     return sc.make_recording(sc.EMPS_RIGID, "rigid", qr=qr, force_noise=0.5, seed=3, **kw)
 
 
@@ -177,6 +177,7 @@ def test_arrays_of_different_lengths_are_named():
 
 def test_record_too_short_for_the_decimation_filter():
     rec = short_record(n=10)
+    assert rec.diagnose() == []
     with pytest.raises(didim.DataError, match=r"too short for the decimation filter of didim \(rigid\): 10 samples"):
         didim.identify(rec, "rigid", "didim", apM=90.0)
     with pytest.raises(didim.DataError, match=r"too short for the decimation filter of IDIM-LS"):

@@ -156,8 +156,11 @@ class SimResult:
         return self.qdd[1] if self.qdd.shape[0] > 1 else None
 
     def relative_error(self, recording: Recording) -> float:
-        """``‖τ − τ_sim‖ / ‖τ‖`` against the recording's measured force."""
-        return float(np.linalg.norm(recording.force - self.force) / np.linalg.norm(recording.force))
+        """``‖τ − τ_sim‖ / ‖τ‖`` against the recording's measured force (NaN when the measured force is zero)."""
+        ref = float(np.linalg.norm(recording.force))
+        if ref == 0 or not np.isfinite(ref):
+            return float("nan")
+        return float(np.linalg.norm(recording.force - self.force) / ref)
 
     def plot(self, recording: Optional[Recording] = None, ax=None):
         """Measured (when a recording is given) and simulated force with their difference, like Fig. 6 of the paper."""

@@ -5,7 +5,7 @@ use std::borrow::Cow;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyOverflowError, PyTypeError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyInt};
+use pyo3::types::{PyBool, PyComplex, PyInt};
 
 /// A 1-D array as a slice, borrowed when contiguous.
 pub fn slice1<'a>(a: &'a PyReadonlyArray1<'_, f64>) -> Cow<'a, [f64]> {
@@ -114,6 +114,13 @@ impl<'a, 'py> FromPyObject<'a, 'py> for Real {
     type Error = PyErr;
 
     fn extract(obj: Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        // a complex number (Python's or numpy's) would otherwise lose its imaginary part with only a warning
+        if obj.is_instance_of::<PyComplex>() || obj.get_type().name()?.to_string().contains("complex") {
+            return Err(PyTypeError::new_err(format!(
+                "expected a real number, got {}",
+                obj.get_type().name()?
+            )));
+        }
         match obj.extract::<f64>() {
             Ok(v) => Ok(Real(v)),
             Err(e) if e.is_instance_of::<PyOverflowError>(obj.py()) => {
