@@ -8,13 +8,15 @@ from typing import Dict, Optional
 
 from . import _checks
 from ._errors import DataError, DidimWarning
-from .identification import Progress, didim, didim_flexible, didim_rigid, idim_ls, reference_mass
+from .identification import Progress, didim, didim_flexible, didim_rigid, idim_ls, a_priori_mass
 from .output_error import CRITERIA, oe_gn, oe_nm, pseudo_regular_initial
 from .recording import Recording
 from .result import IdentificationResult
 from .simulation import MODELS, param_names
 
-METHODS = ("idim-ls", "didim", "oe-nm", "oe-gn")
+METHODS = ("idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn")
+#: Other names of the methods: "oe-gn" is the exact-sensitivity Levenberg-Marquardt solver's former name.
+ALIASES = {"oe-gn": "oe-lm"}
 
 
 def identify(
@@ -35,11 +37,13 @@ def identify(
     - ``"didim"``: rigid DIDIM, or for "flexible" the three-step procedure (rigid DIDIM, Nelder-Mead on
       (λ, f_n_flex), flexible DIDIM);
     - ``"oe-nm"``: Nelder-Mead on all parameters, criterion J_τ ("force") or J_q ("position"), eq. (32);
-    - ``"oe-gn"``: Levenberg-Marquardt with exact closed-loop sensitivities.
+    - ``"oe-lm"`` (also ``"oe-gn"``): Levenberg-Marquardt with exact closed-loop sensitivities.
 
-    The output-error methods start, unless ``initial`` is given, from (apM, 0, 0) for the rigid model and from the
-    pseudo-regular values of eq. (33) built on a rigid DIDIM for the flexible one (its simulations are counted).
-    ``apM`` is the a priori total mass (kg); by default a rough value from the reference is used. Other keyword
+    The output-error methods start, unless ``initial`` is given, from (apM, 0, 0) for the rigid model; for the flexible
+    one oe-nm starts from the pseudo-regular values of eq. (33) built on a rigid DIDIM (as the paper) and oe-lm from
+    the three-step DIDIM estimate (eq. (33) when DIDIM does not converge); their simulations are counted.
+    ``apM`` is the a priori total mass (kg); by default :func:`didim.identification.a_priori_mass` estimates it from
+    the data (a rigid fit on low-passed signals). Other keyword
     options go to the method's function (e.g. ``cutoff_hz``, ``tol``, ``max_iter``, ``substeps``).
 
     Raises :class:`DataError` for a bad option or parameter (an unknown option lists the accepted ones),
@@ -52,6 +56,7 @@ def identify(
         raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)}")
     if not isinstance(method, str) or method not in METHODS:
         raise DataError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
+    method = ALIASES.get(method, method)
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
     offset = _checks.flag("offset", offset)
@@ -60,22 +65,22 @@ def identify(
             raise DataError("apM (a priori mass) is not used by idim-ls, which needs no initial values; leave it out")
         apM = _checks.real("the a priori mass apM", apM, "kg", lo=0.0)
     if initial is not None:
-        if method not in ("oe-nm", "oe-gn"):
+        if method not in ("oe-nm", "oe-lm"):
             start = "starts from apM" if method == "didim" else "needs no initial values"
-            raise DataError(f"initial values are used by the output-error methods (oe-nm, oe-gn); {method} {start}")
+            raise DataError(f"initial values are used by the output-error methods (oe-nm, oe-lm); {method} {start}")
         initial = _checks.physical(initial, "initial")
         if offset and "OF" not in initial:
             raise DataError("offset=True but initial has no OF: give its initial value (N), e.g. 0.0")
     _checks.one_of("criterion", criterion, CRITERIA)
-    if criterion != "force" and method not in ("oe-nm", "oe-gn"):
-        raise DataError(f"criterion={criterion!r} applies to the output-error methods (oe-nm, oe-gn), not to {method}")
+    if criterion != "force" and method not in ("oe-nm", "oe-lm"):
+        raise DataError(f"criterion={criterion!r} applies to the output-error methods (oe-nm, oe-lm), not to {method}")
     if progress is not None and not callable(progress):
         raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
     targets = {
         "idim-ls": ([idim_ls], ("offset",)),
         "didim": ([didim_rigid, didim] if model == "rigid" else [didim_flexible], ("offset", "progress", "frozen", "method")),
         "oe-nm": ([oe_nm], ("criterion", "progress")),
-        "oe-gn": ([oe_gn], ("criterion", "progress")),
+        "oe-lm": ([oe_gn], ("criterion", "progress")),
     }
     funcs, fixed = targets[method]
     _checks.known_options(funcs, options, f"method {method!r} ({model} model)", skip=fixed)
@@ -92,9 +97,18 @@ def identify(
     t0 = time.perf_counter()
     pre: Optional[IdentificationResult] = None
     if initial is None:
-        m0 = apM if apM is not None else reference_mass(recording)
+        m0 = apM if apM is not None else a_priori_mass(recording)
         if model == "rigid":
             initial = {"M": m0, "Fv": 0.0, "Fc": 0.0, **({"OF": 0.0} if offset else {})}
+        elif method == "oe-lm":
+            # a local method: start it from the three-step DIDIM estimate, the pseudo-regular values of eq. (33) only
+            # when DIDIM did not converge (they can lead it to a local minimum when the load friction is large)
+            pre = didim_flexible(recording, apM, offset=offset, progress=progress)
+            if pre.converged:
+                initial = {**pre.frozen, **pre.params}
+            else:
+                rigid = pre.steps.get("rigid", pre) if pre.model == "flexible" else pre
+                initial = pseudo_regular_initial(rigid.params)
         else:
             pre = didim_rigid(recording, m0, offset=offset, progress=progress)
             initial = pseudo_regular_initial(pre.params)
@@ -104,7 +118,7 @@ def identify(
         initial = {k: (v if v != 0 else 1.0) for k, v in initial.items()}
     r = solver(recording, model, initial, criterion=criterion, progress=progress, **options)
     if pre is not None:
-        r.steps = {"rigid": pre}
+        r.steps = {"didim" if pre.model == "flexible" and "rigid" in pre.steps else "rigid": pre}
         r.simulations += pre.simulations
     r.elapsed_s = time.perf_counter() - t0
     return r

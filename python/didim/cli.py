@@ -29,7 +29,7 @@ def cmd_identify(args) -> int:
     opts = {}
     if args.apm is not None and args.method != "idim-ls":
         opts["apM"] = args.apm
-    if args.method in ("oe-nm", "oe-gn"):
+    if args.method in ("oe-nm", "oe-lm", "oe-gn"):
         opts["criterion"] = args.criterion
     if args.max_iter is not None:
         opts["max_iter"] = args.max_iter
@@ -201,7 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     i = sub.add_parser("identify", help="identify the dynamic parameters of a recording (EMPS .mat layout)")
     i.add_argument("file", help="MAT file with t, qm, qg, vir, gtau, kp, kv (optional pulses_N, ql)")
     i.add_argument("--model", choices=["rigid", "flexible"], default="rigid")
-    i.add_argument("--method", choices=["idim-ls", "didim", "oe-nm", "oe-gn"], default="didim")
+    i.add_argument("--method", choices=["idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn"], default="didim")
     i.add_argument("--offset", action="store_true", help="add a constant force OF (N)")
     i.add_argument("--apm", type=float, default=None, help="a priori total mass (kg) to start from")
     i.add_argument("--criterion", choices=["force", "position"], default="force", help="output-error criterion (eq. (32))")
@@ -235,7 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--scenario", help="simulated record with known truth: flexible-motor-friction, flexible-table3, "
                                       "rigid-emps")
     w.add_argument("--model", choices=["rigid", "flexible"], default="flexible")
-    w.add_argument("--method", choices=["idim-ls", "didim", "oe-nm", "oe-gn"], default="didim")
+    w.add_argument("--method", choices=["idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn"], default="didim")
     w.add_argument("--offset", action="store_true")
     w.add_argument("--grid", action="append", metavar="KEY=VALUES",
                    help="swept values: a,b,c or start:stop:count[:log] (e.g. apM=25:1000:12:log, lambda0=0.25:0.95:8)")

@@ -31,7 +31,7 @@ from . import _core
 from ._errors import DataError, DidimError, SimulationError
 from ._io import jsonable as _clean
 from .identification import didim as didim_fit
-from .identification import fit_flexible_mode, flexible_from_mode, reference_mass
+from .identification import fit_flexible_mode, flexible_from_mode, a_priori_mass
 from .recording import Recording
 from .result import IdentificationResult
 from .signal import Decimation, diffcent
@@ -551,7 +551,7 @@ def doctor(
     data = _Data(recording, validate, dec, holdout)
 
     # 1. base fit
-    m0 = apM if apM is not None else reference_mass(recording)
+    m0 = apM if apM is not None else a_priori_mass(recording)
     say(f"base fit: DIDIM {model}")
     if model == "rigid":
         state = State("rigid", {"M": m0, "Fv": 0.0, "Fc": 0.0}, {})

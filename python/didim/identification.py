@@ -20,12 +20,13 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
 from . import _checks, _core
-from ._errors import DataError, DidimError, IdentifiabilityError, SimulationError
+from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation, diffcent, lowpass
@@ -201,6 +202,33 @@ def prefetch(cost, cost_batch, points) -> Callable:
     return f
 
 
+#: Masses and stiffness must stay positive for the closed loop to be simulated.
+_POSITIVE = ("M", "M1", "M2", "K12")
+#: DIDIM's divergence test: the simulated output error of an iterate above this factor times the best so far is a real
+#: rise (not the wandering of a fixed point that is not the output-error minimum).
+DIVERGENCE_FACTOR = 1.5
+#: How many times an iterate may be pulled back halfway to the best one before DIDIM reports divergence.
+MAX_BACKTRACKS = 6
+#: Largest factor by which one DIDIM step may change a mass or the stiffness. The regression is only valid while the
+#: simulated loop's bandwidth stays near the real one (eqs. (17)-(18)); from a far a priori mass (1000 kg for a 100 kg
+#: axis) the first LS step can overshoot by orders of magnitude (to 1 kg, where the simulated loop chatters and the
+#: iteration is trapped). Steps within this factor, as every step near convergence is, are taken whole.
+MAX_STEP_RATIO = 4.0
+
+
+def _physical(names: Sequence[str], chi: np.ndarray, ref: Optional[np.ndarray] = None) -> bool:
+    """Masses and stiffness positive (and within MAX_STEP_RATIO of ``ref``), every value finite."""
+    if not np.all(np.isfinite(chi)):
+        return False
+    for i, n in enumerate(names):
+        if n in _POSITIVE:
+            if chi[i] <= 0:
+                return False
+            if ref is not None and ref[i] > 0 and not (1 / MAX_STEP_RATIO <= chi[i] / ref[i] <= MAX_STEP_RATIO):
+                return False
+    return True
+
+
 def didim(
     rec: Recording,
     model: str,
@@ -214,7 +242,7 @@ def didim(
     max_iter: int = 30,
     substeps: int = 10,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
-    divergence_factor: float = 1.02,
+    divergence_factor: float = DIVERGENCE_FACTOR,
     progress: Progress = None,
     method: str = "didim",
     terms: Sequence = (),
@@ -228,13 +256,19 @@ def didim(
     (noise-free) states, decimate Y and W in parallel, solve by QR for χᵏ⁺¹; stop when
     |‖ρₖ₊₁‖ − ‖ρₖ‖|/‖ρₖ‖ ≤ tol (eq. (21)).
 
-    ``initial`` gives χ⁰ for the estimated parameters, ``frozen`` the parameters held at fixed values. Divergence
-    (the simulated output error growing beyond ``divergence_factor`` times its best value twice in a row, or a
-    simulation that fails) stops the iteration: the result then holds the iterate with the lowest output error and
-    ``converged=False`` with a message saying what happened. ``fit_samples`` restricts the regression and the
-    output errors to the first samples (the rest of the record is then held out for validation). ``integrator``,
-    ``sim_tol`` and ``substeps`` choose the simulator's scheme (see :func:`didim.simulate`); ``terms``,
-    ``backlash_gap`` and ``delay`` extend the model (see :func:`didim.simulate`).
+    ``initial`` gives χ⁰ for the estimated parameters, ``frozen`` the parameters held at fixed values.
+
+    Safeguards (not in the paper; they never act on an iteration that goes well): an LS step that makes a mass or the
+    stiffness non-positive, or changes one by more than ``MAX_STEP_RATIO`` (4×), is shortened
+    (χ + α(χ_LS − χ), α = 1/2, 1/4, ...) until it is not; an iterate whose
+    simulation fails, or whose simulated output error exceeds ``divergence_factor`` times the best so far (a real
+    rise, not the slow wandering of DIDIM's fixed point, which is not the output-error minimum), is pulled back
+    halfway to the best iterate, at most ``MAX_BACKTRACKS`` times in a row; after that the iteration is declared
+    divergent and the result holds the best iterate with ``converged=False`` and a message.
+
+    ``fit_samples`` restricts the regression and the output errors to the first samples (the rest of the record is
+    then held out for validation). ``integrator``, ``sim_tol`` and ``substeps`` choose the simulator's scheme (see
+    :func:`didim.simulate`); ``terms``, ``backlash_gap`` and ``delay`` extend the model (see :func:`didim.simulate`).
     """
     t0 = time.perf_counter()
     _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps,
@@ -268,12 +302,28 @@ def didim(
         y_motor = np.concatenate([np.zeros(delay), rec.force[:-delay]])
 
     history: List[Iteration] = []
-    best = (math.inf, chi.copy(), None)  # (output error, χ, solution)
-    n_sim, worse, converged, message = 0, 0, False, ""
+    notes: List[str] = []
+    best = (math.inf, chi.copy(), None, None)  # (output error, χ, solution, history index)
+    n_sim, backtracks, converged, message = 0, 0, False, ""
     rho_prev = None
     sol = None
     stop: Optional[DidimError] = None  # the error that stopped the iterations, re-raised if there is no iterate
-    for k in range(max_iter):
+    last_rise = ""
+
+    def pull_back(reason: str) -> bool:
+        """Moves χ halfway back to the best iterate; False when there is none or the budget is spent."""
+        nonlocal chi, backtracks, last_rise
+        if best[2] is None or backtracks >= MAX_BACKTRACKS:
+            return False
+        backtracks += 1
+        last_rise = reason
+        chi = best[1] + 0.5 * (chi - best[1])
+        return True
+
+    k = 0
+    for k in range(max_iter + MAX_BACKTRACKS):
+        if len(history) >= max_iter:
+            break
         # one call: simulate with χᵏ, build W of the simulated states, decimate Y, W and the simulated force
         try:
             y_all, w_all, force_dec = pb.didim_system(chi, y_motor, fi, dec.core)
@@ -282,49 +332,69 @@ def didim(
                 keep = np.concatenate([np.arange(d * m, d * m + m_fit) for d in range(len(y_all) // m)])
                 y_all, w_all, force_dec = y_all[keep], w_all[keep], force_dec[:m_fit]
         except (SimulationError, DataError) as e:
-            message = f"iteration {k}: the simulation with χ{k} failed ({e}); stopped"
+            n_sim += 1
+            if pull_back(f"the simulation failed ({e})"):
+                continue
+            message = f"iteration {len(history)}: the simulation with χ{len(history)} failed ({e}); stopped"
             stop = e
             break
         n_sim += 1
         out_err = float(np.linalg.norm(yd_motor - force_dec)) / ny
-        if history:
+        if history and np.array_equal(chi, _vector(history[-1].params, names)):
             history[-1].output_error = out_err
-        if out_err < best[0]:
-            best, worse = (out_err, chi.copy(), sol), 0
-        elif out_err > divergence_factor * best[0]:
-            worse += 1
-            if worse >= 2:
-                message = (
-                    f"diverged: the simulated output error grew from {100 * best[0]:.2f} % to {100 * out_err:.2f} % "
-                    f"(iteration {k}); returning the iterate with the lowest output error. The initial values are "
-                    "probably too far from the truth, or the model misses a physical effect"
-                )
-                break
+        if out_err > divergence_factor * best[0]:
+            if pull_back(f"output error {100 * out_err:.2f} % against {100 * best[0]:.2f} %"):
+                continue
+            message = (
+                f"diverged: the simulated output error rose from {100 * best[0]:.2f} % to {100 * out_err:.2f} % and "
+                f"stayed above {divergence_factor:g} × the best after {MAX_BACKTRACKS} steps back toward the best "
+                "iterate; returning the iterate with the lowest output error. The initial values are probably too far "
+                "from the truth, or the model misses a physical effect"
+            )
+            break
+        if best[2] is not None and backtracks:
+            notes.append(f"iteration {len(history)}: step shortened {backtracks}× ({last_rise})")
+        backtracks = 0
         try:
             sol = _solve(w_all, y_all, free)
         except IdentifiabilityError as e:
-            message = f"iteration {k + 1}: {e}"
+            message = f"iteration {len(history) + 1}: {e}"
             stop = e
             break
-        chi = chi.copy()
-        chi[fi] = sol["params"]
+        if out_err < best[0]:
+            best = (out_err, chi.copy(), sol, len(history))
+        new = chi.copy()
+        new[fi] = sol["params"]
+        alpha = 1.0
+        while not _physical(names, new, chi) and alpha > 1 / 64:
+            alpha /= 2
+            new = chi.copy()
+            new[fi] = chi[fi] + alpha * (sol["params"] - chi[fi])
+        if not _physical(names, new):
+            message = (f"iteration {len(history) + 1}: the least-squares step makes a mass or the stiffness "
+                       "non-positive even when shortened 64×; stopped")
+            break
+        if alpha < 1:
+            notes.append(f"iteration {len(history) + 1}: step shortened to {alpha:g} (a mass or the stiffness would "
+                         f"have changed by more than {MAX_STEP_RATIO:g}× or become non-positive)")
+        chi = new
         rho = float(sol["residual_norm"])
         history.append(
             Iteration(
-                k=k + 1,
+                k=len(history) + 1,
                 params=dict(zip(names, map(float, chi))),
                 rel_std_pct=dict(zip(free, map(float, sol["rel_std_pct"]))),
                 relative_error=float(sol["relative_error"]),
                 output_error=float("nan"),
             )
         )
-        _say(progress, f"{method} {model} iteration {k + 1}: ‖Y−Wχ‖/‖Y‖ = {100 * sol['relative_error']:.3f} %, "
-             f"output error of χ{k} = {100 * out_err:.3f} %")
-        if rho_prev is not None and abs(rho - rho_prev) / rho_prev <= tol:
+        _say(progress, f"{method} {model} iteration {len(history)}: ‖Y−Wχ‖/‖Y‖ = {100 * sol['relative_error']:.3f} %, "
+             f"output error of χ{len(history) - 1} = {100 * out_err:.3f} %")
+        if alpha == 1 and rho_prev is not None and abs(rho - rho_prev) / rho_prev <= tol:
             converged = True
             break
         rho_prev = rho
-    else:
+    if not converged and not message:
         message = f"no convergence in {max_iter} iterations (criterion (21) with tol = {tol})"
 
     final_out = float("nan")
@@ -340,7 +410,8 @@ def didim(
                 converged = False
                 message = (
                     f"diverged: the regression converged but the simulated output error of the result "
-                    f"({100 * final_out:.2f} %) exceeds the best iterate's ({100 * best[0]:.2f} %); returning the best iterate"
+                    f"({100 * final_out:.2f} %) exceeds {divergence_factor:g} × the best iterate's "
+                    f"({100 * best[0]:.2f} %); returning the best iterate"
                 )
         except (SimulationError, DataError) as e:
             converged, message = False, f"the simulation of the final estimate failed ({e})"
@@ -368,12 +439,38 @@ def didim(
         options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset,
                      terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, integrator=integrator),
         covariance=sol["covariance"],
+        notes=notes,
     )
 
 
-def reference_mass(rec: Recording) -> float:
-    """A rough a priori mass (kg) from the reference alone: least squares of the measured force on the reference's
-    acceleration, velocity and sign of velocity. Used only when no a priori value ``apM`` is given."""
+def _vector(params: Dict[str, float], names: Sequence[str]) -> np.ndarray:
+    return np.array([params[n] for n in names], dtype=float)
+
+
+#: Where the paper found rigid DIDIM robust (25-1000 kg on an axis of about 100 kg), as factors of the data's mass.
+APM_ROBUST_RANGE = (0.25, 10.0)
+#: Low-pass cutoff (Hz) of the rough rigid fit behind the default a priori mass: below the usual flexible modes.
+APM_LOWPASS_HZ = 10.0
+
+
+def a_priori_mass(rec: Recording) -> float:
+    """The default a priori mass ``apM`` (kg), from the data alone: a rigid least-squares fit of the force on the
+    measured motor position's acceleration, velocity, sign of velocity and a constant, with the position and the
+    force low-passed alike (zero-phase Butterworth, order 4, at ``APM_LOWPASS_HZ``, below the flexible modes, where
+    the axis moves as one mass) and differentiated by central differences. It estimates the total mass to some ten
+    percent, well inside the range where rigid DIDIM converges (0.25 to 10 times the truth, as the paper's
+    25-1000 kg). Falls back to a fit on the reference when the motor position does not give a positive mass."""
+    fc = min(APM_LOWPASS_HZ, 0.2 * rec.fs)
+    q = lowpass(rec.qm, fc, rec.fs, order=4)
+    f = lowpass(rec.force, fc, rec.fs, order=4)
+    qd = diffcent(q, rec.dt)
+    qdd = diffcent(qd, rec.dt)
+    edge = min(rec.n // 10, int(2 * rec.fs / fc))  # filter transients at both ends
+    sl = slice(edge, rec.n - edge) if rec.n > 4 * edge + 8 else slice(None)
+    w = np.column_stack([qdd, qd, np.sign(qd), np.ones(rec.n)])[sl]
+    x, *_ = np.linalg.lstsq(w, f[sl], rcond=None)
+    if np.isfinite(x[0]) and x[0] > 0:
+        return float(x[0])
     qd = diffcent(rec.qr, rec.dt)
     qdd = diffcent(qd, rec.dt)
     w = np.column_stack([qdd, qd, np.sign(qd), np.ones(rec.n)])
@@ -381,12 +478,29 @@ def reference_mass(rec: Recording) -> float:
     return float(x[0]) if x[0] > 0 else float(np.linalg.norm(rec.force) / max(np.linalg.norm(qdd), 1e-12))
 
 
+def _check_apm(rec: Recording, apM: float) -> Optional[str]:
+    """A warning text when a user's apM lies outside the robust range around the data's own estimate."""
+    est = a_priori_mass(rec)
+    lo, hi = APM_ROBUST_RANGE
+    if not (lo * est <= apM <= hi * est):
+        return (f"apM = {apM:.4g} kg lies outside {lo:g}-{hi:g} × the mass the data suggest ({est:.4g} kg), the range "
+                "where the paper found rigid DIDIM robust (25-1000 kg on a 100 kg axis); it may not converge. Leave "
+                "apM out to start from the data's estimate")
+    return None
+
+
 def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: bool = False, cutoff_hz: float = RIGID_CUTOFF_HZ,
                 **kw) -> IdentificationResult:
-    """Step 1: rigid DIDIM from χ⁰ = (apM, 0, 0[, 0]), eq. (22), decimation cutoff 5 Hz by default."""
+    """Step 1: rigid DIDIM from χ⁰ = (apM, 0, 0[, 0]), eq. (22), decimation cutoff 5 Hz by default. Without ``apM``,
+    χ⁰ starts from :func:`a_priori_mass`; an ``apM`` outside the robust range around it gives a
+    :class:`~didim.DidimWarning`."""
     if apM is None:
-        apM = reference_mass(rec)
-    apM = _checks.real("the a priori mass apM", apM, "kg", lo=0.0)
+        apM = a_priori_mass(rec)
+    else:
+        apM = _checks.real("the a priori mass apM", apM, "kg", lo=0.0)
+        warning = _check_apm(rec, apM)
+        if warning:
+            warnings.warn(f"{rec.name or 'record'}: {warning}", DidimWarning, stacklevel=3)
     init = {"M": float(apM), "Fv": 0.0, "Fc": 0.0}
     if offset:
         init["OF"] = 0.0
@@ -398,12 +512,102 @@ def flexible_from_mode(m_tot: float, lam: float, f_n: float) -> Dict[str, float]
     return {"M1": lam * m_tot, "M2": (1 - lam) * m_tot, "K12": 4 * math.pi**2 * (1 - lam) * f_n**2 * m_tot}
 
 
+#: Eq. (28): step 2 starts cover λ in [0.1, 0.9] and f_n_flex in [10, 80] Hz; didim evaluates this grid in one
+#: parallel batch and starts Nelder-Mead from its best point.
+MODE_GRID_LAMBDA = tuple(np.round(np.linspace(0.1, 0.9, 9), 3))
+MODE_GRID_F_HZ = tuple(np.round(np.geomspace(10.0, 80.0, 8), 3))
+#: Load shares of the friction totals on the grid of the friction-split variant.
+MODE_GRID_SHARE = (0.0, 0.5)
+#: A step-2 optimum within this margin of the rigid model's output error explains nothing the rigid model does not.
+RIGID_LIMIT_MARGIN = 0.97
+#: The friction split is used when it lowers step 2's output error by more than this fraction.
+SPLIT_GAIN = 0.05
+
+
+class _ModeCriterion:
+    """Step 2's criterion (25), ‖Y − Y_s‖/‖Y‖ on the decimated force, as a function of (λ, f_n_flex[, s]) with
+    M_tot, Fv_tot, Fc_tot (and OF) from step 1: eqs. (26)-(27) put all friction on the motor (s = 0); the friction
+    split (beyond the paper) puts the share s of both totals on the load side."""
+
+    def __init__(self, rec: Recording, rigid: IdentificationResult, dec: Decimation, sim_kw: dict):
+        self.rigid = rigid.params
+        self.offset = "OF" in self.rigid
+        self.dec = dec
+        self.yd = dec(rec.force)
+        self.ny = float(np.linalg.norm(self.yd))
+        _checks.measured_signal("force", self.ny, "step 2")
+        self.pb = problem(rec, "flexible", offset=self.offset, **sim_kw)
+        self.sims = 0
+        self.bad = 1e3  # returned for points outside the domain or that fail to simulate (relative error 100000 %)
+
+    def params(self, lam: float, f: float, s: float = 0.0) -> Dict[str, float]:
+        m, fv, fc = self.rigid["M"], self.rigid["Fv"], self.rigid["Fc"]
+        p = flexible_from_mode(m, lam, f)
+        d = {"M1": p["M1"], "Fv1": (1 - s) * fv, "Fc1": (1 - s) * fc, "M2": p["M2"], "Fv2": s * fv, "Fc2": s * fc,
+             "K12": p["K12"]}
+        if self.offset:
+            d["OF"] = self.rigid["OF"]
+        return d
+
+    @staticmethod
+    def valid(x) -> bool:
+        return 0.0 < x[0] < 1.0 and x[1] > 0.0 and (len(x) < 3 or 0.0 <= x[2] <= 1.0)
+
+    def batch(self, xs) -> np.ndarray:
+        xs = np.atleast_2d(np.asarray(xs, dtype=float))
+        ok = np.array([self.valid(x) for x in xs], dtype=bool)
+        out = np.full(len(xs), self.bad)
+        if ok.any():
+            pts = np.array([params_vector("flexible", self.params(*x), self.offset)[1] for x in xs[ok]])
+            self.sims += len(pts)
+            vals, _ = self.pb.output_error_batch(pts, self.yd, self.dec.core)
+            out[ok] = np.where(np.isfinite(vals), np.sqrt(np.abs(vals)) / self.ny, self.bad)
+        return out
+
+    def __call__(self, x) -> float:
+        return float(self.batch([x])[0])
+
+
+def _nelder_mead(crit: _ModeCriterion, x0, tol: float, max_iter: int, progress: Progress, label: str):
+    """Nelder-Mead (scipy's, as MATLAB's fminsearch) on the mode criterion from x0, its initial simplex in one batch."""
+    from scipy.optimize import minimize
+
+    trace: List[tuple] = []
+
+    def callback(xk):
+        trace.append(tuple(map(float, xk)))
+        _say(progress, f"step 2 ({label}) iteration {len(trace)}: " + ", ".join(
+            f"{n} = {v:.4g}" for n, v in zip(("λ", "f_n_flex", "s"), xk)))
+
+    simplex = nelder_mead_simplex(x0)
+    vals = crit.batch(simplex)
+    res = minimize(prefetch(crit, lambda xs: vals, simplex), x0, method="Nelder-Mead", callback=callback,
+                   options=dict(xatol=1e-4, fatol=tol * float(vals[0]), maxiter=max_iter, initial_simplex=simplex))
+    return res, trace
+
+
+def _degenerate(x, j: float, rigid_limit: float, cutoff_hz: float) -> str:
+    """Why a step-2 optimum is not a flexible mode this record can support ('' when it is one)."""
+    lam, f = float(x[0]), float(x[1])
+    if f >= cutoff_hz:
+        return (f"the best mode, f_n_flex = {f:.1f} Hz, lies above the analysed band (decimation cutoff "
+                f"{cutoff_hz:g} Hz): the record does not show the flexible mode")
+    if lam >= 0.97 or lam <= 0.03:
+        return (f"the best mass ratio λ = {lam:.3f} puts almost all the mass on one side: the flexible model "
+                "degenerates into the rigid one")
+    if j >= RIGID_LIMIT_MARGIN * rigid_limit:
+        return (f"the best flexible model explains the force no better than the rigid one (output error "
+                f"{100 * j:.2f} % against {100 * rigid_limit:.2f} %): the record does not excite the flexible mode")
+    return ""
+
+
 def fit_flexible_mode(
     rec: Recording,
     rigid: IdentificationResult,
     *,
     lambda0: float = 0.5,
     f0: float = 40.0,
+    friction_split: bool = False,
     cutoff_hz: float = FLEXIBLE_CUTOFF_HZ,
     tol: float = 1e-4,
     max_iter: int = 300,
@@ -412,101 +616,92 @@ def fit_flexible_mode(
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
-    grid_start: bool = False,
+    grid_start: bool = True,
+    _crit: Optional[_ModeCriterion] = None,
+    _grid: Optional[tuple] = None,
 ) -> IdentificationResult:
     """Step 2: Nelder-Mead on (λ, f_n_flex) with M_tot, Fv_tot, Fc_tot frozen from step 1, eqs. (23)-(28):
     M1 = λ M_tot, M2 = (1 − λ) M_tot, K12 = 4π²(1 − λ) f² M_tot, Fv1 = Fv_tot, Fc1 = Fc_tot, Fv2 = Fc2 = 0.
 
-    ``grid_start=True`` (not in the paper) first evaluates the criterion on a coarse grid, λ in 0.1..0.9 (9 values)
-    times f_n_flex in 3..2·cutoff_hz Hz (10 values, geometric), in one parallel batch with (λ⁰, f⁰), and starts the
-    Nelder-Mead from the best of them: the result then no longer depends on (λ⁰, f⁰) (see docs/robustness.md)."""
-    from scipy.optimize import minimize
+    Starts: eq. (28) asks for initial values covering f_n_flex in [10, 80] Hz and λ in [0.1, 0.9]. With
+    ``grid_start`` (default) the criterion is evaluated on that grid (9 × 8 points, f geometric) and at (λ⁰, f⁰) in
+    one parallel batch, and Nelder-Mead starts from the best point; ``grid_start=False`` starts from (λ⁰, f⁰) alone.
 
+    ``friction_split=True`` (beyond the paper) also fits the load share s of the friction totals, Fv2 = s Fv_tot,
+    Fc2 = s Fc_tot, Fv1 = (1 − s) Fv_tot, Fc1 = (1 − s) Fc_tot: the paper's model cannot reproduce the mode when the
+    load's Coulomb friction governs it (a chirp played at rest).
+
+    The result's ``converged`` is False with a message when Nelder-Mead stops early or when the optimum is
+    degenerate (λ at 0 or 1, f_n_flex above the analysed band, or no better than the rigid model, whose output
+    error at this decimation is in ``options["rigid_output_error"]``): the record then does not show the mode."""
     t0 = time.perf_counter()
     _checks.options(lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps,
                     coulomb_eps=coulomb_eps)
-    offset = "OF" in rigid.params
-    m, fv, fc = rigid.params["M"], rigid.params["Fv"], rigid.params["Fc"]
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
-    yd = dec(rec.force)
-    ny = float(np.linalg.norm(yd))
-    _checks.measured_signal("force", ny, "step 2")
-    count = {"sim": 0}
-    trace: List[tuple] = []
-
-    def chi(lam, f):
-        p = flexible_from_mode(m, lam, f)
-        d = {"M1": p["M1"], "Fv1": fv, "Fc1": fc, "M2": p["M2"], "Fv2": 0.0, "Fc2": 0.0, "K12": p["K12"]}
-        if offset:
-            d["OF"] = rigid.params["OF"]
-        return d
-
-    pb = problem(rec, "flexible", offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
-                 tol=sim_tol)
-    penalty = 1e3 * ny**2
-
-    def vector(lam, f):
-        return params_vector("flexible", chi(lam, f), offset)[1]
-
-    def cost(x):
-        lam, f = float(x[0]), float(x[1])
-        if not (0.0 < lam < 1.0 and f > 0.0):
-            return penalty
-        count["sim"] += 1
-        try:
-            return pb.output_error(vector(lam, f), yd, dec.core)
-        except (SimulationError, DataError):
-            return penalty
-
-    def cost_batch(xs):
-        ok = [(0.0 < x[0] < 1.0 and x[1] > 0.0) for x in xs]
-        out = np.full(len(xs), penalty)
-        if any(ok):
-            pts = np.array([vector(float(x[0]), float(x[1])) for x, g in zip(xs, ok) if g])
-            count["sim"] += len(pts)
-            vals, _ = pb.output_error_batch(pts, yd, dec.core)
-            out[np.flatnonzero(ok)] = np.where(np.isfinite(vals), vals, penalty)
-        return out
-
-    def callback(xk):
-        trace.append((float(xk[0]), float(xk[1])))
-        _say(progress, f"step 2 iteration {len(trace)}: λ = {xk[0]:.4f}, f_n_flex = {xk[1]:.3f} Hz")
-
-    initial = (lambda0, f0)
+    crit = _crit or _ModeCriterion(rec, rigid, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps,
+                                                         integrator=integrator, tol=sim_tol))
+    sims0 = crit.sims
+    shares = MODE_GRID_SHARE if friction_split else (0.0,)
+    if _grid is None:
+        pts = [(lambda0, f0, s) for s in shares]
+        if grid_start:
+            pts += [(a, b, s) for a in MODE_GRID_LAMBDA for b in MODE_GRID_F_HZ for s in shares]
+        pts_arr = np.array(pts)
+        vals = crit.batch(pts_arr)
+    else:
+        pts_arr, vals = _grid
+    dims = 3 if friction_split else 2
+    use = np.isin(pts_arr[:, 2], shares)
+    i = int(np.flatnonzero(use)[np.argmin(vals[use])])
+    x0 = pts_arr[i, :dims]
     if grid_start:
-        pts = np.array([(a, b) for a in np.linspace(0.1, 0.9, 9) for b in np.geomspace(3.0, 2 * cutoff_hz, 10)]
-                       + [(lambda0, f0)])
-        g = cost_batch(pts)
-        lambda0, f0 = map(float, pts[int(np.argmin(g))])
-        _say(progress, f"step 2 grid start: {len(pts)} points, best λ = {lambda0:.3f}, f_n_flex = {f0:.2f} Hz")
-    simplex = nelder_mead_simplex([lambda0, f0])
-    vals = cost_batch(simplex)
-    j0 = float(vals[0])
-    res = minimize(prefetch(cost, lambda xs: vals, simplex), [lambda0, f0], method="Nelder-Mead", callback=callback,
-                   options=dict(xatol=1e-4, fatol=tol * j0, maxiter=max_iter, initial_simplex=simplex))
-    lam, f = map(float, res.x)
+        _say(progress, f"step 2 start: {int(use.sum())} points of eq. (28)'s grid, best λ = {x0[0]:.2f}, "
+             f"f_n_flex = {x0[1]:.1f} Hz" + (f", s = {x0[2]:.2f}" if dims == 3 else ""))
+    if dims == 3 and x0[2] == 0.0:
+        x0 = np.array([x0[0], x0[1], 0.05])  # Nelder-Mead's simplex scales by x0: start s off its bound
+    res, trace = _nelder_mead(crit, x0, tol, max_iter, progress, "friction split" if dims == 3 else "paper")
+    x = np.asarray(res.x, dtype=float)
     j = float(res.fun)
-    history = [Iteration(k=i + 1, params={"lambda": a, "f_n_flex": b}, rel_std_pct={}, relative_error=float("nan"),
-                         output_error=float("nan")) for i, (a, b) in enumerate(trace)]
+    rigid_limit = float(crit(np.array([0.999, 0.5 * rec.fs, 0.0][:dims])))  # flexible model that moves as one mass
+    why = _degenerate(x, j, rigid_limit, cutoff_hz)
+    names = ["lambda", "f_n_flex", "load_share"][:dims]
+    params = dict(zip(names, map(float, x)))
+    history = [Iteration(k=i + 1, params=dict(zip(names, p)), rel_std_pct={}, relative_error=float("nan"),
+                         output_error=float("nan")) for i, p in enumerate(trace)]
+    converged = bool(res.success) and not why
+    message = why or ("" if res.success else str(res.message))
     return IdentificationResult(
         model="flexible",
-        method="nelder-mead (λ, f_n_flex)",
-        params={"lambda": lam, "f_n_flex": f},
-        std={"lambda": float("nan"), "f_n_flex": float("nan")},
-        rel_std_pct={"lambda": float("nan"), "f_n_flex": float("nan")},
-        relative_error=math.sqrt(j) / ny,
-        output_error=math.sqrt(j) / ny,
+        method="nelder-mead (" + ", ".join(names) + ")",
+        params=params,
+        std={n: float("nan") for n in names},
+        rel_std_pct={n: float("nan") for n in names},
+        relative_error=j,
+        output_error=j,
         iterations=int(res.nit),
-        simulations=count["sim"],
+        simulations=crit.sims - sims0,
         elapsed_s=time.perf_counter() - t0,
-        converged=bool(res.success),
-        message="" if res.success else str(res.message),
-        initial={"lambda": initial[0], "f_n_flex": initial[1]},
-        frozen={k: v for k, v in chi(lam, f).items()},
+        converged=converged,
+        message=message,
+        initial=dict(zip(names, map(float, pts_arr[0, :dims]))),
+        frozen=crit.params(*x),
         history=history,
         options=dict(decimation=dec.describe(), tol=tol, integrator=integrator, grid_start=grid_start,
-                     nelder_mead_start={"lambda": lambda0, "f_n_flex": f0}),
+                     nelder_mead_start=dict(zip(names, map(float, x0))), rigid_output_error=rigid_limit,
+                     degenerate=why, friction_split=friction_split),
     )
+
+
+#: Variants of the three-step procedure: "paper" (eqs. (22)-(30) as written), "friction-split" (step 2 also fits the
+#: load share of the friction, step 3 frees Fv2 and Fc2: beyond the paper), "auto" (the split when it explains the
+#: record clearly better, see SPLIT_GAIN).
+VARIANTS = ("auto", "paper", "friction-split")
+
+
+def _cannot_support(why: str, rec: Recording) -> str:
+    fix = ("superimpose a small chirp (e.g. 2-40 Hz, tens of µm) on a slow constant-speed move, so the load moves "
+           "in one direction while the mode is excited, or add a load encoder (ql) and use method='idim-ls'")
+    return f"this record cannot support a flexible identification: {why}. To fix the experiment: {fix}"
 
 
 def didim_flexible(
@@ -514,6 +709,7 @@ def didim_flexible(
     apM: Optional[float] = None,
     *,
     offset: bool = False,
+    variant: str = "auto",
     lambda0: float = 0.5,
     f0: float = 40.0,
     rigid_cutoff_hz: float = RIGID_CUTOFF_HZ,
@@ -525,49 +721,111 @@ def didim_flexible(
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
-    grid_start: bool = False,
+    grid_start: bool = True,
 ) -> IdentificationResult:
-    """The three-step procedure of section V: rigid DIDIM (step 1), Nelder-Mead on (λ, f_n_flex) (step 2), DIDIM on
-    the flexible model initialised by eqs. (29)-(30) (step 3). Fv2 and Fc2 are held at zero (the paper's choice) and
-    the motor friction carries the totals; see the module docstring for why. When the axis has load-side friction,
-    steps 2 and 3 are biased and step 3 can drift: the result is then flagged ``converged=False`` with the reason,
-    and :func:`didim.output_error.oe_gn` (exact sensitivities) is the method to use."""
+    """The three-step procedure of section V: rigid DIDIM (step 1), Nelder-Mead on (λ, f_n_flex) (step 2, started on
+    eq. (28)'s grid), DIDIM on the flexible model initialised by eqs. (29)-(30) (step 3).
+
+    ``variant="paper"`` runs the paper's procedure: Fv2 = Fc2 = 0 throughout, the motor friction carries the totals.
+    ``variant="friction-split"`` (beyond the paper) also fits the load share s of the friction in step 2 and frees Fv2
+    and Fc2 in step 3 (the load row of eq. (4) keeps their ratio to M2, so step 3 keeps s). ``"auto"`` (default) runs
+    both step 2s on one shared grid batch and takes the split when it lowers step 2's output error by more than
+    ``SPLIT_GAIN`` (5 %); the result's ``options["variant"]`` and ``notes`` say which ran and why.
+
+    Step 3 keeps step 2's f_n_flex (the load row moves M2 and K12 together; the paper's own Tables do the same). A
+    step-3 output error above step 2's is normal (DIDIM's fixed point is not the output-error minimum) and is noted,
+    not flagged. When step 2's optimum is degenerate (no visible mode), steps 3 is not run: the result holds step 2's
+    parameters with ``converged=False`` and a message naming the reason and the experiment that would fix it."""
     t0 = time.perf_counter()
     _checks.options(lambda0=lambda0, f0=f0, rigid_cutoff_hz=rigid_cutoff_hz, cutoff_hz=cutoff_hz, tol=tol,
                     max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
+    _checks.one_of("variant", variant, VARIANTS)
     common = dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, sim_tol=sim_tol)
     _say(progress, "step 1: rigid DIDIM")
-    r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress, **common)
+    r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress,
+                     **common)
     if not r1.converged:
         # nothing sensible to start steps 2 and 3 from: hand back step 1, flagged, with its history
         r1.message = (f"step 1 (rigid DIDIM) did not converge, so steps 2 and 3 were not run and this is step 1's rigid "
                       f"result: {r1.message}")
         r1.elapsed_s = time.perf_counter() - t0
         return r1
-    _say(progress, "step 2: Nelder-Mead on (λ, f_n_flex)")
-    r2 = fit_flexible_mode(rec, r1, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress,
-                           grid_start=grid_start, **common)
+
+    dec = Decimation.lowpass(cutoff_hz, rec.fs)
+    crit = _ModeCriterion(rec, r1, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
+                                             tol=sim_tol))
+    shares = (0.0,) if variant == "paper" else MODE_GRID_SHARE
+    pts = [(lambda0, f0, s) for s in shares]
+    if grid_start:
+        pts += [(a, b, s) for a in MODE_GRID_LAMBDA for b in MODE_GRID_F_HZ for s in shares]
+    grid = (np.array(pts), None)
+    grid = (grid[0], crit.batch(grid[0]))
+    mode_kw = dict(lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress, grid_start=grid_start,
+                   _crit=crit, _grid=grid, **common)
+    notes: List[str] = []
+    candidates = {}
+    if variant in ("auto", "paper"):
+        _say(progress, "step 2: Nelder-Mead on (λ, f_n_flex)")
+        candidates["paper"] = fit_flexible_mode(rec, r1, friction_split=False, **mode_kw)
+    if variant in ("auto", "friction-split"):
+        _say(progress, "step 2 (friction split, beyond the paper): Nelder-Mead on (λ, f_n_flex, s)")
+        candidates["friction-split"] = fit_flexible_mode(rec, r1, friction_split=True, **mode_kw)
+    chosen = variant
+    if variant == "auto":
+        jp, js = candidates["paper"].output_error, candidates["friction-split"].output_error
+        if js < (1 - SPLIT_GAIN) * jp and not candidates["friction-split"].options["degenerate"]:
+            chosen = "friction-split"
+            notes.append(f"variant friction-split (beyond the paper): putting the share s = "
+                         f"{candidates['friction-split'].params['load_share']:.2f} of the friction on the load lowers "
+                         f"step 2's output error from {100 * jp:.2f} % (paper, all friction on the motor) to "
+                         f"{100 * js:.2f} %, so Fv2 and Fc2 are identified too")
+        else:
+            chosen = "paper"
+            notes.append(f"variant paper: the friction split does not explain the record better (step 2 output error "
+                         f"{100 * js:.2f} % against {100 * jp:.2f} % with all friction on the motor)")
+    r2 = candidates[chosen]
+    r2.simulations = crit.sims
+    n_sim = r1.simulations + crit.sims
+    if r2.options["degenerate"]:
+        r = IdentificationResult(
+            model="flexible", method="didim", params=dict(r2.frozen), std={}, rel_std_pct={},
+            relative_error=float("nan"), output_error=r2.output_error, iterations=0, simulations=n_sim,
+            elapsed_s=time.perf_counter() - t0, converged=False, message=_cannot_support(r2.options["degenerate"], rec),
+            options=dict(variant=chosen), steps={"rigid": r1, "mode": r2}, notes=notes)
+        return r
+
     _say(progress, "step 3: flexible DIDIM")
-    init = flexible_from_mode(r1.params["M"], r2.params["lambda"], r2.params["f_n_flex"])
-    init.update({"Fv1": 0.0, "Fc1": 0.0})
-    frozen = {"Fv2": 0.0, "Fc2": 0.0}
+    lam, f = r2.params["lambda"], r2.params["f_n_flex"]
+    init = flexible_from_mode(r1.params["M"], lam, f)
+    if chosen == "paper":
+        init.update({"Fv1": 0.0, "Fc1": 0.0})  # eq. (30)
+        frozen = {"Fv2": 0.0, "Fc2": 0.0}
+    else:
+        # the load row of eq. (4) only scales the load parameters together: they start where step 2 put them
+        init.update({k: r2.frozen[k] for k in ("Fv1", "Fc1", "Fv2", "Fc2")})
+        frozen = {}
     if offset:
         init["OF"] = 0.0
     r3 = didim(rec, "flexible", init, frozen=frozen, offset=offset, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter,
                progress=progress, **common)
     r3.steps = {"rigid": r1, "mode": r2}
-    if r3.converged and r3.output_error > r2.output_error * 1.02:
-        r3.converged = False
-        r3.message = (
-            f"step 3 ended with a simulated output error of {100 * r3.output_error:.2f} %, worse than step 2's "
-            f"{100 * r2.output_error:.2f} %: the flexible DIDIM drifted (typical of load-side friction, which the "
-            "three-step procedure freezes at zero); use method='oe-gn'"
-        )
-    elif not r3.converged:
-        r3.message += f" (step 2's output error was {100 * r2.output_error:.2f} %); consider method='oe-gn'"
-    if not r2.converged:
-        r3.message = (r3.message + "; " if r3.message else "") + f"note: step 2 stopped without converging ({r2.message})"
-    r3.simulations += r1.simulations + r2.simulations
+    r3.notes = notes + r3.notes
+    if r3.converged and r3.output_error > r2.output_error:
+        r3.notes.append(f"step 3's simulated output error ({100 * r3.output_error:.2f} %) is above step 2's "
+                        f"({100 * r2.output_error:.2f} %): normal, DIDIM's fixed point is not the output-error minimum")
+    if not r3.converged:
+        r3.message += f" (step 2's output error was {100 * r2.output_error:.2f} %)"
+        if chosen == "paper":
+            r3.message += (". The paper's model puts all friction on the motor; when the load's Coulomb friction "
+                           "governs the mode (a chirp played with the axis at rest) it cannot reproduce it: use "
+                           "variant='friction-split' or method='oe-lm', or superimpose the chirp on a slow "
+                           "constant-speed move")
+        else:
+            r3.message += "; consider method='oe-lm'"
+    if not r2.converged and not r2.options["degenerate"]:
+        r3.notes.append(f"step 2 stopped without converging ({r2.message})")
+    r3.options["variant"] = chosen
+    r3.simulations += n_sim
     r3.elapsed_s = time.perf_counter() - t0
     r3.method = "didim"
     return r3

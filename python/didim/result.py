@@ -27,6 +27,7 @@ UNITS = {
     "K12": "N/m",
     "lambda": "-",
     "f_n_flex": "Hz",
+    "load_share": "-",
 }
 
 
@@ -66,6 +67,8 @@ class IdentificationResult:
     options: Dict[str, Any] = field(default_factory=dict)
     covariance: Optional[np.ndarray] = None
     steps: Dict[str, "IdentificationResult"] = field(default_factory=dict)
+    #: What the method did beyond the plain iteration (variant chosen, steps shortened, ...), in plain words.
+    notes: List[str] = field(default_factory=list)
 
     @property
     def names(self) -> List[str]:
@@ -93,6 +96,7 @@ class IdentificationResult:
             "options": {k: v for k, v in self.options.items() if not k.startswith("_")},
             "history": [asdict(h) for h in self.history],
             "steps": {k: v.to_dict() for k, v in self.steps.items()},
+            "notes": list(self.notes),
             "units": {k: UNITS.get(k, "") for k in self.params},
         }
         return jsonable(d)
@@ -138,6 +142,7 @@ class IdentificationResult:
             lines.append(f"NOT CONVERGED: {self.message}")
         elif self.message:
             lines.append(self.message)
+        lines.extend(f"note: {n}" for n in self.notes)
         return "\n".join(l for l in lines if l != "")
 
     def __str__(self) -> str:
