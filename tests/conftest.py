@@ -36,3 +36,29 @@ def emps_pulses(emps_pulses_path):
     import didim
 
     return didim.load_mat(emps_pulses_path)
+
+
+#: Records with known truth from an independent simulator (../shared/data/truthbench, see its README).
+TRUTHBENCH_DIR = pathlib.Path(
+    os.environ.get("DIDIM_TRUTHBENCH_DIR", pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "truthbench")
+)
+
+
+@pytest.fixture(scope="session")
+def truthbench():
+    """(load, truth): ``load("flexible/paperlike_moving_chirp")`` reads a record, ``truth[key]`` its truth.json entry."""
+    import json
+
+    import didim
+
+    if not (TRUTHBENCH_DIR / "truth.json").exists():
+        pytest.skip(f"truthbench {TRUTHBENCH_DIR} not available (set DIDIM_TRUTHBENCH_DIR)")
+    truth = json.loads((TRUTHBENCH_DIR / "truth.json").read_text())
+    cache = {}
+
+    def load(key):
+        if key not in cache:
+            cache[key] = didim.load_mat(TRUTHBENCH_DIR / f"{key}.mat")
+        return cache[key]
+
+    return load, truth

@@ -60,10 +60,25 @@ def table3():
     return sc.make_recording(sc.TABLE3_TRUTH, "flexible", force_noise=1.0, seed=12)
 
 
-def test_three_step_didim_flags_the_drift_caused_by_load_friction(table3):
+def test_three_step_didim_with_load_friction_takes_the_labelled_friction_split(table3):
+    truth = sc.TABLE3_TRUTH
     r = didim.identify(table3, "flexible", "didim", apM=78.0)
-    assert not r.converged
-    assert "oe-gn" in r.message
+    assert r.converged, r.message
+    assert r.options["variant"] == "friction-split"
+    for name in ("M1", "M2", "K12"):
+        assert r.params[name] == pytest.approx(truth[name], rel=0.02), name
+    assert r.params["Fv1"] + r.params["Fv2"] == pytest.approx(truth["Fv1"] + truth["Fv2"], rel=0.02)
+    assert r.params["Fc1"] + r.params["Fc2"] == pytest.approx(truth["Fc1"] + truth["Fc2"], rel=0.02)
+
+
+def test_three_step_didim_paper_variant_keeps_load_friction_at_zero(table3):
+    r = didim.identify(table3, "flexible", "didim", apM=78.0, variant="paper")
+    assert r.options["variant"] == "paper"
+    assert r.frozen == {"Fv2": 0.0, "Fc2": 0.0}
+    if r.converged:  # the motor friction carries the totals
+        assert r.params["Fv1"] == pytest.approx(sc.TABLE3_TRUTH["Fv1"] + sc.TABLE3_TRUTH["Fv2"], rel=0.05)
+    else:  # the drift is named, with what to do
+        assert "drifted" in r.message and "friction-split" in r.message
 
 
 def test_exact_sensitivity_solver_separates_motor_and_load_friction(table3):

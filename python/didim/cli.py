@@ -96,19 +96,19 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 def cmd_demo(args) -> int:
     from ._io import write_text
-    from .demo import demo_report, didim_case_report, run_demo, run_didim_case
+    from .demo import demo_report, run_demo, run_rest_case
 
     if args.json:
         from ._io import check_writable
 
         check_writable(args.json)
     results = run_demo(seed=args.seed, progress=_progress(args.quiet))
-    print(demo_report(results))
-    print(didim_case_report(run_didim_case(seed=args.seed)))
+    rest = run_rest_case(seed=args.seed, progress=_progress(args.quiet))
+    print(demo_report(results, rest))
     if args.json:
         import json
 
-        write_text(args.json, json.dumps({k: r.to_dict() for k, r in results.items()}, indent=2) + "\n")
+        write_text(args.json, json.dumps({k: r.to_dict() for k, r in {**results, **rest}.items()}, indent=2) + "\n")
         print(f"wrote {args.json}")
     return 0
 

@@ -84,6 +84,27 @@ def trapezoid_chirp(*, dt: float = 1e-3, stroke: float = 0.2, chirp_f1: float = 
     return np.concatenate([tr, ramp, ch, back, np.zeros(int(0.3 / dt))])
 
 
+def trapezoid_moving_chirp(*, dt: float = 1e-3, stroke: float = 0.2, speed: float = 0.03, amplitude: float = 25e-6,
+                           f0: float = 2.0, f1: float = 40.0) -> np.ndarray:
+    """The paper's "trapezoidal velocity signal coupled with a chirp": trapezoidal moves (inertia, friction), then a
+    slow move across the stroke at ``speed`` (m/s) with a chirp of ``amplitude`` (m) from ``f0`` to ``f1`` Hz on top,
+    so the axis keeps moving in one direction while the flexible mode is excited (the load's Coulomb friction then
+    acts as a constant force instead of reversing twice per period). ``amplitude · 2π f1`` must stay below ``speed``."""
+    if amplitude * 2 * math.pi * f1 >= speed:
+        raise DataError(f"the chirp's velocity amplitude {amplitude * 2 * math.pi * f1:.3g} m/s reaches the move's speed "
+                        f"{speed:g} m/s: the axis would reverse; lower amplitude or f1, or raise speed")
+    tr = trapezoid(dt=dt, stroke=stroke)
+    start, end = 0.1 * stroke, 0.9 * stroke
+    to_start = tr[-1] + _smooth_move(start - tr[-1], 0.083, 0.83, dt)
+    move = start + _smooth_move(end - start, speed, 0.83, dt)
+    t = np.arange(len(move)) * dt
+    dur = t[-1]
+    phase = 2 * math.pi * (f0 * t + 0.5 * (f1 - f0) * t**2 / dur)
+    fade = np.clip(np.minimum(t, dur - t) / 0.5, 0, 1)
+    back = end + _smooth_move(-end, 0.083, 0.83, dt)
+    return np.concatenate([tr, to_start, move + fade * amplitude * np.sin(phase), back, np.zeros(int(0.3 / dt))])
+
+
 def emps_like(*, n: int = 24841, dt: float = 1e-3) -> np.ndarray:
     """A reference shaped like the EMPS record's: bang-bang acceleration (0.83 m/s²), plateaus at 0.042, 0.083 and
     0.125 m/s, strokes within 0 .. 0.246 m, ``n`` samples."""
@@ -154,5 +175,5 @@ def make_recording(
     )
 
 
-__all__ = ["trapezoid", "chirp", "trapezoid_chirp", "emps_like", "pulses", "make_recording", "TABLE3_TRUTH",
+__all__ = ["trapezoid", "chirp", "trapezoid_chirp", "trapezoid_moving_chirp", "emps_like", "pulses", "make_recording", "TABLE3_TRUTH",
            "TABLE4_TRUTH", "EMPS_RIGID"]

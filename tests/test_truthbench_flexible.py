@@ -1,0 +1,117 @@
+"""The three-step DIDIM and OE-LM on flexible records from an independent simulator (../shared/data/truthbench:
+another integrator, tanh Coulomb friction, force noise inside the loop), asserted against the truth. Tolerances are
+the issue's acceptance bounds: 5 % with load friction (the friction split between motor and load is weakly
+identifiable from the motor force alone, the totals are not), 2 % with all friction on the motor side."""
+
+import glob
+import os
+import warnings
+
+import pytest
+
+import didim
+
+FLEX = ["paperlike_moving_chirp", "paperlike_moving_chirp_payload", "paperlike_chirp_at_rest",
+        "paperlike_motor_friction_only"]
+
+
+def _truth(truth, name):
+    t = truth[f"flexible/{name}"]["params"]
+    return dict(M1=t["M1"], Fv1=t["Fv1"], Fc1=t["Fc1"], M2=t["M2"], Fv2=t.get("Fv2", 0.0), Fc2=t.get("Fc2", 0.0),
+                K12=t["K"])
+
+
+def _value(r, n):
+    return r.params.get(n, r.frozen.get(n, 0.0))
+
+
+def _sums(r):
+    return {"M1+M2": _value(r, "M1") + _value(r, "M2"), "Fv1+Fv2": _value(r, "Fv1") + _value(r, "Fv2"),
+            "Fc1+Fc2": _value(r, "Fc1") + _value(r, "Fc2")}
+
+
+@pytest.fixture(scope="module")
+def three_step(truthbench):
+    load, _ = truthbench
+    return {n: didim.identify(load(f"flexible/{n}"), "flexible", "didim") for n in FLEX}
+
+
+@pytest.mark.parametrize("name", ["paperlike_moving_chirp", "paperlike_moving_chirp_payload", "paperlike_chirp_at_rest"])
+def test_three_step_didim_with_load_friction_is_within_5_percent(three_step, truthbench, name):
+    r, t = three_step[name], _truth(truthbench[1], name)
+    assert r.converged, r.message
+    for n in ("M1", "M2", "K12"):
+        assert r.params[n] == pytest.approx(t[n], rel=0.05), n
+    for n, v in _sums(r).items():
+        a, b = n.split("+")
+        assert v == pytest.approx(t[a] + t[b], rel=0.05), n
+    # load friction governs these records: the paper's model does not explain them, and the result says so
+    assert r.options["variant"] == "friction-split"
+    assert any("beyond the paper" in note for note in r.notes)
+
+
+def test_three_step_didim_sees_the_10_kg_payload(three_step):
+    dm2 = three_step["paperlike_moving_chirp_payload"].params["M2"] - three_step["paperlike_moving_chirp"].params["M2"]
+    assert dm2 == pytest.approx(10.0, abs=1.5)
+
+
+def test_three_step_didim_with_motor_friction_only_is_within_2_percent(three_step, truthbench):
+    r, t = three_step["paperlike_motor_friction_only"], _truth(truthbench[1], "paperlike_motor_friction_only")
+    assert r.converged, r.message
+    assert r.options["variant"] == "paper"  # nothing on the load side to split
+    for n in ("M1", "Fv1", "Fc1", "M2", "K12"):
+        assert r.params[n] == pytest.approx(t[n], rel=0.02), n
+    assert r.frozen == {"Fv2": 0.0, "Fc2": 0.0}
+
+
+def test_the_paper_variant_never_reports_a_wrong_result_as_converged(truthbench):
+    load, truth = truthbench
+    for name in ("paperlike_chirp_at_rest", "paperlike_motor_friction_only"):
+        r = didim.identify(load(f"flexible/{name}"), "flexible", "didim", variant="paper")
+        t = _truth(truth, name)
+        assert r.options["variant"] == "paper"
+        if r.converged:
+            for n in ("M1", "M2", "K12"):
+                assert r.params[n] == pytest.approx(t[n], rel=0.05), (name, n)
+        else:  # honest: names the cause and what to do
+            assert "friction" in r.message and ("friction-split" in r.message or "oe-lm" in r.message)
+
+
+@pytest.mark.parametrize("name", FLEX)
+def test_oe_lm_is_within_2_percent(truthbench, name):
+    load, truth = truthbench
+    r = didim.identify(load(f"flexible/{name}"), "flexible", "oe-lm")
+    t = _truth(truth, name)
+    assert r.converged, r.message
+    for n in ("M1", "M2", "K12"):
+        assert r.params[n] == pytest.approx(t[n], rel=0.02), n
+    for n, v in _sums(r).items():
+        a, b = n.split("+")
+        assert v == pytest.approx(t[a] + t[b], rel=0.02), n
+
+
+def test_step_2_recognises_a_record_without_a_visible_mode(truthbench):
+    """A rigid axis (no mode at all): step 2's best flexible model is no better than the rigid one, and the three-step
+    DIDIM says the record cannot support a flexible identification instead of returning a drifted answer."""
+    load, _ = truthbench
+    r = didim.identify(load("doctor/null_trap_train"), "flexible", "didim")
+    assert not r.converged
+    assert "cannot support a flexible identification" in r.message
+    assert "chirp" in r.message
+
+
+def test_rigid_step_converges_from_25_and_1000_kg_on_every_truthbench_record(truthbench):
+    from conftest import TRUTHBENCH_DIR
+
+    files = sorted(glob.glob(str(TRUTHBENCH_DIR / "*" / "*_train.mat")) + glob.glob(str(TRUTHBENCH_DIR / "flexible" / "*.mat")))
+    assert len(files) >= 20
+    failed = []
+    for f in files:
+        rec = didim.load_mat(f)
+        for apm in (25.0, 1000.0):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", didim.DidimWarning)
+                r = didim.identify(rec, "rigid", "didim", apM=apm)
+            if not r.converged:
+                failed.append((os.path.basename(f), apm, r.message))
+    assert not failed
