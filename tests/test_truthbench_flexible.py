@@ -115,3 +115,27 @@ def test_rigid_step_converges_from_25_and_1000_kg_on_every_truthbench_record(tru
             if not r.converged:
                 failed.append((os.path.basename(f), apm, r.message))
     assert not failed
+
+
+def test_exponential_sensitivities_stay_finite_where_the_coulomb_sign_is_stiff(truthbench):
+    """At this point of an OE-LM run the quick (extrapolated) steps of the exponential integrator used to chatter near
+    rest, and the sensitivities of the affine parameters grew to 1e242; the stiff zone now takes the implicit step.
+    The Jacobian must agree with RK4's (another discretization of the same derivatives) to its discretization error."""
+    import numpy as np
+
+    from didim.signal import Decimation
+    from didim.simulation import params_vector, problem
+
+    load, _ = truthbench
+    rec = load("flexible/paperlike_moving_chirp")
+    p = {"M1": 66.17449375953105, "Fv1": 94.2554781650991, "Fc1": 8.607159626198905, "M2": 35.99957880029411,
+         "Fv2": 95.63070446845238, "Fc2": 9.376452841680262, "K12": 800864.5794629008}
+    _, chi, _ = params_vector("flexible", p)
+    dec = Decimation.lowpass(60.0, rec.fs)
+    cols = {}
+    for integrator in ("exponential", "rk4"):
+        _, jac = problem(rec, "flexible", integrator=integrator).linearize(chi, rec.force, list(range(7)), dec.core,
+                                                                            output="force")
+        assert np.all(np.isfinite(jac))
+        cols[integrator] = np.linalg.norm(jac, axis=0)
+    np.testing.assert_allclose(cols["exponential"], cols["rk4"], rtol=1e-2)

@@ -19,6 +19,7 @@ exact-sensitivity solver (:func:`oe_gn`) has no such restriction.
 from __future__ import annotations
 
 import math
+import threading
 import time
 import warnings
 from typing import Callable, Dict, List, Optional, Sequence
@@ -546,6 +547,7 @@ class _ModeCriterion:
         _checks.measured_signal("force", self.ny, "step 2")
         self.pb = problem(rec, "flexible", offset=self.offset, **sim_kw)
         self.sims = 0
+        self._lock = threading.Lock()  # two Nelder-Mead runs may share the criterion from two threads
         self.bad = 1e3  # returned for points outside the domain or that fail to simulate (relative error 100000 %)
 
     def params(self, lam: float, f: float, s: float = 0.0) -> Dict[str, float]:
@@ -561,19 +563,23 @@ class _ModeCriterion:
     def valid(x) -> bool:
         return 0.0 < x[0] < 1.0 and x[1] > 0.0 and (len(x) < 3 or 0.0 <= x[2] <= 1.0)
 
-    def batch(self, xs) -> np.ndarray:
+    def batch(self, xs, tally: Optional[list] = None) -> np.ndarray:
+        """The criterion at each row of ``xs``; the number of simulations run is added to ``tally[0]`` too."""
         xs = np.atleast_2d(np.asarray(xs, dtype=float))
         ok = np.array([self.valid(x) for x in xs], dtype=bool)
         out = np.full(len(xs), self.bad)
         if ok.any():
             pts = np.array([params_vector("flexible", self.params(*x), self.offset)[1] for x in xs[ok]])
-            self.sims += len(pts)
+            with self._lock:
+                self.sims += len(pts)
+            if tally is not None:
+                tally[0] += len(pts)
             vals, _ = self.pb.output_error_batch(pts, self.yd, self.dec.core)
             out[ok] = np.where(np.isfinite(vals), np.sqrt(np.abs(vals)) / self.ny, self.bad)
         return out
 
-    def __call__(self, x) -> float:
-        return float(self.batch([x])[0])
+    def __call__(self, x, tally: Optional[list] = None) -> float:
+        return float(self.batch([x], tally)[0])
 
 
 #: Step 2's Nelder-Mead stops when the simplex spans less than this in λ, in s and relatively in f_n_flex (0.05 %,
@@ -581,7 +587,7 @@ class _ModeCriterion:
 MODE_XTOL = 5e-4
 
 
-def _nelder_mead(crit: _ModeCriterion, x0, tol: float, max_iter: int, progress: Progress, label: str):
+def _nelder_mead(crit: _ModeCriterion, x0, tol: float, max_iter: int, progress: Progress, label: str, tally: list):
     """Nelder-Mead (scipy's, as MATLAB's fminsearch) on the mode criterion from x0, its initial simplex in one batch.
     f_n_flex is scaled by its start, so one tolerance serves all variables."""
     from scipy.optimize import minimize
@@ -598,8 +604,8 @@ def _nelder_mead(crit: _ModeCriterion, x0, tol: float, max_iter: int, progress: 
 
     u0 = np.asarray(x0, dtype=float) / scale
     simplex = nelder_mead_simplex(u0)
-    vals = crit.batch(simplex * scale)
-    res = minimize(prefetch(lambda u: crit(u * scale), lambda us: vals, simplex), u0, method="Nelder-Mead",
+    vals = crit.batch(simplex * scale, tally)
+    res = minimize(prefetch(lambda u: crit(u * scale, tally), lambda us: vals, simplex), u0, method="Nelder-Mead",
                    callback=callback, options=dict(xatol=MODE_XTOL, fatol=tol * float(vals[0]), maxiter=max_iter,
                                                    initial_simplex=simplex))
     res.x = res.x * scale
@@ -660,14 +666,15 @@ def fit_flexible_mode(
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     crit = _crit or _ModeCriterion(rec, rigid, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps,
                                                          integrator=integrator, tol=sim_tol))
-    sims0 = crit.sims
     shares = MODE_GRID_SHARE if friction_split else (0.0,)
     if _grid is None:
         pts = [(lambda0, f0, s) for s in shares]
         if grid_start:
             pts += [(a, b, s) for a in MODE_GRID_LAMBDA for b in MODE_GRID_F_HZ for s in shares]
         pts_arr = np.array(pts)
-        vals = crit.batch(pts_arr)
+        count = [0]
+        vals = crit.batch(pts_arr, count)
+        grid_sims = count[0]
     else:
         pts_arr, vals = _grid
     dims = 3 if friction_split else 2
@@ -679,10 +686,12 @@ def fit_flexible_mode(
              f"f_n_flex = {x0[1]:.1f} Hz" + (f", s = {x0[2]:.2f}" if dims == 3 else ""))
     if dims == 3 and x0[2] == 0.0:
         x0 = np.array([x0[0], x0[1], 0.05])  # Nelder-Mead's simplex scales by x0: start s off its bound
-    res, trace = _nelder_mead(crit, x0, tol, max_iter, progress, "friction split" if dims == 3 else "paper")
+    tally = [0 if _grid is not None else grid_sims]
+    res, trace = _nelder_mead(crit, x0, tol, max_iter, progress, "friction split" if dims == 3 else "paper", tally)
     x = np.asarray(res.x, dtype=float)
     j = float(res.fun)
-    rigid_limit = float(crit(np.array([0.999, 0.5 * rec.fs, 0.0][:dims])))  # flexible model that moves as one mass
+    rigid_limit = crit(np.array([0.999, 0.5 * rec.fs, 0.0][:dims]), tally)  # flexible model moving as one mass
+    n_sims = tally[0]
     why = _degenerate(x, j, rigid_limit, cutoff_hz)
     names = ["lambda", "f_n_flex", "load_share"][:dims]
     params = dict(zip(names, map(float, x)))
@@ -699,7 +708,7 @@ def fit_flexible_mode(
         relative_error=j,
         output_error=j,
         iterations=int(res.nit),
-        simulations=crit.sims - sims0,
+        simulations=n_sims,
         elapsed_s=time.perf_counter() - t0,
         converged=converged,
         message=message,
@@ -783,13 +792,21 @@ def didim_flexible(
     mode_kw = dict(lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress, grid_start=grid_start,
                    _crit=crit, _grid=grid, **common)
     notes: List[str] = []
-    candidates = {}
+    runs = {}
     if variant in ("auto", "paper"):
         _say(progress, "step 2: Nelder-Mead on (λ, f_n_flex)")
-        candidates["paper"] = fit_flexible_mode(rec, r1, friction_split=False, **mode_kw)
+        runs["paper"] = dict(friction_split=False)
     if variant in ("auto", "friction-split"):
         _say(progress, "step 2 (friction split, beyond the paper): Nelder-Mead on (λ, f_n_flex, s)")
-        candidates["friction-split"] = fit_flexible_mode(rec, r1, friction_split=True, **mode_kw)
+        runs["friction-split"] = dict(friction_split=True)
+    if len(runs) == 1:
+        candidates = {k: fit_flexible_mode(rec, r1, **kw, **mode_kw) for k, kw in runs.items()}
+    else:  # two independent Nelder-Mead runs, side by side (the core releases the interpreter lock)
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=len(runs)) as pool:
+            futures = {k: pool.submit(fit_flexible_mode, rec, r1, **kw, **mode_kw) for k, kw in runs.items()}
+            candidates = {k: f.result() for k, f in futures.items()}
     chosen = variant
     if variant == "auto":
         jp, js = candidates["paper"].output_error, candidates["friction-split"].output_error

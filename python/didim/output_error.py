@@ -203,7 +203,8 @@ def oe_gn(
             trial[free] += delta
             try:
                 r_t, j_t = evaluate(trial)
-                c_t = float(r_t @ r_t)
+                # a trial whose sensitivities are not finite cannot carry the next step: reject it like a failure
+                c_t = float(r_t @ r_t) if np.all(np.isfinite(j_t)) else math.inf
             except (SimulationError, DataError):
                 c_t = math.inf
             if c_t < cost:

@@ -248,6 +248,19 @@ impl<const N: usize> Plant<N> {
         (dq, dv)
     }
 
+    /// Whether `g` is too stiff at `(q, v)` for the quick step of length `h`. The quick step
+    /// extrapolates the change of `g` from the previous step, a recurrence whose
+    /// perturbations grow by about `h·|∂g/∂q̇|/2` per step: near rest the Coulomb sign's slope
+    /// `Fc/(εM)` makes that factor exceed 1 for a sample period, and while the prediction can
+    /// still pass the defect test, the computed trajectory then chatters and its derivatives
+    /// (the sensitivities) grow without bound. There the implicit solve, stable for any
+    /// slope, is used instead.
+    #[inline(always)]
+    fn stiff(&self, q: &V<N>, v: &V<N>, h: f64) -> bool {
+        let (gq, gv) = self.g_partials(q, v);
+        h * (gv.amax() + h * gq.amax()) >= 1.0
+    }
+
     /// Accelerations of the full direct model for the input accelerations `b` (= M⁻¹ u).
     #[inline(always)]
     pub fn accel(&self, q: &V<N>, v: &V<N>, b: &V<N>, g: &V<N>) -> V<N> {
@@ -278,7 +291,7 @@ impl<const N: usize> Plant<N> {
         let v1 = vp + lv.p2v * pred;
         let g1 = self.g(&q1, &v1);
         let scale = self.atol / (h * self.dt);
-        if (g1 - gn - pred).amax() <= 0.1 * scale {
+        if (g1 - gn - pred).amax() <= 0.1 * scale && !self.stiff(&q1, &v1, h) {
             return Step {
                 q1,
                 v1,
