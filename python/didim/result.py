@@ -208,14 +208,20 @@ def compare(results: Dict[str, IdentificationResult], reference: Optional[str] =
                 )
             )
     cols = list(results)
-    head = f"{'parameter':<12}" + ("".join(f"{'truth':>12}") if truth else "")
+    w = 20  # label column: name and unit
+
+    def label(name: str) -> str:
+        unit = UNITS.get(name.split(" ")[0], "")
+        return f"{name} ({unit})" if unit and unit != "-" else name
+
+    head = f"{'parameter':<{w}}" + ("".join(f"{'truth':>12}") if truth else "")
     for c in cols:
         head += f"{c:>14}"
         if reference and c != reference:
             head += f"{'%e':>8}"
     lines = [head, "-" * len(head)]
     for name, vals, tv in rows:
-        line = f"{name:<12}" + (f"{_fmt(tv) if tv is not None else '-':>12}" if truth else "")
+        line = f"{label(name):<{w}}" + (f"{_fmt(tv) if tv is not None else '-':>12}" if truth else "")
         for c in cols:
             line += f"{_fmt(vals[c]):>14}"
             if reference and c != reference:
@@ -224,16 +230,16 @@ def compare(results: Dict[str, IdentificationResult], reference: Optional[str] =
                 line += f"{_pct(e) if math.isfinite(e) else '-':>8}"
         lines.append(line)
     lines.append("-" * len(head))
-    lines.append(f"{'rel. error':<12}" + (f"{'':>12}" if truth else "") + "".join(
+    lines.append(f"{'rel. error':<{w}}" + (f"{'':>12}" if truth else "") + "".join(
         f"{100 * results[c].relative_error:>13.2f}%" + ("" if not reference or c == reference else f"{'':>8}") for c in cols
     ))
-    lines.append(f"{'iterations':<12}" + (f"{'':>12}" if truth else "") + "".join(
+    lines.append(f"{'iterations':<{w}}" + (f"{'':>12}" if truth else "") + "".join(
         f"{results[c].iterations:>14d}" + ("" if not reference or c == reference else f"{'':>8}") for c in cols
     ))
-    lines.append(f"{'simulations':<12}" + (f"{'':>12}" if truth else "") + "".join(
+    lines.append(f"{'simulations':<{w}}" + (f"{'':>12}" if truth else "") + "".join(
         f"{results[c].simulations:>14d}" + ("" if not reference or c == reference else f"{'':>8}") for c in cols
     ))
-    lines.append(f"{'time (s)':<12}" + (f"{'':>12}" if truth else "") + "".join(
+    lines.append(f"{'time (s)':<{w}}" + (f"{'':>12}" if truth else "") + "".join(
         f"{results[c].elapsed_s:>14.3f}" + ("" if not reference or c == reference else f"{'':>8}") for c in cols
     ))
     return "\n".join(lines)
