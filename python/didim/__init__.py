@@ -15,6 +15,7 @@ from .api import METHODS, identify
 from . import scenarios
 from .doctor import Diagnosis, Finding, doctor
 from .simulation import Term
+from .model import Model, load_result
 
 __version__ = "0.1.0"
 
@@ -47,4 +48,6 @@ __all__ = [
     "Diagnosis",
     "Finding",
     "Term",
+    "Model",
+    "load_result",
 ]

@@ -88,11 +88,11 @@ def identify(
     for finding in recording.diagnose():
         warnings.warn(f"{recording.name or 'record'}: {finding}", DidimWarning, stacklevel=2)
     if method == "idim-ls":
-        return idim_ls(recording, model, offset=offset, **options)
+        return _with_force_error(recording, idim_ls(recording, model, offset=offset, **options))
     if method == "didim":
         if model == "rigid":
-            return didim_rigid(recording, apM, offset=offset, progress=progress, **options)
-        return didim_flexible(recording, apM, offset=offset, progress=progress, **options)
+            return _with_force_error(recording, didim_rigid(recording, apM, offset=offset, progress=progress, **options))
+        return _with_force_error(recording, didim_flexible(recording, apM, offset=offset, progress=progress, **options))
 
     t0 = time.perf_counter()
     pre: Optional[IdentificationResult] = None
@@ -123,6 +123,20 @@ def identify(
         r.steps = {"didim" if pre.model == "flexible" and "rigid" in pre.steps else "rigid": pre}
         r.simulations += pre.simulations
     r.elapsed_s = time.perf_counter() - t0
+    return _with_force_error(recording, r)
+
+
+def _with_force_error(recording: Recording, r: IdentificationResult) -> IdentificationResult:
+    """Sets the headline measure: the closed-loop force error of the result's full model on all samples, the same
+    number ``didim.simulate(recording, r).relative_error(recording)`` gives (one simulation)."""
+    from ._errors import DidimError
+    from .simulation import simulate
+
+    if r.structure is not None:
+        try:
+            r.force_error = simulate(recording, r).relative_error(recording)
+        except DidimError:
+            r.force_error = float("nan")
     return r
 
 

@@ -49,6 +49,40 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def cmd_simulate(args) -> int:
+    """Applies a saved result to a record: the closed loop simulated with the result's model against the measured
+    force (the paper's cross-test, Fig. 6)."""
+    import json
+
+    from . import load_mat
+    from ._io import save_figure, write_text
+    from .model import load_result
+    from .simulation import simulate
+
+    _check_outputs(args.file, [args.json, args.plot])
+    for out in (args.json, args.plot):
+        if out:
+            _check_outputs(args.result, [out])
+    if args.plot:
+        _check_figure_format(args.plot)
+    result = load_result(args.result)
+    rec = load_mat(args.file)
+    sim = simulate(rec, result)
+    err = sim.relative_error(rec)
+    st = result.structure
+    print(f"{args.file}: closed-loop force error of {args.result} ({result.method}, {st.kind} model): {100 * err:.2f} %")
+    if result.force_error == result.force_error:
+        print(f"  (on its own record: {100 * result.force_error:.2f} %)")
+    if args.json:
+        write_text(args.json, json.dumps({"record": args.file, "result": args.result, "force_error": err,
+                                          "model": st.to_dict(), "params": result.all_params}, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    if args.plot:
+        save_figure(sim.plot(rec), args.plot, dpi=110)
+        print(f"wrote {args.plot}")
+    return 0
+
+
 def _check_outputs(source: str, outputs) -> None:
     """Fails before any work when an output cannot be written, or would overwrite the input record."""
     import os
@@ -222,6 +256,13 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--html", metavar="OUT", help="the report an engineer reads (plots embedded)")
     o.add_argument("--quiet", action="store_true")
     o.set_defaults(func=cmd_doctor)
+
+    m = sub.add_parser("simulate", help="apply a saved result to a record: simulated vs measured force (cross-test)")
+    m.add_argument("file", help="the record (MAT file, EMPS layout)")
+    m.add_argument("result", help="a result saved as JSON (didim identify --json, result.save)")
+    m.add_argument("--json", metavar="OUT", help="write the force error, the model and its parameters")
+    m.add_argument("--plot", metavar="PNG", help="measured and simulated force and their difference")
+    m.set_defaults(func=cmd_simulate)
 
     d = sub.add_parser("demo", help="simulated flexible EMPS with known truth: IDIM-LS, three-step DIDIM, exact-sensitivity OE")
     d.add_argument("--seed", type=int, default=0)

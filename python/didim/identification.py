@@ -438,7 +438,8 @@ def didim(
         frozen=frozen,
         history=history,
         options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset,
-                     terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, integrator=integrator),
+                     terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, integrator=integrator,
+                     sim_tol=sim_tol),
         covariance=sol["covariance"],
         notes=notes,
     )
@@ -828,7 +829,8 @@ def didim_flexible(
             model="flexible", method="didim", params=dict(r2.frozen), std={}, rel_std_pct={},
             relative_error=float("nan"), output_error=r2.output_error, iterations=0, simulations=n_sim,
             elapsed_s=time.perf_counter() - t0, converged=False, message=_cannot_support(r2.options["degenerate"], rec),
-            options=dict(variant=chosen), steps={"rigid": r1, "mode": r2}, notes=notes)
+            options=dict(variant=chosen, coulomb_eps=coulomb_eps, integrator=integrator, sim_tol=sim_tol,
+                         substeps=substeps), steps={"rigid": r1, "mode": r2}, notes=notes)
         return r
 
     _say(progress, "step 3: flexible DIDIM")

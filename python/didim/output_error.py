@@ -115,7 +115,8 @@ def oe_nm(
         relative_error=out, output_error=out, iterations=int(res.nit), simulations=count["sim"],
         elapsed_s=time.perf_counter() - t0, converged=bool(res.success), message="" if res.success else str(res.message),
         initial=dict(initial), history=history,
-        options=dict(criterion=criterion, decimation=dec.describe(), xatol=xatol, fatol=fatol, integrator=integrator),
+        options=dict(criterion=criterion, decimation=dec.describe(), xatol=xatol, fatol=fatol, integrator=integrator,
+                     coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol),
     )
 
 
@@ -247,6 +248,7 @@ def oe_gn(
         iterations=len(history), simulations=n_sim, elapsed_s=time.perf_counter() - t0,
         converged=converged, message=message, initial=dict(initial), frozen=frozen, history=history,
         options=dict(criterion=criterion, decimation=dec.describe(), tol=tol, integrator=integrator,
+                     coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol,
                      condition_number=float(sol["condition_number"])),
         covariance=sol["covariance"],
     )

@@ -69,6 +69,24 @@ class IdentificationResult:
     steps: Dict[str, "IdentificationResult"] = field(default_factory=dict)
     #: What the method did beyond the plain iteration (variant chosen, steps shortened, ...), in plain words.
     notes: List[str] = field(default_factory=list)
+    #: The model structure the parameters belong to (:class:`didim.Model`); derived from the method's options.
+    structure: Optional[Any] = None
+    #: Closed-loop simulated force error on all samples, ‖τ − τ_sim‖/‖τ‖ (the headline measure; NaN until computed).
+    force_error: float = float("nan")
+
+    def __post_init__(self):
+        if self.structure is None:
+            from .model import Model
+
+            self.structure = Model.of_result(self.model, self.all_params, self.options)
+
+    @property
+    def all_params(self) -> Dict[str, float]:
+        """Every parameter of the model, the frozen ones included, in the order of the parameter vector."""
+        full = {**self.frozen, **self.params}
+        if self.structure is not None:
+            return {n: full[n] for n in self.structure.param_names() if n in full}
+        return full
 
     @property
     def names(self) -> List[str]:
@@ -98,8 +116,48 @@ class IdentificationResult:
             "steps": {k: v.to_dict() for k, v in self.steps.items()},
             "notes": list(self.notes),
             "units": {k: UNITS.get(k, "") for k in self.params},
+            "structure": self.structure.to_dict() if self.structure is not None else None,
+            "force_error": self.force_error,
         }
         return jsonable(d)
+
+    @classmethod
+    def from_dict(cls, d: Dict[str, Any]) -> "IdentificationResult":
+        """The inverse of :meth:`to_dict` (history and steps included)."""
+        from ._errors import DataError
+        from .model import Model
+
+        def floats(x, what):
+            if x is None:
+                return {}
+            if not isinstance(x, dict):
+                raise DataError(f"result field {what!r} must be an object name -> value")
+            try:
+                return {str(k): (float(v) if v is not None else float("nan")) for k, v in x.items()}
+            except (TypeError, ValueError) as e:
+                raise DataError(f"result field {what!r}: {e}") from None
+
+        def num(x, default=float("nan")):
+            try:
+                return float(x) if x is not None else default
+            except (TypeError, ValueError):
+                return default
+
+        history = [Iteration(k=int(h.get("k", i + 1)), params=floats(h.get("params"), "history"),
+                             rel_std_pct=floats(h.get("rel_std_pct"), "history"),
+                             relative_error=num(h.get("relative_error")), output_error=num(h.get("output_error")))
+                   for i, h in enumerate(d.get("history") or [])]
+        structure = Model.from_dict(d["structure"]) if d.get("structure") else None
+        r = cls(model=str(d["model"]), method=str(d.get("method", "")), params=floats(d["params"], "params"),
+                std=floats(d.get("std"), "std"), rel_std_pct=floats(d.get("rel_std_pct"), "rel_std_pct"),
+                relative_error=num(d.get("relative_error")), iterations=int(d.get("iterations") or 0),
+                simulations=int(d.get("simulations") or 0), elapsed_s=num(d.get("elapsed_s"), 0.0),
+                converged=bool(d.get("converged", True)), message=str(d.get("message") or ""),
+                initial=floats(d.get("initial"), "initial"), output_error=num(d.get("output_error")),
+                history=history, frozen=floats(d.get("frozen"), "frozen"), options=dict(d.get("options") or {}),
+                steps={k: cls.from_dict(v) for k, v in (d.get("steps") or {}).items()},
+                notes=list(d.get("notes") or []), structure=structure, force_error=num(d.get("force_error")))
+        return r
 
     def to_json(self, **kw) -> str:
         return json.dumps(self.to_dict(), indent=2, **kw)
@@ -134,9 +192,12 @@ class IdentificationResult:
             )
         for name, v in self.frozen.items():
             lines.append(f"{name + ' (frozen)':<18}{'':>12}{_fmt(v):>14}{'-':>12}{'-':>8}")
-        lines.append(f"‖Y − Wχ‖/‖Y‖ = {100 * self.relative_error:.2f} %" if math.isfinite(self.relative_error) else "")
+        if math.isfinite(self.force_error):
+            lines.append(f"closed-loop force error (simulated vs measured, all samples) = {100 * self.force_error:.2f} %")
+        if math.isfinite(self.relative_error):
+            lines.append(f"regression error ‖Y − Wχ‖/‖Y‖ (decimated) = {100 * self.relative_error:.2f} %")
         if math.isfinite(self.output_error):
-            lines.append(f"‖Y − Ys‖/‖Y‖ (simulated output) = {100 * self.output_error:.2f} %")
+            lines.append(f"decimated output error ‖Y − Ys‖/‖Y‖ = {100 * self.output_error:.2f} %")
         lines.append(f"{k} iterations, {self.simulations} simulations, {self.elapsed_s:.3f} s")
         if not self.converged:
             lines.append(f"NOT CONVERGED: {self.message}")

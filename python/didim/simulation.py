@@ -252,6 +252,14 @@ def simulate(
     """
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
+    if _is_result(params):  # a result carries its model structure and its simulator's numerics
+        st = _structure(params)
+        model, offset, terms, backlash_gap, delay, coulomb_eps = (st.kind, st.offset, st.terms, st.backlash_gap,
+                                                                  st.delay, st.coulomb_eps)
+        integrator = params.options.get("integrator", integrator)
+        tol = params.options.get("sim_tol", tol)
+        substeps = params.options.get("substeps", substeps)
+        params = params.all_params
     if offset is not None:
         offset = _checks.flag("offset", offset)
     names, vec, offset = params_vector(model, params, offset, terms)
@@ -279,6 +287,22 @@ def simulate(
         qd=out["qd"],
         qdd=out["qdd"],
     )
+
+
+def _is_result(x) -> bool:
+    from .result import IdentificationResult
+
+    return isinstance(x, IdentificationResult)
+
+
+def _structure(result):
+    if result.structure is None:
+        raise DataError(f"this {result.method} result holds no parameter set of a model ({', '.join(result.params)}); "
+                        "simulate the final result of the identification (or one of its steps that has one)")
+    missing = [n for n in result.structure.param_names() if n not in result.all_params]
+    if missing:
+        raise DataError(f"the result lacks the parameter(s) {', '.join(missing)} of its {result.structure.kind} model")
+    return result.structure
 
 
 @dataclass(frozen=True)
@@ -341,14 +365,25 @@ def simulate_batch(
 
     A member whose simulation fails does not fail the batch: its message is in ``errors`` and its rows are NaN.
     """
-    if isinstance(params, Mapping):
+    if isinstance(params, Mapping) or _is_result(params):
         raise DataError("simulate_batch takes a sequence of parameter sets; use simulate for one")
     rows = list(params) if not isinstance(params, np.ndarray) else params
+    if len(rows) and all(_is_result(r) for r in rows):  # results: one structure for all, its options by default
+        structures = {_structure(r) for r in rows}
+        if len(structures) > 1:
+            raise DataError("the results of a batch must share one model structure (kind, offset, terms, delay, "
+                            "backlash, Coulomb smoothing); simulate them one by one")
+        st = structures.pop()
+        model, offset = st.kind, st.offset
+        for k, v in dict(terms=st.terms, delay=st.delay, backlash_gap=st.backlash_gap, coulomb_eps=st.coulomb_eps).items():
+            sim_kw.setdefault(k, v)
+        sim_kw.setdefault("integrator", rows[0].options.get("integrator", "exponential"))
+        rows = [r.all_params for r in rows]
     if isinstance(rows, np.ndarray) and rows.ndim == 1:
         raise DataError("params must be 2-D, one parameter set per row (use simulate for one set)")
     if len(rows) == 0:
         raise DataError("params holds no parameter set")
-    vecs = [params_vector(model, r, offset) for r in rows]
+    vecs = [params_vector(model, r, offset, sim_kw.get("terms", ())) for r in rows]
     names, _, offset = vecs[0]
     if any(v[2] != offset for v in vecs):
         raise DataError("all parameter sets of a batch must have the same parameters (with or without OF)")

@@ -1,0 +1,124 @@
+"""The model structure as one object: what a result was identified with and what the simulator needs to reproduce it.
+
+A :class:`Model` is the kind (rigid or flexible), the constant force offset, the extra terms, the actuation delay, the
+backlash of the coupling and the Coulomb smoothing. Every identification result carries one (``result.structure``),
+with all its parameters (``result.all_params``, frozen ones included), so ``didim.simulate(rec, result)`` reproduces
+the result's own closed loop, and a saved result reloads with it (:func:`load_result`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Dict, Optional, Tuple
+
+from ._errors import DataError
+from .simulation import DEFAULT_COULOMB_EPS, MODELS, Term, param_names
+
+#: Units of the parameters (SI, load side), by name; extra terms' units follow their kind (see :meth:`Model.units`).
+UNITS = {"M": "kg", "Fv": "N/(m/s)", "Fc": "N", "OF": "N", "M1": "kg", "Fv1": "N/(m/s)", "Fc1": "N", "M2": "kg",
+         "Fv2": "N/(m/s)", "Fc2": "N", "K12": "N/m"}
+_TERM_UNITS = {"offset": "N", "viscous": "N/(m/s)", "coulomb": "N", "abs_viscous": "N/(m/s)", "abs_coulomb": "N",
+               "stribeck": "N", "ripple_sin": "N", "ripple_cos": "N"}
+
+
+@dataclass(frozen=True)
+class Model:
+    """A model structure. ``kind``: "rigid" (eq. (6), M, Fv, Fc) or "flexible" (eq. (2), M1, Fv1, Fc1, M2, Fv2, Fc2,
+    K12); ``offset``: a constant force OF (N); ``terms``: extra :class:`didim.Term` s; ``delay``: actuation delay in
+    samples; ``backlash_gap``: total width (m) of a dead zone in K12 (flexible only); ``coulomb_eps``: velocity scale
+    (m/s) of the smoothed Coulomb sign, 0 for the hard sign."""
+
+    kind: str = "rigid"
+    offset: bool = False
+    terms: Tuple[Term, ...] = field(default_factory=tuple)
+    delay: int = 0
+    backlash_gap: Optional[float] = None
+    coulomb_eps: float = DEFAULT_COULOMB_EPS
+
+    def __post_init__(self):
+        if self.kind not in MODELS:
+            raise DataError(f"unknown model kind {self.kind!r}: use one of {', '.join(MODELS)}")
+        object.__setattr__(self, "terms", tuple(t if isinstance(t, Term) else Term(*t) for t in self.terms))
+        if not (isinstance(self.delay, int) and self.delay >= 0):
+            raise DataError(f"delay must be a whole number of samples >= 0, got {self.delay!r}")
+        if not (isinstance(self.coulomb_eps, (int, float)) and math.isfinite(self.coulomb_eps) and self.coulomb_eps >= 0):
+            raise DataError(f"coulomb_eps must be a finite speed >= 0 m/s, got {self.coulomb_eps!r}")
+
+    def param_names(self) -> list:
+        """Parameter names in the order of the parameter vector."""
+        return param_names(self.kind, self.offset, self.terms)
+
+    def units(self) -> Dict[str, str]:
+        """Unit of each parameter."""
+        out = {}
+        for n in self.param_names():
+            term = next((t for t in self.terms if t.name == n), None)
+            out[n] = _TERM_UNITS.get(term.kind, "") if term is not None else UNITS.get(n, "")
+        return out
+
+    def sim_kw(self) -> Dict[str, Any]:
+        """Keyword arguments of :func:`didim.simulate` that describe this structure."""
+        return dict(offset=self.offset, terms=self.terms, delay=self.delay, backlash_gap=self.backlash_gap,
+                    coulomb_eps=self.coulomb_eps)
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"kind": self.kind, "offset": self.offset, "terms": [list(t.spec()) for t in self.terms],
+                "delay": self.delay, "backlash_gap": self.backlash_gap, "coulomb_eps": self.coulomb_eps}
+
+    @classmethod
+    def from_dict(cls, d: Dict[str, Any]) -> "Model":
+        if not isinstance(d, dict):
+            raise DataError(f"a model structure must be a JSON object, got {type(d).__name__}")
+        unknown = set(d) - {"kind", "offset", "terms", "delay", "backlash_gap", "coulomb_eps"}
+        if unknown:
+            raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
+        try:
+            terms = tuple(Term(str(n), str(k), float(h)) for n, k, h in d.get("terms", []))
+        except (TypeError, ValueError) as e:
+            raise DataError(f"model terms must be [name, kind, hyper] triples: {e}") from None
+        return cls(kind=d.get("kind", "rigid"), offset=bool(d.get("offset", False)), terms=terms,
+                   delay=int(d.get("delay", 0)), backlash_gap=d.get("backlash_gap"),
+                   coulomb_eps=float(d.get("coulomb_eps", DEFAULT_COULOMB_EPS)))
+
+    @classmethod
+    def of_result(cls, kind: str, params: Dict[str, float], options: Dict[str, Any]) -> Optional["Model"]:
+        """The structure a method's options describe, or None for results that are not parameter sets of a model
+        (step 2's λ, f_n_flex)."""
+        if kind not in MODELS:
+            return None
+        terms = tuple(Term(*t) for t in options.get("terms") or ())
+        m = cls(kind=kind, offset="OF" in params, terms=terms, delay=int(options.get("delay") or 0),
+                backlash_gap=options.get("backlash_gap"),
+                coulomb_eps=float(options.get("coulomb_eps", DEFAULT_COULOMB_EPS)))
+        return m if set(m.param_names()) >= set(params) else None
+
+
+def load_result(path) -> "IdentificationResult":  # noqa: F821
+    """Reloads a result saved as JSON (``result.save("r.json")``, ``didim identify --json``) with its model structure,
+    so that ``didim.simulate(rec, load_result("r.json"))`` applies it to another record (the paper's cross-test)."""
+    from .result import IdentificationResult
+
+    try:
+        if not os.path.isfile(path):
+            raise DataError(f"{os.fspath(path)}: no such result file" if not os.path.exists(path)
+                            else f"{os.fspath(path)}: not a regular file (give a JSON result file)")
+        with open(path, "r", encoding="utf-8") as f:
+            text = f.read(64 * 1024 * 1024)
+    except (OSError, TypeError, ValueError) as e:
+        if isinstance(e, DataError):
+            raise
+        raise DataError(f"cannot read the result {path!r}: {e}") from None
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise DataError(f"{os.fspath(path)}: not a JSON result ({e})") from None
+    if not isinstance(d, dict) or "params" not in d or "model" not in d:
+        raise DataError(f"{os.fspath(path)}: not a didim result (needs 'model' and 'params'; save one with "
+                        "result.save('r.json') or didim identify --json)")
+    return IdentificationResult.from_dict(d)
+
+
+__all__ = ["Model", "load_result", "UNITS"]
