@@ -412,7 +412,8 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
         init = {**st.params, "Fv2": max(float(beta[0]), 1.0), "Fc2": max(float(beta[1]), 0.1)}
         init["Fv1"] = max(init["Fv1"] - init["Fv2"], 1.0)
         init["Fc1"] = max(init["Fc1"] - init["Fc2"], 0.1)
-        r = oe_gn(data.rec, st.model, init, frozen=st.frozen, cutoff_hz=data.dec.cutoff_hz or 60.0)
+        r = oe_gn(data.rec, st.model, init, frozen=st.frozen, cutoff_hz=data.dec.cutoff_hz or 60.0, terms=st.terms,
+                  backlash_gap=st.backlash_gap, delay=st.delay)
         st = replace(st, params=dict(r.params))
         return st, r, {"Fv2": st.params["Fv2"], "Fc2": st.params["Fc2"]}, {k: r.std.get(k, math.nan) for k in ("Fv2", "Fc2")}
     if c.effect == "backlash":

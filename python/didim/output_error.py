@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
@@ -15,7 +15,7 @@ from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_simp
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation
-from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, param_names, params_vector, problem, sim_options
+from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, Term, params_vector, problem, sim_options
 
 CRITERIA = ("force", "position")
 
@@ -77,7 +77,7 @@ def oe_nm(
     history: List[Iteration] = []
 
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
-                 tol=sim_tol)
+                 tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay)
     output = "force" if criterion == "force" else "position"
     penalty = 1e3 * ny**2
 
@@ -135,19 +135,23 @@ def oe_gn(
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
+    terms: Sequence[Term] = (),
+    backlash_gap: Optional[float] = None,
+    delay: int = 0,
 ) -> IdentificationResult:
     """Closed-loop output error by Levenberg-Marquardt with the exact Jacobian of the decimated simulated output
     (motor force, or motor position), from the forward sensitivity equations of the closed loop (controller
-    included). Covariance: σ̂²(JᵀJ)⁻¹ at the solution, σ̂² = ‖r‖²/(m − p), from the same QR solver as DIDIM."""
+    included). Covariance: σ̂²(JᵀJ)⁻¹ at the solution, σ̂² = ‖r‖²/(m − p), from the same QR solver as DIDIM.
+    ``terms``, ``backlash_gap`` and ``delay`` extend the model as for :func:`didim.simulate`; their sensitivities
+    are exact too."""
     _check_criterion(criterion)
     _checks.options(cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
     initial = _checks.physical(initial, "initial")
     t0 = time.perf_counter()
     frozen = _checks.physical(dict(frozen or {}), "frozen")
     offset = "OF" in initial or "OF" in frozen
-    names = param_names(model, offset)
     full = {**initial, **frozen}
-    names, chi, offset = params_vector(model, full, offset)
+    names, chi, offset = params_vector(model, full, offset, terms)
     free = [i for i, n in enumerate(names) if n not in frozen]
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 1, "oe-gn")
@@ -155,7 +159,7 @@ def oe_gn(
     ny = float(np.linalg.norm(dec(measured)))
     _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-gn")
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
-                 tol=sim_tol)
+                 tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay)
     output = "force" if criterion == "force" else "position"
     n_sim = 0
 
@@ -248,8 +252,8 @@ def oe_gn(
         iterations=len(history), simulations=n_sim, elapsed_s=time.perf_counter() - t0,
         converged=converged, message=message, initial=dict(initial), frozen=frozen, history=history,
         options=dict(criterion=criterion, decimation=dec.describe(), tol=tol, integrator=integrator,
-                     coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol,
-                     condition_number=float(sol["condition_number"])),
+                     coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol, terms=[t.spec() for t in terms],
+                     backlash_gap=backlash_gap, delay=delay, condition_number=float(sol["condition_number"])),
         covariance=sol["covariance"],
     )
 
@@ -262,6 +266,8 @@ def check_sensitivities(
     offset: Optional[bool] = None,
     output: str = "force",
     rel_step: float = 1e-6,
+    terms: Sequence[Term] = (),
+    backlash_gap: Optional[float] = None,
     **sim_kw,
 ) -> Dict[str, float]:
     """Checks the exact forward sensitivities against central differences of the simulated ``output`` ("force" or
@@ -271,16 +277,16 @@ def check_sensitivities(
     """
     from .simulation import simulate_batch
 
-    names, chi, offset = params_vector(model, params, offset)
+    names, chi, offset = params_vector(model, params, offset, terms)
     if output not in ("force", "position"):
         raise DataError(f"output must be 'force' or 'position', got {output!r}")
     sens = _core.simulate_sensitivity(
         model, chi, rec.qr, rec.dt, rec.controller.kind, list(rec.controller.gains), u_ext=rec.u_ext, offset=offset,
-        **sim_options(rec, **sim_kw))
+        terms=[t.spec() for t in terms] or None, backlash_gap=backlash_gap, **sim_options(rec, **sim_kw))
     exact = sens["dforce"] if output == "force" else sens["dq"][0]
     h = rel_step * np.maximum(np.abs(chi), 1e-3)
     sets = np.vstack([chi + np.diag(h), chi - np.diag(h)])
-    b = simulate_batch(rec, sets, model, offset=offset, **sim_kw)
+    b = simulate_batch(rec, sets, model, offset=offset, terms=terms, backlash_gap=backlash_gap, **sim_kw)
     if not all(e is None for e in b.errors):
         raise SimulationError(f"a perturbed simulation failed: {next(e for e in b.errors if e)}")
     sim = b.force if output == "force" else b.q[:, 0, :]
