@@ -77,7 +77,7 @@ def oe_nm(
     history: List[Iteration] = []
 
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
-                 tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay)
+                 tol=sim_tol)
     output = "force" if criterion == "force" else "position"
     penalty = 1e3 * ny**2
 
