@@ -368,14 +368,16 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
             "Ar_sin": r.std.get("Ar_sin", math.nan), "Ar_cos": r.std.get("Ar_cos", math.nan)}
     if c.effect == "delay":
         best = None
-        for d in range(1, 9):  # search the delay in whole samples
+        for d in range(1, 9):  # search the delay in whole samples, upward until the fit gets clearly worse
             st = replace(state, delay=d)
             try:
                 st, r = _refit(data, st, {}, progress)
             except DidimError:
-                continue
+                break  # a longer delay destabilises the simulated loop even more
             if best is None or r.output_error < best[1].output_error:
                 best = (st, r)
+            elif not r.converged or r.output_error > 1.1 * best[1].output_error:
+                break  # past the minimum: longer delays only make the simulated loop less stable
         if best is None:
             raise SimulationError("the delay refit failed")
         st, r = best
