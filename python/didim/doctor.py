@@ -38,6 +38,10 @@ from .signal import Decimation, diffcent
 from .simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign, simulate
 from .stats import diebold_mariano, holm, orthogonalize, wald_added
 
+#: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
+#: of it (besides being statistically significant). Real friction differs from any smooth law, and at low noise a test
+#: finds such differences; an engineer cares about an effect that changes the fit, not about one that is detectable.
+MIN_HELDOUT_GAIN = 0.05
 EFFECTS = ("offset", "asymmetric_friction", "stribeck", "position_ripple", "flexibility", "load_friction", "delay",
            "backlash", "unnamed")
 
@@ -592,10 +596,13 @@ def doctor(
             break
         accepted = False
         tries = significant[:2]
-        # a mode near the top of the analysed band looks like a delay (a phase lag): when the delay is the leading
-        # candidate of a rigid model, its partner in ambiguity is tried too, even when not significant on its own
-        if state.model == "rigid" and any(c.effect == "delay" for c in tries) and "flexibility" not in done:
-            tries += [c for c in ranked if c.effect == "flexibility"]
+        # a mode near the top of the analysed band looks like a delay (a phase lag): when either is a leading candidate
+        # of a rigid model, its partner in ambiguity is tried too, even when not significant on its own (a whole-sample
+        # delay's residual is mostly taken by the flexibility candidate's test, and the other way round)
+        for lead, partner in (("delay", "flexibility"), ("flexibility", "delay")):
+            if state.model == "rigid" and any(c.effect == lead for c in tries) and partner not in done \
+                    and not any(c.effect == partner for c in tries):
+                tries += [c for c in ranked if c.effect == partner]
         for c in tries:
             try:
                 st_new, res, params, std = _model_candidate(c, state, base, data, progress)
@@ -614,8 +621,12 @@ def doctor(
             evidence = (f"explains {100 * c.test.explained:.1f} % of the prewhitened training residual (Wald {c.test.statistic:.1f} "
                         f"on {c.test.dof} dof, adjusted p = {c.p_adj:.2g}); held-out error {100 * fit['valid_before']:.2f} % -> "
                         f"{100 * fit['valid_after']:.2f} % (Diebold-Mariano p = {p_dm:.2g})")
+            practical = fit["valid_after"] < (1 - MIN_HELDOUT_GAIN) * fit["valid_before"]
+            if p_dm < alpha and not practical:
+                evidence += (f"; below the practical threshold: an effect must lower the held-out force error by at "
+                             f"least {100 * MIN_HELDOUT_GAIN:.0f} % of itself")
             f = Finding(c.effect, params, std, stat, evidence, PHYSICS[c.effect], fit,
-                        where={"hyper": c.hyper}, accepted=p_dm < alpha and fit["valid_after"] < fit["valid_before"])
+                        where={"hyper": c.hyper}, accepted=p_dm < alpha and practical)
             done.append(c.effect)
             if f.accepted:
                 # effects the record cannot tell from this one
@@ -633,6 +644,8 @@ def doctor(
                                             "experiment": SEPARATE.get(key, "excite the axis differently (other speeds, rests, both directions)")})
                 findings.append(f)
                 state, rt, rv, sim = st_new, rt_n, rv_n, sim_n
+                # the model changed: candidates rejected on the old one get another chance on the new one
+                done = [x.effect for x in findings]
                 history.append((state, rt, rv, sim))
                 accepted = True
                 say(f"accepted {c.effect}: {evidence}")
