@@ -52,6 +52,10 @@ PHYSICS = {
                            "film that differs going forward and backward.",
     "stribeck": "Friction is higher at low speed and decays as the speed grows (Stribeck effect): boundary "
                 "lubrication before a fluid film forms.",
+    # the same low-speed law with the other sign (a fitted Fs opposite to the Coulomb friction)
+    "stribeck_deficit": "Friction is lower at low speed than the Coulomb-plus-viscous law says and recovers as the "
+                        "speed grows: a low-speed friction deficit (lubricant, preload or seal behaviour that no "
+                        "smooth Coulomb law captures); modelled by the Stribeck shape with the opposite sign.",
     "position_ripple": "A force periodic in position: motor cogging, ball-screw lead error or position-dependent "
                        "friction, with the period found in the spatial spectrum of the residual.",
     "flexibility": "The drive is not rigid: a flexible coupling (a two-mass model) shows as a resonance that the rigid "
@@ -334,6 +338,11 @@ def _score(groups: List[List[_Candidate]], r: np.ndarray, wb: np.ndarray, data: 
     return sorted(best, key=lambda c: (c.p_adj, -c.test.explained))
 
 
+def _coulomb(state: State) -> float:
+    """The Coulomb friction on the motor side (Fc or Fc1) of a state."""
+    return state.params.get("Fc", state.params.get("Fc1", 1.0))
+
+
 def _model_candidate(c: _Candidate, state: State, base_result: IdentificationResult, data: _Data, progress):
     """Adds the candidate to the model and refits; returns (new state, result, reported params, std)."""
     beta = c.test.beta
@@ -359,9 +368,7 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
         if best is None:
             raise SimulationError("the Stribeck refit failed")
         st, r, vs = best
-        if st.params["Fs"] * state.params.get("Fc", state.params.get("Fc1", 1.0)) <= 0:
-            raise SimulationError(f"the Stribeck friction came out with the sign opposite to the Coulomb friction "
-                                  f"(Fs = {st.params['Fs']:.3g} N): not a Stribeck effect")
+        # free sign: Fs opposite to the Coulomb friction is a low-speed deficit, named as such (see PHYSICS)
         return st, r, {"Fs": st.params["Fs"], "vs": vs}, {"Fs": r.std.get("Fs", math.nan)}
     if c.effect == "position_ripple":
         P = c.hyper["period"]
@@ -625,7 +632,10 @@ def doctor(
             if p_dm < alpha and not practical:
                 evidence += (f"; below the practical threshold: an effect must lower the held-out force error by at "
                              f"least {100 * MIN_HELDOUT_GAIN:.0f} % of itself")
-            f = Finding(c.effect, params, std, stat, evidence, PHYSICS[c.effect], fit,
+            physics = PHYSICS[c.effect]
+            if c.effect == "stribeck" and params["Fs"] * _coulomb(st_new) < 0:
+                physics = PHYSICS["stribeck_deficit"]
+            f = Finding(c.effect, params, std, stat, evidence, physics, fit,
                         where={"hyper": c.hyper}, accepted=p_dm < alpha and practical)
             done.append(c.effect)
             if f.accepted:
