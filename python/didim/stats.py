@@ -8,8 +8,6 @@ from dataclasses import dataclass
 from typing import List, Optional, Sequence
 
 import numpy as np
-from scipy import stats as sst
-from scipy.signal import lfilter
 
 
 def ar_fit(x: np.ndarray, max_order: int = 8) -> np.ndarray:
@@ -37,6 +35,8 @@ def ar_fit(x: np.ndarray, max_order: int = 8) -> np.ndarray:
 def prewhiten(a: np.ndarray, *arrays: np.ndarray) -> List[np.ndarray]:
     """Filters each array (along axis 0) by the AR polynomial ``a`` and drops the first len(a) − 1 samples."""
     k = len(a) - 1
+    from scipy.signal import lfilter  # scipy is imported where it is used: `import didim` stays fast
+
     return [lfilter(a, [1.0], np.asarray(x, float), axis=0)[k:] for x in arrays]
 
 
@@ -102,6 +102,8 @@ def wald_added(r: np.ndarray, x: np.ndarray, a: Optional[np.ndarray] = None) -> 
     cov = np.zeros((x.shape[1], x.shape[1]))
     cov[np.ix_(keep, keep)] = cov_s / np.outer(scale[keep], scale[keep])
     explained = 1.0 - float(e @ e) / float(rw @ rw) if rw @ rw > 0 else 0.0
+    from scipy import stats as sst
+
     return WaldTest(beta, cov, stat, k, float(sst.f.sf(stat / k, k, max(n - k, 1))), explained)
 
 
@@ -131,6 +133,8 @@ def diebold_mariano(e_before: np.ndarray, e_after: np.ndarray) -> tuple:
     if s <= 0:
         return 0.0, 1.0, 0.0
     stat = d.mean() / math.sqrt(s / n)
+    from scipy import stats as sst
+
     return float(stat), float(sst.norm.sf(stat)), float(d.mean() / np.mean(np.asarray(e_before) ** 2))
 
 
