@@ -19,7 +19,8 @@ def _diagnose(truthbench, name):
     return d, entry
 
 
-@pytest.mark.parametrize("name", ["backlash_trap", "delay1_slow", "flex_delay_chirp", "null_lownoise", "null_flex_trap"])
+@pytest.mark.parametrize("name", ["backlash_trap", "delay1_slow", "flex_delay_chirp", "null_lownoise", "null_flex_trap",
+                                  "coupling_damping_multisine"])
 def test_the_doctor_names_what_is_concealed_and_nothing_else(truthbench, name):
     d, entry = _diagnose(truthbench, name)
     named = {f.effect for f in d.findings if f.effect != "unnamed"}
@@ -28,3 +29,9 @@ def test_the_doctor_names_what_is_concealed_and_nothing_else(truthbench, name):
         from didim.doctor import MIN_HELDOUT_GAIN
 
         assert d.fit["valid_after"] < (1 - MIN_HELDOUT_GAIN) * d.fit["valid_before"]
+
+
+def test_the_doctor_recovers_the_coupling_damping(truthbench):
+    d, entry = _diagnose(truthbench, "coupling_damping_multisine")
+    (f,) = [f for f in d.findings if f.effect == "coupling_damping"]
+    assert f.params["C12"] == pytest.approx(entry["params"]["Cdamp"], rel=0.15)

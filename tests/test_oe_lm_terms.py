@@ -45,3 +45,16 @@ def test_oe_lm_sensitivities_with_backlash_match_central_differences():
     # edge at different times errs by the kink's slope change times the step (seen: 1e-3 on M1, 1e-4 elsewhere),
     # while an error of the sensitivity equations would show at the 10 % level
     assert max(err.values()) < 3e-3, err
+
+
+def test_coupling_damper_sensitivities_match_central_differences():
+    """The damper between motor and load is an affine term: exact in both integrators' sensitivities. With the
+    exponential integrator a step of 1e-4 keeps the central differences off the step-sequence switches."""
+    truth = dict(sc.TABLE3_TRUTH, C12=300.0)
+    rec = sc.make_recording(sc.TABLE3_TRUTH, "flexible", sc.trapezoid_moving_chirp(), force_noise=0.0, quantization=0.0,
+                            seed=1)
+    damper = [didim.Term("C12", "damper")]
+    err = check_sensitivities(rec, truth, "flexible", terms=damper, integrator="rk4", quantization=0.0)
+    assert max(err.values()) < 1e-3, err
+    err = check_sensitivities(rec, truth, "flexible", terms=damper, quantization=0.0, rel_step=1e-4)
+    assert max(err.values()) < 5e-3, err

@@ -42,8 +42,8 @@ from .stats import diebold_mariano, holm, orthogonalize, wald_added
 #: of it (besides being statistically significant). Real friction differs from any smooth law, and at low noise a test
 #: finds such differences; an engineer cares about an effect that changes the fit, not about one that is detectable.
 MIN_HELDOUT_GAIN = 0.05
-EFFECTS = ("offset", "asymmetric_friction", "stribeck", "position_ripple", "flexibility", "load_friction", "delay",
-           "backlash", "unnamed")
+EFFECTS = ("offset", "asymmetric_friction", "stribeck", "position_ripple", "flexibility", "load_friction",
+           "coupling_damping", "delay", "backlash", "unnamed")
 
 PHYSICS = {
     "offset": "A constant force acts on the axis whatever it does: an amplifier or current-sensor offset, a cable "
@@ -62,6 +62,9 @@ PHYSICS = {
                    "model cannot follow.",
     "load_friction": "Part of the friction acts on the load side of the coupling, so it reaches the motor through the "
                      "spring, delayed and filtered by the flexible mode.",
+    "coupling_damping": "The coupling dissipates energy as it deflects (a damper in parallel with the spring: "
+                        "elastomer, belt or joint friction that depends on the deflection rate): the flexible mode is "
+                        "more damped than load friction alone would make it.",
     "delay": "The force is applied later than commanded: current-loop lag, communication or computation delay.",
     "backlash": "The coupling has a dead zone: the load is free over a small gap each time the force reverses.",
     "unnamed": "Structure remains in the residual that none of the candidate effects explains.",
@@ -74,6 +77,8 @@ SEPARATE = {
     frozenset({"stribeck", "asymmetric_friction"}): "move at several low constant speeds in both directions",
     frozenset({"delay", "flexibility"}): "excite with a chirp through the expected mode and measure the load position",
     frozenset({"load_friction", "flexibility"}): "add a load encoder or move at several constant speeds",
+    frozenset({"load_friction", "coupling_damping"}): "move at several constant speeds (load friction acts at every "
+    "speed, coupling damping only while the coupling deflects) or add a load encoder",
 }
 
 
@@ -296,6 +301,8 @@ def _candidates(state: State, sim: SimResult, data: _Data, done: Sequence[str]) 
             v12 = sim.qd[1]
             cols = np.column_stack([v12, coulomb_sign(v12)])
             out.append([_Candidate("load_friction", cols, {}, 1)])
+        if "coupling_damping" not in done and not any(t.kind == "damper" for t in state.terms):
+            out.append([_Candidate("coupling_damping", (sim.qd[0] - sim.qd[1])[:, None], {}, 1)])
         if "backlash" not in done and state.backlash_gap is None:
             q2 = sim.q[1] - sim.q[0]
             amp = float(np.percentile(np.abs(q2), 90))
@@ -429,6 +436,13 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
                   backlash_gap=st.backlash_gap, delay=st.delay)
         st = replace(st, params=dict(r.params))
         return st, r, {"Fv2": st.params["Fv2"], "Fc2": st.params["Fc2"]}, {k: r.std.get(k, math.nan) for k in ("Fv2", "Fc2")}
+    if c.effect == "coupling_damping":
+        st = replace(state, terms=state.terms + (Term("C12", "damper"),))
+        st, r = _refit(data, st, {"C12": max(float(beta[0]), 1.0)}, progress)
+        if st.params["C12"] <= 0:
+            raise SimulationError(f"the coupling damping came out non-positive (C12 = {st.params['C12']:.3g} N/(m/s)): "
+                                  "not a damper")
+        return st, r, {"C12": st.params["C12"]}, {"C12": r.std.get("C12", math.nan)}
     if c.effect == "backlash":
         g = c.hyper["gap"]
         st = replace(state, backlash_gap=g)
@@ -437,7 +451,8 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
     raise DataError(f"unknown effect {c.effect}")
 
 
-_TERM_NAMES = {"asymmetric_friction": ("dFv", "dFc"), "stribeck": ("Fs",), "position_ripple": ("Ar_sin", "Ar_cos")}
+_TERM_NAMES = {"asymmetric_friction": ("dFv", "dFc"), "stribeck": ("Fs",), "position_ripple": ("Ar_sin", "Ar_cos"),
+               "coupling_damping": ("C12",)}
 
 
 def _without(state: State, effect: str) -> Optional[State]:

@@ -9,7 +9,8 @@ import io
 from typing import Any, Dict
 
 VIEW_OF = {"offset": "velocity", "asymmetric_friction": "velocity", "stribeck": "velocity", "load_friction": "velocity",
-           "position_ripple": "position", "flexibility": "spectrum", "delay": "spectrum", "backlash": "spectrum"}
+           "position_ripple": "position", "flexibility": "spectrum", "delay": "spectrum", "backlash": "spectrum",
+           "coupling_damping": "spectrum"}
 
 
 def _png(fig) -> str:

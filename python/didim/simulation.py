@@ -28,7 +28,8 @@ DEFAULT_TOL: float = _core.DEFAULT_TOL
 Params = Union[Mapping[str, float], Sequence[float], np.ndarray]
 
 #: Kinds of extra model terms (all on the motor side): see :class:`Term`.
-TERM_KINDS = ("offset", "viscous", "coulomb", "abs_viscous", "abs_coulomb", "stribeck", "ripple_sin", "ripple_cos")
+TERM_KINDS = ("offset", "viscous", "coulomb", "abs_viscous", "abs_coulomb", "stribeck", "ripple_sin", "ripple_cos",
+              "damper")
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,9 @@ class Term:
     - ``offset``: 1 (N); ``viscous``: q̇; ``coulomb``: sign(q̇);
     - ``abs_viscous``: |q̇| and ``abs_coulomb``: |sign(q̇)|, friction that depends on the direction of motion;
     - ``stribeck``: sign(q̇)·exp(−(q̇/vs)²) with ``hyper`` = vs (m/s);
-    - ``ripple_sin``/``ripple_cos``: sin/cos(2π q/P) with ``hyper`` = P (m).
+    - ``ripple_sin``/``ripple_cos``: sin/cos(2π q/P) with ``hyper`` = P (m);
+    - ``damper`` (flexible model): coupling damping in parallel with K12, q̇1 − q̇12 on the motor row and its opposite
+      on the load row (N/(m/s)).
     """
 
     name: str

@@ -116,6 +116,9 @@ pub enum Basis {
     /// Position-periodic force (N): `φ = sin(2π q/period + phase)`, with the
     /// period in m (cogging, ball-screw lead error, position-dependent friction).
     Ripple { dof: usize, period: f64, phase: f64 },
+    /// Damper in parallel with the spring between dofs `a` and `b` (N/(m/s)):
+    /// `φ_a = q̇_a − q̇_b`, `φ_b = q̇_b − q̇_a` (coupling damping of a flexible joint).
+    Damper { a: usize, b: usize },
     /// Spring with a dead zone (backlash) of total width `gap` (m) between dofs
     /// `a` and `b` (N/m): `φ_a = dz(q_a − q_b)`, `φ_b = −φ_a`, with
     /// `dz(x) = sign(x)·max(|x| − gap/2, 0)`.
@@ -137,7 +140,7 @@ impl Basis {
     pub fn is_affine(&self) -> bool {
         matches!(
             self,
-            Basis::Viscous { .. } | Basis::Offset { .. } | Basis::Spring { .. }
+            Basis::Viscous { .. } | Basis::Offset { .. } | Basis::Spring { .. } | Basis::Damper { .. }
         )
     }
 
@@ -152,7 +155,7 @@ impl Basis {
             | Basis::AbsCoulomb { dof }
             | Basis::Stribeck { dof, .. }
             | Basis::Ripple { dof, .. } => (dof, None),
-            Basis::Spring { a, b } | Basis::Backlash { a, b, .. } => (a, Some(b)),
+            Basis::Spring { a, b } | Basis::Damper { a, b } | Basis::Backlash { a, b, .. } => (a, Some(b)),
         }
     }
 
@@ -190,6 +193,11 @@ impl Basis {
             Basis::Offset { dof } => out[dof] += value,
             Basis::Spring { a, b } => {
                 let f = value * (q[a] - q[b]);
+                out[a] += f;
+                out[b] -= f;
+            }
+            Basis::Damper { a, b } => {
+                let f = value * (qd[a] - qd[b]);
                 out[a] += f;
                 out[b] -= f;
             }
@@ -246,6 +254,12 @@ impl Basis {
                 dq[(a, b)] -= value;
                 dq[(b, a)] -= value;
                 dq[(b, b)] += value;
+            }
+            Basis::Damper { a, b } => {
+                dv[(a, a)] += value;
+                dv[(a, b)] -= value;
+                dv[(b, a)] -= value;
+                dv[(b, b)] += value;
             }
             Basis::AbsViscous { dof } => {
                 let v = qd[dof];
@@ -313,8 +327,11 @@ impl<const N: usize> Model<N> {
                 ));
             }
             b.check().map_err(|e| invalid!("term {name}: {e}"))?;
-            if matches!(b, Basis::Spring { a, b } | Basis::Backlash { a, b, .. } if a == b) {
-                return Err(invalid!("term {name}: a spring needs two different dofs"));
+            if matches!(b, Basis::Spring { a, b } | Basis::Damper { a, b } | Basis::Backlash { a, b, .. } if a == b)
+            {
+                return Err(invalid!(
+                    "term {name}: a spring or damper needs two different dofs"
+                ));
             }
             if names.contains(&name) {
                 return Err(invalid!("parameter name {name} appears twice in the model"));

@@ -84,6 +84,10 @@ fn extra_basis(kind: &str, hyper: f64) -> Result<Basis, Error> {
         "abs_viscous" => Basis::AbsViscous { dof },
         "abs_coulomb" => Basis::AbsCoulomb { dof },
         "stribeck" => Basis::Stribeck { dof, vs: hyper },
+        "damper" => Basis::Damper {
+            a: dof,
+            b: model::LOAD,
+        },
         "ripple_sin" => Basis::Ripple {
             dof,
             period: hyper,
@@ -97,7 +101,7 @@ fn extra_basis(kind: &str, hyper: f64) -> Result<Basis, Error> {
         other => {
             return Err(Error::InvalidInput(format!(
             "unknown term kind {other:?}: use offset, viscous, coulomb, abs_viscous, abs_coulomb, stribeck, \
-                 ripple_sin or ripple_cos"
+                 ripple_sin, ripple_cos or damper (flexible model)"
         )))
         }
     })
