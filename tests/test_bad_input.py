@@ -47,7 +47,7 @@ def test_missing_file_is_named(tmp_path):
 
 
 def test_a_folder_is_not_a_mat_file(tmp_path):
-    with pytest.raises(didim.DataError, match="is a folder, not a MAT file"):
+    with pytest.raises(didim.DataError, match="is a folder, not a regular file"):
         didim.load_mat(tmp_path)
 
 

@@ -144,7 +144,7 @@ def test_the_cli_refuses_to_write_over_its_input_and_fails_before_the_work(tmp_p
     copy.write_bytes(emps_path.read_bytes())
     before = sha256(copy)
     p = _cli("identify", str(copy), "--json", str(copy))
-    assert p.returncode == 2 and "is the input record" in p.stderr and sha256(copy) == before
+    assert p.returncode == 2 and "is the input" in p.stderr and sha256(copy) == before
     p = _cli("identify", str(copy), "--json", str(tmp_path / "missing" / "r.json"), "--plot", str(tmp_path / "f.png"))
     assert p.returncode == 2 and "the folder" in p.stderr and "does not exist" in p.stderr
     assert "identification" not in p.stdout  # failed before identifying

@@ -83,7 +83,7 @@ def test_load_result_says_what_is_wrong(tmp_path):
     (tmp_path / "b.json").write_text(json.dumps({"x": 1}))
     with pytest.raises(didim.DataError, match="not a didim result"):
         didim.load_result(tmp_path / "b.json")
-    with pytest.raises(didim.DataError, match="no such result file"):
+    with pytest.raises(didim.DataError, match="no such file"):
         didim.load_result(tmp_path / "missing.json")
 
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import errno
 import math
 import os
+import shutil
+import stat
 import tempfile
 from contextlib import contextmanager
 from typing import Iterator
@@ -53,13 +55,109 @@ def jsonable(x):
     return x
 
 
+def _special(target: str) -> str:
+    """'' for a regular or missing file, else what the existing ``target`` is (a device, a FIFO, a socket, a folder)."""
+    try:
+        mode = os.stat(target).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return ""
+    if stat.S_ISREG(mode):
+        return ""
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "device"
+    if stat.S_ISFIFO(mode):
+        return "FIFO"
+    if stat.S_ISSOCK(mode):
+        return "socket"
+    if stat.S_ISDIR(mode):
+        return "folder"
+    return "special file"
+
+
+def check_input(path, what: str = "input file") -> str:
+    """The path of an input that is a regular file; a FIFO (which would block), a device, a socket or a folder is a
+    DataError naming it, before anything opens it."""
+    from ._errors import DataError
+
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    if not isinstance(path, (str, os.PathLike)):
+        raise DataError(f"the {what} must be a path (str or os.PathLike), got {type(path).__name__}")
+    shown = os.fspath(path)
+    try:
+        mode = os.stat(shown).st_mode
+    except FileNotFoundError:
+        if os.path.islink(shown):
+            raise DataError(f"{shown}: a symbolic link to a missing file") from None
+        raise DataError(f"{shown}: no such file") from None
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise DataError(f"{shown}: a loop of symbolic links") from None
+        raise DataError(f"{shown}: cannot be read ({e.strerror or e})") from None
+    if not stat.S_ISREG(mode):
+        kind = _special(os.path.realpath(shown)) or "special file"
+        raise DataError(f"{shown}: is a {kind}, not a regular file: give the path of the {what} itself")
+    return shown
+
+
+def check_outputs(inputs, outputs) -> None:
+    """The one guard of every command, run before any work: an output is never an input (same file through any
+    spelling, symbolic or hard link), two outputs are never the same file, an output is never a FIFO, a socket or a
+    folder (a device such as /dev/null is written in place), and each output's folder is writable."""
+    from ._errors import DataError
+
+    def same(a: str, b: str) -> bool:
+        try:
+            return os.path.samefile(a, b)
+        except OSError:
+            return os.path.realpath(a) == os.path.realpath(b)
+
+    ins = [os.fspath(x) for x in inputs if x]
+    outs = [os.fspath(x) for x in outputs if x]
+    for i, out in enumerate(outs):
+        for src in ins:
+            if same(src, out):
+                raise DataError(f"output {out} is the input {src}: choose another name (inputs are never modified)")
+        for other in outs[:i]:
+            if same(other, out):
+                raise DataError(f"outputs {other} and {out} are the same file: choose two names")
+        kind = _special(_target(out))
+        if kind in ("FIFO", "socket", "folder", "special file"):
+            raise DataError(f"output {out} is a {kind}: didim writes results to regular files (or a device such as "
+                            "/dev/null); choose a file name")
+        if kind != "device":
+            try:
+                check_writable(out)
+            except OSError as e:
+                raise DataError(str(e)) from None
+
+
 @contextmanager
 def atomic_path(path) -> Iterator[str]:
     """Yields a temporary path in the target's folder; when the block succeeds, the file written there is flushed to
     disk and replaces ``path`` (keeping the old file's permissions, or the default ones for a new file); when it
-    fails, the temporary file is removed and ``path`` is untouched."""
+    fails, the temporary file is removed and ``path`` is untouched. A device (e.g. /dev/null) is never replaced: the
+    content is written to it in place; a FIFO or a folder is refused."""
     shown = os.fspath(path)
     target = _target(path)
+    kind = _special(target)
+    if kind == "device":
+        fd, tmp = tempfile.mkstemp(prefix=".didim.", suffix=".tmp")
+        os.close(fd)
+        try:
+            yield tmp
+            with open(tmp, "rb") as src, open(target, "wb") as dst:
+                shutil.copyfileobj(src, dst)
+        finally:
+            try:
+                os.unlink(tmp)
+            except FileNotFoundError:
+                pass
+        return
+    if kind:
+        from ._errors import DataError
+
+        raise DataError(f"cannot write {shown}: it is a {kind}; choose a file name")
     folder = os.path.dirname(target)
     base, ext = os.path.splitext(os.path.basename(target))
     try:
@@ -121,4 +219,4 @@ def save_figure(fig, path, **kw) -> None:
         fig.savefig(tmp, format=fmt, **kw)
 
 
-__all__ = ["atomic_path", "check_writable", "write_text", "write_bytes", "save_figure"]
+__all__ = ["atomic_path", "check_writable", "check_input", "check_outputs", "write_text", "write_bytes", "save_figure"]

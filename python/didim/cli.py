@@ -59,10 +59,7 @@ def cmd_simulate(args) -> int:
     from .model import load_result
     from .simulation import simulate
 
-    _check_outputs(args.file, [args.json, args.plot])
-    for out in (args.json, args.plot):
-        if out:
-            _check_outputs(args.result, [out])
+    _check_outputs([args.file, args.result], [args.json, args.plot])
     if args.plot:
         _check_figure_format(args.plot)
     result = load_result(args.result)
@@ -83,24 +80,11 @@ def cmd_simulate(args) -> int:
     return 0
 
 
-def _check_outputs(source: str, outputs) -> None:
-    """Fails before any work when an output cannot be written, or would overwrite the input record."""
-    import os
+def _check_outputs(inputs, outputs) -> None:
+    """Fails before any work when an output cannot be written, is an input or another output (see _io.check_outputs)."""
+    from ._io import check_outputs
 
-    from ._errors import DataError
-    from ._io import check_writable
-
-    seen = {}
-    for out in outputs:
-        if not out:
-            continue
-        if os.path.exists(source) and os.path.exists(out) and os.path.samefile(source, out):
-            raise DataError(f"output {out} is the input record {source}: choose another name (inputs are never modified)")
-        real = os.path.realpath(out)
-        if real in seen:
-            raise DataError(f"outputs {seen[real]} and {out} are the same file: choose two names")
-        seen[real] = out
-        check_writable(out)
+    check_outputs([inputs] if isinstance(inputs, str) else inputs, outputs)
 
 
 def _check_figure_format(path: str) -> None:
@@ -132,10 +116,7 @@ def cmd_demo(args) -> int:
     from ._io import write_text
     from .demo import demo_report, run_demo, run_rest_case
 
-    if args.json:
-        from ._io import check_writable
-
-        check_writable(args.json)
+    _check_outputs([], [args.json])
     results = run_demo(seed=args.seed, progress=_progress(args.quiet))
     rest = run_rest_case(seed=args.seed, progress=_progress(args.quiet))
     print(demo_report(results, rest))
@@ -152,6 +133,7 @@ def cmd_doctor(args) -> int:
     from ._io import write_text
     from .doctor import doctor
 
+    _check_outputs([args.file, args.validate], [args.json, args.html])
     rec = load_mat(args.file)
     val = load_mat(args.validate) if args.validate else None
     d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet))
@@ -182,9 +164,12 @@ def cmd_sweep(args) -> int:
     from ._io import save_figure, write_text
     from .sweep import grid_points, parse_values, random_points, sweep
 
+    _check_outputs([args.record], [args.json, args.plot])
     fixed = {k: (v[0] if len(v) == 1 else v) for k, v in _keyvals(args.set, parse_values).items()}
     if args.record:
-        fixed["record"] = args.record
+        from ._io import check_input
+
+        fixed["record"] = check_input(args.record, "record (MAT file)")
     elif args.scenario:
         fixed["scenario"] = args.scenario
     else:

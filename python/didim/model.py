@@ -101,15 +101,13 @@ def load_result(path) -> "IdentificationResult":  # noqa: F821
     so that ``didim.simulate(rec, load_result("r.json"))`` applies it to another record (the paper's cross-test)."""
     from .result import IdentificationResult
 
+    from ._io import check_input
+
+    path = check_input(path, "result file (JSON)")
     try:
-        if not os.path.isfile(path):
-            raise DataError(f"{os.fspath(path)}: no such result file" if not os.path.exists(path)
-                            else f"{os.fspath(path)}: not a regular file (give a JSON result file)")
         with open(path, "r", encoding="utf-8") as f:
             text = f.read(64 * 1024 * 1024)
-    except (OSError, TypeError, ValueError) as e:
-        if isinstance(e, DataError):
-            raise
+    except (OSError, ValueError) as e:
         raise DataError(f"cannot read the result {path!r}: {e}") from None
     try:
         d = json.loads(text)

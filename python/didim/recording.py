@@ -322,11 +322,9 @@ def load_mat(
     """
     from scipy.io import loadmat
 
-    path = os.fspath(path)
-    if not os.path.exists(path):
-        raise DataError(f"{path}: no such file")
-    if os.path.isdir(path):
-        raise DataError(f"{path}: is a folder, not a MAT file")
+    from ._io import check_input
+
+    path = check_input(path, "MAT file")
     try:
         with open(path, "rb") as f:
             head = f.read(128)
