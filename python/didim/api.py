@@ -6,6 +6,8 @@ import time
 import warnings
 from typing import Dict, Optional
 
+import numpy as np
+
 from . import _checks
 from ._errors import DataError, DidimWarning
 from .identification import Progress, didim, didim_flexible, didim_rigid, idim_ls, a_priori_mass
@@ -85,6 +87,9 @@ def identify(
     funcs, fixed = targets[method]
     _checks.known_options(funcs, options, f"method {method!r} ({model} model)", skip=fixed)
     _checks.excitation(recording.qr, recording.u_ext, param_names(model, offset))
+    if not np.any(recording.force):
+        raise DataError(f"{recording.name or 'record'}: the measured force is zero everywhere: nothing to identify "
+                        "from (check the force column and its scale, e.g. gtau)")
     for finding in recording.diagnose():
         warnings.warn(f"{recording.name or 'record'}: {finding}", DidimWarning, stacklevel=2)
     if method == "idim-ls":
@@ -137,7 +142,20 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
             r.force_error = simulate(recording, r).relative_error(recording)
         except DidimError:
             r.force_error = float("nan")
+    # one sanity check for every method: a model whose simulated force misses the measured one by more than the force
+    # itself explains nothing, whatever the method's own convergence test said
+    if r.converged and not (r.force_error <= ABSURD_FORCE_ERROR):
+        r.converged = False
+        what = (f"its closed-loop force error is {100 * r.force_error:.0f} %" if np.isfinite(r.force_error)
+                else "its model cannot be simulated in closed loop")
+        r.message = (f"the result explains nothing: {what} (more than {100 * ABSURD_FORCE_ERROR:.0f} % means worse "
+                     "than predicting no force at all); check the units, the controller and the initial values "
+                     "(apM)") + (f"; the method said: {r.message}" if r.message else "")
     return r
+
+
+#: A closed-loop force error above this (relative) is worse than predicting zero force: no fit, whatever converged.
+ABSURD_FORCE_ERROR = 1.0
 
 
 __all__ = ["identify", "METHODS"]
