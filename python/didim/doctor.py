@@ -42,8 +42,8 @@ from .stats import diebold_mariano, holm, orthogonalize, wald_added
 #: of it (besides being statistically significant). Real friction differs from any smooth law, and at low noise a test
 #: finds such differences; an engineer cares about an effect that changes the fit, not about one that is detectable.
 MIN_HELDOUT_GAIN = 0.05
-EFFECTS = ("offset", "asymmetric_friction", "stribeck", "position_ripple", "flexibility", "load_friction",
-           "coupling_damping", "delay", "backlash", "unnamed")
+EFFECTS = ("offset", "asymmetric_friction", "stribeck", "position_ripple", "position_dependent_coulomb", "flexibility",
+           "load_friction", "coupling_damping", "delay", "backlash", "unnamed")
 
 PHYSICS = {
     "offset": "A constant force acts on the axis whatever it does: an amplifier or current-sensor offset, a cable "
@@ -58,6 +58,9 @@ PHYSICS = {
                         "smooth Coulomb law captures); modelled by the Stribeck shape with the opposite sign.",
     "position_ripple": "A force periodic in position: motor cogging, ball-screw lead error or position-dependent "
                        "friction, with the period found in the spatial spectrum of the residual.",
+    "position_dependent_coulomb": "The Coulomb friction level varies along the stroke, always against the motion "
+                                  "(a preload or lubrication that changes along the screw, a worn or tight zone of a "
+                                  "guide): the force flips sign with the direction, unlike a position ripple.",
     "flexibility": "The drive is not rigid: a flexible coupling (a two-mass model) shows as a resonance that the rigid "
                    "model cannot follow.",
     "load_friction": "Part of the friction acts on the load side of the coupling, so it reaches the motor through the "
@@ -77,6 +80,8 @@ SEPARATE = {
     frozenset({"stribeck", "asymmetric_friction"}): "move at several low constant speeds in both directions",
     frozenset({"delay", "flexibility"}): "excite with a chirp through the expected mode and measure the load position",
     frozenset({"load_friction", "flexibility"}): "add a load encoder or move at several constant speeds",
+    frozenset({"position_ripple", "position_dependent_coulomb"}): "move over the same positions in both directions: "
+    "a ripple keeps its sign, position-dependent friction flips it with the direction",
     frozenset({"load_friction", "coupling_damping"}): "move at several constant speeds (load friction acts at every "
     "speed, coupling damping only while the coupling deflects) or add a load encoder",
 }
@@ -291,6 +296,18 @@ def _candidates(state: State, sim: SimResult, data: _Data, done: Sequence[str]) 
             make = lambda P: _motor_columns(state, sim, [Term("Ar_sin", "ripple_sin", P), Term("Ar_cos", "ripple_cos", P)])  # noqa: E731
             out.append([_Candidate("position_ripple", make(P), {"period": float(P)}, len(grid), rebuild=make,
                                    step=float(grid[1] / grid[0])) for P in grid])
+    if "position_dependent_coulomb" not in done:
+        stroke = float(np.ptp(q))
+        moving = np.abs(v) > 0.05 * np.max(np.abs(v))
+        vtyp = float(np.median(np.abs(v[moving]))) if moving.any() else 0.0
+        pmin = max(4 * vtyp * rec.dt * data.dec.factor, 2e-4)
+        pmax = stroke / 2 if stroke > 0 else 0.0
+        if pmax > pmin:
+            grid = np.geomspace(pmin, pmax, 80)
+            make = lambda P: _motor_columns(state, sim, [Term("Aq_sin", "coulomb_ripple_sin", P),  # noqa: E731
+                                                         Term("Aq_cos", "coulomb_ripple_cos", P)])
+            out.append([_Candidate("position_dependent_coulomb", make(P), {"period": float(P)}, len(grid),
+                                   rebuild=make, step=float(grid[1] / grid[0])) for P in grid])
     if "delay" not in done and state.delay == 0:
         out.append([_Candidate("delay", diffcent(sim.force, rec.dt)[:, None] * rec.dt, {}, 1)])
     if state.model == "rigid" and "flexibility" not in done:
@@ -384,6 +401,16 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
         amp = math.hypot(st.params["Ar_sin"], st.params["Ar_cos"])
         return st, r, {"amplitude": amp, "period": P, "Ar_sin": st.params["Ar_sin"], "Ar_cos": st.params["Ar_cos"]}, {
             "Ar_sin": r.std.get("Ar_sin", math.nan), "Ar_cos": r.std.get("Ar_cos", math.nan)}
+    if c.effect == "position_dependent_coulomb":
+        P = c.hyper["period"]
+        st = replace(state, terms=state.terms + (Term("Aq_sin", "coulomb_ripple_sin", P),
+                                                 Term("Aq_cos", "coulomb_ripple_cos", P)))
+        st, r = _refit(data, st, {"Aq_sin": float(beta[0]), "Aq_cos": float(beta[1])}, progress)
+        amp = math.hypot(st.params["Aq_sin"], st.params["Aq_cos"])
+        fc = _coulomb(st)
+        return st, r, {"amplitude": amp, "period": P, "relative_amplitude": amp / abs(fc) if fc else math.nan,
+                       "Aq_sin": st.params["Aq_sin"], "Aq_cos": st.params["Aq_cos"]}, {
+            "Aq_sin": r.std.get("Aq_sin", math.nan), "Aq_cos": r.std.get("Aq_cos", math.nan)}
     if c.effect == "delay":
         best = None
         for d in range(1, 9):  # search the delay in whole samples, upward until the fit gets clearly worse
@@ -452,7 +479,7 @@ def _model_candidate(c: _Candidate, state: State, base_result: IdentificationRes
 
 
 _TERM_NAMES = {"asymmetric_friction": ("dFv", "dFc"), "stribeck": ("Fs",), "position_ripple": ("Ar_sin", "Ar_cos"),
-               "coupling_damping": ("C12",)}
+               "coupling_damping": ("C12",), "position_dependent_coulomb": ("Aq_sin", "Aq_cos")}
 
 
 def _without(state: State, effect: str) -> Optional[State]:

@@ -21,7 +21,8 @@ from .simulation import DEFAULT_COULOMB_EPS, MODELS, Term, param_names
 UNITS = {"M": "kg", "Fv": "N/(m/s)", "Fc": "N", "OF": "N", "M1": "kg", "Fv1": "N/(m/s)", "Fc1": "N", "M2": "kg",
          "Fv2": "N/(m/s)", "Fc2": "N", "K12": "N/m"}
 _TERM_UNITS = {"offset": "N", "viscous": "N/(m/s)", "coulomb": "N", "abs_viscous": "N/(m/s)", "abs_coulomb": "N",
-               "stribeck": "N", "ripple_sin": "N", "ripple_cos": "N", "damper": "N/(m/s)"}
+               "stribeck": "N", "ripple_sin": "N", "ripple_cos": "N", "coulomb_ripple_sin": "N",
+               "coulomb_ripple_cos": "N", "damper": "N/(m/s)"}
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ from typing import Any, Dict
 
 VIEW_OF = {"offset": "velocity", "asymmetric_friction": "velocity", "stribeck": "velocity", "load_friction": "velocity",
            "position_ripple": "position", "flexibility": "spectrum", "delay": "spectrum", "backlash": "spectrum",
-           "coupling_damping": "spectrum"}
+           "coupling_damping": "spectrum", "position_dependent_coulomb": "position"}
 
 
 def _png(fig) -> str:

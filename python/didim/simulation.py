@@ -29,7 +29,7 @@ Params = Union[Mapping[str, float], Sequence[float], np.ndarray]
 
 #: Kinds of extra model terms (all on the motor side): see :class:`Term`.
 TERM_KINDS = ("offset", "viscous", "coulomb", "abs_viscous", "abs_coulomb", "stribeck", "ripple_sin", "ripple_cos",
-              "damper")
+              "coulomb_ripple_sin", "coulomb_ripple_cos", "damper")
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,8 @@ class Term:
     - ``abs_viscous``: |q̇| and ``abs_coulomb``: |sign(q̇)|, friction that depends on the direction of motion;
     - ``stribeck``: sign(q̇)·exp(−(q̇/vs)²) with ``hyper`` = vs (m/s);
     - ``ripple_sin``/``ripple_cos``: sin/cos(2π q/P) with ``hyper`` = P (m);
+    - ``coulomb_ripple_sin``/``coulomb_ripple_cos``: sign(q̇)·sin/cos(2π q/P), ``hyper`` = P (m): Coulomb friction
+      that varies along the stroke, always against the motion;
     - ``damper`` (flexible model): coupling damping in parallel with K12, q̇1 − q̇12 on the motor row and its opposite
       on the load row (N/(m/s)).
     """

@@ -116,6 +116,11 @@ pub enum Basis {
     /// Position-periodic force (N): `φ = sin(2π q/period + phase)`, with the
     /// period in m (cogging, ball-screw lead error, position-dependent friction).
     Ripple { dof: usize, period: f64, phase: f64 },
+    /// Position-dependent Coulomb friction (N): `φ = coulomb_sign(q̇)·sin(2π q/period + phase)`,
+    /// with the period in m. With a `Coulomb` term `Fc`, the friction level varies along the
+    /// stroke, `Fc + A sin(2π q/P + φ)`, always against the motion (a preload or lubrication
+    /// that changes along a screw, a worn zone of a guide).
+    CoulombRipple { dof: usize, period: f64, phase: f64 },
     /// Damper in parallel with the spring between dofs `a` and `b` (N/(m/s)):
     /// `φ_a = q̇_a − q̇_b`, `φ_b = q̇_b − q̇_a` (coupling damping of a flexible joint).
     Damper { a: usize, b: usize },
@@ -154,7 +159,8 @@ impl Basis {
             | Basis::AbsViscous { dof }
             | Basis::AbsCoulomb { dof }
             | Basis::Stribeck { dof, .. }
-            | Basis::Ripple { dof, .. } => (dof, None),
+            | Basis::Ripple { dof, .. }
+            | Basis::CoulombRipple { dof, .. } => (dof, None),
             Basis::Spring { a, b } | Basis::Damper { a, b } | Basis::Backlash { a, b, .. } => (a, Some(b)),
         }
     }
@@ -165,9 +171,13 @@ impl Basis {
             Basis::Stribeck { vs, .. } if !(vs.is_finite() && vs > 0.0) => {
                 Err(invalid!("the Stribeck speed vs must be finite and > 0 m/s, got {vs}"))
             }
-            Basis::Ripple { period, phase, .. } if !(period.is_finite() && period > 0.0 && phase.is_finite()) => Err(
-                invalid!("a position ripple needs a finite period > 0 m and a finite phase, got {period} and {phase}"),
-            ),
+            Basis::Ripple { period, phase, .. } | Basis::CoulombRipple { period, phase, .. }
+                if !(period.is_finite() && period > 0.0 && phase.is_finite()) =>
+            {
+                Err(invalid!(
+                    "a position ripple needs a finite period > 0 m and a finite phase, got {period} and {phase}"
+                ))
+            }
             Basis::Backlash { gap, .. } if !(gap.is_finite() && gap >= 0.0) => {
                 Err(invalid!("the backlash gap must be finite and >= 0 m, got {gap}"))
             }
@@ -209,6 +219,11 @@ impl Basis {
             }
             Basis::Ripple { dof, period, phase } => {
                 out[dof] += value * (std::f64::consts::TAU * q[dof] / period + phase).sin()
+            }
+            Basis::CoulombRipple { dof, period, phase } => {
+                out[dof] += value
+                    * coulomb_sign(qd[dof], eps)
+                    * (std::f64::consts::TAU * q[dof] / period + phase).sin()
             }
             Basis::Backlash { a, b, gap } => {
                 let f = value * dead_zone(q[a] - q[b], gap);
@@ -278,6 +293,12 @@ impl Basis {
             Basis::Ripple { dof, period, phase } => {
                 let w = std::f64::consts::TAU / period;
                 dq[(dof, dof)] += value * w * (w * q[dof] + phase).cos();
+            }
+            Basis::CoulombRipple { dof, period, phase } => {
+                let w = std::f64::consts::TAU / period;
+                let (s, c) = (w * q[dof] + phase).sin_cos();
+                dq[(dof, dof)] += value * coulomb_sign(qd[dof], eps) * w * c;
+                dv[(dof, dof)] += value * coulomb_sign_derivative(qd[dof], eps) * s;
             }
             Basis::Backlash { a, b, gap } => {
                 // slope 1 outside the gap, 0 inside

@@ -84,6 +84,16 @@ fn extra_basis(kind: &str, hyper: f64) -> Result<Basis, Error> {
         "abs_viscous" => Basis::AbsViscous { dof },
         "abs_coulomb" => Basis::AbsCoulomb { dof },
         "stribeck" => Basis::Stribeck { dof, vs: hyper },
+        "coulomb_ripple_sin" => Basis::CoulombRipple {
+            dof,
+            period: hyper,
+            phase: 0.0,
+        },
+        "coulomb_ripple_cos" => Basis::CoulombRipple {
+            dof,
+            period: hyper,
+            phase: std::f64::consts::FRAC_PI_2,
+        },
         "damper" => Basis::Damper {
             a: dof,
             b: model::LOAD,
@@ -101,7 +111,7 @@ fn extra_basis(kind: &str, hyper: f64) -> Result<Basis, Error> {
         other => {
             return Err(Error::InvalidInput(format!(
             "unknown term kind {other:?}: use offset, viscous, coulomb, abs_viscous, abs_coulomb, stribeck, \
-                 ripple_sin, ripple_cos or damper (flexible model)"
+                 ripple_sin, ripple_cos, coulomb_ripple_sin, coulomb_ripple_cos or damper (flexible model)"
         )))
         }
     })
