@@ -25,6 +25,8 @@ def test_the_doctor_names_what_is_concealed_and_nothing_else(truthbench, name):
     d, entry = _diagnose(truthbench, name)
     named = {f.effect for f in d.findings if f.effect != "unnamed"}
     assert named == set(entry["effects"]), d.summary()
+    if not entry["effects"]:  # nothing concealed: no finding of any kind, `unnamed` included
+        assert not d.findings, d.summary()
     if named:  # every accepted effect matters: the held-out error drops by more than the practical threshold
         from didim.doctor import MIN_HELDOUT_GAIN
 
