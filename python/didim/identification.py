@@ -321,8 +321,7 @@ def didim(
         chi = best[1] + 0.5 * (chi - best[1])
         return True
 
-    k = 0
-    for k in range(max_iter + MAX_BACKTRACKS):
+    for _ in range(max_iter * (MAX_BACKTRACKS + 1)):  # each iteration may be preceded by MAX_BACKTRACKS pull-backs
         if len(history) >= max_iter:
             break
         # one call: simulate with χᵏ, build W of the simulated states, decimate Y, W and the simulated force
