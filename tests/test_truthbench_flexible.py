@@ -132,3 +132,18 @@ def test_exponential_sensitivities_stay_finite_where_the_coulomb_sign_is_stiff(t
         assert np.all(np.isfinite(jac))
         cols[integrator] = np.linalg.norm(jac, axis=0)
     np.testing.assert_allclose(cols["exponential"], cols["rk4"], rtol=1e-2)
+
+
+def test_cli_variant_option(truthbench):
+    import subprocess
+    import sys
+
+    from conftest import TRUTHBENCH_DIR
+
+    rest = TRUTHBENCH_DIR / "flexible" / "paperlike_chirp_at_rest.mat"
+    run = lambda *a: subprocess.run([sys.executable, "-m", "didim.cli", "identify", str(rest), *a, "--quiet"],  # noqa: E731
+                                    capture_output=True, text=True, timeout=300)
+    paper = run("--model", "flexible", "--variant", "paper")
+    assert paper.returncode == 1 and "friction-split" in paper.stderr  # not converged, says what to do
+    wrong = run("--variant", "paper")  # the rigid model has no variants
+    assert wrong.returncode == 2 and "--model flexible --method didim" in wrong.stderr

@@ -31,6 +31,12 @@ def cmd_identify(args) -> int:
         opts["apM"] = args.apm
     if args.method in ("oe-nm", "oe-lm", "oe-gn"):
         opts["criterion"] = args.criterion
+    if args.variant is not None:
+        if not (args.method == "didim" and args.model == "flexible"):
+            from ._errors import DataError
+
+            raise DataError("--variant chooses the three-step DIDIM's variant: use it with --model flexible --method didim")
+        opts["variant"] = args.variant
     if args.max_iter is not None:
         opts["max_iter"] = args.max_iter
     if args.tol is not None:
@@ -221,6 +227,9 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("file", help="MAT file with t, qm, qg, vir, gtau, kp, kv (optional pulses_N, ql)")
     i.add_argument("--model", choices=["rigid", "flexible"], default="rigid")
     i.add_argument("--method", choices=["idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn"], default="didim")
+    i.add_argument("--variant", choices=["auto", "paper", "friction-split"],
+                   help="three-step DIDIM (flexible): the paper's procedure, the friction split (beyond the paper), "
+                        "or auto (default: the split when it explains the record clearly better)")
     i.add_argument("--offset", action="store_true", help="add a constant force OF (N)")
     i.add_argument("--apm", type=float, default=None, help="a priori total mass (kg) to start from")
     i.add_argument("--criterion", choices=["force", "position"], default="force", help="output-error criterion (eq. (32))")
