@@ -35,7 +35,7 @@ from .identification import fit_flexible_mode, flexible_from_mode, a_priori_mass
 from .recording import Recording
 from .result import IdentificationResult
 from .signal import Decimation, diffcent
-from .simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign, simulate
+from .simulation import SimResult, Term, coulomb_sign, simulate
 from .stats import diebold_mariano, holm, orthogonalize, wald_added
 
 #: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
@@ -274,6 +274,17 @@ class _Candidate:
     step: float = 1.0  # ratio between neighbouring grid values
 
 
+def _period_grid(v: np.ndarray, q: np.ndarray, rec: Recording, data: "_Data", share: float) -> Optional[np.ndarray]:
+    """80 periods (m), geometric, from what the decimated record resolves at the typical speed to 1/``share`` of the
+    stroke; None when the record cannot show a period."""
+    stroke = float(np.ptp(q))
+    moving = np.abs(v) > 0.05 * np.max(np.abs(v))
+    vtyp = float(np.median(np.abs(v[moving]))) if moving.any() else 0.0
+    pmin = max(4 * vtyp * rec.dt * data.dec.factor, 2e-4)
+    pmax = stroke / share if stroke > 0 else 0.0
+    return np.geomspace(pmin, pmax, 80) if pmax > pmin else None
+
+
 def _candidates(state: State, sim: SimResult, data: _Data, done: Sequence[str]) -> List[List[_Candidate]]:
     """Every candidate effect, each as the list of its hyper-parameter variants."""
     rec = data.rec
@@ -290,29 +301,20 @@ def _candidates(state: State, sim: SimResult, data: _Data, done: Sequence[str]) 
         make = lambda vs: _motor_columns(state, sim, [Term("Fs", "stribeck", vs)])  # noqa: E731
         out.append([_Candidate("stribeck", make(vs), {"vs": float(vs)}, len(grid), rebuild=make,
                                step=float(grid[1] / grid[0])) for vs in grid])
-    if "position_ripple" not in done:
-        stroke = float(np.ptp(q))
-        moving = np.abs(v) > 0.05 * np.max(np.abs(v))
-        vtyp = float(np.median(np.abs(v[moving]))) if moving.any() else 0.0
-        pmin = max(4 * vtyp * rec.dt * data.dec.factor, 2e-4)
-        pmax = stroke / 3 if stroke > 0 else 0.0
-        if pmax > pmin:
-            grid = np.geomspace(pmin, pmax, 80)
-            make = lambda P: _motor_columns(state, sim, [Term("Ar_sin", "ripple_sin", P), Term("Ar_cos", "ripple_cos", P)])  # noqa: E731
-            out.append([_Candidate("position_ripple", make(P), {"period": float(P)}, len(grid), rebuild=make,
-                                   step=float(grid[1] / grid[0])) for P in grid])
-    if "position_dependent_coulomb" not in done:
-        stroke = float(np.ptp(q))
-        moving = np.abs(v) > 0.05 * np.max(np.abs(v))
-        vtyp = float(np.median(np.abs(v[moving]))) if moving.any() else 0.0
-        pmin = max(4 * vtyp * rec.dt * data.dec.factor, 2e-4)
-        pmax = stroke / 2 if stroke > 0 else 0.0
-        if pmax > pmin:
-            grid = np.geomspace(pmin, pmax, 80)
-            make = lambda P: _motor_columns(state, sim, [Term("Aq_sin", "coulomb_ripple_sin", P),  # noqa: E731
-                                                         Term("Aq_cos", "coulomb_ripple_cos", P)])
-            out.append([_Candidate("position_dependent_coulomb", make(P), {"period": float(P)}, len(grid),
-                                   rebuild=make, step=float(grid[1] / grid[0])) for P in grid])
+    # forces periodic in position: a ripple (same sign both ways) and Coulomb friction varying along the stroke
+    # (against the motion), each searched over the same period grid, up to a third or a half of the stroke
+    periodic = (("position_ripple", ("Ar_sin", "Ar_cos"), ("ripple_sin", "ripple_cos"), 3.0),
+                ("position_dependent_coulomb", ("Aq_sin", "Aq_cos"), ("coulomb_ripple_sin", "coulomb_ripple_cos"), 2.0))
+    for effect, names, kinds, share in periodic:
+        grid = _period_grid(v, q, rec, data, share)
+        if effect in done or grid is None:
+            continue
+
+        def make(P, names=names, kinds=kinds):
+            return _motor_columns(state, sim, [Term(names[0], kinds[0], P), Term(names[1], kinds[1], P)])
+
+        out.append([_Candidate(effect, make(P), {"period": float(P)}, len(grid), rebuild=make,
+                               step=float(grid[1] / grid[0])) for P in grid])
     if "delay" not in done and state.delay == 0:
         out.append([_Candidate("delay", diffcent(sim.force, rec.dt)[:, None] * rec.dt, {}, 1)])
     if state.model == "rigid" and "flexibility" not in done:
