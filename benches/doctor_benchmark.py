@@ -82,13 +82,13 @@ LEVELS = {  # from hard to easy
 def make(effect: str, level: float, traj: str, seed: int):
     h = hidden(effect, level)
     qr = trajectory(traj)
-    plan = didim.Recording(dt=1e-3, qr=qr, force=np.zeros(len(qr)), qm=qr, position_resolution=5e-8)
+    plan = didim.Recording(controller=didim.EmpsCascade(), dt=1e-3, qr=qr, force=np.zeros(len(qr)), qm=qr, position_resolution=5e-8)
     sim = didim.simulate(plan, h["truth"], h["model"], **h["kw"])
     base = didim.simulate(plan, BASE, "rigid")
     enr = float(np.sqrt(np.mean((sim.force - base.force) ** 2)) / NOISE_RMS) if effect != "none" else 0.0
     rng = np.random.default_rng(seed)
     noise = lfilter([1.0], [1.0, -NOISE_CORR], rng.standard_normal(len(qr)) * NOISE_RMS * math.sqrt(1 - NOISE_CORR**2))
-    rec = didim.Recording(dt=1e-3, qr=qr, force=sim.force + noise, qm=np.round(sim.q1 / 5e-8) * 5e-8,
+    rec = didim.Recording(controller=didim.EmpsCascade(), dt=1e-3, qr=qr, force=sim.force + noise, qm=np.round(sim.q1 / 5e-8) * 5e-8,
                           position_resolution=5e-8, name=f"{effect}@{level}/{traj}/{seed}")
     return rec, h, enr
 

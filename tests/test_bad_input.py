@@ -189,7 +189,7 @@ def test_record_too_short_for_the_decimation_filter():
 
 def test_constant_reference_says_which_parameters_and_why():
     n = 2000
-    rec = didim.Recording(dt=1e-3, qr=np.full(n, 0.1), force=np.random.default_rng(0).normal(0, 1, n), qm=np.full(n, 0.1))
+    rec = didim.Recording(controller=didim.EmpsCascade(), dt=1e-3, qr=np.full(n, 0.1), force=np.random.default_rng(0).normal(0, 1, n), qm=np.full(n, 0.1))
     for method in ("idim-ls", "didim", "oe-gn"):
         with pytest.raises(didim.IdentifiabilityError) as e:
             didim.identify(rec, "rigid", method, offset=True)
@@ -211,14 +211,14 @@ def test_a_command_saturating_for_long_stretches_is_warned_with_the_evidence():
 
 
 def test_force_in_volts_is_warned_with_the_rms_evidence(emps):
-    volts = didim.Recording(dt=emps.dt, qr=emps.qr, force=emps.force / emps.controller.gtau, qm=emps.qm)
+    volts = didim.Recording(controller=didim.EmpsCascade(), dt=emps.dt, qr=emps.qr, force=emps.force / emps.controller.gtau, qm=emps.qm)
     with pytest.warns(didim.DidimWarning) as w:
         didim.identify(volts, "rigid", "idim-ls")
     msg = str(w[0].message)
     assert "looks like volts, not newtons" in msg
     assert "RMS is 1.539 against the 54.1 N RMS that the controller" in msg
     assert "multiply the drive command by gtau = 35.15065188 N/V" in msg
-    twice = didim.Recording(dt=emps.dt, qr=emps.qr, force=emps.force * emps.controller.gtau, qm=emps.qm)
+    twice = didim.Recording(controller=didim.EmpsCascade(), dt=emps.dt, qr=emps.qr, force=emps.force * emps.controller.gtau, qm=emps.qm)
     assert any("multiplied by gtau twice" in f for f in twice.diagnose())
     c = emps.controller  # the cascade is a PD of kp·kv·gtau N/m and kv·gtau N/(m/s); here with gains 100 times too low
     pd = didim.PD(c.kp * c.kv * c.gtau / 100, c.kv * c.gtau / 100)
@@ -339,7 +339,7 @@ def test_unstable_loop_names_the_parameter_set_and_the_sample(emps):
 
 
 def test_rank_deficient_regressor_names_the_dependent_columns(emps):
-    rigid_load = didim.Recording(dt=emps.dt, qr=emps.qr, force=emps.force, qm=emps.qm, ql=emps.qm)
+    rigid_load = didim.Recording(controller=didim.EmpsCascade(), dt=emps.dt, qr=emps.qr, force=emps.force, qm=emps.qm, ql=emps.qm)
     with pytest.raises(didim.IdentifiabilityError, match=r"rank 6 < 7: column K12 is zero \(K12 has no effect on this "
                                                           r"record\)\. K12 cannot be identified separately"):
         didim.identify(rigid_load, "flexible", "idim-ls")

@@ -46,7 +46,7 @@ def test_load_mat_rejects_non_uniform_time(tmp_path, emps_path):
 
 def test_recording_validates_signals():
     n = 10
-    ok = dict(dt=1e-3, qr=np.zeros(n), force=np.zeros(n), qm=np.zeros(n))
+    ok = dict(dt=1e-3, qr=np.zeros(n), force=np.zeros(n), qm=np.zeros(n), controller=didim.EmpsCascade())
     didim.Recording(**ok)
     with pytest.raises(didim.DataError, match="force has 9 samples"):
         didim.Recording(**{**ok, "force": np.zeros(n - 1)})

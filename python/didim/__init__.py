@@ -5,7 +5,7 @@ simulation, parallel decimation and QR least squares. SI units on the load side 
 """
 
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
-from .controllers import PD, EmpsCascade
+from .controllers import PD, EmpsCascade, TransferFunction, load_controller
 from .recording import Recording, load_mat
 from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, INTEGRATORS, BatchResult, SimResult, coulomb_sign, param_names,
                          simulate, simulate_batch)
@@ -27,6 +27,8 @@ __all__ = [
     "DidimWarning",
     "EmpsCascade",
     "PD",
+    "TransferFunction",
+    "load_controller",
     "Recording",
     "load_mat",
     "simulate",

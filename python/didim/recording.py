@@ -11,7 +11,7 @@ from typing import List, Optional
 import numpy as np
 
 from ._errors import DataError, DidimWarning
-from .controllers import PD, Controller, EmpsCascade
+from .controllers import PD, Controller, EmpsCascade, TransferFunction
 
 #: Relative tolerance on the sample-time jitter accepted by :func:`load_mat` (the EMPS logs ±2.5e-8 s on 1e-3 s).
 TIME_JITTER_RTOL = 1e-3
@@ -60,7 +60,8 @@ class Recording:
         qr: position reference fed to the controller (m).
         force: measured motor force (N), e.g. ``gtau·vir`` on the EMPS.
         qm: measured motor position (m).
-        controller: the controller that ran the axis (:class:`EmpsCascade` or :class:`PD`).
+        controller: the controller that ran the axis (:class:`TransferFunction`, :class:`EmpsCascade` or :class:`PD`;
+            :func:`didim.load_controller` reads one from a file). Required.
         ql: measured load position (m) when the axis has a second encoder, else None.
         u_ext: known external force added to the command (N), e.g. the EMPS pulses, else None.
         position_resolution: resolution of the motor encoder (m), used to quantize the simulated measurement, or None.
@@ -71,7 +72,7 @@ class Recording:
     qr: np.ndarray
     force: np.ndarray
     qm: np.ndarray
-    controller: Controller = field(default_factory=EmpsCascade)
+    controller: Optional[Controller] = None
     ql: Optional[np.ndarray] = None
     u_ext: Optional[np.ndarray] = None
     position_resolution: Optional[float] = None
@@ -95,8 +96,15 @@ class Recording:
             object.__setattr__(self, "ql", _signal("ql (load position)", self.ql, n))
         if self.u_ext is not None:
             object.__setattr__(self, "u_ext", _signal("u_ext (external force)", self.u_ext, n))
-        if not isinstance(self.controller, (EmpsCascade, PD)):
-            raise DataError(f"controller must be EmpsCascade or PD, got {type(self.controller).__name__}")
+        if self.controller is None:
+            raise DataError("the recording has no controller: didim simulates the closed loop, so it needs the law that "
+                            "ran the axis; give controller=didim.EmpsCascade() for the EMPS, didim.PD(kp, kd), "
+                            "didim.TransferFunction(...) or .cascade(...), or didim.load_controller('controller.json') "
+                            "(on the command line: --controller FILE)")
+        if not isinstance(self.controller, (EmpsCascade, PD, TransferFunction)):
+            raise DataError("controller must be a didim.TransferFunction, EmpsCascade or PD, got "
+                            f"{type(self.controller).__name__}")
+        self.controller.transfer_function(dt)  # a transfer function designed for another sample period is refused
         if self.position_resolution is not None:
             r = _number("position_resolution", self.position_resolution, "m")
             if not (math.isfinite(r) and r > 0):
@@ -134,23 +142,13 @@ class Recording:
     @property
     def force_limit(self) -> float:
         """The controller's saturation of the command in N (``gtau·vsat`` or ``tau_max``), ``inf`` for none."""
-        c = self.controller
-        return c.gtau * c.vsat if isinstance(c, EmpsCascade) else c.tau_max
+        return self.controller.force_limit
 
     def implied_command(self) -> np.ndarray:
         """The force (N) the controller computes from the logged reference and motor position (and ``u_ext``), per
         sample, with the controller's saturation: the evidence :meth:`diagnose` compares the measured force with.
         The two samples before the start take the first position."""
-        c = self.controller
-        qm = self.qm
-        qm2 = np.concatenate([qm[:1], qm[:1], qm[:-2]])
-        u = self.u_ext if self.u_ext is not None else 0.0
-        with np.errstate(all="ignore"):
-            v_hat = (qm - qm2) / (2 * self.dt)
-            if isinstance(c, EmpsCascade):
-                vir = c.kv * (c.kp * (self.qr - qm) - v_hat) + u / c.gtau
-                return c.gtau * np.clip(vir, -c.vsat, c.vsat)
-            return np.clip(c.kp * (self.qr - qm) - c.kd * v_hat + u, -c.tau_max, c.tau_max)
+        return self.controller.transfer_function(self.dt).command(self.qr, self.qm, self.u_ext)
 
     def diagnose(self) -> List[str]:
         """Things in the record that look wrong but need not be, each as a sentence with the evidence and what to
@@ -258,9 +256,7 @@ def _longest_run(mask: np.ndarray):
 
 
 def _describe(c: Controller) -> str:
-    if isinstance(c, EmpsCascade):
-        return f"EmpsCascade kp = {c.kp:g} 1/s, kv = {c.kv:g} V/(m/s), gtau = {c.gtau:.6g} N/V"
-    return f"PD kp = {c.kp:g} N/m, kd = {c.kd:g} N/(m/s)"
+    return c.describe()
 
 
 def _time_step(t: np.ndarray, where: str) -> float:

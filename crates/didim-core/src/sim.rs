@@ -15,7 +15,7 @@
 //! over `[t_k, t_{k+1})`. Without delay the IDM of these states reproduces the
 //! commanded force exactly.
 
-use crate::controller::Controller;
+use crate::controller::{Controller, FilterState, TransferFunction, MAX_TAPS};
 use crate::error::{invalid, Error, Result};
 use crate::model::Model;
 use nalgebra::SVector;
@@ -273,9 +273,8 @@ type Stage<const N: usize> = (SVector<f64, N>, SVector<f64, N>, SVector<f64, N>)
 /// What rides along the state through the simulation loop: nothing for a plain
 /// simulation, the sensitivity matrices for [`simulate_sensitivity`].
 trait Tangent<const N: usize> {
-    /// The command of sample `k` has been computed; `dtau_dqm`, `dtau_dqm2` are its
-    /// derivatives with respect to the measurements at `k` and `k − 2`.
-    fn command(&mut self, k: usize, dtau_dqm: f64, dtau_dqm2: f64);
+    /// The command of sample `k` has been computed by `law` (`active`: not saturated).
+    fn command(&mut self, k: usize, law: &TransferFunction, active: bool);
     /// Records the state outputs of sample `k`.
     fn record(&mut self, k: usize);
     /// Advances by one RK4 substep of length `h` through the state's four stages.
@@ -293,7 +292,7 @@ struct NoTangent;
 
 impl<const N: usize> Tangent<N> for NoTangent {
     #[inline(always)]
-    fn command(&mut self, _: usize, _: f64, _: f64) {}
+    fn command(&mut self, _: usize, _: &TransferFunction, _: bool) {}
     #[inline(always)]
     fn record(&mut self, _: usize) {}
     #[inline(always)]
@@ -307,8 +306,8 @@ struct Sensitivity<const N: usize> {
     n: usize,
     sq: Vec<f64>,
     sv: Vec<f64>,
-    /// `∂q1/∂χ` at samples k−1 and k−2.
-    sq1_hist: [Vec<f64>; 2],
+    /// The controller's state on `∂q1/∂χ`, one per parameter.
+    ctl: Vec<FilterState>,
     /// Sensitivity of the force applied over the current period.
     dtau: Vec<f64>,
     /// Delayed command sensitivities (ring buffer, like the commands).
@@ -331,7 +330,7 @@ impl<const N: usize> Sensitivity<N> {
             n,
             sq: z.clone(),
             sv: z.clone(),
-            sq1_hist: [vec![0.0; p], vec![0.0; p]],
+            ctl: vec![[0.0; MAX_TAPS]; p],
             dtau: vec![0.0; p],
             pending: vec![vec![0.0; p]; delay],
             dforce: vec![0.0; p * n],
@@ -346,9 +345,9 @@ impl<const N: usize> Sensitivity<N> {
 }
 
 impl<const N: usize> Tangent<N> for Sensitivity<N> {
-    fn command(&mut self, k: usize, dtau_dqm: f64, dtau_dqm2: f64) {
+    fn command(&mut self, k: usize, law: &TransferFunction, active: bool) {
         let (p, n, d) = (self.p, self.n, self.pending.len());
-        // ∂τ[k]/∂χ from ∂q1[k]/∂χ (the current state) and ∂q1[k−2]/∂χ.
+        // ∂τ[k]/∂χ: the controller's law on ∂q1/∂χ (zero while the command saturates).
         let cmd = if d == 0 {
             &mut self.dtau
         } else {
@@ -357,12 +356,11 @@ impl<const N: usize> Tangent<N> for Sensitivity<N> {
             std::mem::swap(&mut self.dtau, slot);
             slot
         };
+        let gain = if active { law.gain() } else { 0.0 };
         for j in 0..p {
-            cmd[j] = dtau_dqm * self.sq[j] + dtau_dqm2 * self.sq1_hist[1][j];
+            cmd[j] = gain * law.sensitivity_step(&mut self.ctl[j], self.sq[j]);
             self.dforce[j * n + k] = cmd[j];
         }
-        self.sq1_hist.swap(0, 1);
-        self.sq1_hist[0].copy_from_slice(&self.sq[..p]);
     }
 
     fn record(&mut self, k: usize) {
@@ -496,8 +494,8 @@ fn run<const N: usize, T: Tangent<N>>(
 
     let mut q = SVector::<f64, N>::repeat(qr[0]);
     let mut qd = SVector::<f64, N>::zeros();
-    let q0m = quantize(q[0]);
-    let (mut qm1, mut qm2) = (q0m, q0m); // measurements at k-1 and k-2
+    let law = controller.law(opts.dt)?;
+    let mut ctl = law.rest_state(qr[0], quantize(q[0]));
     let mut pending = vec![0.0; opts.delay]; // ring buffer of delayed commands
 
     let mut out = SimOutput {
@@ -509,11 +507,8 @@ fn run<const N: usize, T: Tangent<N>>(
 
     for k in 0..n {
         let qm = quantize(q[0]);
-        let (tau_cmd, dtau_dqm, dtau_dqm2) =
-            controller.command_with_partials(qr[k], qm, qm2, opts.dt, u_ext.map_or(0.0, |u| u[k]));
-        tangent.command(k, dtau_dqm, dtau_dqm2);
-        qm2 = qm1;
-        qm1 = qm;
+        let (tau_cmd, active) = law.step(&mut ctl, qr[k], qm, u_ext.map_or(0.0, |u| u[k]));
+        tangent.command(k, &law, active);
         let tau = if opts.delay == 0 {
             tau_cmd
         } else {

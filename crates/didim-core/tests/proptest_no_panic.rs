@@ -5,7 +5,7 @@
 //! Cases per property: `PROPTEST_CASES` when set (a local campaign runs tens of thousands), otherwise a default
 //! sized for CI (the tests build in debug mode there).
 
-use didim_core::controller::Controller;
+use didim_core::controller::{Controller, TransferFunction};
 use didim_core::filter::{self, Decimator, FilterForm, Sos, Tf};
 use didim_core::lstsq::{lstsq, lstsq_full_rank, LstsqOptions, SigmaConvention};
 use didim_core::model::{self, Basis, Model};
@@ -338,9 +338,15 @@ proptest! {
     #[test]
     fn controller_command_never_panics(c in controller(), x in prop::collection::vec(hostile(), 5..=5)) {
         let _ = c.validate();
-        let _ = c.command(x[0], x[1], x[2], x[3], x[4]);
-        let _ = c.command_with_partials(x[0], x[1], x[2], x[3], x[4]);
-        let _ = c.stiffness();
+        if let Ok(law) = c.law(x[3]) {
+            let mut z = law.rest_state(x[0], x[1]);
+            let _ = law.step(&mut z, x[0], x[1], x[4]);
+            let _ = law.sensitivity_step(&mut z, x[2]);
+        }
+        if let Ok(law) = TransferFunction::new(&x[..3], &x[1..4], &x[2..], &x[..2], x[4].abs(), x[3]) {
+            let mut z = law.rest_state(x[0], x[1]);
+            let _ = law.step(&mut z, x[0], x[1], x[4]);
+        }
     }
 }
 

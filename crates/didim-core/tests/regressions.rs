@@ -1,7 +1,7 @@
 //! Inputs that crashed or misbehaved before, found by the property tests of `proptest_no_panic.rs`; each is now an
 //! error or a correct value.
 
-use didim_core::controller::Controller;
+use didim_core::controller::{Controller, TransferFunction};
 use didim_core::filter::{self, Sos, Tf};
 use didim_core::model::{self, coulomb_sign, coulomb_sign_derivative};
 use didim_core::sim::{self, SimOptions};
@@ -36,7 +36,7 @@ fn a_delay_not_shorter_than_the_record_is_an_error_before_any_allocation() {
     assert!(sim::simulate(&m, &chi, &Controller::EMPS, &ramp(10), None, &o).is_ok());
 }
 
-/// `f64::clamp` panics when the limit is NaN or negative; `Controller::command` used it and is public.
+/// `f64::clamp` panics when the limit is NaN or negative; the controller's command used it and is public.
 #[test]
 fn the_controller_command_does_not_panic_on_a_bad_saturation() {
     for vsat in [f64::NAN, -10.0, 0.0] {
@@ -47,21 +47,20 @@ fn the_controller_command_does_not_panic_on_a_bad_saturation() {
             vsat,
         };
         assert!(c.validate().is_err());
-        let _ = c.command(0.1, 0.0, 0.0, 1e-3, 0.0);
-        let c = Controller::Pd {
-            kp: 1e4,
-            kd: 100.0,
-            tau_max: vsat,
-        };
-        let _ = c.command_with_partials(0.1, 0.0, 0.0, 1e-3, 0.0);
+        assert!(c.law(1e-3).is_err());
+        assert!(TransferFunction::new(&[1.0], &[1.0], &[1.0], &[1.0], vsat, 1.0).is_err());
     }
-    let c = Controller::Pd {
+    let law = Controller::Pd {
         kp: 1e4,
         kd: 100.0,
         tau_max: 5.0,
-    };
-    assert_eq!(c.command(1.0, 0.0, 0.0, 1e-3, 0.0), 5.0);
-    assert_eq!(c.command(-1.0, 0.0, 0.0, 1e-3, 0.0), -5.0);
+    }
+    .law(1e-3)
+    .unwrap();
+    let mut z = law.rest_state(0.0, 0.0);
+    assert_eq!(law.step(&mut z, 1.0, 0.0, 0.0), (5.0, false));
+    let mut z = law.rest_state(0.0, 0.0);
+    assert_eq!(law.step(&mut z, -1.0, 0.0, 0.0), (-5.0, false));
 }
 
 /// `v / sqrt(v² + eps²)` returned +inf when v² + eps² underflowed to 0 (v = eps = 2.2e-308) and 0 when it

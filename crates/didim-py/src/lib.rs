@@ -11,7 +11,7 @@ use didim_core::error::Error;
 use didim_core::filter as flt;
 use didim_core::lstsq::{LstsqOptions, SigmaConvention};
 use didim_core::model::{self, Basis, Model, DEFAULT_COULOMB_EPS};
-use didim_core::{lstsq as ls, sim, Controller};
+use didim_core::{controller::TransferFunction, lstsq as ls, sim, Controller};
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -172,6 +172,32 @@ fn make_controller(kind: &str, gains: &[f64]) -> Result<Controller, Error> {
             kd: *kd,
             tau_max: *tau_max,
         },
+        ("tf", [saturation, gain, lens @ ..]) if lens.len() >= 4 => {
+            let counts: Vec<usize> = lens[..4].iter().map(|&x| x.max(0.0) as usize).collect();
+            let coeffs = &lens[4..];
+            if lens[..4].iter().any(|&x| x.fract() != 0.0 || x < 1.0)
+                || counts.iter().sum::<usize>() != coeffs.len()
+            {
+                return Err(Error::InvalidInput(
+                    "the tf controller takes (saturation, gain, len b_r, len a_r, len b_y, len a_y, coefficients...)"
+                        .into(),
+                ));
+            }
+            let mut parts = Vec::with_capacity(4);
+            let mut at = 0;
+            for c in counts {
+                parts.push(&coeffs[at..at + c]);
+                at += c;
+            }
+            Controller::TransferFunction(TransferFunction::new(
+                parts[0],
+                parts[1],
+                parts[2],
+                parts[3],
+                *saturation,
+                *gain,
+            )?)
+        }
         ("emps", g) => {
             return Err(Error::InvalidInput(format!(
                 "the emps controller takes 4 gains (kp, kv, gtau, vsat), got {}",
@@ -186,7 +212,7 @@ fn make_controller(kind: &str, gains: &[f64]) -> Result<Controller, Error> {
         }
         (other, _) => {
             return Err(Error::InvalidInput(format!(
-                "unknown controller {other:?}: use \"emps\" or \"pd\""
+                "unknown controller {other:?}: use \"emps\", \"pd\" or \"tf\""
             )))
         }
     };

@@ -30,7 +30,7 @@
 //! The steps depend only on the inputs, so a simulation is deterministic.
 
 use super::{describe, SimOptions, SimOutput};
-use crate::controller::Controller;
+use crate::controller::{Controller, FilterState, TransferFunction, MAX_TAPS};
 use crate::error::{invalid, Error, Result};
 use crate::model::{Basis, Model};
 use nalgebra::{DMatrix, SMatrix, SVector};
@@ -496,10 +496,9 @@ pub struct StepStats {
 pub(super) trait Tangent<const N: usize>: StepHook<N> {
     /// Sets up the tangent for the plant (initial state `(q, v)` with `g = g0`).
     fn start(&mut self, plant: &Plant<N>, q: &V<N>, v: &V<N>, g0: &V<N>);
-    /// The command of sample `k` has been computed, with derivatives `dtau_dqm`, `dtau_dqm2`
-    /// with respect to the measurements at `k` and `k − 2`; `tau` is the force applied over
-    /// the coming period (after the delay).
-    fn command(&mut self, k: usize, dtau_dqm: f64, dtau_dqm2: f64, tau: f64);
+    /// The command of sample `k` has been computed by `law` (`active`: not saturated);
+    /// `tau` is the force applied over the coming period (after the delay).
+    fn command(&mut self, k: usize, law: &TransferFunction, active: bool, tau: f64);
     /// Records the outputs of sample `k`.
     fn record(&mut self, k: usize);
 }
@@ -508,7 +507,7 @@ impl<const N: usize> Tangent<N> for NoHook {
     #[inline(always)]
     fn start(&mut self, _: &Plant<N>, _: &V<N>, _: &V<N>, _: &V<N>) {}
     #[inline(always)]
-    fn command(&mut self, _: usize, _: f64, _: f64, _: f64) {}
+    fn command(&mut self, _: usize, _: &TransferFunction, _: bool, _: f64) {}
     #[inline(always)]
     fn record(&mut self, _: usize) {}
 }
@@ -544,8 +543,8 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
     let mut v = V::<N>::zeros();
     let mut g = plant.g(&q, &v);
     tangent.start(&plant, &q, &v, &g);
-    let q0m = quantize(q[0]);
-    let (mut qm1, mut qm2) = (q0m, q0m);
+    let law = controller.law(opts.dt)?;
+    let mut ctl = law.rest_state(qr[0], quantize(q[0]));
     let mut pending = vec![0.0; opts.delay];
 
     let mut force = vec![0.0; n];
@@ -555,16 +554,13 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
 
     for k in 0..n {
         let qm = quantize(q[0]);
-        let (tau_cmd, dtau_dqm, dtau_dqm2) =
-            controller.command_with_partials(qr[k], qm, qm2, opts.dt, u_ext.map_or(0.0, |u| u[k]));
-        qm2 = qm1;
-        qm1 = qm;
+        let (tau_cmd, active) = law.step(&mut ctl, qr[k], qm, u_ext.map_or(0.0, |u| u[k]));
         let tau = if opts.delay == 0 {
             tau_cmd
         } else {
             std::mem::replace(&mut pending[k % opts.delay], tau_cmd)
         };
-        tangent.command(k, dtau_dqm, dtau_dqm2, tau);
+        tangent.command(k, &law, active, tau);
         let mut b = V::<N>::zeros();
         b[0] = tau * plant.inv_mass[0];
         // Every step ends with g evaluated at its end state, so this is the direct model's
@@ -647,7 +643,8 @@ pub(super) struct Sens<const N: usize> {
     tau: f64,
     /// Sensitivity of the force applied over the current period.
     dtau: Vec<f64>,
-    sq1_hist: [Vec<f64>; 2],
+    /// The controller's state on `∂q1/∂χ`, one per parameter.
+    ctl: Vec<FilterState>,
     pending: Vec<Vec<f64>>,
     pub dforce: Vec<f64>,
     pub dq: Vec<f64>,
@@ -680,7 +677,7 @@ impl<const N: usize> Sens<N> {
             gchi: vec![V::<N>::zeros(); p],
             tau: 0.0,
             dtau: vec![0.0; p],
-            sq1_hist: [vec![0.0; p], vec![0.0; p]],
+            ctl: vec![[0.0; MAX_TAPS]; p],
             pending: vec![vec![0.0; p]; delay],
             dforce: vec![0.0; p * n],
             dq: vec![0.0; N * p * n],
@@ -771,7 +768,7 @@ impl<const N: usize> Tangent<N> for Sens<N> {
         self.dg.copy_from_slice(&self.gchi);
     }
 
-    fn command(&mut self, k: usize, dtau_dqm: f64, dtau_dqm2: f64, tau: f64) {
+    fn command(&mut self, k: usize, law: &TransferFunction, active: bool, tau: f64) {
         let (p, n, d) = (self.p, self.n, self.pending.len());
         self.tau = tau;
         let cmd = if d == 0 {
@@ -781,13 +778,10 @@ impl<const N: usize> Tangent<N> for Sens<N> {
             std::mem::swap(&mut self.dtau, slot);
             slot
         };
+        let gain = if active { law.gain() } else { 0.0 };
         for j in 0..p {
-            cmd[j] = dtau_dqm * self.sq[j][0] + dtau_dqm2 * self.sq1_hist[1][j];
+            cmd[j] = gain * law.sensitivity_step(&mut self.ctl[j], self.sq[j][0]);
             self.dforce[j * n + k] = cmd[j];
-        }
-        self.sq1_hist.swap(0, 1);
-        for j in 0..p {
-            self.sq1_hist[0][j] = self.sq[j][0];
         }
     }
 
