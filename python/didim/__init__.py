@@ -7,6 +7,7 @@ simulation, parallel decimation and QR least squares. SI units on the load side 
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .controllers import PD, EmpsCascade, TransferFunction, load_controller
 from .recording import Recording, load_mat
+from .loaders import load_record
 from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, INTEGRATORS, BatchResult, SimResult, coulomb_sign, param_names,
                          simulate, simulate_batch)
 from .signal import Decimation
@@ -31,6 +32,7 @@ __all__ = [
     "load_controller",
     "Recording",
     "load_mat",
+    "load_record",
     "simulate",
     "simulate_batch",
     "SimResult",

@@ -16,16 +16,38 @@ def _progress(quiet: bool):
     return lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True)
 
 
+def _load(args, path: str):
+    """The record at ``path`` with the command's --controller, --columns and --force-scale."""
+    from .controllers import load_controller
+    from .loaders import beside, load_record, parse_columns
+
+    controller = load_controller(args.controller) if getattr(args, "controller", None) else None
+    if controller is None and not path.lower().endswith(".mat") and beside(path) and not getattr(args, "quiet", False):
+        print(f"  … controller from {beside(path)}", file=sys.stderr, flush=True)
+    return load_record(path, controller=controller, columns=parse_columns(getattr(args, "columns", None)),
+                       force_scale=getattr(args, "force_scale", 1.0))
+
+
+def _record_options(p) -> None:
+    """The options every command that reads a record takes."""
+    p.add_argument("--controller", metavar="FILE",
+                   help="the drive's controller (JSON or TOML: transfer_function, cascade, emps or pd); default: the "
+                        "MAT file's EMPS gains, or NAME_controller.json beside a CSV/Parquet/HDF5 record")
+    p.add_argument("--columns", metavar="MAP", help="column names of the file, e.g. force=F_motor,qm=encoder "
+                   "(didim's names: t, qr, force, qm, ql, u_ext)")
+    p.add_argument("--force-scale", type=float, default=1.0, metavar="N_PER_UNIT",
+                   help="N per unit of the logged force (e.g. the drive gain for a force logged in V); default 1")
+
+
 def cmd_identify(args) -> int:
-    from . import load_mat
     from ._io import save_figure, write_text
     from .api import identify
     from .plots import plot_fit
 
-    _check_outputs(args.file, [args.json, args.plot])
+    _check_outputs([args.file, args.controller], [args.json, args.plot])
     if args.plot:
         _check_figure_format(args.plot)
-    rec = load_mat(args.file)
+    rec = _load(args, args.file)
     opts = {}
     if args.apm is not None and args.method != "idim-ls":
         opts["apM"] = args.apm
@@ -60,16 +82,15 @@ def cmd_simulate(args) -> int:
     force (the paper's cross-test, Fig. 6)."""
     import json
 
-    from . import load_mat
     from ._io import save_figure, write_text
     from .model import load_result
     from .simulation import simulate
 
-    _check_outputs([args.file, args.result], [args.json, args.plot])
+    _check_outputs([args.file, args.result, args.controller], [args.json, args.plot])
     if args.plot:
         _check_figure_format(args.plot)
     result = load_result(args.result)
-    rec = load_mat(args.file)
+    rec = _load(args, args.file)
     sim = simulate(rec, result)
     err = sim.relative_error(rec)
     st = result.structure
@@ -135,13 +156,12 @@ def cmd_demo(args) -> int:
 
 
 def cmd_doctor(args) -> int:
-    from . import load_mat
     from ._io import write_text
     from .doctor import doctor
 
-    _check_outputs([args.file, args.validate], [args.json, args.html])
-    rec = load_mat(args.file)
-    val = load_mat(args.validate) if args.validate else None
+    _check_outputs([args.file, args.validate, args.controller], [args.json, args.html])
+    rec = _load(args, args.file)
+    val = _load(args, args.validate) if args.validate else None
     d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet))
     print(d.summary())
     if args.json:
@@ -170,12 +190,17 @@ def cmd_sweep(args) -> int:
     from ._io import save_figure, write_text
     from .sweep import grid_points, parse_values, random_points, sweep
 
-    _check_outputs([args.record], [args.json, args.plot])
+    _check_outputs([args.record, args.controller], [args.json, args.plot])
     fixed = {k: (v[0] if len(v) == 1 else v) for k, v in _keyvals(args.set, parse_values).items()}
+    if args.controller:
+        from .controllers import load_controller
+
+        load_controller(args.controller)  # a bad file fails here, once, with its reason
+        fixed["controller"] = args.controller
     if args.record:
         from ._io import check_input
 
-        fixed["record"] = check_input(args.record, "record (MAT file)")
+        fixed["record"] = check_input(args.record, "record (CSV, Parquet, HDF5 or MAT file)")
     elif args.scenario:
         fixed["scenario"] = args.scenario
     else:
@@ -224,7 +249,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     i = sub.add_parser("identify", help="identify the dynamic parameters of a recording (EMPS .mat layout)")
-    i.add_argument("file", help="MAT file with t, qm, qg, vir, gtau, kp, kv (optional pulses_N, ql)")
+    i.add_argument("file", help="the record: CSV, Parquet or HDF5 (columns t, qr, force, qm; optional ql, u_ext) or a "
+                   "MAT file in the EMPS layout (t, qm, qg, vir, gtau, kp, kv; optional pulses_N, ql)")
+    _record_options(i)
     i.add_argument("--model", choices=["rigid", "flexible"], default="rigid")
     i.add_argument("--method", choices=["idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn"], default="didim")
     i.add_argument("--variant", choices=["auto", "paper", "friction-split"],
@@ -241,7 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.set_defaults(func=cmd_identify)
 
     o = sub.add_parser("doctor", help="find what physics the model misses, model it and show the fit improve")
-    o.add_argument("file", help="MAT file (EMPS layout)")
+    o.add_argument("file", help="the record (CSV, Parquet, HDF5 or EMPS MAT file)")
+    _record_options(o)
     o.add_argument("--validate", metavar="FILE", help="a recording the fit does not see (default: the last 30 %% of FILE)")
     o.add_argument("--model", choices=["rigid", "flexible"], default="rigid")
     o.add_argument("--apm", type=float, default=None, help="a priori total mass (kg)")
@@ -252,7 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
     o.set_defaults(func=cmd_doctor)
 
     m = sub.add_parser("simulate", help="apply a saved result to a record: simulated vs measured force (cross-test)")
-    m.add_argument("file", help="the record (MAT file, EMPS layout)")
+    m.add_argument("file", help="the record (CSV, Parquet, HDF5 or EMPS MAT file)")
+    _record_options(m)
     m.add_argument("result", help="a result saved as JSON (didim identify --json, result.save)")
     m.add_argument("--json", metavar="OUT", help="write the force error, the model and its parameters")
     m.add_argument("--plot", metavar="PNG", help="measured and simulated force and their difference")
@@ -266,7 +295,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     w = sub.add_parser("sweep", help="re-run an identification over a grid or random draws of initial values and noise "
                                      "seeds, in parallel; convergence rate, spread against σ, plot")
-    w.add_argument("record", nargs="?", help="MAT file to identify (else --scenario)")
+    w.add_argument("record", nargs="?", help="record to identify: CSV, Parquet, HDF5 or EMPS MAT file (else --scenario)")
+    w.add_argument("--controller", metavar="FILE", help="the drive's controller file (JSON or TOML), as for identify")
     w.add_argument("--scenario", help="simulated record with known truth: flexible-motor-friction, flexible-table3, "
                                       "rigid-emps")
     w.add_argument("--model", choices=["rigid", "flexible"], default="flexible")

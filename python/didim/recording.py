@@ -124,6 +124,17 @@ class Recording:
             _check_expected_dt(step, dt, "")
         return cls(dt=step, qr=qr, force=force, qm=qm, **kw)
 
+    @classmethod
+    def from_dataframe(cls, df, *, controller: Controller, columns=None, force_scale: float = 1.0,
+                       dt: Optional[float] = None, position_resolution="auto", name: str = "") -> "Recording":
+        """A recording from a pandas DataFrame with columns ``t, qr, force, qm`` (optional ``ql``, ``u_ext``);
+        ``columns`` maps these names to the frame's, ``force_scale`` is N per unit of the logged force,
+        ``position_resolution='auto'`` detects the encoder step from ``qm`` (see :func:`didim.load_record`)."""
+        from .loaders import from_dataframe
+
+        return from_dataframe(df, controller=controller, columns=columns, force_scale=force_scale, dt=dt,
+                              position_resolution=position_resolution, name=name)
+
     @property
     def n(self) -> int:
         """Number of samples."""

@@ -41,16 +41,18 @@ SCENARIOS: Dict[str, Dict[str, Any]] = {
 }
 
 #: Keys of a point that describe the record rather than the identification.
-RECORD_KEYS = ("scenario", "record", "seed", "force_noise")
+RECORD_KEYS = ("scenario", "record", "seed", "force_noise", "controller")
 
 
 @functools.lru_cache(maxsize=32)
-def _record(scenario: Optional[str], record: Optional[str], seed: int, force_noise: float):
+def _record(scenario: Optional[str], record: Optional[str], seed: int, force_noise: float,
+            controller: Optional[str] = None):
     from . import scenarios as sc
-    from .recording import load_mat
+    from .controllers import load_controller
+    from .loaders import load_record
 
     if record is not None:
-        return load_mat(record), None
+        return load_record(record, controller=load_controller(controller) if controller else None), None
     if scenario not in SCENARIOS:
         raise DataError(f"unknown scenario {scenario!r}: use one of {', '.join(SCENARIOS)} or give a record file")
     spec = SCENARIOS[scenario]
@@ -88,7 +90,8 @@ def run_point(point: Mapping[str, Any]) -> Dict[str, Any]:
     from .api import identify
 
     p = dict(point)
-    rec_args = (p.pop("scenario", None), p.pop("record", None), int(p.pop("seed", 0)), float(p.pop("force_noise", 1.0)))
+    rec_args = (p.pop("scenario", None), p.pop("record", None), int(p.pop("seed", 0)), float(p.pop("force_noise", 1.0)),
+                p.pop("controller", None))
     out: Dict[str, Any] = dict(point=dict(point), error=None, truth=None)
     t0 = time.perf_counter()
     try:

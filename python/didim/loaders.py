@@ -1,0 +1,246 @@
+"""Records from the files drives log: CSV, Parquet, HDF5 (and the EMPS MAT layout), one entry point.
+
+Columns (SI units on the load side): ``t`` (s), ``qr`` (position reference, m), ``force`` (motor force, N), ``qm``
+(motor position, m); optional ``ql`` (load position, m) and ``u_ext`` (known external force added to the command, N).
+Other names are mapped with ``columns={"force": "F_motor", ...}``; a force logged in another unit (V, A, % of rated)
+is brought to N with ``force_scale``. The controller that ran the axis is required: ``controller=`` or, when it is
+not given, a controller file beside the record (``NAME_controller.json`` or ``.toml``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Callable, Dict, List, Mapping, Optional, Union
+
+import numpy as np
+
+from ._errors import DataError
+from .controllers import Controller, load_controller
+from .recording import Recording, load_mat
+
+#: The columns of a record: required, then optional.
+REQUIRED = ("t", "qr", "force", "qm")
+OPTIONAL = ("ql", "u_ext")
+#: File extensions and their readers.
+EXTENSIONS = {".csv": "CSV", ".txt": "CSV", ".parquet": "Parquet", ".pq": "Parquet", ".h5": "HDF5", ".hdf5": "HDF5",
+              ".mat": "MAT"}
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+def parse_columns(text: Optional[str]) -> Dict[str, str]:
+    """``"force=F_motor,qm=enc"`` → ``{"force": "F_motor", "qm": "enc"}`` (the CLI's ``--columns``)."""
+    if not text:
+        return {}
+    out: Dict[str, str] = {}
+    for part in text.split(","):
+        key, sep, value = part.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep or not key or not value:
+            raise DataError(f"--columns: {part!r} is not KEY=NAME; e.g. --columns force=F_motor,qm=encoder")
+        out[key] = value
+    return out
+
+
+def detect_resolution(qm: np.ndarray) -> Optional[float]:
+    """The encoder resolution (m) when every motor position is a whole number of one step, else None.
+
+    The step is the smallest non-zero change between samples; positions must be multiples of it within 1e-3 of a
+    step (text files round the last digits)."""
+    d = np.abs(np.diff(qm))
+    d = d[d > 0]
+    if d.size < 10:
+        return None
+    step = float(d.min())
+    # a rounded decimal step: keep 6 significant digits so that 4.99999e-8 reads as 5e-8
+    step = float(f"{step:.6g}")
+    k = qm / step
+    if not np.all(np.isfinite(k)) or np.max(np.abs(k)) > 2**52:
+        return None
+    if np.max(np.abs(k - np.round(k))) > 1e-3:
+        return None
+    return step
+
+
+def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[str], where: str, *,
+                  controller: Optional[Controller], columns: Optional[Mapping[str, str]], force_scale: float,
+                  dt: Optional[float], position_resolution: Union[None, float, str], name: str) -> Recording:
+    columns = dict(columns or {})
+    unknown = sorted(set(columns) - set(REQUIRED) - set(OPTIONAL))
+    if unknown:
+        raise DataError(f"{where}: unknown key(s) {', '.join(unknown)} in the column map; the keys are "
+                        f"{', '.join(REQUIRED + OPTIONAL)}")
+    scale = force_scale
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
+        raise DataError(f"force_scale must be a finite non-zero number (N per unit of the logged force), got {scale!r}")
+    signals: Dict[str, Optional[np.ndarray]] = {}
+    for key in REQUIRED + OPTIONAL:
+        col = columns.get(key, key)
+        if key == "t" and col not in available and dt is not None and "t" not in columns:
+            signals["t"] = None  # no time column: the period is given
+            continue
+        a = get(col) if col in available else None
+        if a is None and key in REQUIRED:
+            hint = " (or give dt)" if key == "t" else ""
+            raise DataError(f"{where}: no column {col!r} for {key}{hint}; the file has {', '.join(available) or 'none'}. "
+                            f"A record needs columns {', '.join(REQUIRED)} (optional {', '.join(OPTIONAL)}); map other "
+                            "names with columns={'force': 'YOUR_NAME', ...} (CLI: --columns force=YOUR_NAME)")
+        if a is not None:
+            a = np.asarray(a)
+            if a.dtype.kind not in "iuf":
+                raise DataError(f"{where}: column {col!r} ({key}) must hold numbers, got {a.dtype}")
+            a = a.astype(float).ravel()
+        signals[key] = a
+    force = signals["force"] * float(scale)  # type: ignore[operator]
+    qm = signals["qm"]
+    assert qm is not None
+    if position_resolution == "auto":
+        res = detect_resolution(qm) if np.all(np.isfinite(qm)) else None
+    elif position_resolution is None or isinstance(position_resolution, (int, float)):
+        res = position_resolution
+    else:
+        raise DataError(f"position_resolution must be a length in m, None or 'auto', got {position_resolution!r}")
+    if controller is None:
+        raise DataError(f"{where}: no controller given: didim simulates the closed loop, so it needs the law that ran "
+                        "the axis. Give controller=didim.load_controller('controller.json') (CLI: --controller FILE) "
+                        "or put a controller file beside the record as NAME_controller.json")
+    kw = dict(qr=signals["qr"], force=force, qm=qm, controller=controller, ql=signals["ql"], u_ext=signals["u_ext"],
+              position_resolution=res, name=name)
+    try:
+        if signals["t"] is None:
+            return Recording(dt=dt, **kw)  # type: ignore[arg-type]
+        return Recording.from_time(signals["t"], dt=dt, **kw)  # type: ignore[arg-type]
+    except DataError as e:
+        raise DataError(f"{where}: {e}") from None
+
+
+def beside(path: PathLike) -> Optional[str]:
+    """The controller file beside a record, ``NAME_controller.json`` (or ``.toml``), if there is one."""
+    stem = os.path.splitext(os.fspath(path))[0]
+    for ext in (".json", ".toml"):
+        if os.path.isfile(stem + "_controller" + ext):
+            return stem + "_controller" + ext
+    return None
+
+
+def _csv(path: str):
+    import csv
+
+    with open(path, newline="", encoding="utf-8-sig") as f:
+        head = f.readline()
+    if not head.strip():
+        raise DataError(f"{path}: the file is empty or its first line is blank; a CSV record starts with a header "
+                        f"line naming its columns ({', '.join(REQUIRED)})")
+    delim = max([",", ";", "\t"], key=head.count)
+    if head.count(delim) == 0:
+        delim = None  # whitespace-separated
+    names = [c.strip().strip('"') for c in (next(csv.reader([head], delimiter=delim)) if delim else head.split())]
+    try:
+        data = np.loadtxt(path, delimiter=delim, skiprows=1, ndmin=2, encoding="utf-8-sig")
+    except ValueError as e:
+        raise DataError(f"{path}: not a numeric CSV table under its header ({e}); every row must hold "
+                        f"{len(names)} numbers") from None
+    if data.shape[1] != len(names):
+        raise DataError(f"{path}: the header names {len(names)} columns but the rows hold {data.shape[1]}")
+    return (lambda c: data[:, names.index(c)]), names
+
+
+def _parquet(path: str):
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise DataError(f"{path}: reading Parquet needs pyarrow: pip install pyarrow (or pip install 'didim[io]')") \
+            from None
+    try:
+        table = pq.read_table(path)
+    except Exception as e:  # pyarrow raises its own types for corrupt files
+        raise DataError(f"{path}: not a readable Parquet file ({type(e).__name__}: {e})") from None
+    names = list(table.column_names)
+    return (lambda c: table.column(c).to_numpy()), names
+
+
+def _hdf5(path: str):
+    try:
+        import h5py
+    except ImportError:
+        raise DataError(f"{path}: reading HDF5 needs h5py: pip install h5py (or pip install 'didim[io]')") from None
+    try:
+        f = h5py.File(path, "r")
+    except Exception as e:
+        raise DataError(f"{path}: not a readable HDF5 file ({type(e).__name__}: {e})") from None
+    with f:
+        names: List[str] = []
+        f.visititems(lambda n, obj: names.append(n) if isinstance(obj, h5py.Dataset) else None)
+        data = {n: np.asarray(f[n][()]) for n in names}
+    return (lambda c: data[c]), names
+
+
+def load_record(path: PathLike, *, controller: Optional[Controller] = None,
+                columns: Optional[Mapping[str, str]] = None, force_scale: float = 1.0, dt: Optional[float] = None,
+                position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None) -> Recording:
+    """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
+
+    CSV: a header line naming the columns, then one row of numbers per sample (comma, semicolon, tab or spaces).
+    Parquet: one column per signal. HDF5: one dataset per signal (``columns`` may name ``group/dataset``). MAT: the
+    EMPS layout (:func:`didim.load_mat`), whose controller comes from the file unless ``controller`` is given.
+
+    ``controller``: the controller that ran the axis; when None, ``NAME_controller.json`` (or ``.toml``) beside the
+    file is read if it exists. ``columns``: map from didim's names (t, qr, force, qm, ql, u_ext) to the file's.
+    ``force_scale``: N per unit of the logged force. ``dt``: the expected period (s), checked against ``t``, or the
+    period when the file has no time column. ``position_resolution``: the motor encoder's step (m), ``'auto'`` to
+    detect it from ``qm`` (positions on a grid), or None.
+    """
+    from ._io import check_input
+
+    p = check_input(path, "record")
+    ext = os.path.splitext(p)[1].lower()
+    if ext not in EXTENSIONS:
+        raise DataError(f"{p}: unknown record format {ext or '(no extension)'!r}: didim reads "
+                        f"{', '.join(sorted(EXTENSIONS))} (CSV, Parquet, HDF5, MATLAB in the EMPS layout)")
+    if os.path.getsize(p) == 0:
+        raise DataError(f"{p}: the file is empty (0 bytes)")
+    if controller is None:
+        side = beside(p)
+        if side is not None:
+            controller = load_controller(side)
+    label = name if name is not None else os.path.splitext(os.path.basename(p))[0]
+    if ext == ".mat":
+        res = None if position_resolution == "auto" else position_resolution
+        rec = load_mat(p, position_resolution=res, name=label, dt=dt)  # type: ignore[arg-type]
+        if controller is not None:
+            import dataclasses
+
+            rec = dataclasses.replace(rec, controller=controller)
+        return rec
+    try:
+        get, names = {"CSV": _csv, "Parquet": _parquet, "HDF5": _hdf5}[EXTENSIONS[ext]](p)
+    except PermissionError as e:
+        raise DataError(f"{p}: cannot be read ({e.strerror or e}): check its permissions") from None
+    except UnicodeDecodeError:
+        raise DataError(f"{p}: not a text file: a {EXTENSIONS[ext]} record was expected from its extension") from None
+    return _from_columns(get, names, p, controller=controller, columns=columns, force_scale=force_scale, dt=dt,
+                         position_resolution=position_resolution, name=label)
+
+
+def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str, str]] = None,
+                   force_scale: float = 1.0, dt: Optional[float] = None,
+                   position_resolution: Union[None, float, str] = "auto", name: str = "") -> Recording:
+    """A record from a pandas DataFrame (or any mapping of column name to array), as :func:`load_record`.
+
+    A DataFrame whose index is the time may be passed with ``df.reset_index()`` or ``dt=``."""
+    try:
+        names = [str(c) for c in df.columns] if hasattr(df, "columns") else [str(c) for c in df.keys()]
+    except Exception:
+        raise DataError(f"from_dataframe needs a pandas DataFrame or a mapping of columns, got {type(df).__name__}") \
+            from None
+
+    def get(c: str) -> np.ndarray:
+        col = df[c]
+        return col.to_numpy() if hasattr(col, "to_numpy") else np.asarray(col)
+
+    return _from_columns(get, names, name or "DataFrame", controller=controller, columns=columns,
+                         force_scale=force_scale, dt=dt, position_resolution=position_resolution, name=name)
+
+
+__all__ = ["load_record", "from_dataframe", "detect_resolution", "parse_columns", "REQUIRED", "OPTIONAL"]
