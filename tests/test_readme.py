@@ -6,6 +6,8 @@ import re
 import warnings
 from pathlib import Path
 
+import pytest
+
 README = Path(__file__).resolve().parents[1] / "README.md"
 
 
@@ -20,6 +22,11 @@ def test_readme_python_blocks_run_as_written(tmp_path, monkeypatch, emps_path):
     work.mkdir()
     (tmp_path / "shared" / "data").mkdir(parents=True)
     os.symlink(Path(emps_path).parent, tmp_path / "shared" / "data" / "emps")
+    from conftest import TRUTHBENCH_DIR
+
+    if not (TRUTHBENCH_DIR / "drive").is_dir():
+        pytest.skip(f"the README's drive example reads {TRUTHBENCH_DIR / 'drive'}, not available")
+    os.symlink(TRUTHBENCH_DIR, tmp_path / "shared" / "data" / "truthbench")
     monkeypatch.chdir(work)
     namespace = {}
     with warnings.catch_warnings():

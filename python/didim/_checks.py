@@ -43,6 +43,10 @@ def whole(name: str, value, *, lo: int = 0, hi: Optional[int] = None, hint: str 
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)):
         raise DataError(f"{name} must be a whole number, got {value!r}{hint}")
     v = int(value)
+    if hi is None:
+        hi_cap = 2**63 - 1  # the core's integers are 64-bit: a larger value is refused here, not by an overflow
+        if v > hi_cap:
+            raise DataError(f"{name} must be at most {hi_cap}, got {v}{hint}")
     if v < lo or (hi is not None and v > hi):
         rng = f">= {lo}" if hi is None else f"between {lo} and {hi}"
         raise DataError(f"{name} must be {rng}, got {v}{hint}")

@@ -240,8 +240,9 @@ class _Data:
 def _refit(data: _Data, state: State, init: Dict[str, float], progress) -> Tuple[State, IdentificationResult]:
     """DIDIM refit of ``state`` (with its new terms) from ``init``, on the training samples."""
     free_init = {k: v for k, v in {**state.params, **init}.items() if k not in state.frozen}
+    # every sample: the effects the doctor looks for (Stribeck, backlash, ...) live around reversals and stops
     r = didim_fit(data.rec, state.model, free_init, frozen=state.frozen, decimation=data.dec, tol=1e-4, max_iter=30,
-                  fit_samples=data.n_train, **state.sim_kwargs())
+                  fit_samples=data.n_train, reversals="keep", **state.sim_kwargs())
     return replace(state, params=dict(r.params)), r
 
 
@@ -626,7 +627,7 @@ def doctor(
         from .identification import didim_flexible
 
         # the paper's base model (all friction on the motor): load friction is one of the effects to name
-        fl = didim_flexible(recording, m0, variant="paper")
+        fl = didim_flexible(recording, m0, variant="paper", reversals="keep")
         state = State("flexible", dict(fl.params), dict(fl.frozen))
         state, base = _refit(data, state, {}, progress)
 

@@ -252,6 +252,7 @@ def didim(
     fit_samples: Optional[int] = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
+    reversals: str = "auto",
 ) -> IdentificationResult:
     """DIDIM iterations, eqs. (16)-(21): simulate the closed loop with χᵏ, build the IDM regressor of the simulated
     (noise-free) states, decimate Y and W in parallel, solve by QR for χᵏ⁺¹; stop when
@@ -270,8 +271,18 @@ def didim(
     ``fit_samples`` restricts the regression and the output errors to the first samples (the rest of the record is
     then held out for validation). ``integrator``, ``sim_tol`` and ``substeps`` choose the simulator's scheme (see
     :func:`didim.simulate`); ``terms``, ``backlash_gap`` and ``delay`` extend the model (see :func:`didim.simulate`).
+
+    ``reversals`` (not in the paper): ``"exclude"`` leaves out of the regression the decimated samples around velocity
+    reversals and stops, where the decimated Coulomb regressor of the simulated velocity is not saturated
+    (``|dec sign(q̇)| < COULOMB_SATURATED``): there the fit depends on the shape of the friction law near zero speed,
+    which no smooth law gets right (real friction sticks; another simulator smooths otherwise), and those few samples
+    bias Fv and Fc by several percent. The closed loop is still simulated through them. ``"auto"`` (default) excludes
+    them for the rigid model (the only model it applies to) when at least ``MIN_MOVING_SHARE`` of the samples remain;
+    ``"keep"`` is the paper's regression on every sample.
     """
     t0 = time.perf_counter()
+    if reversals not in ("auto", "exclude", "keep"):
+        raise DataError(f"reversals must be 'auto', 'exclude' or 'keep', got {reversals!r}")
     _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps,
                     divergence_factor=divergence_factor, cutoff_hz=cutoff_hz)
     initial = _checks.physical(initial, "initial")
@@ -291,6 +302,10 @@ def didim(
     _checks.decimation_matches(dec, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 2 if model == "flexible" else 1, f"{method} ({model})")
     fi = [names.index(n) for n in free]
+    if reversals == "exclude" and model != "rigid":
+        raise DataError("reversals='exclude' is for the rigid model (the flexible regression has a load row per "
+                        "sample whose friction reverses on its own); use 'keep' or 'auto'")
+    exclude = reversals != "keep" and model == "rigid" and _coulomb_column(free) is not None
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, tol=sim_tol,
                  terms=terms, backlash_gap=backlash_gap, delay=delay)
@@ -356,7 +371,9 @@ def didim(
             notes.append(f"iteration {len(history)}: step shortened {backtracks}× ({last_rise})")
         backtracks = 0
         try:
-            sol = _solve(w_all, y_all, free)
+            rows = _moving_rows(w_all, free) if exclude else None
+            sol = _solve(w_all, y_all, free) if rows is None else _solve(w_all[rows], y_all[rows], free)
+            sol["rows_kept"] = None if rows is None else (int(np.count_nonzero(rows)), len(rows))
         except IdentifiabilityError as e:
             message = f"iteration {len(history) + 1}: {e}"
             stop = e
@@ -419,6 +436,11 @@ def didim(
         final_out, chi, sol = best[0], best[1], best[2]
     elif not converged and sol is None:
         raise (type(stop) if stop is not None else SimulationError)(f"DIDIM could not start: {message}")
+    if exclude and sol is not None and sol.get("rows_kept") is not None:
+        kept, total = sol["rows_kept"]
+        notes.append(f"regression on {kept} of {total} decimated samples: the {total - kept} around velocity reversals "
+                     "and stops are left out (their fit depends on the friction law's shape near zero speed); "
+                     "reversals='keep' uses them, as the paper does")
 
     return IdentificationResult(
         model=model,
@@ -438,10 +460,35 @@ def didim(
         history=history,
         options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset,
                      terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, integrator=integrator,
-                     sim_tol=sim_tol),
+                     sim_tol=sim_tol, reversals="exclude" if exclude else "keep"),
         covariance=sol["covariance"],
         notes=notes,
     )
+
+
+#: A decimated sample counts as moving when the decimated Coulomb regressor |dec sign(q̇)| reaches this (of 1).
+COULOMB_SATURATED = 0.99
+#: Samples around reversals are left out only while at least this share of the decimated samples remains.
+MIN_MOVING_SHARE = 0.3
+
+
+def _coulomb_column(free: Sequence[str]) -> Optional[int]:
+    for name in ("Fc", "Fc1"):
+        if name in free:
+            return list(free).index(name)
+    return None
+
+
+def _moving_rows(w: np.ndarray, free: Sequence[str]) -> Optional[np.ndarray]:
+    """The rows of the motor block where the decimated Coulomb regressor is saturated, or None (keep every row) when
+    fewer than MIN_MOVING_SHARE of them are."""
+    j = _coulomb_column(free)
+    if j is None:
+        return None
+    keep = np.abs(w[:, j]) >= COULOMB_SATURATED
+    if np.count_nonzero(keep) < MIN_MOVING_SHARE * len(keep) or np.count_nonzero(keep) < 4 * w.shape[1]:
+        return None
+    return keep
 
 
 def _vector(params: Dict[str, float], names: Sequence[str]) -> np.ndarray:
@@ -751,6 +798,7 @@ def didim_flexible(
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
     grid_start: bool = True,
+    reversals: str = "auto",
 ) -> IdentificationResult:
     """The three-step procedure of section V: rigid DIDIM (step 1), Nelder-Mead on (λ, f_n_flex) (step 2, started on
     eq. (28)'s grid), DIDIM on the flexible model initialised by eqs. (29)-(30) (step 3).
@@ -772,7 +820,7 @@ def didim_flexible(
     common = dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, sim_tol=sim_tol)
     _say(progress, "step 1: rigid DIDIM")
     r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress,
-                     **common)
+                     reversals=reversals, **common)
     if not r1.converged:
         # nothing sensible to start steps 2 and 3 from: hand back step 1, flagged, with its history
         r1.message = (f"step 1 (rigid DIDIM) did not converge, so steps 2 and 3 were not run and this is step 1's rigid "

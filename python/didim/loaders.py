@@ -46,21 +46,23 @@ def parse_columns(text: Optional[str]) -> Dict[str, str]:
 def detect_resolution(qm: np.ndarray) -> Optional[float]:
     """The encoder resolution (m) when every motor position is a whole number of one step, else None.
 
-    The step is the smallest non-zero change between samples; positions must be multiples of it within 1e-3 of a
-    step (text files round the last digits)."""
+    The step is the largest whole fraction (1/1 … 1/20) of the smallest non-zero change between samples of which
+    every position is a multiple, within 1e-3 of a step (text files round the last digits)."""
     d = np.abs(np.diff(qm))
     d = d[d > 0]
     if d.size < 10:
         return None
-    step = float(d.min())
-    # a rounded decimal step: keep 6 significant digits so that 4.99999e-8 reads as 5e-8
-    step = float(f"{step:.6g}")
-    k = qm / step
-    if not np.all(np.isfinite(k)) or np.max(np.abs(k)) > 2**52:
-        return None
-    if np.max(np.abs(k - np.round(k))) > 1e-3:
-        return None
-    return step
+    smallest = float(d.min())
+    # the step divides every change: try the smallest change and its whole fractions (a record that never moves by a
+    # single count still has its positions on the grid)
+    for parts in range(1, 21):
+        step = float(f"{smallest / parts:.6g}")  # a rounded decimal step: 4.99999e-8 reads as 5e-8
+        k = qm / step
+        if not np.all(np.isfinite(k)) or np.max(np.abs(k)) > 2**52:
+            return None
+        if np.max(np.abs(k - np.round(k))) <= 1e-3:
+            return step
+    return None
 
 
 def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[str], where: str, *,

@@ -89,7 +89,7 @@ class Decimation:
         _wn(cutoff_hz, fs_hz)
         if factor is None:
             factor = default_factor(fs_hz, cutoff_hz)
-        factor = _checks.whole("decimation factor", factor, lo=1, hint=" (keep one sample in factor)")
+        factor = _checks.whole("decimation factor", factor, lo=1, hi=2**31 - 1, hint=" (keep one sample in factor)")
         order = _checks.whole("order", order, lo=1, hi=20)
         _checks.one_of("form", form, ("sos", "ba"))
         return cls(factor=factor, kind="butter", cutoff_hz=float(cutoff_hz), fs_hz=float(fs_hz), order=order, form=form)
@@ -97,7 +97,7 @@ class Decimation:
     @classmethod
     def matlab(cls, factor: int):
         """MATLAB's ``decimate(x, factor)`` convention."""
-        factor = _checks.whole("decimation factor", factor, lo=1, hint=" (keep one sample in factor)")
+        factor = _checks.whole("decimation factor", factor, lo=1, hi=2**31 - 1, hint=" (keep one sample in factor)")
         return cls(factor=factor, kind="matlab", order=8, form="ba")
 
     @property
