@@ -21,6 +21,23 @@ METHODS = ("idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn")
 ALIASES = {"oe-gn": "oe-lm"}
 
 
+def check_options(model: str, method: str, options) -> None:
+    """Refuses options that ``method`` on ``model`` does not take (a DataError listing the ones it does)."""
+    method = ALIASES.get(method, method)
+    targets = {
+        "idim-ls": ([idim_ls], ("offset",)),
+        "didim": ([didim_rigid, didim] if model == "rigid" else [didim_flexible], ("offset", "progress", "frozen", "method")),
+        "oe-nm": ([oe_nm], ("criterion", "progress")),
+        "oe-lm": ([oe_gn], ("criterion", "progress")),
+    }
+    if method not in targets:
+        raise DataError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
+    funcs, fixed = targets[method]
+    named = ("apM", "initial", "criterion", "offset")  # identify's own keywords
+    _checks.known_options(funcs, {k: v for k, v in options.items() if k not in named},
+                          f"method {method!r} ({model} model)", skip=fixed)
+
+
 def identify(
     recording: Recording,
     model: str = "rigid",
@@ -78,14 +95,7 @@ def identify(
         raise DataError(f"criterion={criterion!r} applies to the output-error methods (oe-nm, oe-lm), not to {method}")
     if progress is not None and not callable(progress):
         raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
-    targets = {
-        "idim-ls": ([idim_ls], ("offset",)),
-        "didim": ([didim_rigid, didim] if model == "rigid" else [didim_flexible], ("offset", "progress", "frozen", "method")),
-        "oe-nm": ([oe_nm], ("criterion", "progress")),
-        "oe-lm": ([oe_gn], ("criterion", "progress")),
-    }
-    funcs, fixed = targets[method]
-    _checks.known_options(funcs, options, f"method {method!r} ({model} model)", skip=fixed)
+    check_options(model, method, options)
     _checks.excitation(recording.qr, recording.u_ext, param_names(model, offset))
     if not np.any(recording.force):
         raise DataError(f"{recording.name or 'record'}: the measured force is zero everywhere: nothing to identify "

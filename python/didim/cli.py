@@ -216,13 +216,21 @@ def cmd_sweep(args) -> int:
         ranges = {}
         for k, v in _keyvals(args.draw, str).items():
             parts = v.split(":")
-            ranges[k] = (float(parts[0]), float(parts[1])) + ((parts[2],) if len(parts) > 2 else ())
+            try:
+                if len(parts) not in (2, 3):
+                    raise ValueError
+                ranges[k] = (float(parts[0]), float(parts[1])) + ((parts[2],) if len(parts) > 2 else ())
+            except ValueError:
+                raise DataError(f"--draw {k}={v}: expected KEY=LO:HI[:log|:int] with numbers LO and HI") from None
         points = [dict(p, **g) for g in (grid_points(grid) if grid else [{}])
                   for p in random_points(ranges, args.draws, seed=args.draw_seed, fixed=fixed)]
     else:
         if not grid:
             raise DataError("nothing to sweep: give --grid KEY=VALUES, --seeds N or --draws N with --draw")
         points = grid_points(grid, fixed)
+    from .sweep import check_points
+
+    check_points(points)
     executor = None
     if args.dask:
         try:
@@ -324,11 +332,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Runs the command line; returns 0 on success, 1 when a method did not converge, 2 for a user error (bad file,
-    option or parameter, a diverging simulation, nothing identifiable), 130 when interrupted."""
+    option or parameter, a diverging simulation, nothing identifiable), 130 when interrupted (Ctrl-C), 143 on
+    SIGTERM; an interrupted command leaves no temporary file and no half-written output."""
     import warnings
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = _terminate_as_exception()
     with warnings.catch_warnings():
         if not args.debug:
             warnings.showwarning = _show_warning  # one line per warning; restored by catch_warnings
@@ -339,9 +349,37 @@ def main(argv: Optional[List[str]] = None) -> int:
                 raise
             print(f"didim: error: {_one_line(_describe_error(e))}", file=sys.stderr)
             return 2
+        except Terminated:
+            print("didim: terminated (SIGTERM); outputs left as they were", file=sys.stderr)
+            return 143
         except KeyboardInterrupt:
-            print("didim: interrupted", file=sys.stderr)
+            print("didim: interrupted; outputs left as they were", file=sys.stderr)
             return 130
+        finally:
+            if previous is not None:
+                import signal
+
+                signal.signal(signal.SIGTERM, previous)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread like Ctrl-C so that every ``finally`` runs: temporary files are removed,
+    worker processes stopped, and no output is half-written."""
+
+
+def _terminate_as_exception():
+    """Installs the SIGTERM handler that raises :class:`Terminated`; returns the previous handler (None when signals
+    cannot be set here, e.g. outside the main thread)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        raise Terminated()
+
+    return signal.signal(signal.SIGTERM, handler)
 
 
 def _describe_error(e: BaseException) -> str:
@@ -350,5 +388,18 @@ def _describe_error(e: BaseException) -> str:
     return str(e)
 
 
+def entry() -> None:
+    """The console script: :func:`main`, then exit with its code. After Ctrl-C or SIGTERM (outputs already cleaned up
+    as the interruption unwound) the process exits at once, without waiting for core threads still computing."""
+    code = main()
+    if code in (130, 143):
+        import os
+
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    entry()

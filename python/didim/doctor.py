@@ -608,6 +608,12 @@ def doctor(
     and of the residual analysis."""
     if model not in ("rigid", "flexible"):
         raise DataError(f"unknown model {model!r}: use rigid or flexible")
+    from .recording import Recording
+
+    for what, rec in (("recording", recording), ("validate", validate)):
+        if rec is not None and not isinstance(rec, Recording):
+            raise DataError(f"{what} must be a didim.Recording (read a file with didim.load_record), got "
+                            f"{type(rec).__name__}")
     if not (0 < alpha < 0.5):
         raise DataError(f"alpha must be in (0, 0.5), got {alpha}")
     if validate is None and not (0.1 <= holdout <= 0.5):

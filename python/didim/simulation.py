@@ -217,6 +217,7 @@ def problem(recording: Recording, model: str = "rigid", *, offset: bool = False,
     """The recording's closed loop held by the Rust core (reference, controller, external input, model structure and
     simulator options), for repeated simulations with varying parameters. ``sim_kw`` as for :func:`simulate`."""
     _check_model(model)
+    _checks.known_options([sim_options, problem], sim_kw, "the simulator")
     opts = sim_options(recording, **sim_kw)
     return _core.Problem(model, recording.qr, recording.dt, recording.controller.kind, list(recording.controller.gains),
                          u_ext=recording.u_ext, offset=bool(offset), terms=_specs(terms), backlash_gap=backlash_gap,
@@ -237,6 +238,7 @@ def simulate(
     backlash_gap: Optional[float] = None,
     integrator: str = "exponential",
     tol: float = DEFAULT_TOL,
+    **unknown,
 ) -> SimResult:
     """Simulates the recording's closed loop (its reference, controller and known external input) with ``params``.
 
@@ -255,6 +257,8 @@ def simulate(
             bends) or "rk4" (fixed substeps, the reference).
         tol: local tolerance of the exponential integrator per step, as a fraction of the reference stroke.
     """
+    if unknown:
+        _checks.known_options([simulate], unknown, "simulate")
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
     if _is_result(params):  # a result carries its model structure and its simulator's numerics

@@ -108,9 +108,37 @@ def run_point(point: Mapping[str, Any]) -> Dict[str, Any]:
     return out
 
 
+#: Most points of one sweep (grid size times draws); a larger sweep is refused before anything runs.
+MAX_POINTS = 100_000
+
+
+def check_points(points: Sequence[Mapping[str, Any]]) -> None:
+    """Refuses, before anything runs, what would fail every point alike: an unknown scenario, a record that cannot
+    be opened, an option the method does not take (a DataError naming it)."""
+    from .api import check_options
+
+    seen = set()
+    for p in points:
+        opts = {k: v for k, v in p.items() if k not in RECORD_KEYS and k not in ("model", "method")}
+        key = (p.get("scenario"), p.get("record"), p.get("model"), p.get("method"), tuple(sorted(opts)))
+        if key in seen:
+            continue
+        seen.add(key)
+        if p.get("record") is None and p.get("scenario") not in SCENARIOS:
+            raise DataError(f"unknown scenario {p.get('scenario')!r}: use one of {', '.join(SCENARIOS)} or give a record "
+                            "file")
+        model = p.get("model", SCENARIOS.get(p.get("scenario") or "", {}).get("model", "rigid"))
+        check_options(model, p.get("method", "didim"), opts)
+
+
 def grid_points(grid: Mapping[str, Sequence[Any]], fixed: Optional[Mapping[str, Any]] = None) -> List[Dict[str, Any]]:
-    """The cartesian product of ``grid`` (key → values), each point completed with ``fixed``."""
+    """The cartesian product of ``grid`` (key → values), each point completed with ``fixed``; at most
+    :data:`MAX_POINTS`."""
     keys = list(grid)
+    size = math.prod(len(list(grid[k])) for k in keys)
+    if size > MAX_POINTS:
+        raise DataError(f"the grid has {size} points ({' × '.join(str(len(list(grid[k]))) for k in keys)}); at most "
+                        f"{MAX_POINTS} are run: use fewer values or random draws")
     return [{**(fixed or {}), **dict(zip(keys, vals))} for vals in itertools.product(*(list(grid[k]) for k in keys))]
 
 
@@ -118,6 +146,15 @@ def random_points(ranges: Mapping[str, tuple], n: int, *, seed: int = 0,
                   fixed: Optional[Mapping[str, Any]] = None) -> List[Dict[str, Any]]:
     """``n`` random draws: ``ranges`` maps a key to ``(low, high)`` (uniform), ``(low, high, "log")`` (log-uniform)
     or ``(low, high, "int")`` (integers in [low, high]); reproducible with ``seed``."""
+    if not 0 <= int(n) <= MAX_POINTS:
+        raise DataError(f"the number of draws must be between 0 and {MAX_POINTS}, got {n}")
+    for k, spec in ranges.items():
+        ok = len(spec) in (2, 3) and all(isinstance(x, (int, float)) and math.isfinite(x) for x in spec[:2])
+        if not ok or (len(spec) == 3 and spec[2] not in ("lin", "log", "int")):
+            raise DataError(f"draw range of {k}: {spec!r} must be (low, high) or (low, high, 'log' | 'int') with "
+                            "finite numbers (CLI: --draw KEY=LO:HI[:log|:int])")
+        if len(spec) == 3 and spec[2] == "log" and min(spec[0], spec[1]) <= 0:
+            raise DataError(f"draw range of {k}: a log range needs low and high > 0, got {spec[0]}, {spec[1]}")
     rng = np.random.default_rng(seed)
     pts = []
     for _ in range(int(n)):
@@ -182,6 +219,21 @@ def _executor(executor, workers: int):
     raise DataError(f"executor must be a name, a concurrent.futures.Executor or a Dask client, got {type(executor).__name__}")
 
 
+def _stop(ex) -> None:
+    """Stops an owned executor at once: pending points cancelled, worker processes terminated and reaped."""
+    held = getattr(ex, "_processes", None)  # ProcessPoolExecutor's workers (no public accessor)
+    procs = list(held.values()) if isinstance(held, dict) else []
+    ex.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in procs:
+        proc.join(timeout=5)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(timeout=5)
+
+
 def sweep(points: Sequence[Mapping[str, Any]], *, task: Callable[[Mapping[str, Any]], Dict[str, Any]] = run_point,
           workers: Optional[int] = None, executor=None, progress=True, agree_rtol: float = 0.01,
           label: str = "sweep") -> "SweepResult":
@@ -219,6 +271,11 @@ def sweep(points: Sequence[Mapping[str, Any]], *, task: Callable[[Mapping[str, A
                 except Exception as e:  # a worker crash is a result, not the end of the sweep
                     results[i] = dict(point=points[i], converged=False, error=f"{type(e).__name__}: {e}", truth=None)
                 bar.update(results[i].get("converged", False))
+    except BaseException:
+        if owned:  # interrupted (Ctrl-C, SIGTERM): no waiting for running points, no worker left behind
+            _stop(ex)
+            owned = False
+        raise
     finally:
         if owned:
             ex.shutdown(wait=True)
@@ -433,10 +490,20 @@ def parse_values(spec: str) -> List[Any]:
     """Values of a command-line grid: ``a,b,c`` or ``start:stop:count`` (linear) or ``start:stop:count:log``."""
     if ":" in spec:
         parts = spec.split(":")
-        if len(parts) not in (3, 4):
+        if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3] not in ("log", "lin")):
             raise DataError(f"range {spec!r} must be start:stop:count[:log]")
-        a, b, n = float(parts[0]), float(parts[1]), int(parts[2])
+        try:
+            a, b, n = float(parts[0]), float(parts[1]), int(parts[2])
+        except ValueError:
+            raise DataError(f"range {spec!r}: start and stop must be numbers and count a whole number "
+                            "(start:stop:count[:log])") from None
+        if not (math.isfinite(a) and math.isfinite(b)):
+            raise DataError(f"range {spec!r}: start and stop must be finite")
+        if not 1 <= n <= MAX_POINTS:
+            raise DataError(f"range {spec!r}: count must be between 1 and {MAX_POINTS}, got {n}")
         if len(parts) == 4 and parts[3] == "log":
+            if a <= 0 or b <= 0:
+                raise DataError(f"range {spec!r}: a log range needs start and stop > 0")
             return [float(v) for v in np.geomspace(a, b, n)]
         return [float(v) for v in np.linspace(a, b, n)]
     out: List[Any] = []

@@ -1,0 +1,103 @@
+"""Signals and malformed sweep options: SIGTERM gives 143 and one line, Ctrl-C 130; a command killed at any moment
+(SIGINT, SIGTERM, SIGKILL) leaves the previous outputs intact and no temporary file; sweep workers do not outlive
+their parent; a malformed --grid or --draw is a user error (exit 2, one line, no traceback)."""
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+CLI = [sys.executable, "-m", "didim"]
+
+
+def _children(pid: int):
+    out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True).stdout
+    return [int(x) for x in out.split()]
+
+
+def _wait_for(pred, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def test_sigterm_stops_a_sweep_and_its_workers(tmp_path):
+    out = tmp_path / "out.json"
+    p = subprocess.Popen(CLI + ["sweep", "--scenario", "flexible-motor-friction", "--model", "flexible", "--seeds", "60",
+                                "--workers", "2", "--json", str(out), "--quiet"],
+                         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert _wait_for(lambda: len(_children(p.pid)) >= 2, 60), "the sweep started no workers"
+    workers = _children(p.pid)
+    time.sleep(1.0)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 143, err
+    assert "terminated" in err and "Traceback" not in err
+    assert not out.exists()
+    assert _wait_for(lambda: not any(os.path.exists(f"/proc/{w}") and _alive(w) for w in workers), 10), \
+        "sweep workers outlived their parent"
+    assert sorted(os.listdir(tmp_path)) == []
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split()[2] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("args", [
+    ["--grid", "apM=1:2:x"], ["--draws", "3", "--draw", "apM=1"], ["--draws", "3", "--draw", "apM=x:y"],
+    ["--grid", "apM=1:1e9:1000000000"], ["--grid", "apM=1:10:1000", "--grid", "f0=1:2:1000"],
+    ["--grid", "bogus=1,2"], ["--grid", "apM=-1:5:3:log"],
+])
+def test_malformed_sweep_options_are_user_errors(tmp_path, args):
+    r = subprocess.run(CLI + ["sweep", "--scenario", "flexible-motor-friction", "--model", "rigid", *args, "--quiet"],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr and r.stderr.strip().count("\n") == 0, r.stderr
+
+
+def test_unknown_scenario_is_a_user_error(tmp_path):
+    r = subprocess.run(CLI + ["sweep", "--scenario", "nope", "--seeds", "2", "--quiet"], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "unknown scenario 'nope'" in r.stderr
+
+
+def test_killed_at_random_moments_a_command_leaves_previous_outputs_intact(tmp_path, emps_path):
+    """Fault injection: the doctor writing over existing outputs is killed (SIGINT, SIGTERM, SIGKILL) at random
+    moments; every time, each output holds either its previous content or a complete new one, and no temporary file
+    remains. (Seeded: the same moments on every run.)"""
+    js, html = tmp_path / "d.json", tmp_path / "d.html"
+    js.write_text('{"previous": true}\n')
+    html.write_text("<p>previous</p>\n")
+    rng = random.Random(13)
+    complete = 0
+    for i in range(12):
+        sig = (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)[i % 3]
+        p = subprocess.Popen(CLI + ["doctor", str(emps_path), "--json", str(js), "--html", str(html), "--quiet"],
+                             cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        time.sleep(rng.uniform(0.2, 6.0))
+        p.send_signal(sig)
+        _, err = p.communicate(timeout=120)
+        if p.returncode == 0:
+            complete += 1
+        elif sig == signal.SIGINT:
+            assert p.returncode == 130, err
+        elif sig == signal.SIGTERM:
+            assert p.returncode == 143, err
+        assert "Traceback" not in err, err
+        text = js.read_text()
+        assert text == '{"previous": true}\n' or (text.startswith("{") and text.rstrip().endswith("}")), text[-200:]
+        page = html.read_text()
+        assert page == "<p>previous</p>\n" or page.rstrip().endswith("</html>"), page[-200:]
+        leftovers = [f for f in os.listdir(tmp_path) if f not in ("d.json", "d.html")]
+        assert leftovers == [], leftovers
