@@ -101,3 +101,23 @@ def test_killed_at_random_moments_a_command_leaves_previous_outputs_intact(tmp_p
         assert page == "<p>previous</p>\n" or page.rstrip().endswith("</html>"), page[-200:]
         leftovers = [f for f in os.listdir(tmp_path) if f not in ("d.json", "d.html")]
         assert leftovers == [], leftovers
+
+
+def test_an_unused_compressed_variable_is_never_expanded(tmp_path, emps_path):
+    """A MAT file with an unused variable that decompresses to 480 MB (a bomb of 1 MB) loads within a small
+    memory budget: only the record's variables are decompressed, and their sizes are checked from their headers."""
+    bomb = tmp_path / "bomb.mat"
+    make = ("import numpy as np, scipy.io as sio, sys\n"
+            "d = {k: v for k, v in sio.loadmat(sys.argv[1]).items() if not k.startswith('__')}\n"
+            "d['junk'] = np.zeros((60_000_000, 1))\n"
+            "sio.savemat(sys.argv[2], d, do_compression=True)\n")
+    subprocess.run([sys.executable, "-c", make, str(emps_path), str(bomb)], check=True)
+    assert bomb.stat().st_size < 5_000_000
+    load = ("import resource, sys, didim\n"
+            "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+            "r = didim.load_mat(sys.argv[1])\n"
+            "print(r.n, (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) // 1024)\n")
+    out = subprocess.run([sys.executable, "-c", load, str(bomb)], check=True, capture_output=True, text=True).stdout
+    n, grown_mb = map(int, out.split())
+    assert n == 24841
+    assert grown_mb < 100, f"loading grew the process by {grown_mb} MB: the unused variable was decompressed"

@@ -327,7 +327,7 @@ def load_mat(
     file, missing variable, wrong shape or type, time not increasing or not uniform, a period other than ``dt``.
     The file is only read.
     """
-    from scipy.io import loadmat
+    from scipy.io import loadmat, whosmat
 
     from ._io import check_input
 
@@ -343,7 +343,10 @@ def load_mat(
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # scipy warns on odd headers before failing or succeeding
-            d = loadmat(path)
+            # only the variables a record needs are decompressed, after their sizes are read from their headers: an
+            # unused variable (or a decompression bomb) is never expanded
+            source = _mat5_needed(path, MAT_VARIABLES, MAX_MAT_SAMPLES)
+            d = loadmat(source if source is not None else path, variable_names=list(MAT_VARIABLES))
     except PermissionError as e:
         raise DataError(f"{path}: cannot be read ({e.strerror or e}): check its permissions") from None
     except NotImplementedError:
@@ -362,6 +365,13 @@ def load_mat(
     missing = [k for k in required if k not in d]
     if missing:
         present = sorted(k for k in d if not k.startswith("__"))
+        if size < 50_000_000:  # name the file's other variables (scipy decompresses them to list them)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    present = sorted(name for name, _, _ in whosmat(path))
+            except Exception:
+                pass
         hint = "; the file holds no variable at all: is it truncated?" if not present else ""
         raise DataError(
             f"{path}: missing variable(s) {', '.join(missing)}; the EMPS layout needs {', '.join(required)} "
@@ -406,6 +416,80 @@ def load_mat(
     except DataError as e:
         msg = str(e)
         raise DataError(msg if msg.startswith(path) else f"{path}: {msg}") from None
+
+
+#: The variables of the EMPS layout that load_mat reads (the others are never decompressed).
+MAT_VARIABLES = ("t", "qm", "qg", "vir", "gtau", "kp", "kv", "vsat", "pulses_N", "ql")
+#: Most samples of a record read from a MAT file (each signal then takes up to 400 MB in memory).
+MAX_MAT_SAMPLES = 50_000_000
+
+
+def _mat5_needed(path: str, names, max_values: int):
+    """A MATLAB v5 file reduced to the variables ``names`` (an in-memory copy of their raw, still compressed records
+    behind the file's header), after checking from each variable's header that it holds at most ``max_values``
+    values; None for another format (v4, which has no compression, is read as it is). Only the first bytes of each
+    compressed variable are decompressed, to read its name and dimensions."""
+    import io
+    import struct
+    import zlib
+
+    with open(path, "rb") as f:
+        raw = f.read()
+    if len(raw) < 128 or not raw.startswith(b"MATLAB 5.0") or raw[126:128] not in (b"IM", b"MI"):
+        return None
+    e = "<" if raw[126:128] == b"IM" else ">"
+    keep = [raw[:128]]
+    pos = 128
+    while pos + 8 <= len(raw):
+        mdtype, count = struct.unpack(e + "II", raw[pos:pos + 8])
+        end = pos + 8 + count
+        if count == 0 or end > len(raw):
+            return None  # truncated or odd: scipy reads it and says what is wrong
+        if mdtype == 15:  # miCOMPRESSED: decompress a bounded prefix only
+            head = zlib.decompressobj().decompress(raw[pos + 8:end], 4096)
+        elif mdtype == 14:  # miMATRIX
+            head = raw[pos:pos + 4096]
+        else:
+            return None
+        info = _mat5_header(head, e)
+        if info is None:
+            return None
+        name, dims = info
+        if name in names:
+            size = int(np.prod(dims, dtype=np.int64)) if dims else 1
+            if size > max_values:
+                raise DataError(f"{path}: variable {name!r} has {size} values (shape {tuple(dims)}); didim reads records "
+                                f"of at most {max_values} samples: split the record")
+            keep.append(raw[pos:end])
+        pos = end + ((-count) % 8 if mdtype == 14 else 0)
+    return io.BytesIO(b"".join(keep))
+
+
+def _mat5_header(head: bytes, e: str):
+    """(name, dims) of a v5 miMATRIX element from its first bytes, or None."""
+    import struct
+
+    if len(head) < 40:
+        return None
+    mdtype, _ = struct.unpack(e + "II", head[:8])
+    if mdtype != 14:
+        return None
+    p = 8 + 16  # array flags: an 8-byte tag and 8 bytes
+    dtype, count = struct.unpack(e + "II", head[p:p + 8])
+    if dtype != 5 or count % 4 or p + 8 + count > len(head):  # dimensions: miINT32
+        return None
+    dims = list(struct.unpack(e + f"{count // 4}i", head[p + 8:p + 8 + count]))
+    p += 8 + count + ((-count) % 8)
+    if p + 8 > len(head):
+        return None
+    first = struct.unpack(e + "I", head[p:p + 4])[0]
+    if first >> 16:  # small data element: type and length packed in the tag, name in its last 4 bytes
+        n = first >> 16  # the byte count is the upper half in either byte order (as scipy reads it)
+        name = head[p + 4:p + 4 + n]
+    else:
+        n = struct.unpack(e + "I", head[p + 4:p + 8])[0]
+        name = head[p + 8:p + 8 + n]
+    return name.decode("latin-1"), dims
 
 
 #: First bytes of MATLAB v4 files (no text header): the type code of a double matrix, either byte order.
