@@ -121,3 +121,40 @@ def test_an_unused_compressed_variable_is_never_expanded(tmp_path, emps_path):
     n, grown_mb = map(int, out.split())
     assert n == 24841
     assert grown_mb < 100, f"loading grew the process by {grown_mb} MB: the unused variable was decompressed"
+
+
+LONG_CALL = """
+import sys, time
+import numpy as np
+import didim
+qr = np.tile(np.concatenate([np.linspace(0, 0.2, 2000), np.linspace(0.2, 0, 2000)]), 100)
+rec = didim.Recording(dt=1e-3, qr=qr, force=np.zeros_like(qr), qm=qr, controller=didim.EmpsCascade())
+p = {"M": 95.0, "Fv": 200.0, "Fc": 20.0}
+print("start", flush=True)
+t = time.perf_counter()
+try:
+    if sys.argv[1] == "one":
+        didim.simulate(rec, p, integrator="rk4", substeps=400)
+    else:
+        didim.simulate_batch(rec, [dict(p, M=95.0 + i) for i in range(4)], integrator="rk4", substeps=200)
+    print("finished", flush=True)
+except KeyboardInterrupt:
+    print("interrupted", flush=True)
+"""
+
+
+@pytest.mark.parametrize("mode", ["one", "batch"])
+def test_ctrl_c_stops_a_long_core_call(mode):
+    """Ctrl-C reaches a simulation running in the Rust core (alone or as a parallel batch): it stops at its next
+    check with KeyboardInterrupt, instead of running to the end (minutes here)."""
+    p = subprocess.Popen([sys.executable, "-c", LONG_CALL, mode], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    assert p.stdout.readline().strip() == "start"
+    time.sleep(1.0)
+    p.send_signal(signal.SIGINT)
+    try:
+        out, err = p.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        pytest.fail("the core call did not stop within 30 s of Ctrl-C")
+    assert out.strip() == "interrupted", (out, err)

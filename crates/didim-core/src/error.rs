@@ -14,6 +14,9 @@ pub enum Error {
     /// The regressor is rank deficient (or otherwise unusable) for the requested estimate.
     #[error("{0}")]
     Identifiability(String),
+    /// The user asked to stop (see [`crate::interrupt`]).
+    #[error("interrupted")]
+    Interrupted,
 }
 
 /// Result alias of the core.

@@ -20,6 +20,7 @@
 pub mod controller;
 pub mod error;
 pub mod filter;
+pub mod interrupt;
 pub mod lstsq;
 pub mod model;
 pub mod objective;

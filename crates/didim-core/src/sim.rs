@@ -506,6 +506,9 @@ fn run<const N: usize, T: Tangent<N>>(
     };
 
     for k in 0..n {
+        if k % crate::interrupt::EVERY == 0 {
+            crate::interrupt::check()?;
+        }
         let qm = quantize(q[0]);
         let (tau_cmd, active) = law.step(&mut ctl, qr[k], qm, u_ext.map_or(0.0, |u| u[k]));
         tangent.command(k, &law, active);

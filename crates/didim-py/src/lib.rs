@@ -23,9 +23,38 @@ use convert::*;
 
 /// Runs a core computation without the interpreter lock, turning panics into errors.
 fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> Result<T, Error> + Send) -> PyResult<T> {
-    let out = py.detach(|| catch_unwind(AssertUnwindSafe(f)));
+    didim_core::interrupt::reset();
+    // The core runs on a scoped thread while this (Python's) thread waits for it and, every
+    // POLL, runs Python's signal handlers: Ctrl-C or SIGTERM stop the core at its next check.
+    let out = py.detach(|| {
+        std::thread::scope(|s| {
+            let (tx, rx) = std::sync::mpsc::channel();
+            s.spawn(move || {
+                let _ = tx.send(catch_unwind(AssertUnwindSafe(f)));
+            });
+            loop {
+                match rx.recv_timeout(POLL) {
+                    Ok(r) => return r,
+                    Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                        if signalled() {
+                            didim_core::interrupt::raise();
+                        }
+                    }
+                    Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                        return Err(Box::new("the core's thread ended without a result".to_string())
+                            as Box<dyn std::any::Any + Send>)
+                    }
+                }
+            }
+        })
+    });
     match out {
         Ok(Ok(v)) => Ok(v),
+        Ok(Err(Error::Interrupted)) => Err(PENDING
+            .lock()
+            .ok()
+            .and_then(|mut p| p.take())
+            .unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err("interrupted"))),
         Ok(Err(e)) => Err(core_error(py, e)),
         Err(panic) => {
             let what = panic
@@ -44,12 +73,42 @@ fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> Result<T, Error> + Send) -> 
     }
 }
 
+/// The exception a signal handler raised while the core was running (Ctrl-C's KeyboardInterrupt, the CLI's
+/// SIGTERM exception), re-raised when the core has stopped.
+static PENDING: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
+
+/// How often a waiting call runs Python's signal handlers.
+const POLL: std::time::Duration = std::time::Duration::from_millis(50);
+
+/// Runs Python's signal handlers (they only run on the main thread; elsewhere this is a no-op) and keeps the
+/// exception one of them raised; true when there was one.
+fn signalled() -> bool {
+    Python::attach(|py| match py.check_signals() {
+        Ok(()) => false,
+        Err(e) => {
+            if let Ok(mut p) = PENDING.lock() {
+                p.get_or_insert(e);
+            }
+            true
+        }
+    })
+}
+
+/// A batch's per-set results, or `Error::Interrupted` when the user stopped it (not one failed set among others).
+pub(crate) fn interrupted<T>(results: Vec<Result<T, Error>>) -> Result<Vec<Result<T, Error>>, Error> {
+    if results.iter().any(|r| matches!(r, Err(Error::Interrupted))) {
+        return Err(Error::Interrupted);
+    }
+    Ok(results)
+}
+
 /// Maps a core error to its Python class.
 fn core_error(py: Python<'_>, e: Error) -> PyErr {
     match e {
         Error::InvalidInput(m) => py_error(py, "DataError", m),
         Error::Simulation(m) => py_error(py, "SimulationError", m),
         Error::Identifiability(m) => py_error(py, "IdentifiabilityError", m),
+        Error::Interrupted => pyo3::exceptions::PyKeyboardInterrupt::new_err("interrupted"),
     }
 }
 

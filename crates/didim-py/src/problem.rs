@@ -13,7 +13,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::convert::*;
-use crate::{core_error, make_controller, make_model, run, sim_options, AnyModel, Decimated, Terms};
+use crate::{
+    core_error, interrupted, make_controller, make_model, run, sim_options, AnyModel, Decimated, Terms,
+};
 
 type Arr<'py> = Bound<'py, PyArray1<f64>>;
 type Costs<'py> = (Arr<'py>, Vec<Option<String>>);
@@ -270,7 +272,9 @@ impl Problem {
         let chis = rows2(&params);
         let (n, ndof) = (self.qr.len(), self.ndof_());
         let m = chis.len();
-        let results = run(py, || Ok(with_problem!(self, pb => pb.simulate_batch(&chis))))?;
+        let results = run(py, || {
+            interrupted(with_problem!(self, pb => pb.simulate_batch(&chis)))
+        })?;
         let (outs, errs) = split_errors(results);
         let mut force = vec![f64::NAN; m * n];
         let mut q = vec![f64::NAN; m * ndof * n];
@@ -339,7 +343,7 @@ impl Problem {
         let meas: &[f64] = &meas;
         let results = run(py, || {
             let out = parse_output(output)?;
-            Ok(with_problem!(self, pb => pb.output_error_batch(&chis, out, meas, &decimator.inner)))
+            interrupted(with_problem!(self, pb => pb.output_error_batch(&chis, out, meas, &decimator.inner)))
         })?;
         let (vals, errs) = split_errors(results);
         let costs: Vec<f64> = vals.into_iter().map(|v| v.unwrap_or(f64::NAN)).collect();

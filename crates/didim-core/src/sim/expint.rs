@@ -553,6 +553,9 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
     let mut oqdd = vec![vec![0.0; n]; N];
 
     for k in 0..n {
+        if k % crate::interrupt::EVERY == 0 {
+            crate::interrupt::check()?;
+        }
         let qm = quantize(q[0]);
         let (tau_cmd, active) = law.step(&mut ctl, qr[k], qm, u_ext.map_or(0.0, |u| u[k]));
         let tau = if opts.delay == 0 {
