@@ -17,6 +17,29 @@ pub enum Error {
     /// The user asked to stop (see [`crate::interrupt`]).
     #[error("interrupted")]
     Interrupted,
+    /// An allocation failed; the message names what and how much.
+    #[error("{0}")]
+    OutOfMemory(String),
+}
+
+/// An empty vector with room for `len` values, or [`Error::OutOfMemory`] naming `what` and the
+/// size (instead of aborting the process as `Vec::with_capacity` does).
+pub fn room(len: usize, what: &str) -> Result<Vec<f64>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len).map_err(|_| {
+        Error::OutOfMemory(format!(
+            "cannot allocate {what}: {len} values ({:.3} GB); use a shorter record or fewer parameter sets per call",
+            len as f64 * 8e-9
+        ))
+    })?;
+    Ok(v)
+}
+
+/// `len` copies of `value`, or [`Error::OutOfMemory`] (see [`room`]).
+pub fn filled(len: usize, value: f64, what: &str) -> Result<Vec<f64>> {
+    let mut v = room(len, what)?;
+    v.resize(len, value);
+    Ok(v)
 }
 
 /// Result alias of the core.

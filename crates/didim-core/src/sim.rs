@@ -16,7 +16,7 @@
 //! commanded force exactly.
 
 use crate::controller::{Controller, FilterState, TransferFunction, MAX_TAPS};
-use crate::error::{invalid, Error, Result};
+use crate::error::{filled, invalid, room, Error, Result};
 use crate::model::Model;
 use nalgebra::SVector;
 
@@ -237,11 +237,11 @@ pub fn simulate_sensitivity<const N: usize>(
 ) -> Result<SensOutput> {
     check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
     let (sim, dforce, dq) = if opts.integrator == Integrator::Exponential {
-        let mut t = expint::Sens::<N>::new(model, qr.len(), opts.delay);
+        let mut t = expint::Sens::<N>::new(model, qr.len(), opts.delay)?;
         let sim = expint::run(model, chi, controller, qr, u_ext, opts, None, &mut t)?;
         (sim, t.dforce, t.dq)
     } else {
-        let mut t = Sensitivity::<N>::new(model.n_params(), qr.len(), opts.delay);
+        let mut t = Sensitivity::<N>::new(model.n_params(), qr.len(), opts.delay)?;
         let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
         (sim, t.dforce, t.dq)
     };
@@ -323,9 +323,9 @@ struct Sensitivity<const N: usize> {
 }
 
 impl<const N: usize> Sensitivity<N> {
-    fn new(p: usize, n: usize, delay: usize) -> Self {
+    fn new(p: usize, n: usize, delay: usize) -> Result<Self> {
         let z = vec![0.0; N * p];
-        Self {
+        Ok(Self {
             p,
             n,
             sq: z.clone(),
@@ -333,14 +333,14 @@ impl<const N: usize> Sensitivity<N> {
             ctl: vec![[0.0; MAX_TAPS]; p],
             dtau: vec![0.0; p],
             pending: vec![vec![0.0; p]; delay],
-            dforce: vec![0.0; p * n],
-            dq: vec![0.0; N * p * n],
+            dforce: filled(p * n, 0.0, "the force sensitivities")?,
+            dq: filled(N * p * n, 0.0, "the position sensitivities")?,
             kq: [z.clone(), z.clone(), z.clone(), z.clone()],
             kv: [z.clone(), z.clone(), z.clone(), z.clone()],
             stage_q: z.clone(),
             stage_v: z.clone(),
             phi: z,
-        }
+        })
     }
 }
 
@@ -498,11 +498,12 @@ fn run<const N: usize, T: Tangent<N>>(
     let mut ctl = law.rest_state(qr[0], quantize(q[0]));
     let mut pending = vec![0.0; opts.delay]; // ring buffer of delayed commands
 
+    let signals = |what| (0..N).map(|_| room(n, what)).collect::<Result<Vec<_>>>();
     let mut out = SimOutput {
-        force: Vec::with_capacity(n),
-        q: vec![Vec::with_capacity(n); N],
-        qd: vec![Vec::with_capacity(n); N],
-        qdd: vec![Vec::with_capacity(n); N],
+        force: room(n, "the simulated force")?,
+        q: signals("the simulated positions")?,
+        qd: signals("the simulated velocities")?,
+        qdd: signals("the simulated accelerations")?,
     };
 
     for k in 0..n {

@@ -94,10 +94,14 @@ fn signalled() -> bool {
     })
 }
 
-/// A batch's per-set results, or `Error::Interrupted` when the user stopped it (not one failed set among others).
-pub(crate) fn interrupted<T>(results: Vec<Result<T, Error>>) -> Result<Vec<Result<T, Error>>, Error> {
-    if results.iter().any(|r| matches!(r, Err(Error::Interrupted))) {
-        return Err(Error::Interrupted);
+/// A batch's per-set results, or the error that ends the whole batch: the user stopped it, or memory ran out
+/// (not one failed set among others).
+pub(crate) fn interrupted<T>(mut results: Vec<Result<T, Error>>) -> Result<Vec<Result<T, Error>>, Error> {
+    if let Some(i) = results
+        .iter()
+        .position(|r| matches!(r, Err(Error::Interrupted | Error::OutOfMemory(_))))
+    {
+        return Err(results.swap_remove(i).err().expect("an error at i"));
     }
     Ok(results)
 }
@@ -109,6 +113,7 @@ fn core_error(py: Python<'_>, e: Error) -> PyErr {
         Error::Simulation(m) => py_error(py, "SimulationError", m),
         Error::Identifiability(m) => py_error(py, "IdentifiabilityError", m),
         Error::Interrupted => pyo3::exceptions::PyKeyboardInterrupt::new_err("interrupted"),
+        Error::OutOfMemory(m) => pyo3::exceptions::PyMemoryError::new_err(m),
     }
 }
 

@@ -272,14 +272,30 @@ impl Problem {
         let chis = rows2(&params);
         let (n, ndof) = (self.qr.len(), self.ndof_());
         let m = chis.len();
+        // the core holds every set's signals, then they are copied into the arrays below: check that the whole
+        // fits before starting (an allocation that fails halfway would abort the process)
+        let per_set = n.saturating_mul(1 + 3 * ndof + 1 + ndof * if states { 3 } else { 1 });
+        let total = m
+            .saturating_mul(per_set)
+            .saturating_add(m.saturating_mul(per_set) / 10);
+        drop(
+            didim_core::error::room(total, &format!("the batch of {m} simulations"))
+                .map_err(|e| core_error(py, e))?,
+        );
         let results = run(py, || {
             interrupted(with_problem!(self, pb => pb.simulate_batch(&chis)))
         })?;
         let (outs, errs) = split_errors(results);
-        let mut force = vec![f64::NAN; m * n];
-        let mut q = vec![f64::NAN; m * ndof * n];
+        let big = |len: usize, what: &str| {
+            didim_core::error::filled(len, f64::NAN, what).map_err(|e| core_error(py, e))
+        };
+        let mut force = big(m * n, "the batch's forces")?;
+        let mut q = big(m * ndof * n, "the batch's positions")?;
         let (mut qd, mut qdd) = if states {
-            (vec![f64::NAN; m * ndof * n], vec![f64::NAN; m * ndof * n])
+            (
+                big(m * ndof * n, "the batch's velocities")?,
+                big(m * ndof * n, "the batch's accelerations")?,
+            )
         } else {
             (Vec::new(), Vec::new())
         };

@@ -31,7 +31,7 @@
 
 use super::{describe, SimOptions, SimOutput};
 use crate::controller::{Controller, FilterState, TransferFunction, MAX_TAPS};
-use crate::error::{invalid, Error, Result};
+use crate::error::{filled, invalid, Error, Result};
 use crate::model::{Basis, Model};
 use nalgebra::{DMatrix, SMatrix, SVector};
 
@@ -547,10 +547,11 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
     let mut ctl = law.rest_state(qr[0], quantize(q[0]));
     let mut pending = vec![0.0; opts.delay];
 
-    let mut force = vec![0.0; n];
-    let mut oq = vec![vec![0.0; n]; N];
-    let mut oqd = vec![vec![0.0; n]; N];
-    let mut oqdd = vec![vec![0.0; n]; N];
+    let signals = |what| (0..N).map(|_| filled(n, 0.0, what)).collect::<Result<Vec<_>>>();
+    let mut force = filled(n, 0.0, "the simulated force")?;
+    let mut oq = signals("the simulated positions")?;
+    let mut oqd = signals("the simulated velocities")?;
+    let mut oqdd = signals("the simulated accelerations")?;
 
     for k in 0..n {
         if k % crate::interrupt::EVERY == 0 {
@@ -654,7 +655,7 @@ pub(super) struct Sens<const N: usize> {
 }
 
 impl<const N: usize> Sens<N> {
-    pub fn new(model: &Model<N>, n: usize, delay: usize) -> Self {
+    pub fn new(model: &Model<N>, n: usize, delay: usize) -> Result<Self> {
         let p = model.n_params();
         let role = model
             .basis()
@@ -665,7 +666,7 @@ impl<const N: usize> Sens<N> {
                 b => Role::Nonlinear(b),
             })
             .collect();
-        Self {
+        Ok(Self {
             p,
             n,
             role,
@@ -682,9 +683,9 @@ impl<const N: usize> Sens<N> {
             dtau: vec![0.0; p],
             ctl: vec![[0.0; MAX_TAPS]; p],
             pending: vec![vec![0.0; p]; delay],
-            dforce: vec![0.0; p * n],
-            dq: vec![0.0; N * p * n],
-        }
+            dforce: filled(p * n, 0.0, "the force sensitivities")?,
+            dq: filled(N * p * n, 0.0, "the position sensitivities")?,
+        })
     }
 
     /// `∂g/∂χ_j` at `(q, v)` where `g = ge`, into `self.gchi`.
