@@ -178,13 +178,18 @@ def test_arrays_of_different_lengths_are_named():
 def test_record_too_short_for_the_decimation_filter():
     rec = short_record(n=10)
     assert rec.diagnose() == []
-    with pytest.raises(didim.DataError, match=r"too short for the decimation filter of didim \(rigid\): 10 samples"):
+    # the message gives the length that works: 3 parameters need 4 decimated rows, i.e. 3·80 + 1 samples at factor 80
+    with pytest.raises(didim.DataError, match=r"too short for didim \(rigid\): 10 samples .*zero-phase padding; it "
+                                              r"needs at least 241 samples"):
         didim.identify(rec, "rigid", "didim", apM=90.0)
-    with pytest.raises(didim.DataError, match=r"too short for the decimation filter of IDIM-LS"):
+    with pytest.raises(didim.DataError, match=r"too short for IDIM-LS.*zero-phase padding"):
         didim.identify(rec, "rigid", "idim-ls")
     rec = short_record(n=200)
-    with pytest.raises(didim.DataError, match=r"decimated by 80 leave 3 equations for 3 parameters; record at least"):
+    with pytest.raises(didim.DataError, match=r"decimated by 80, it leaves 3 equations for 3 parameters; it needs at "
+                                              r"least 241 samples"):
         didim.identify(rec, "rigid", "didim", apM=90.0)
+    rec = short_record(n=241)
+    assert didim.identify(rec, "rigid", "idim-ls").params["M"] > 0  # the length named is enough
 
 
 def test_constant_reference_says_which_parameters_and_why():
@@ -287,10 +292,12 @@ def test_sample_period_that_does_not_match_the_data(emps_path, emps):
 
 
 def test_decimation_cutoff_above_nyquist(emps):
-    with pytest.raises(didim.DataError, match="cutoff 600 Hz must lie between 0 and the Nyquist frequency 500 Hz"):
+    with pytest.raises(didim.DataError, match="Nyquist frequency 500 Hz lies below didim's cutoff_hz = 600 Hz"):
         didim.identify(emps, "rigid", "didim", apM=78.0, cutoff_hz=600.0)
-    with pytest.raises(didim.DataError, match="Nyquist frequency 500 Hz"):
+    with pytest.raises(didim.DataError, match="Nyquist frequency 500 Hz lies below idim-ls's lowpass_hz = 700 Hz"):
         didim.identify(emps, "rigid", "idim-ls", lowpass_hz=700.0)
+    with pytest.raises(didim.DataError, match="cutoff 600 Hz must lie between 0 and the Nyquist frequency 500 Hz"):
+        didim.Decimation.lowpass(600.0, emps.fs)
     with pytest.raises(didim.DataError, match="Nyquist"):
         didim.Decimation.lowpass(500.0, 1000.0)
 
@@ -405,3 +412,27 @@ def test_cli_warnings_are_one_line_each(tmp_path, emps_path):
     lines = lines[:-1]
     assert lines and all(l.startswith("didim: warning: g1: ") for l in lines), p.stderr
     assert any("multiplied by gtau twice" in l for l in lines)
+
+
+def test_a_record_sampled_below_a_default_cutoff_names_the_default_and_the_way_out(tmp_path):
+    """dt = 1 s (e.g. a time column in ms read as s): the user set no cutoff, so the message must say the default's
+    name, that it is a default, what to check, and how to set it from the CLI; --set then reaches the method."""
+    import pandas as pd
+
+    n = 3000
+    t = np.arange(n) * 1.0
+    rng = np.random.default_rng(0)
+    pd.DataFrame(dict(t=t, qr=np.sin(t / 100), force=np.cos(t / 100) + 0.1 * rng.standard_normal(n),
+                      qm=np.sin(t / 100))).to_csv(tmp_path / "slow.csv", index=False)
+    (tmp_path / "pd.json").write_text('{"type": "pd", "kp": 1000, "kd": 100}')
+    args = [str(tmp_path / "slow.csv"), "--controller", str(tmp_path / "pd.json")]
+    for method, name, value in (("idim-ls", "lowpass_hz", 100), ("didim", "cutoff_hz", 5), ("oe-nm", "cutoff_hz", 60)):
+        p = _cli("identify", *args, "--method", method)
+        assert p.returncode == 2, p.stderr
+        line = p.stderr.strip().splitlines()[-1]
+        assert (f"Nyquist frequency 0.5 Hz lies below {method}'s default {name} = {value} Hz" in line
+                and "milliseconds read as seconds" in line and f"--set {name}=" in line), line
+    p = _cli("identify", *args, "--method", "idim-ls", "--set", "lowpass_hz=0.2")
+    assert "lies below" not in p.stderr, p.stderr  # the options reached the method (its result is another matter)
+    p = _cli("identify", *args, "--set", "no_such_option=1")
+    assert p.returncode == 2 and "no_such_option" in p.stderr, p.stderr

@@ -187,20 +187,31 @@ def measured_signal(name: str, norm: float, what: str) -> None:
 
 def record_long_enough(dec, n: int, dt: float, n_params: int, blocks: int, what: str) -> None:
     """The decimation filter needs more samples than its padding, and the decimated system more rows than
-    parameters; raises a DataError about the record (not about an internal array) otherwise."""
-    try:
-        m = len(dec(np.zeros(n)))
-    except DataError as e:
-        raise DataError(
-            f"the record is too short for the decimation filter of {what}: {n} samples ({n * dt:.4g} s) with "
-            f"{dec.describe()} ({e}); use a longer record, or a higher cutoff_hz / smaller factor"
-        ) from None
-    if m * blocks <= n_params:
-        raise DataError(
-            f"the record is too short for {what}: {n} samples ({n * dt:.4g} s) decimated by {dec.factor} leave "
-            f"{m * blocks} equations for {n_params} parameters; record at least "
-            f"{(n_params // blocks + 2) * dec.factor * dt:.3g} s, or raise cutoff_hz (less decimation)"
-        )
+    parameters; raises a DataError about the record (not about an internal array) saying how long it must be."""
+
+    def rows(k: int) -> int:
+        try:
+            return len(dec(np.zeros(k))) * blocks
+        except DataError:
+            return -1
+
+    m = rows(n)
+    if m > n_params:
+        return
+    need = max(n + 1, 2)
+    while rows(need) <= n_params:  # the shortest length that works (few doublings, then a bisection)
+        need *= 2
+    lo = n
+    while need - lo > 1:
+        mid = (lo + need) // 2
+        lo, need = (lo, mid) if rows(mid) > n_params else (mid, need)
+    why = ("shorter than the decimation filter's zero-phase padding" if m < 0
+           else f"decimated by {dec.factor}, it leaves {m} equations for {n_params} parameters")
+    raise DataError(
+        f"the record is too short for {what}: {n} samples ({n * dt:.4g} s), {why}; it needs at least {need} samples "
+        f"({need * dt:.4g} s) with the decimation {dec.describe()}: record longer, or raise cutoff_hz (less "
+        "decimation)"
+    )
 
 
 def decimation_matches(dec, fs: float) -> None:

@@ -24,18 +24,43 @@ ALIASES = {"oe-gn": "oe-lm"}
 def check_options(model: str, method: str, options) -> None:
     """Refuses options that ``method`` on ``model`` does not take (a DataError listing the ones it does)."""
     method = ALIASES.get(method, method)
-    targets = {
+    if method not in METHODS:
+        raise DataError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
+    funcs, fixed = _targets(model, method)
+    named = ("apM", "initial", "criterion", "offset")  # identify's own keywords
+    _checks.known_options(funcs, {k: v for k, v in options.items() if k not in named},
+                          f"method {method!r} ({model} model)", skip=fixed)
+
+
+def _targets(model: str, method: str):
+    """The functions ``identify`` hands a method's options to, and the keywords it sets itself."""
+    return {
         "idim-ls": ([idim_ls], ("offset",)),
         "didim": ([didim_rigid, didim] if model == "rigid" else [didim_flexible], ("offset", "progress", "frozen", "method")),
         "oe-nm": ([oe_nm], ("criterion", "progress")),
         "oe-lm": ([oe_gn], ("criterion", "progress")),
-    }
-    if method not in targets:
-        raise DataError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
-    funcs, fixed = targets[method]
-    named = ("apM", "initial", "criterion", "offset")  # identify's own keywords
-    _checks.known_options(funcs, {k: v for k, v in options.items() if k not in named},
-                          f"method {method!r} ({model} model)", skip=fixed)
+    }[method]
+
+
+def check_sampling(recording: Recording, model: str, method: str, options) -> None:
+    """Every low-pass cutoff the method will use (``*_hz`` keywords, given or default) must lie below the record's
+    Nyquist frequency; otherwise a DataError says which cutoff, whether it is a default, and what to check."""
+    import inspect
+
+    nyquist = recording.fs / 2
+    for func in _targets(model, ALIASES.get(method, method))[0]:
+        for name, par in inspect.signature(func).parameters.items():
+            if not name.endswith("_hz"):
+                continue
+            given = name in options
+            value = options[name] if given else par.default
+            if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= nyquist:
+                raise DataError(
+                    f"{recording.name or 'record'}: sampled at {recording.fs:g} Hz (dt = {recording.dt:g} s), its "
+                    f"Nyquist frequency {nyquist:g} Hz lies below {method}'s "
+                    f"{'' if given else 'default '}{name} = {value:g} Hz. Drive loops are logged at 1 kHz or more: "
+                    "check the time column's unit (milliseconds read as seconds?) or dt; if the rate is right, give a "
+                    f"{name} below {nyquist:g} Hz (Python: {name}=…, CLI: --set {name}=…)")
 
 
 def identify(
@@ -96,6 +121,7 @@ def identify(
     if progress is not None and not callable(progress):
         raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
     check_options(model, method, options)
+    check_sampling(recording, model, method, options)
     _checks.excitation(recording.qr, recording.u_ext, param_names(model, offset))
     if not np.any(recording.force):
         raise DataError(f"{recording.name or 'record'}: the measured force is zero everywhere: nothing to identify "
@@ -156,10 +182,11 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
     # itself explains nothing, whatever the method's own convergence test said
     if r.converged and not (r.force_error <= ABSURD_FORCE_ERROR):
         r.converged = False
-        what = (f"its closed-loop force error is {100 * r.force_error:.0f} %" if np.isfinite(r.force_error)
-                else "its model cannot be simulated in closed loop")
-        r.message = (f"the result explains nothing: {what} (more than {100 * ABSURD_FORCE_ERROR:.0f} % means worse "
-                     "than predicting no force at all); check the units, the controller and the initial values "
+        what = (f"its closed-loop force error is {100 * r.force_error:.0f} % (more than "
+                f"{100 * ABSURD_FORCE_ERROR:.0f} % means worse than predicting no force at all)"
+                if np.isfinite(r.force_error) else "its model cannot be simulated in closed loop (the loop diverges or "
+                "the parameters are not physical)")
+        r.message = (f"the result explains nothing: {what}; check the units, the controller and the initial values "
                      "(apM)") + (f"; the method said: {r.message}" if r.message else "")
     return r
 

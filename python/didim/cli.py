@@ -63,6 +63,14 @@ def cmd_identify(args) -> int:
         opts["max_iter"] = args.max_iter
     if args.tol is not None:
         opts["tol"] = args.tol
+    from .sweep import parse_values
+
+    for k, v in _keyvals(args.set, parse_values).items():
+        if k in opts or k in ("offset", "progress", "model", "method"):
+            from ._errors import DataError
+
+            raise DataError(f"--set {k}=…: {k} has its own option (see didim identify --help)")
+        opts[k] = v[0] if len(v) == 1 else v
     res = identify(rec, args.model, args.method, offset=args.offset, progress=_progress(args.quiet), **opts)
     print(res.summary())
     if args.json:
@@ -270,6 +278,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--criterion", choices=["force", "position"], default="force", help="output-error criterion (eq. (32))")
     i.add_argument("--max-iter", type=int, default=None, help="iteration limit of didim, oe-nm and oe-gn")
     i.add_argument("--tol", type=float, default=None, help="stopping tolerance of didim and oe-gn (eq. (21))")
+    i.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="another option of the method, e.g. cutoff_hz=2 or substeps=20 (the Python function's keywords)")
     i.add_argument("--json", metavar="OUT", help="write the result as JSON")
     i.add_argument("--plot", metavar="PNG", help="write measured vs simulated force and the iterations")
     i.add_argument("--quiet", action="store_true", help="no progress messages")
