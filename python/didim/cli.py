@@ -340,10 +340,12 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
     """Runs the command line; returns 0 on success, 1 when a method did not converge, 2 for a user error (bad file,
     option or parameter, a diverging simulation, nothing identifiable), 130 when interrupted (Ctrl-C), 143 on
-    SIGTERM; an interrupted command leaves no temporary file and no half-written output."""
+    SIGTERM; an interrupted command leaves no temporary file and no half-written output. (``_last``: the process
+    exits right after, so SIGINT and SIGTERM are ignored once the command has finished instead of killing the
+    interpreter's teardown.)"""
     import warnings
 
     parser = build_parser()
@@ -369,7 +371,11 @@ def main(argv: Optional[List[str]] = None) -> int:
             if previous is not None:
                 import signal
 
-                signal.signal(signal.SIGTERM, previous)
+                if _last:  # the command is over (done, or cleaned up): nothing is left to interrupt
+                    signal.signal(signal.SIGINT, signal.SIG_IGN)
+                    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+                else:
+                    signal.signal(signal.SIGTERM, previous)
 
 
 class Terminated(KeyboardInterrupt):
@@ -401,7 +407,10 @@ def _describe_error(e: BaseException) -> str:
 def entry() -> None:
     """The console script: :func:`main`, then exit with its code. After Ctrl-C or SIGTERM (outputs already cleaned up
     as the interruption unwound) the process exits at once, without waiting for core threads still computing."""
-    code = main()
+    try:
+        code = main(_last=True)
+    except KeyboardInterrupt as e:  # a signal in the instants between main's own handlers and its end
+        code = 143 if isinstance(e, Terminated) else 130
     if code in (130, 143):
         import os
 
