@@ -312,8 +312,9 @@ def test_zero_substeps(emps):
 
 
 def test_unknown_and_unused_options_are_refused_with_the_accepted_ones(emps):
-    with pytest.raises(didim.DataError, match=r"unknown option\(s\) 'cuttoff_hz' for method 'didim' \(rigid model\); it "
-                                               r"accepts cutoff_hz, decimation, tol, max_iter"):
+    with pytest.raises(didim.DataError, match=r"unknown option\(s\) 'cuttoff_hz' for method 'didim' \(rigid model\) "
+                                              r"\('cuttoff_hz': did you mean 'cutoff_hz'\?\); it accepts apM, offset, "
+                                              r"cutoff_hz, decimation, tol, max_iter"):
         didim.identify(emps, "rigid", "didim", apM=78.0, cuttoff_hz=5.0)
     with pytest.raises(didim.DataError, match="apM .* is not used by idim-ls"):
         didim.identify(emps, "rigid", "idim-ls", apM=78.0)
@@ -340,7 +341,7 @@ def test_unstable_loop_names_the_parameter_set_and_the_sample(emps):
         with pytest.raises(didim.SimulationError, match=r"DIDIM could not start: iteration 0: the simulation with χ0 "
                                                          r"failed \(closed-loop simulation diverged at sample \d+.*M=0.01"):
             didim.identify(stiff, "rigid", "didim", apM=0.01)
-        with pytest.raises(didim.SimulationError, match=r"oe-gn: the simulation with the initial parameters failed.*"
+        with pytest.raises(didim.SimulationError, match=r"oe-lm: the simulation with the initial parameters failed.*"
                                                          r"M=0.01"):
             didim.identify(stiff, "rigid", "oe-gn", initial=dict(M=0.01, Fv=0.0, Fc=0.0))
 
@@ -436,3 +437,13 @@ def test_a_record_sampled_below_a_default_cutoff_names_the_default_and_the_way_o
     assert "lies below" not in p.stderr, p.stderr  # the options reached the method (its result is another matter)
     p = _cli("identify", *args, "--set", "no_such_option=1")
     assert p.returncode == 2 and "no_such_option" in p.stderr, p.stderr
+
+
+def test_a_misspelt_option_gets_the_nearest_name(emps):
+    with pytest.raises(didim.DataError, match=r"'apm': did you mean 'apM'\?.*it accepts apM, offset, cutoff_hz"):
+        didim.identify(emps, "rigid", "didim", apm=78.0)
+    with pytest.raises(didim.DataError, match=r"'cuttoff_hz': did you mean 'cutoff_hz'\?"):
+        didim.identify(emps, "rigid", "oe-lm", cuttoff_hz=3.0)
+    with pytest.raises(didim.DataError) as e:
+        didim.identify(emps, "rigid", "idim-ls", xyz=1)
+    assert "did you mean" not in str(e.value) and "it accepts offset, lowpass_hz" in str(e.value)

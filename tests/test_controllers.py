@@ -141,6 +141,16 @@ def test_a_record_needs_its_controller_and_its_period():
     c = TransferFunction(b_r=(1.0,), a_r=(1.0,), b_y=(1.0,), a_y=(1.0,), dt=1e-3)
     with pytest.raises(didim.DataError, match="sample period of 0.001 s but the record's is 0.002 s"):
         didim.Recording(dt=2e-3, qr=qr, force=qr, qm=qr, controller=c)
+    with pytest.raises(didim.DataError, match="got str; read a controller file with didim.load_controller"):
+        didim.Recording(dt=1e-3, qr=qr, force=qr, qm=qr, controller="drive.json")
+
+
+def test_load_record_takes_the_controller_file_path(tmp_path):
+    p, cols = _write_record(tmp_path, "csv", {})
+    (tmp_path / "pd.json").write_text('{"type": "pd", "kp": 1000, "kd": 50}')
+    rec = didim.load_record(p, controller=tmp_path / "pd.json")
+    assert rec.controller == didim.PD(1000.0, 50.0)
+    assert didim.load_record(str(p), controller=str(tmp_path / "pd.json")).controller == rec.controller
 
 
 def _write_record(tmp_path, fmt, names):

@@ -35,3 +35,18 @@ def test_readme_python_blocks_run_as_written(tmp_path, monkeypatch, emps_path):
             exec(compile(code, f"README block {i + 1}", "exec"), namespace)  # noqa: S102 - the README's own code
     assert (work / "fit.png").stat().st_size > 0 and (work / "d.html").stat().st_size > 0
     assert namespace["flex"].converged and namespace["lm"].converged
+
+
+def test_the_readme_rigid_emps_numbers_are_what_the_code_gives(emps):
+    """The README's headline rigid DIDIM numbers on DATA_EMPS are re-measured here, to their printed digits."""
+    import didim
+
+    text = README.read_text(encoding="utf-8")
+    m = re.search(r"converges to M = ([\d.]+) kg, Fv = ([\d.]+) N/\(m/s\), Fc = ([\d.]+) N,\s+OF = −([\d.]+) N", text)
+    assert m, "the README's rigid DIDIM sentence changed: update this test"
+    r = didim.identify(emps, "rigid", "didim", offset=True, apM=78.0)
+    assert r.converged
+    for name, printed, sign in zip(("M", "Fv", "Fc", "OF"), m.groups(), (1, 1, 1, -1)):
+        decimals = len(printed.split(".")[1]) if "." in printed else 0
+        assert abs(r.params[name] - sign * float(printed)) <= 0.5 * 10 ** -decimals + 1e-6 * abs(r.params[name]), (
+            name, r.params[name], printed)

@@ -88,19 +88,31 @@ def one_of(name: str, value, choices: Sequence[str]) -> str:
     return value
 
 
-def known_options(funcs: Sequence[Callable], options: Mapping, where: str, skip: Iterable[str] = ()) -> None:
+def known_options(funcs: Sequence[Callable], options: Mapping, where: str, skip: Iterable[str] = (),
+                  also: Sequence[str] = ()) -> None:
     """Refuses keyword options that none of ``funcs`` takes (the functions an entry point forwards its options to),
-    listing the ones they do."""
+    listing the ones they do (and ``also``, the entry point's own keywords) and suggesting the nearest name."""
+    import difflib
+
     skip = set(skip)
-    accepted = []
+    accepted = list(also)
     for f in funcs:
         for k, p in inspect.signature(f).parameters.items():
             if p.kind == p.KEYWORD_ONLY and k not in skip and k not in accepted:
                 accepted.append(k)
     unknown = [k for k in options if k not in accepted]
     if unknown:
+        lower = {a.lower(): a for a in accepted}
+        hints = []
+        for k in unknown:
+            near = ([lower[str(k).lower()]] if str(k).lower() in lower
+                    else difflib.get_close_matches(str(k), accepted, n=1, cutoff=0.75))
+            if near:
+                hints.append(f"{k!r}: did you mean {near[0]!r}?")
         raise DataError(
-            f"unknown option(s) {', '.join(map(repr, unknown))} for {where}; it accepts {', '.join(accepted) or 'none'}"
+            f"unknown option(s) {', '.join(map(repr, unknown))} for {where}"
+            + (f" ({'; '.join(hints)})" if hints else "")
+            + f"; it accepts {', '.join(accepted) or 'none'}"
         )
 
 

@@ -28,8 +28,9 @@ def check_options(model: str, method: str, options) -> None:
         raise DataError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     funcs, fixed = _targets(model, method)
     named = ("apM", "initial", "criterion", "offset")  # identify's own keywords
+    own = {"idim-ls": ("offset",), "didim": ("apM", "offset")}.get(method, named)
     _checks.known_options(funcs, {k: v for k, v in options.items() if k not in named},
-                          f"method {method!r} ({model} model)", skip=fixed)
+                          f"method {method!r} ({model} model)", skip=fixed, also=own)
 
 
 def _targets(model: str, method: str):

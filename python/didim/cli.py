@@ -264,20 +264,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     sub = p.add_subparsers(dest="command", required=True)
 
-    i = sub.add_parser("identify", help="identify the dynamic parameters of a recording (EMPS .mat layout)")
+    i = sub.add_parser("identify", help="identify the dynamic parameters of a recording (CSV, Parquet, HDF5, EMPS MAT)")
     i.add_argument("file", help="the record: CSV, Parquet or HDF5 (columns t, qr, force, qm; optional ql, u_ext) or a "
                    "MAT file in the EMPS layout (t, qm, qg, vir, gtau, kp, kv; optional pulses_N, ql)")
     _record_options(i)
-    i.add_argument("--model", choices=["rigid", "flexible"], default="rigid")
-    i.add_argument("--method", choices=["idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn"], default="didim")
+    i.add_argument("--model", choices=["rigid", "flexible"], default="rigid", help="default: rigid")
+    i.add_argument("--method", choices=["idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn"], default="didim",
+                   help="default: didim (oe-gn is another name of oe-lm)")
     i.add_argument("--variant", choices=["auto", "paper", "friction-split"],
                    help="three-step DIDIM (flexible): the paper's procedure, the friction split (beyond the paper), "
                         "or auto (default: the split when it explains the record clearly better)")
     i.add_argument("--offset", action="store_true", help="add a constant force OF (N)")
     i.add_argument("--apm", type=float, default=None, help="a priori total mass (kg) to start from")
     i.add_argument("--criterion", choices=["force", "position"], default="force", help="output-error criterion (eq. (32))")
-    i.add_argument("--max-iter", type=int, default=None, help="iteration limit of didim, oe-nm and oe-gn")
-    i.add_argument("--tol", type=float, default=None, help="stopping tolerance of didim and oe-gn (eq. (21))")
+    i.add_argument("--max-iter", type=int, default=None, help="iteration limit of didim, oe-nm and oe-lm")
+    i.add_argument("--tol", type=float, default=None, help="stopping tolerance of didim (eq. (21)) and oe-lm")
     i.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="another option of the method, e.g. cutoff_hz=2 or substeps=20 (the Python function's keywords)")
     i.add_argument("--json", metavar="OUT", help="write the result as JSON")
@@ -289,7 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("file", help="the record (CSV, Parquet, HDF5 or EMPS MAT file)")
     _record_options(o)
     o.add_argument("--validate", metavar="FILE", help="a recording the fit does not see (default: the last 30 %% of FILE)")
-    o.add_argument("--model", choices=["rigid", "flexible"], default="rigid")
+    o.add_argument("--model", choices=["rigid", "flexible"], default="rigid", help="the base model (default: rigid)")
     o.add_argument("--apm", type=float, default=None, help="a priori total mass (kg)")
     o.add_argument("--alpha", type=float, default=0.01, help="family-wise test level (default 0.01)")
     o.add_argument("--json", metavar="OUT")

@@ -191,7 +191,7 @@ class Diagnosis:
             lines.append("nothing significant is missing from the model")
         for x in self.findings:
             ps = ", ".join(f"{k} = {v:.4g}" for k, v in x.params.items())
-            lines.append(f"- {x.effect}: {ps}; {x.evidence}")
+            lines.append(f"- {x.effect}: {ps + '; ' if ps else ''}{x.evidence}")
         for x in self.rejected:
             lines.append(f"  (not confirmed on held-out data: {x.effect}: {x.evidence})")
         for a in self.ambiguities:

@@ -178,7 +178,7 @@ def _hdf5(path: str):
     return (lambda c: data[c]), names
 
 
-def load_record(path: PathLike, *, controller: Optional[Controller] = None,
+def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike] = None,
                 columns: Optional[Mapping[str, str]] = None, force_scale: float = 1.0, dt: Optional[float] = None,
                 position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None) -> Recording:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
@@ -187,7 +187,7 @@ def load_record(path: PathLike, *, controller: Optional[Controller] = None,
     Parquet: one column per signal. HDF5: one dataset per signal (``columns`` may name ``group/dataset``). MAT: the
     EMPS layout (:func:`didim.load_mat`), whose controller comes from the file unless ``controller`` is given.
 
-    ``controller``: the controller that ran the axis; when None, ``NAME_controller.json`` (or ``.toml``) beside the
+    ``controller``: the controller that ran the axis, or the path of its file; when None, ``NAME_controller.json`` (or ``.toml``) beside the
     file is read if it exists. ``columns``: map from didim's names (t, qr, force, qm, ql, u_ext) to the file's.
     ``force_scale``: N per unit of the logged force. ``dt``: the expected period (s), checked against ``t``, or the
     period when the file has no time column. ``position_resolution``: the motor encoder's step (m), ``'auto'`` to
@@ -202,6 +202,8 @@ def load_record(path: PathLike, *, controller: Optional[Controller] = None,
                         f"{', '.join(sorted(EXTENSIONS))} (CSV, Parquet, HDF5, MATLAB in the EMPS layout)")
     if os.path.getsize(p) == 0:
         raise DataError(f"{p}: the file is empty (0 bytes)")
+    if isinstance(controller, (str, os.PathLike)):  # a controller file (JSON or TOML)
+        controller = load_controller(controller)
     if controller is None:
         side = beside(p)
         if side is not None:

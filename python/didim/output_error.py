@@ -154,10 +154,10 @@ def oe_gn(
     names, chi, offset = params_vector(model, full, offset, terms)
     free = [i for i, n in enumerate(names) if n not in frozen]
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
-    _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 1, "oe-gn")
+    _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 1, "oe-lm")
     measured = _measured(rec, criterion)
     ny = float(np.linalg.norm(dec(measured)))
-    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-gn")
+    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-lm")
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
                  tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay)
     output = "force" if criterion == "force" else "position"
@@ -173,7 +173,7 @@ def oe_gn(
     try:
         r, jac = evaluate(chi)
     except (SimulationError, DataError) as e:
-        raise SimulationError(f"oe-gn: the simulation with the initial parameters failed: {e}") from None
+        raise SimulationError(f"oe-lm: the simulation with the initial parameters failed: {e}") from None
     cost = float(r @ r)
     mu = 1e-3
     history: List[Iteration] = []
@@ -229,7 +229,7 @@ def oe_gn(
         mu = max(mu / 3.0, 1e-12)
         history.append(Iteration(k=it + 1, params=dict(zip(names, map(float, chi))), rel_std_pct={},
                                  relative_error=math.sqrt(cost) / ny, output_error=math.sqrt(cost) / ny))
-        _say(progress, f"oe-gn iteration {it + 1}: output error {100 * math.sqrt(cost) / ny:.4f} %")
+        _say(progress, f"oe-lm iteration {it + 1}: output error {100 * math.sqrt(cost) / ny:.4f} %")
         if rel_dec < tol or rel_step < 1e-9:
             converged = True
             break
@@ -243,7 +243,7 @@ def oe_gn(
         sol = dict(std=nan, covariance=None, condition_number=np.nan)
         message = (message + "; " if message else "") + f"no covariance: {e}"
     return IdentificationResult(
-        model=model, method=f"oe-gn ({'J_tau' if criterion == 'force' else 'J_q'})",
+        model=model, method=f"oe-lm ({'J_tau' if criterion == 'force' else 'J_q'})",
         params={n: float(chi[i]) for i, n in enumerate(names) if i in free},
         std=dict(zip(fnames, map(float, sol["std"]))),
         rel_std_pct={n: float(100 * s / abs(chi[names.index(n)])) if chi[names.index(n)] else math.inf

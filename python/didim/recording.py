@@ -103,7 +103,9 @@ class Recording:
                             "(on the command line: --controller FILE)")
         if not isinstance(self.controller, (EmpsCascade, PD, TransferFunction)):
             raise DataError("controller must be a didim.TransferFunction, EmpsCascade or PD, got "
-                            f"{type(self.controller).__name__}")
+                            f"{type(self.controller).__name__}"
+                            + ("; read a controller file with didim.load_controller(path)"
+                               if isinstance(self.controller, (str, bytes, os.PathLike)) else ""))
         self.controller.transfer_function(dt)  # a transfer function designed for another sample period is refused
         if self.position_resolution is not None:
             r = _number("position_resolution", self.position_resolution, "m")

@@ -181,7 +181,8 @@ class IdentificationResult:
         k = self.iterations
         head = f"{self.method} identification of the {self.model} model"
         lines = [head, "=" * len(head)]
-        lines.append(f"{'parameter':<18}{'χ0':>12}{'χ' + str(k):>14}{'σ':>12}{'%σ':>8}")
+        est = f"χ{k}" if k > 0 else "χ̂"  # the paper's χᵏ after k iterations (none: a result not iterated)
+        lines.append(f"{'parameter':<18}{'χ0':>12}{est:>14}{'σ':>12}{'%σ':>8}")
         for name, v in self.params.items():
             unit = UNITS.get(name, "")
             label = f"{name} ({unit})" if unit else name
@@ -194,7 +195,7 @@ class IdentificationResult:
             lines.append(f"{name + ' (frozen)':<18}{'':>12}{_fmt(v):>14}{'-':>12}{'-':>8}")
         if math.isfinite(self.force_error):
             lines.append(f"closed-loop force error (simulated vs measured, all samples) = {100 * self.force_error:.2f} %")
-        if math.isfinite(self.relative_error):
+        if math.isfinite(self.relative_error) and not self.method.startswith("oe-"):  # OE methods fit no regression
             lines.append(f"regression error ‖Y − Wχ‖/‖Y‖ (decimated) = {100 * self.relative_error:.2f} %")
         if math.isfinite(self.output_error):
             lines.append(f"decimated output error ‖Y − Ys‖/‖Y‖ = {100 * self.output_error:.2f} %")
@@ -303,6 +304,9 @@ def compare(results: Dict[str, IdentificationResult], reference: Optional[str] =
     lines.append(f"{'time (s)':<{w}}" + (f"{'':>12}" if truth else "") + "".join(
         f"{results[c].elapsed_s:>14.3f}" + ("" if not reference or c == reference else f"{'':>8}") for c in cols
     ))
+    if reference:
+        lines.append(f"(%e = 100 (χ − χ_{reference})/χ_{reference}, eq. (34): against the reference column {reference}, "
+                     "not against the truth)")
     return "\n".join(lines)
 
 
