@@ -447,3 +447,165 @@ def test_a_misspelt_option_gets_the_nearest_name(emps):
     with pytest.raises(didim.DataError) as e:
         didim.identify(emps, "rigid", "idim-ls", xyz=1)
     assert "did you mean" not in str(e.value) and "it accepts offset, lowpass_hz" in str(e.value)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# The second hostile campaign (590 cases; these are the ones it broke)
+# ---------------------------------------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def drive_csv(tmp_path):
+    """A small CSV record with its controller file beside it (NAME_controller.json), as users keep them."""
+    n = 4000
+    t = np.arange(n) * 1e-3
+    qr = 0.05 * (1 - np.cos(2 * np.pi * 0.5 * t))
+    rec = sc.make_recording(sc.EMPS_RIGID, "rigid", qr=qr, force_noise=0.5, seed=1)
+    with open(tmp_path / "rec.csv", "w") as f:
+        f.write("t,qr,force,qm\n")
+        for row in zip(t, rec.qr, rec.force, rec.qm):
+            f.write(",".join(f"{x:.12g}" for x in row) + "\n")
+    (tmp_path / "rec_controller.json").write_text('{"type": "emps"}\n')
+    return tmp_path / "rec.csv"
+
+
+@pytest.mark.parametrize("argv", [
+    ["identify", "{rec}", "--method", "idim-ls", "--json", "{side}"],
+    ["doctor", "{rec}", "--json", "{side}", "--quiet"],
+    ["identify", "{rec}", "--method", "idim-ls", "--json", "{d}/./rec_controller.json"],
+])
+def test_the_controller_file_beside_a_record_is_an_input_too(drive_csv, argv):
+    side = drive_csv.parent / "rec_controller.json"
+    before = side.read_bytes()
+    p = _cli(*[a.format(rec=drive_csv, side=side, d=drive_csv.parent) for a in argv])
+    assert p.returncode == 2 and "is the input" in p.stderr and "rec_controller.json" in p.stderr, p.stderr
+    assert side.read_bytes() == before
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--set", "cutoff_hz=1e-5"], "needs at least 120000001 samples"),      # was a hang (searching GB arrays)
+    (["--set", "cutoff_hz=1e-6"], "needs at least 1200000001 samples"),     # was a MemoryError traceback
+    (["--method", "idim-ls", "--apm", "80"], "apM .* is not used by idim-ls"),  # was silently ignored
+    (["--criterion", "position"], "applies to the output-error methods"),      # was silently ignored
+    (["--json", ""], "an output path is empty"),                               # was exit 0, nothing written
+    (["--json", "{emps}/o.json"], "is a file, not a folder"),                  # was "the folder ... does not exist"
+])
+def test_cli_options_that_used_to_hang_or_be_ignored(emps_path, argv, match):
+    import re
+
+    p = _cli("identify", str(emps_path), "--quiet", *[a.format(emps=emps_path) for a in argv])
+    assert p.returncode == 2 and re.search(match, p.stderr) and "Traceback" not in p.stderr, p.stderr
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--grid", "apM=-5"], "apM .*must be a finite number > 0"),
+    (["--grid", "apM=nan"], "apM .*must be a finite number"),
+    (["--grid", "apM=abc"], "apM .*must be a real number"),
+    (["--set", "apM=-5", "--grid", "tol=1e-3"], "apM .*> 0"),
+    (["--draws", "2", "--draw", "apM=5:1:log"], "low 5 is above high 1"),
+    (["--grid", "apM=80", "--agree-rtol", "nan"], "--agree-rtol must be a finite fraction"),
+    (["--grid", "apM=80", "--workers", "-1"], "--workers must be at least 1"),
+    (["--grid", "apM=80", "--step", "mode"], "--step mode is a step of the three-step DIDIM"),
+])
+def test_sweep_values_that_would_fail_every_run_are_user_errors(emps_path, argv, match):
+    import re
+
+    p = _cli("sweep", str(emps_path), "--model", "rigid", "--quiet", *argv)
+    assert p.returncode == 2 and re.search(match, p.stderr) and "Traceback" not in p.stderr, p.stderr
+
+
+def test_a_sweep_where_every_run_fails_exits_1_with_the_reason(drive_csv, tmp_path):
+    os.remove(tmp_path / "rec_controller.json")  # every run fails to load the record: no controller
+    p = _cli("sweep", str(drive_csv), "--model", "rigid", "--grid", "apM=80,90", "--workers", "1", "--quiet")
+    assert p.returncode == 1 and "none of the 2 runs converged" in p.stderr, (p.stdout, p.stderr)
+    assert "failed (2 runs): DataError" in p.stdout and "no controller" in p.stdout, p.stdout
+
+
+def test_simulate_reports_a_result_that_does_not_describe_the_record(tmp_path, emps_path):
+    import json
+
+    (tmp_path / "tiny.json").write_text(json.dumps({"model": "rigid", "method": "by hand",
+                                                    "params": {"M": 1e-3, "Fv": 0.0, "Fc": 0.0}}))
+    p = _cli("simulate", str(emps_path), str(tmp_path / "tiny.json"))
+    assert p.returncode == 1 and "does not describe" in p.stderr and "Traceback" not in p.stderr, p.stderr
+
+
+def _edited(tmp_path, emps, edit):
+    import json
+
+    r = didim.identify(emps, "rigid", "idim-ls", offset=True)
+    d = r.to_dict()
+    edit(d)
+    p = tmp_path / "edited.json"
+    p.write_text(json.dumps(d))
+    return p
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: d["structure"].update(delay="x"), "delay must be a whole number"),
+    (lambda d: d["structure"].update(coulomb_eps="x"), "coulomb_eps must be a finite speed"),
+    (lambda d: d["structure"].update(backlash_gap="x"), "backlash_gap must be a real number"),
+    (lambda d: d.update(history=[1, 2]), r"'history\[0\]' must be an object"),
+    (lambda d: d.update(steps=[1]), "'steps' must be an object"),
+    (lambda d: d.update(options="abc"), "'options' must be an object"),
+    (lambda d: d.update(notes=5), "'notes' must be a list"),
+    (lambda d: d.update(iterations="many"), "'iterations' must be a whole number"),
+    (lambda d: d["params"].update(M=True), "M must be a number, got True"),
+    (lambda d: d["params"].update(Zeta=1.0), "Zeta are not parameters of its model"),
+    (lambda d: d.update(converged="no"), "'converged' must be a bool"),
+])
+def test_an_edited_result_file_is_a_data_error_naming_the_field(tmp_path, emps, edit, match):
+    p = _edited(tmp_path, emps, edit)
+    with pytest.raises(didim.DataError, match=match):
+        didim.load_result(p)
+
+
+def test_deeply_nested_json_is_a_data_error(tmp_path):
+    deep = '{"a": ' * 100_000 + "1" + "}" * 100_000
+    (tmp_path / "c.json").write_text(deep)
+    (tmp_path / "r.json").write_text('{"model": "rigid", "params": {"M": 1}, "steps": ' + deep + "}")
+    with pytest.raises(didim.DataError, match="nested too deeply"):
+        didim.load_controller(tmp_path / "c.json")
+    with pytest.raises(didim.DataError, match="nested too deeply"):
+        didim.load_result(tmp_path / "r.json")
+
+
+def test_api_arguments_of_the_wrong_type_are_data_errors(emps, tmp_path):
+    rec = emps
+    p = dict(M=95.0, Fv=200.0, Fc=20.0)
+    short = didim.Recording(rec.dt, rec.qr[:100], rec.force[:100], rec.qm[:100], controller=rec.controller)
+    calls = [
+        (lambda: didim.load_mat("DATA_EMPS.mat\x00x"), "NUL character"),
+        (lambda: didim.Recording(1e-300, rec.qr, rec.force, rec.qm, controller=rec.controller), "time column's unit"),
+        (lambda: didim.identify(rec, "rigid", "didim", decimation="x"), "decimation must be a didim.Decimation"),
+        (lambda: didim.simulate(rec, p, terms=["x"]), "terms must be a list of didim.Term"),
+        (lambda: didim.simulate(rec, None), "parameters must be a mapping"),
+        (lambda: didim.simulate_batch(None, [p]), "recording must be a didim.Recording"),
+        (lambda: didim.simulate_batch(rec, 5), "takes a sequence of parameter sets"),
+        (lambda: didim.simulate_batch(rec, "abc"), "takes a sequence of parameter sets"),
+        (lambda: didim.simulate_batch(rec, [p], states="yes"), "states must be True or False"),
+        (lambda: didim.doctor(None), "recording must be a didim.Recording"),
+        (lambda: didim.doctor(short), "too short for the doctor"),
+        (lambda: didim.doctor(rec, progress="x"), "progress must be a function"),
+        (lambda: didim.doctor(rec, max_findings=-1), "max_findings must be between 0 and 20"),
+        (lambda: didim.compare({"a": 5}, reference="a"), "not a didim result"),
+        (lambda: didim.Model(terms=[5]), "a model term is a didim.Term"),
+        (lambda: didim.TransferFunction.cascade(kp=1, kv=1, dt=1e-3, kff=-1), "kff must be a finite number >= 0"),
+    ]
+    for call, match in calls:
+        with pytest.raises(didim.DataError, match=match):
+            call()
+    # numpy scalars are numbers
+    assert didim.TransferFunction.cascade(kp=1, kv=1, dt=1e-3, kff=np.int64(1)).gain == 1.0
+
+
+def test_csv_layout_mistakes_are_named(tmp_path):
+    (tmp_path / "head.csv").write_text("t,qr,force,qm\n")
+    with pytest.raises(didim.DataError, match="no row of samples follows"):
+        didim.load_record(tmp_path / "head.csv", controller=didim.EmpsCascade())
+    (tmp_path / "dup.csv").write_text("t,qr,force,qm,force\n" + "".join(f"{k * 1e-3},0,1,0,2\n" for k in range(50)))
+    with pytest.raises(didim.DataError, match="force appear more than once"):
+        didim.load_record(tmp_path / "dup.csv", controller=didim.EmpsCascade())
+    (tmp_path / "ok.csv").write_text("t,qr,force,qm\n" + "".join(f"{k * 1e-3},0,1,0\n" for k in range(50)))
+    with pytest.raises(didim.DataError, match="columns must map didim's names"):
+        didim.load_record(tmp_path / "ok.csv", controller=didim.EmpsCascade(), columns="force=x")

@@ -197,7 +197,8 @@ def measured_signal(name: str, norm: float, what: str) -> None:
         )
 
 
-def record_long_enough(dec, n: int, dt: float, n_params: int, blocks: int, what: str) -> None:
+def record_long_enough(dec, n: int, dt: float, n_params: int, blocks: int, what: str,
+                       of: str = "parameters") -> None:
     """The decimation filter needs more samples than its padding, and the decimated system more rows than
     parameters; raises a DataError about the record (not about an internal array) saying how long it must be."""
 
@@ -210,15 +211,17 @@ def record_long_enough(dec, n: int, dt: float, n_params: int, blocks: int, what:
     m = rows(n)
     if m > n_params:
         return
-    need = max(n + 1, 2)
-    while rows(need) <= n_params:  # the shortest length that works (few doublings, then a bisection)
-        need *= 2
-    lo = n
-    while need - lo > 1:
-        mid = (lo + need) // 2
-        lo, need = (lo, mid) if rows(mid) > n_params else (mid, need)
+    # the decimated rows alone need factor·(n_params // blocks) + 1 samples; the filter's padding may need more
+    need = max(n + 1, 2, dec.factor * (n_params // blocks) + 1)
+    if need <= 16 * n + 4096:  # search the shortest length that works (few doublings, then a bisection) on
+        lo = n                 # small arrays only: a huge decimation factor is answered by the bound above
+        while rows(need) <= n_params and need <= 64 * n + 16384:
+            lo, need = need, need * 2
+        while need - lo > 1:
+            mid = (lo + need) // 2
+            lo, need = (lo, mid) if rows(mid) > n_params else (mid, need)
     why = ("shorter than the decimation filter's zero-phase padding" if m < 0
-           else f"decimated by {dec.factor}, it leaves {m} equations for {n_params} parameters")
+           else f"decimated by {dec.factor}, it leaves {m} equations for {n_params} {of}")
     raise DataError(
         f"the record is too short for {what}: {n} samples ({n * dt:.4g} s), {why}; it needs at least {need} samples "
         f"({need * dt:.4g} s) with the decimation {dec.describe()}: record longer, or raise cutoff_hz (less "
@@ -228,6 +231,11 @@ def record_long_enough(dec, n: int, dt: float, n_params: int, blocks: int, what:
 
 def decimation_matches(dec, fs: float) -> None:
     """A Butterworth decimation designed for another sampling frequency than the record's is refused."""
+    from .signal import Decimation
+
+    if not isinstance(dec, Decimation):
+        raise DataError(f"decimation must be a didim.Decimation (e.g. Decimation.lowpass(5.0, recording.fs)), got "
+                        f"{type(dec).__name__}")
     if dec.fs_hz is not None and abs(dec.fs_hz - fs) > 1e-9 * fs:
         raise DataError(
             f"the decimation was designed for a sampling frequency of {dec.fs_hz:g} Hz, but the record's sample "

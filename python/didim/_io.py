@@ -35,6 +35,8 @@ def check_writable(path) -> None:
     if os.path.isdir(target):
         raise OSError(errno.EISDIR, f"cannot write {os.fspath(path)}: it is a folder")
     if not os.path.isdir(folder):
+        if os.path.exists(folder):
+            raise OSError(errno.ENOTDIR, f"cannot write {os.fspath(path)}: {folder} is a file, not a folder")
         raise OSError(errno.ENOENT, f"cannot write {os.fspath(path)}: the folder {folder} does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OSError(errno.EACCES, f"cannot write {os.fspath(path)}: no permission to write in {folder}")
@@ -84,6 +86,10 @@ def check_input(path, what: str = "input file") -> str:
     if not isinstance(path, (str, os.PathLike)):
         raise DataError(f"the {what} must be a path (str or os.PathLike), got {type(path).__name__}")
     shown = os.fspath(path)
+    if "\0" in shown:
+        raise DataError(f"the {what} path {shown!r} holds a NUL character: no file can have that name")
+    if not shown:
+        raise DataError(f"the {what} path is empty")
     try:
         mode = os.stat(shown).st_mode
     except FileNotFoundError:
@@ -112,8 +118,16 @@ def check_outputs(inputs, outputs) -> None:
         except OSError:
             return os.path.realpath(a) == os.path.realpath(b)
 
+    if any(x is not None and os.fspath(x) == "" for x in outputs):
+        raise DataError("an output path is empty: give a file name (or leave the option out)")
     ins = [os.fspath(x) for x in inputs if x]
     outs = [os.fspath(x) for x in outputs if x]
+    from .loaders import beside
+
+    for src in list(ins):  # a record's controller file beside it (NAME_controller.json) is an input too
+        side = beside(src)
+        if side is not None:
+            ins.append(side)
     for i, out in enumerate(outs):
         for src in ins:
             if same(src, out):
@@ -129,7 +143,7 @@ def check_outputs(inputs, outputs) -> None:
             try:
                 check_writable(out)
             except OSError as e:
-                raise DataError(str(e)) from None
+                raise DataError(e.strerror or str(e)) from None
 
 
 @contextmanager

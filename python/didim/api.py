@@ -189,11 +189,18 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
                 "the parameters are not physical)")
         r.message = (f"the result explains nothing: {what}; check the units, the controller and the initial values "
                      "(apM)") + (f"; the method said: {r.message}" if r.message else "")
+    elif r.converged and r.force_error > POOR_FORCE_ERROR:
+        why = (f"the model explains little of the force: its closed-loop force error is {100 * r.force_error:.0f} %; "
+               "check that the controller is the one that ran the axis, the force's units and the record")
+        r.notes.append(why)
+        warnings.warn(f"{recording.name or 'record'}: {why}", DidimWarning, stacklevel=3)
     return r
 
 
 #: A closed-loop force error above this (relative) is worse than predicting zero force: no fit, whatever converged.
 ABSURD_FORCE_ERROR = 1.0
+#: Above this a converged fit is kept but flagged (a note and a DidimWarning): the model explains little of the force.
+POOR_FORCE_ERROR = 0.5
 
 
 __all__ = ["identify", "METHODS"]

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from typing import List, Optional
 
@@ -49,10 +50,10 @@ def cmd_identify(args) -> int:
         _check_figure_format(args.plot)
     rec = _load(args, args.file)
     opts = {}
-    if args.apm is not None and args.method != "idim-ls":
-        opts["apM"] = args.apm
-    if args.method in ("oe-nm", "oe-lm", "oe-gn"):
-        opts["criterion"] = args.criterion
+    if args.apm is not None:
+        opts["apM"] = args.apm  # identify refuses it for idim-ls, which needs no initial values
+    if args.method in ("oe-nm", "oe-lm", "oe-gn") or args.criterion != "force":
+        opts["criterion"] = args.criterion  # identify refuses a position criterion for the other methods
     if args.variant is not None:
         if not (args.method == "didim" and args.model == "flexible"):
             from ._errors import DataError
@@ -112,6 +113,13 @@ def cmd_simulate(args) -> int:
     if args.plot:
         save_figure(sim.plot(rec), args.plot, dpi=110)
         print(f"wrote {args.plot}")
+    from .api import ABSURD_FORCE_ERROR
+
+    if not err <= ABSURD_FORCE_ERROR:
+        print(f"didim: no fit: the result does not describe {args.file}: its simulated force misses the measured "
+              f"one by {100 * err:.0f} % (more than {100 * ABSURD_FORCE_ERROR:.0f} % is worse than predicting no force); "
+              "check that the record, its controller and the result belong to the same axis and units", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -239,6 +247,12 @@ def cmd_sweep(args) -> int:
     from .sweep import check_points
 
     check_points(points)
+    if not (math.isfinite(args.agree_rtol) and args.agree_rtol > 0):
+        raise DataError(f"--agree-rtol must be a finite fraction > 0, got {args.agree_rtol}")
+    if args.workers is not None and args.workers < 1:
+        raise DataError(f"--workers must be at least 1, got {args.workers}")
+    if args.step is not None and fixed.get("model") != "flexible":
+        raise DataError(f"--step {args.step} is a step of the three-step DIDIM: use it with --model flexible")
     executor = None
     if args.dask:
         try:
@@ -256,6 +270,9 @@ def cmd_sweep(args) -> int:
     if args.plot:
         save_figure(res.plot(args.step), args.plot, dpi=110)
         print(f"wrote {args.plot}")
+    if not any(res.converged(args.step)):
+        print(f"didim: not converged: none of the {len(res.results)} runs converged (reasons above)", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -18,6 +18,7 @@ from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from . import _checks
 from ._errors import DataError
 
 
@@ -261,8 +262,7 @@ class TransferFunction:
         dt = _positive("dt", dt)
         kp, kv = _positive("kp", kp), _positive("kv", kv)
         for name, value in (("kff", kff), ("kaff", kaff)):
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise DataError(f"controller {name} must be a finite number >= 0, got {value!r}")
+            _checks.real(f"controller {name}", value, lo=0.0, lo_open=False)
         d = np.array([1.0, -1.0]) / dt
         one = np.array([1.0])
         if ti is None:
@@ -403,6 +403,8 @@ def load_controller(path: Union[str, "os.PathLike[str]"]) -> Controller:
             spec = tomllib.loads(raw.decode("utf-8"))
         else:
             spec = json.loads(raw.decode("utf-8"))
+    except RecursionError:
+        raise DataError(f"{p}: not a controller file (nested too deeply)") from None
     except (UnicodeDecodeError, ValueError) as e:
         kind = "TOML" if ext == ".toml" else "JSON"
         raise DataError(f"{p}: not a readable {kind} controller file ({e}); it should hold an object like "

@@ -27,7 +27,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from . import _core
+from . import _checks, _core
 from ._errors import DataError, DidimError, SimulationError
 from ._io import jsonable as _clean
 from .identification import didim as didim_fit
@@ -35,7 +35,7 @@ from .identification import fit_flexible_mode, flexible_from_mode, a_priori_mass
 from .recording import Recording
 from .result import IdentificationResult
 from .signal import Decimation, diffcent
-from .simulation import SimResult, Term, coulomb_sign, simulate
+from .simulation import SimResult, Term, coulomb_sign, param_names, simulate
 from .stats import diebold_mariano, holm, orthogonalize, wald_added
 
 #: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
@@ -590,6 +590,11 @@ def _unnamed(data: _Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: 
     )
 
 
+#: Decimated training samples the doctor needs: its base fit, a candidate's few parameters and the AR-prewhitened
+#: residual tests (up to AR(8)) have no power on fewer.
+MIN_ROWS = 40
+
+
 def doctor(
     recording: Recording,
     model: str = "rigid",
@@ -611,16 +616,25 @@ def doctor(
     from .recording import Recording
 
     for what, rec in (("recording", recording), ("validate", validate)):
-        if rec is not None and not isinstance(rec, Recording):
+        if (rec is not None or what == "recording") and not isinstance(rec, Recording):
             raise DataError(f"{what} must be a didim.Recording (read a file with didim.load_record), got "
                             f"{type(rec).__name__}")
-    if not (0 < alpha < 0.5):
-        raise DataError(f"alpha must be in (0, 0.5), got {alpha}")
-    if validate is None and not (0.1 <= holdout <= 0.5):
+    alpha = _checks.real("alpha", alpha, lo=0.0, hi=0.5, hint=" (family-wise test level)")
+    if validate is None and not (0.1 <= _checks.real("holdout", holdout) <= 0.5):
         raise DataError(f"holdout must be between 0.1 and 0.5 of the record, got {holdout}")
+    max_findings = _checks.whole("max_findings", max_findings, lo=0, hi=20)
+    _checks.options(cutoff_hz=cutoff_hz)
+    if apM is not None:
+        apM = _checks.real("the a priori mass apM", apM, "kg", lo=0.0)
+    if progress is not None and not callable(progress):
+        raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
+    _checks.excitation(recording.qr, recording.u_ext, param_names(model, False))
     t0 = time.perf_counter()
     say = progress or (lambda s: None)
     dec = Decimation.lowpass(cutoff_hz, recording.fs)
+    n_fit = recording.n if validate is not None else int(recording.n * (1 - holdout))
+    _checks.record_long_enough(dec, n_fit, recording.dt, MIN_ROWS, 1, "the doctor",
+                               of="(the minimum of its fits and tests; the validation share is held out)")
     data = _Data(recording, validate, dec, holdout)
 
     # 1. base fit

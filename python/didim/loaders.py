@@ -10,7 +10,9 @@ not given, a controller file beside the record (``NAME_controller.json`` or ``.t
 from __future__ import annotations
 
 import math
+import numbers
 import os
+import warnings
 from typing import Callable, Dict, List, Mapping, Optional, Union
 
 import numpy as np
@@ -68,13 +70,18 @@ def detect_resolution(qm: np.ndarray) -> Optional[float]:
 def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[str], where: str, *,
                   controller: Optional[Controller], columns: Optional[Mapping[str, str]], force_scale: float,
                   dt: Optional[float], position_resolution: Union[None, float, str], name: str) -> Recording:
+    if columns is not None and (not isinstance(columns, Mapping)
+                                or not all(isinstance(k, str) and isinstance(v, str) for k, v in columns.items())):
+        raise DataError(f"columns must map didim's names to the file's, e.g. {{'force': 'F_motor'}}, got {columns!r}"
+                        " (on the command line: --columns force=F_motor)")
     columns = dict(columns or {})
     unknown = sorted(set(columns) - set(REQUIRED) - set(OPTIONAL))
     if unknown:
         raise DataError(f"{where}: unknown key(s) {', '.join(unknown)} in the column map; the keys are "
                         f"{', '.join(REQUIRED + OPTIONAL)}")
     scale = force_scale
-    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
+    if (isinstance(scale, (bool, np.bool_)) or not isinstance(scale, (numbers.Real, np.floating, np.integer))
+            or not math.isfinite(scale) or scale == 0):
         raise DataError(f"force_scale must be a finite non-zero number (N per unit of the logged force), got {scale!r}")
     signals: Dict[str, Optional[np.ndarray]] = {}
     for key in REQUIRED + OPTIONAL:
@@ -99,7 +106,8 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
     assert qm is not None
     if position_resolution == "auto":
         res = detect_resolution(qm) if np.all(np.isfinite(qm)) else None
-    elif position_resolution is None or isinstance(position_resolution, (int, float)):
+    elif position_resolution is None or (isinstance(position_resolution, (numbers.Real, np.floating, np.integer))
+                                         and not isinstance(position_resolution, (bool, np.bool_))):
         res = position_resolution
     else:
         raise DataError(f"position_resolution must be a length in m, None or 'auto', got {position_resolution!r}")
@@ -139,12 +147,20 @@ def _csv(path: str):
         delim = None  # whitespace-separated
     names = [c.strip().strip('"') for c in (next(csv.reader([head], delimiter=delim)) if delim else head.split())]
     try:
-        data = np.loadtxt(path, delimiter=delim, skiprows=1, ndmin=2, encoding="utf-8-sig")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": said below, as a DataError
+            data = np.loadtxt(path, delimiter=delim, skiprows=1, ndmin=2, encoding="utf-8-sig")
     except ValueError as e:
         raise DataError(f"{path}: not a numeric CSV table under its header ({e}); every row must hold "
                         f"{len(names)} numbers") from None
+    if data.size == 0:
+        raise DataError(f"{path}: the header names its columns ({', '.join(names)}) but no row of samples follows")
     if data.shape[1] != len(names):
         raise DataError(f"{path}: the header names {len(names)} columns but the rows hold {data.shape[1]}")
+    twice = sorted({c for c in names if names.count(c) > 1})
+    if twice:
+        raise DataError(f"{path}: column(s) {', '.join(twice)} appear more than once in the header: which one is meant "
+                        "is ambiguous; rename one")
     return (lambda c: data[:, names.index(c)]), names
 
 

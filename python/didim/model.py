@@ -14,6 +14,9 @@ import os
 from dataclasses import dataclass, field
 from typing import Any, Dict, Optional, Tuple
 
+import numpy as np
+
+from . import _checks
 from ._errors import DataError
 from .simulation import DEFAULT_COULOMB_EPS, MODELS, Term, param_names
 
@@ -42,10 +45,18 @@ class Model:
     def __post_init__(self):
         if self.kind not in MODELS:
             raise DataError(f"unknown model kind {self.kind!r}: use one of {', '.join(MODELS)}")
+        if not isinstance(self.kind, str) or not isinstance(self.terms, (tuple, list)):
+            raise DataError(f"a model needs a kind (text) and a list of terms, got {self.kind!r}, {self.terms!r}")
+        for t in self.terms:
+            if not isinstance(t, (Term, tuple, list)) or (not isinstance(t, Term) and len(t) not in (2, 3)):
+                raise DataError(f"a model term is a didim.Term or a (name, kind, hyper) triple, got {t!r}")
         object.__setattr__(self, "terms", tuple(t if isinstance(t, Term) else Term(*t) for t in self.terms))
-        if not (isinstance(self.delay, int) and self.delay >= 0):
+        if self.backlash_gap is not None:
+            _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0)
+        if isinstance(self.delay, (bool, np.bool_)) or not (isinstance(self.delay, (int, np.integer)) and self.delay >= 0):
             raise DataError(f"delay must be a whole number of samples >= 0, got {self.delay!r}")
-        if not (isinstance(self.coulomb_eps, (int, float)) and math.isfinite(self.coulomb_eps) and self.coulomb_eps >= 0):
+        if (isinstance(self.coulomb_eps, (bool, np.bool_)) or not isinstance(self.coulomb_eps, (int, float, np.number))
+                or not math.isfinite(self.coulomb_eps) or self.coulomb_eps < 0):
             raise DataError(f"coulomb_eps must be a finite speed >= 0 m/s, got {self.coulomb_eps!r}")
 
     def param_names(self) -> list:
@@ -76,13 +87,15 @@ class Model:
         unknown = set(d) - {"kind", "offset", "terms", "delay", "backlash_gap", "coulomb_eps"}
         if unknown:
             raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
-        try:
-            terms = tuple(Term(str(n), str(k), float(h)) for n, k, h in d.get("terms", []))
-        except (TypeError, ValueError) as e:
-            raise DataError(f"model terms must be [name, kind, hyper] triples: {e}") from None
-        return cls(kind=d.get("kind", "rigid"), offset=bool(d.get("offset", False)), terms=terms,
-                   delay=int(d.get("delay", 0)), backlash_gap=d.get("backlash_gap"),
-                   coulomb_eps=float(d.get("coulomb_eps", DEFAULT_COULOMB_EPS)))
+        raw = d.get("terms") or []
+        if not isinstance(raw, list) or not all(isinstance(t, list) and len(t) == 3 for t in raw):
+            raise DataError("model terms must be a list of [name, kind, hyper] triples")
+        terms = tuple(Term(n, k, h) for n, k, h in raw)
+        offset = d.get("offset", False)
+        if not isinstance(offset, bool):
+            raise DataError(f"model field offset must be true or false, got {offset!r}")
+        return cls(kind=d.get("kind", "rigid"), offset=offset, terms=terms, delay=d.get("delay", 0),
+                   backlash_gap=d.get("backlash_gap"), coulomb_eps=d.get("coulomb_eps", DEFAULT_COULOMB_EPS))
 
     @classmethod
     def of_result(cls, kind: str, params: Dict[str, float], options: Dict[str, Any]) -> Optional["Model"]:
@@ -114,10 +127,17 @@ def load_result(path) -> "IdentificationResult":  # noqa: F821
         d = json.loads(text)
     except json.JSONDecodeError as e:
         raise DataError(f"{os.fspath(path)}: not a JSON result ({e})") from None
+    except RecursionError:
+        raise DataError(f"{os.fspath(path)}: not a didim result (its JSON is nested too deeply)") from None
     if not isinstance(d, dict) or "params" not in d or "model" not in d:
         raise DataError(f"{os.fspath(path)}: not a didim result (needs 'model' and 'params'; save one with "
                         "result.save('r.json') or didim identify --json)")
-    return IdentificationResult.from_dict(d)
+    try:
+        return IdentificationResult.from_dict(d)
+    except DataError as e:
+        raise DataError(f"{os.fspath(path)}: {e}") from None
+    except RecursionError:
+        raise DataError(f"{os.fspath(path)}: not a didim result (its steps are nested too deeply)") from None
 
 
 __all__ = ["Model", "load_result", "UNITS"]

@@ -51,6 +51,10 @@ def _signal(name: str, x, n: Optional[int] = None) -> np.ndarray:
     return a
 
 
+#: Sample periods didim accepts (s): a drive logs between 10 MHz and 0.1 Hz; outside, the time unit is wrong.
+DT_RANGE = (1e-7, 10.0)
+
+
 @dataclass(frozen=True)
 class Recording:
     """A record of a position-controlled axis, validated on construction. SI units on the load side.
@@ -87,8 +91,11 @@ class Recording:
         n = qr.shape[0]
         if n < 3:
             raise DataError(f"the record has {n} samples; at least 3 are needed")
-        if not 1.0 / dt < math.inf or not n * dt < math.inf:
-            raise DataError(f"sample period dt = {dt!r} s is not usable (its inverse or the record length overflows)")
+        if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
+            raise DataError(
+                f"sample period dt = {dt:g} s is outside {DT_RANGE[0]:g}-{DT_RANGE[1]:g} s (drives log between "
+                f"{1 / DT_RANGE[1]:g} Hz and {1e-6 / DT_RANGE[0]:g} MHz): check the time column's unit (ns, us or ms "
+                "read as seconds?) or the dt you gave")
         object.__setattr__(self, "qr", qr)
         object.__setattr__(self, "force", _signal("force", self.force, n))
         object.__setattr__(self, "qm", _signal("qm (motor position)", self.qm, n))

@@ -6,7 +6,7 @@ import json
 import math
 import os
 from dataclasses import asdict, dataclass, field
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Mapping, Optional
 
 import numpy as np
 
@@ -131,32 +131,73 @@ class IdentificationResult:
             if x is None:
                 return {}
             if not isinstance(x, dict):
-                raise DataError(f"result field {what!r} must be an object name -> value")
-            try:
-                return {str(k): (float(v) if v is not None else float("nan")) for k, v in x.items()}
-            except (TypeError, ValueError) as e:
-                raise DataError(f"result field {what!r}: {e}") from None
+                raise DataError(f"result field {what!r} must be an object name -> value, got {type(x).__name__}")
+            out = {}
+            for k, v in x.items():
+                if v is None:
+                    out[str(k)] = float("nan")
+                elif isinstance(v, bool) or not isinstance(v, (int, float)):
+                    raise DataError(f"result field {what!r}: {k} must be a number, got {v!r}")
+                else:
+                    out[str(k)] = float(v)
+            return out
 
-        def num(x, default=float("nan")):
-            try:
-                return float(x) if x is not None else default
-            except (TypeError, ValueError):
+        def num(x, what, default=float("nan")):
+            if x is None:
                 return default
+            if isinstance(x, bool) or not isinstance(x, (int, float)):
+                raise DataError(f"result field {what!r} must be a number, got {x!r}")
+            return float(x)
 
-        history = [Iteration(k=int(h.get("k", i + 1)), params=floats(h.get("params"), "history"),
-                             rel_std_pct=floats(h.get("rel_std_pct"), "history"),
-                             relative_error=num(h.get("relative_error")), output_error=num(h.get("output_error")))
-                   for i, h in enumerate(d.get("history") or [])]
+        def count(x, what):
+            if x is None:
+                return 0
+            if isinstance(x, bool) or not isinstance(x, int) or x < 0:
+                raise DataError(f"result field {what!r} must be a whole number >= 0, got {x!r}")
+            return x
+
+        def typed(x, kind, what, default):
+            if x is None:
+                return default
+            if not isinstance(x, kind):
+                raise DataError(f"result field {what!r} must be {'an object' if kind is dict else 'a ' + kind.__name__}"
+                                f", got {type(x).__name__}")
+            return x
+
+        history = []
+        for i, h in enumerate(typed(d.get("history"), list, "history", [])):
+            h = typed(h, dict, f"history[{i}]", {})
+            history.append(Iteration(k=count(h.get("k", i + 1), f"history[{i}].k"),
+                                     params=floats(h.get("params"), f"history[{i}].params"),
+                                     rel_std_pct=floats(h.get("rel_std_pct"), f"history[{i}].rel_std_pct"),
+                                     relative_error=num(h.get("relative_error"), f"history[{i}].relative_error"),
+                                     output_error=num(h.get("output_error"), f"history[{i}].output_error")))
         structure = Model.from_dict(d["structure"]) if d.get("structure") else None
-        r = cls(model=str(d["model"]), method=str(d.get("method", "")), params=floats(d["params"], "params"),
+        params = floats(d["params"], "params")
+        frozen = floats(d.get("frozen"), "frozen")
+        model = typed(d["model"], str, "model", "")
+        if structure is not None:
+            known = structure.param_names()
+            unknown = [k for k in list(params) + list(frozen) if k not in known]
+            if unknown:
+                raise DataError(f"result parameter(s) {', '.join(unknown)} are not parameters of its model "
+                                f"({', '.join(known)})")
+        notes = typed(d.get("notes"), list, "notes", [])
+        if not all(isinstance(n, str) for n in notes):
+            raise DataError("result field 'notes' must be a list of texts")
+        steps = typed(d.get("steps"), dict, "steps", {})
+        r = cls(model=model, method=typed(d.get("method"), str, "method", ""), params=params,
                 std=floats(d.get("std"), "std"), rel_std_pct=floats(d.get("rel_std_pct"), "rel_std_pct"),
-                relative_error=num(d.get("relative_error")), iterations=int(d.get("iterations") or 0),
-                simulations=int(d.get("simulations") or 0), elapsed_s=num(d.get("elapsed_s"), 0.0),
-                converged=bool(d.get("converged", True)), message=str(d.get("message") or ""),
-                initial=floats(d.get("initial"), "initial"), output_error=num(d.get("output_error")),
-                history=history, frozen=floats(d.get("frozen"), "frozen"), options=dict(d.get("options") or {}),
-                steps={k: cls.from_dict(v) for k, v in (d.get("steps") or {}).items()},
-                notes=list(d.get("notes") or []), structure=structure, force_error=num(d.get("force_error")))
+                relative_error=num(d.get("relative_error"), "relative_error"),
+                iterations=count(d.get("iterations"), "iterations"),
+                simulations=count(d.get("simulations"), "simulations"),
+                elapsed_s=num(d.get("elapsed_s"), "elapsed_s", 0.0),
+                converged=typed(d.get("converged"), bool, "converged", True),
+                message=typed(d.get("message"), str, "message", ""),
+                initial=floats(d.get("initial"), "initial"), output_error=num(d.get("output_error"), "output_error"),
+                history=history, frozen=frozen, options=dict(typed(d.get("options"), dict, "options", {})),
+                steps={str(k): cls.from_dict(typed(v, dict, f"steps[{k!r}]", {})) for k, v in steps.items()},
+                notes=notes, structure=structure, force_error=num(d.get("force_error"), "force_error"))
         return r
 
     def to_json(self, **kw) -> str:
@@ -250,6 +291,17 @@ def _pct(x: float) -> str:
 def compare(results: Dict[str, IdentificationResult], reference: Optional[str] = None, truth: Optional[Dict[str, float]] = None) -> str:
     """Side-by-side table of several results (like Tables 3 to 6): parameters, the sums M1 + M2, Fv1 + Fv2, Fc1 + Fc2,
     and, with ``reference``, the relative differences %e = 100 (χ − χ_ref)/χ_ref of eq. (34); with ``truth``, a truth column."""
+    from ._errors import DataError
+
+    if not isinstance(results, Mapping) or not results:
+        raise DataError("compare takes a mapping label -> result, e.g. {'DIDIM': r1, 'OE-LM': r2}")
+    bad = [k for k, r in results.items() if not isinstance(r, IdentificationResult)]
+    if bad:
+        raise DataError(f"compare: {', '.join(map(str, bad))} not a didim result (an IdentificationResult)")
+    if reference is not None and reference not in results:
+        raise DataError(f"compare: the reference {reference!r} is not one of {', '.join(map(str, results))}")
+    if truth is not None and not isinstance(truth, Mapping):
+        raise DataError("compare: truth must be a mapping name -> value")
     names: List[str] = []
     for r in results.values():
         for n in list(r.params) + list(r.frozen):

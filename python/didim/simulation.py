@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Dict, Mapping, Optional, Sequence, Union
 
@@ -51,15 +52,22 @@ class Term:
     hyper: float = 0.0
 
     def __post_init__(self):
-        if self.kind not in TERM_KINDS:
+        if not isinstance(self.name, str) or not self.name:
+            raise DataError(f"a term's name must be a non-empty text, got {self.name!r}")
+        if not isinstance(self.kind, str) or self.kind not in TERM_KINDS:
             raise DataError(f"unknown term kind {self.kind!r}: use one of {', '.join(TERM_KINDS)}")
+        object.__setattr__(self, "hyper", _checks.real(f"term {self.name}'s hyper-parameter", self.hyper))
 
     def spec(self) -> tuple:
         return (self.name, self.kind, float(self.hyper))
 
 
 def _specs(terms) -> Optional[list]:
-    return [t.spec() for t in terms] if terms else None
+    if terms is None or (isinstance(terms, (tuple, list)) and not terms):
+        return None
+    if not isinstance(terms, (tuple, list)) or not all(isinstance(t, Term) for t in terms):
+        raise DataError(f"terms must be a list of didim.Term, e.g. [didim.Term('Fs', 'stribeck', 0.01)], got {terms!r}")
+    return [t.spec() for t in terms]
 
 
 def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
@@ -106,7 +114,7 @@ def params_vector(model: str, params: Params, offset: Optional[bool] = None, ter
             )
         vec = np.array([_checks.real(f"parameter {k}", params[k]) for k in names])
     else:
-        if isinstance(params, (str, bytes)) or np.iscomplexobj(params):
+        if params is None or isinstance(params, (str, bytes, numbers.Number)) or np.iscomplexobj(params):
             raise DataError(f"parameters must be a mapping name -> value or a sequence of real numbers, got {params!r}")
         try:
             vec = np.asarray(params, dtype=float).ravel()
@@ -262,6 +270,10 @@ def simulate(
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
     if _is_result(params):  # a result carries its model structure and its simulator's numerics
+        given = [k for k, v in (("terms", terms), ("backlash_gap", backlash_gap), ("delay", delay)) if v not in ((), None, 0)]
+        if given:
+            raise DataError(f"a result carries its model structure: leave {', '.join(given)} out, or simulate "
+                            "result.all_params with the structure you want")
         st = _structure(params)
         model, offset, terms, backlash_gap, delay, coulomb_eps = (st.kind, st.offset, st.terms, st.backlash_gap,
                                                                   st.delay, st.coulomb_eps)
@@ -374,8 +386,14 @@ def simulate_batch(
 
     A member whose simulation fails does not fail the batch: its message is in ``errors`` and its rows are NaN.
     """
+    if not isinstance(recording, Recording):
+        raise DataError(f"recording must be a didim.Recording (see didim.load_record), got {type(recording).__name__}")
     if isinstance(params, Mapping) or _is_result(params):
         raise DataError("simulate_batch takes a sequence of parameter sets; use simulate for one")
+    if isinstance(params, (str, bytes)) or not isinstance(params, (Sequence, np.ndarray)):
+        raise DataError("simulate_batch takes a sequence of parameter sets (a list of mappings or results, or an "
+                        f"(m, p) array), got {type(params).__name__}")
+    states = _checks.flag("states", states)
     rows = list(params) if not isinstance(params, np.ndarray) else params
     if len(rows) and all(_is_result(r) for r in rows):  # results: one structure for all, its options by default
         structures = {_structure(r) for r in rows}

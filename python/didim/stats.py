@@ -14,6 +14,7 @@ def ar_fit(x: np.ndarray, max_order: int = 8) -> np.ndarray:
     """AR polynomial ``a`` (a[0] = 1) of the residual by Yule-Walker, order chosen by AIC up to ``max_order``."""
     x = np.asarray(x, float) - np.mean(x)
     n = len(x)
+    max_order = max(0, min(max_order, n // 4))  # a short residual supports only a low order
     r = np.correlate(x, x, "full")[n - 1 : n + max_order] / n
     best, best_aic = np.array([1.0]), n * math.log(max(r[0], 1e-300))
     for p in range(1, max_order + 1):

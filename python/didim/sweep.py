@@ -115,10 +115,22 @@ MAX_POINTS = 100_000
 def check_points(points: Sequence[Mapping[str, Any]]) -> None:
     """Refuses, before anything runs, what would fail every point alike: an unknown scenario, a record that cannot
     be opened, an option the method does not take (a DataError naming it)."""
+    from . import _checks
     from .api import check_options
 
     seen = set()
+    checked = set()
     for p in points:
+        for k, v in p.items():  # values: a bad one would fail its points alike
+            if (k, repr(v)) in checked:
+                continue
+            checked.add((k, repr(v)))
+            if k == "apM" and v is not None:
+                _checks.real("apM (a priori mass)", v, "kg", lo=0.0)
+            elif k in _checks._RULES and v is not None:
+                _checks.options(**{k: v})
+            elif k == "seed":
+                _checks.whole("seed", v, lo=0)
         opts = {k: v for k, v in p.items() if k not in RECORD_KEYS and k not in ("model", "method")}
         key = (p.get("scenario"), p.get("record"), p.get("model"), p.get("method"), tuple(sorted(opts)))
         if key in seen:
@@ -153,6 +165,8 @@ def random_points(ranges: Mapping[str, tuple], n: int, *, seed: int = 0,
         if not ok or (len(spec) == 3 and spec[2] not in ("lin", "log", "int")):
             raise DataError(f"draw range of {k}: {spec!r} must be (low, high) or (low, high, 'log' | 'int') with "
                             "finite numbers (CLI: --draw KEY=LO:HI[:log|:int])")
+        if spec[0] > spec[1]:
+            raise DataError(f"draw range of {k}: low {spec[0]:g} is above high {spec[1]:g}")
         if len(spec) == 3 and spec[2] == "log" and min(spec[0], spec[1]) <= 0:
             raise DataError(f"draw range of {k}: a log range needs low and high > 0, got {spec[0]}, {spec[1]}")
     rng = np.random.default_rng(seed)
@@ -391,6 +405,10 @@ class SweepResult:
         conv = sum(self.converged(step))
         agree = sum(self.agrees(step))
         errs = sum(r.get("error") is not None for r in self.results)
+        reasons: Dict[str, int] = {}
+        for r in self.results:
+            if r.get("error") is not None:
+                reasons[r["error"]] = reasons.get(r["error"], 0) + 1
         lines = [f"{n} runs in {self.elapsed_s:.1f} s on {self.workers} worker(s): {conv} converged "
                  f"({100 * conv / n:.0f} %), {agree} reached the consensus within {100 * self.agree_rtol:g} %"
                  + (f" (step {step})" if step else "") + (f", {errs} failed" if errs else "")]
@@ -404,6 +422,8 @@ class SweepResult:
         for s in self.spread(step):
             lines.append(f"{s['name']:<10}{s['truth']:>12.5g}{s['consensus']:>12.5g}{s['spread']:>11.3g}"
                          f"{s['sigma']:>11.3g}{s['ratio']:>9.2f}{s['z_rms']:>7.2f}")
+        for why, count in sorted(reasons.items(), key=lambda kv: -kv[1])[:3]:
+            lines.append(f"failed ({count} run{'s' if count > 1 else ''}): {why}")
         return "\n".join(lines)
 
     def to_dict(self) -> Dict[str, Any]:
