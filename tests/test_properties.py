@@ -454,3 +454,57 @@ def test_helpers_and_scenarios_never_raise_undocumented(data):
 
 def sc_truth():
     return dict(M=95.0, Fv=200.0, Fc=20.0)
+
+
+json_values = st.recursive(
+    st.one_of(st.none(), st.booleans(), st.integers(-10**20, 10**20), st.floats(allow_nan=False), st.text(max_size=8)),
+    lambda inner: st.one_of(st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=6), inner, max_size=4)),
+    max_leaves=12,
+)
+_RESULT_KEYS = ["model", "method", "params", "std", "rel_std_pct", "relative_error", "iterations", "simulations",
+                "elapsed_s", "converged", "message", "initial", "output_error", "history", "frozen", "options", "steps",
+                "notes", "structure", "force_error"]
+_STRUCTURE_KEYS = ["kind", "offset", "terms", "delay", "backlash_gap", "coulomb_eps"]
+
+
+@prop
+@given(data=st.data())
+def test_load_result_refuses_any_edited_file_with_a_data_error(tmp_path_factory, data):
+    """A saved result with any field replaced by any JSON value loads, or raises DataError naming the problem (the
+    second hostile campaign found TypeError, AttributeError, ValueError and RecursionError here)."""
+    d = {"model": "rigid", "method": "didim", "params": {"M": 95.0, "Fv": 200.0, "Fc": 20.0},
+         "structure": {"kind": "rigid", "offset": False, "terms": [], "delay": 0, "backlash_gap": None,
+                       "coulomb_eps": 1e-4}, "history": [{"k": 1, "params": {"M": 90.0}}], "steps": {}, "notes": []}
+    for _ in range(data.draw(st.integers(1, 3))):
+        if data.draw(st.booleans()):
+            d[data.draw(st.sampled_from(_RESULT_KEYS))] = data.draw(json_values)
+        elif isinstance(d.get("structure"), dict):
+            d["structure"][data.draw(st.sampled_from(_STRUCTURE_KEYS))] = data.draw(json_values)
+    p = tmp_path_factory.mktemp("r") / "r.json"
+    p.write_text(json.dumps(d))
+    try:
+        r = didim.load_result(p)
+    except didim.DataError as e:
+        assert str(e).strip()
+        _tally("load_result", "DataError")
+        return
+    _tally("load_result", "result")
+    assert isinstance(r, didim.IdentificationResult)
+
+
+@prop
+@given(spec=st.dictionaries(st.sampled_from(["type", "dt", "b_r", "a_r", "b_y", "a_y", "saturation", "gain", "kp", "kv",
+                                             "kd", "ti", "kff", "f_lp", "notch_hz", "tau_max"]),
+                            json_values, max_size=8),
+       kind=st.sampled_from(["transfer_function", "cascade", "emps", "pd", "nope", None]))
+def test_load_controller_refuses_any_malformed_file_with_a_data_error(tmp_path_factory, spec, kind):
+    if kind is not None:
+        spec["type"] = kind
+    p = tmp_path_factory.mktemp("c") / "c.json"
+    p.write_text(json.dumps(spec))
+    try:
+        didim.load_controller(p)
+        _tally("load_controller", "result")
+    except didim.DataError as e:
+        assert str(e).strip()
+        _tally("load_controller", "DataError")

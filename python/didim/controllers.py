@@ -361,7 +361,7 @@ def controller_from_dict(spec: Dict[str, Any], where: str = "controller") -> Con
     if not isinstance(spec, dict):
         raise DataError(f"{where}: a controller is an object with a \"type\" key, got {type(spec).__name__}")
     kind = spec.get("type")
-    if kind not in _FILE_TYPES:
+    if not isinstance(kind, str) or kind not in _FILE_TYPES:
         raise DataError(f"{where}: \"type\" must be one of {', '.join(_FILE_TYPES)}, got {kind!r}")
     allowed = _FILE_TYPES[kind]
     args = {k: v for k, v in spec.items() if k != "type" and not k.startswith(("note", "_", "comment"))}

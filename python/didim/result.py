@@ -164,6 +164,9 @@ class IdentificationResult:
                                 f", got {type(x).__name__}")
             return x
 
+        if not isinstance(d, dict) or "params" not in d or "model" not in d:
+            raise DataError("a result is an object with 'model' and 'params' (save one with result.save('r.json') or "
+                            "didim identify --json)")
         history = []
         for i, h in enumerate(typed(d.get("history"), list, "history", [])):
             h = typed(h, dict, f"history[{i}]", {})
@@ -196,7 +199,7 @@ class IdentificationResult:
                 message=typed(d.get("message"), str, "message", ""),
                 initial=floats(d.get("initial"), "initial"), output_error=num(d.get("output_error"), "output_error"),
                 history=history, frozen=frozen, options=dict(typed(d.get("options"), dict, "options", {})),
-                steps={str(k): cls.from_dict(typed(v, dict, f"steps[{k!r}]", {})) for k, v in steps.items()},
+                steps={str(k): cls.from_dict(v) for k, v in steps.items()},
                 notes=notes, structure=structure, force_error=num(d.get("force_error"), "force_error"))
         return r
 
