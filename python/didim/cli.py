@@ -276,8 +276,17 @@ def cmd_sweep(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the CLI's one-line user errors: ``didim: error: …`` and exit 2, the usage left to --help."""
+
+    def error(self, message: str):  # type: ignore[override]
+        where = self.prog.partition(" ")[2]  # the subcommand, if any
+        print(f"didim: error: {where + ': ' if where else ''}{message} (see {self.prog} --help)", file=sys.stderr)
+        sys.exit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="didim", description="Identify position-controlled drives from the motor force (DIDIM).")
+    p = _Parser(prog="didim", description="Identify position-controlled drives from the motor force (DIDIM).")
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     sub = p.add_subparsers(dest="command", required=True)
 

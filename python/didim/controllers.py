@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
@@ -32,7 +33,12 @@ def _positive(name: str, value: float, allow_inf: bool = False) -> float:
         raise DataError(f"controller {name} must be a real number > 0, got {raw!r}") from None
     if math.isnan(value) or value <= 0 or (math.isinf(value) and not allow_inf):
         what = "a number > 0 (math.inf for no saturation)" if allow_inf else "a finite number > 0"
-        raise DataError(f"controller {name} must be {what}, got {value}: a zero or negative gain cannot run the loop")
+        why = {"dt": "it is the sample period (s)", "vsat": "it is the command's limit",
+               "saturation": "it is the command's limit", "tau_max": "it is the force's limit",
+               "notch_q": "it is the notch's quality factor", "f_lp": "it is a cutoff frequency (Hz)",
+               "notch_hz": "it is a frequency (Hz)", "ti": "it is the integral time (s)"}.get(
+            name, "a zero or negative gain cannot run the loop")
+        raise DataError(f"controller {name} must be {what}, got {value}: {why}")
     return value
 
 
@@ -130,9 +136,13 @@ def _json_inf(x: float):
 
 
 def _coefficients(name: str, value) -> Tuple[float, ...]:
+    if value is None or isinstance(value, (str, bytes)) or np.iscomplexobj(value):
+        raise DataError(f"controller coefficients {name} must be a list of real numbers, got {value!r}")
     try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # e.g. numpy's ComplexWarning for complex objects
+            a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError, OverflowError, Warning):
         raise DataError(f"controller coefficients {name} must be a list of numbers, got {value!r}") from None
     if a.ndim == 0:
         a = a.reshape(1)
@@ -259,6 +269,7 @@ class TransferFunction:
         unit (1 = full velocity feedforward), kaff in u per (m/s²); the force is ``gain·u`` (N), limited to
         ``±gain·saturation``.
         """
+        _positive("notch_q", notch_q)
         dt = _positive("dt", dt)
         kp, kv = _positive("kp", kp), _positive("kv", kv)
         for name, value in (("kff", kff), ("kaff", kaff)):

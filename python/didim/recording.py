@@ -32,6 +32,9 @@ def _signal(name: str, x, n: Optional[int] = None) -> np.ndarray:
         raise DataError(f"{name} is missing (None): give one value per sample")
     if np.iscomplexobj(x):
         raise DataError(f"{name} has complex values: a signal must be real (take the real part or the magnitude first)")
+    if isinstance(x, np.ndarray) and x.dtype.kind not in "biuf":
+        raise DataError(f"{name} must be an array of real numbers, got an array of {x.dtype} (text or objects): "
+                        "convert the column to numbers first")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # e.g. numpy's ComplexWarning for complex objects in an object array

@@ -139,6 +139,8 @@ def check_points(points: Sequence[Mapping[str, Any]]) -> None:
         if p.get("record") is None and p.get("scenario") not in SCENARIOS:
             raise DataError(f"unknown scenario {p.get('scenario')!r}: use one of {', '.join(SCENARIOS)} or give a record "
                             "file")
+        if p.get("record") is not None:  # a record every point reads: one that cannot be loaded fails here, once
+            _record(None, p["record"], 0, 1.0, p.get("controller"))
         model = p.get("model", SCENARIOS.get(p.get("scenario") or "", {}).get("model", "rigid"))
         check_options(model, p.get("method", "didim"), opts)
 
