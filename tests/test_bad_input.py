@@ -611,3 +611,12 @@ def test_csv_layout_mistakes_are_named(tmp_path):
     (tmp_path / "ok.csv").write_text("t,qr,force,qm\n" + "".join(f"{k * 1e-3},0,1,0\n" for k in range(50)))
     with pytest.raises(didim.DataError, match="columns must map didim's names"):
         didim.load_record(tmp_path / "ok.csv", controller=didim.EmpsCascade(), columns="force=x")
+
+
+def test_a_sparse_variable_is_called_sparse(tmp_path, emps_path):
+    import scipy.sparse
+
+    d = emps_vars(emps_path)
+    d["t"] = scipy.sparse.csc_matrix(d["t"])
+    with pytest.raises(didim.DataError, match="variable 't' must be real numbers, got a sparse matrix"):
+        didim.load_mat(save(tmp_path, "sparse.mat", d))

@@ -366,6 +366,8 @@ def load_mat(
             f"{path}: MATLAB v7.3 (HDF5) files are not supported: save it with save(..., '-v7') in MATLAB, or read "
             "it with h5py and build a didim.Recording"
         ) from None
+    except DataError:  # a variable's header says it is too large: the file is readable, the record too long
+        raise
     except Exception as e:  # scipy raises several types for corrupt files
         if head.startswith(b"MATLAB") or head[:4] in _MAT4_HEADS:
             raise DataError(
@@ -393,7 +395,7 @@ def load_mat(
     def vec(key: str) -> np.ndarray:
         a = np.asarray(d[key])
         if not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a):
-            raise DataError(f"{path}: variable {key!r} must be real numbers, got {_kind(a)}")
+            raise DataError(f"{path}: variable {key!r} must be real numbers, got {_kind(d[key])}")
         if a.ndim != 2 or min(a.shape) != 1:
             raise DataError(f"{path}: variable {key!r} must be a vector (N x 1), got shape {a.shape}")
         return a.astype(float).ravel()
@@ -508,7 +510,10 @@ def _mat5_header(head: bytes, e: str):
 _MAT4_HEADS = (b"\x00\x00\x00\x00", b"\xe8\x03\x00\x00", b"\x00\x00\x03\xe8")
 
 
-def _kind(a: np.ndarray) -> str:
+def _kind(a) -> str:
+    if hasattr(a, "tocsc"):
+        return "a sparse matrix (save it with full(...) in MATLAB)"
+    a = np.asarray(a)
     if a.dtype.kind == "U":
         return "text"
     if a.dtype.kind == "O":
