@@ -263,3 +263,17 @@ def test_pi_cascade_drive_record_through_the_cli_and_the_api(tmp_path):
     api = didim.identify(rec, "rigid", "didim")
     for k, v in truth.items():
         assert abs(api.params[k] / v - 1) <= 0.02, (k, api.params[k], v)
+
+
+@needs_drive
+def test_the_doctor_calls_a_near_zero_speed_friction_mismatch_by_its_name():
+    """The independent simulator's Coulomb law is Fc·tanh(v/1e-4); didim's is v/sqrt(v² + ε²), lower by up to 7 % of
+    Fc between 0.1 and 0.3 mm/s. On the drive record (no concealed effect) the doctor sees that, and must say it is the
+    friction law's shape through zero speed, not a Stribeck effect."""
+    train, valid = (didim.load_record(os.path.join(DRIVE, f"pi_cascade_{s}.csv")) for s in ("train", "valid"))
+    d = didim.doctor(train, validate=valid)
+    for f in d.findings:
+        if f.effect == "stribeck":
+            assert f.params["vs"] < 10 * didim.DEFAULT_COULOMB_EPS and 0 < f.params["Fs"] < 0.15 * 17.0, f.params
+            assert "shape of the friction law through zero speed" in f.physics
+            assert "the friction law's shape through zero speed" in d.summary()

@@ -35,7 +35,7 @@ from .identification import fit_flexible_mode, flexible_from_mode, a_priori_mass
 from .recording import Recording
 from .result import IdentificationResult
 from .signal import Decimation, diffcent
-from .simulation import SimResult, Term, coulomb_sign, param_names, simulate
+from .simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign, param_names, simulate
 from .stats import diebold_mariano, holm, orthogonalize, wald_added
 
 #: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
@@ -61,6 +61,11 @@ PHYSICS = {
     "stribeck_deficit": "Friction is lower at low speed than the Coulomb-plus-viscous law says and recovers as the "
                         "speed grows: a low-speed friction deficit (lubricant, preload or seal behaviour that no "
                         "smooth Coulomb law captures); modelled by the Stribeck shape with the opposite sign.",
+    # a Stribeck speed within a few smoothing speeds of zero (see FRICTION_SHAPE_SPEED)
+    "friction_shape": "Friction reaches its Coulomb level at lower speed than the model's smoothed sign "
+                      "v/sqrt(v² + ε²) (ε = 0.1 mm/s by default): the shape of the friction law through zero speed "
+                      "(a sharper transition, or sticking), not necessarily a Stribeck effect; modelled by a Stribeck "
+                      "term at that low speed, or by a smaller coulomb_eps.",
     "position_ripple": "A force periodic in position: motor cogging, ball-screw lead error or position-dependent "
                        "friction, with the period found in the spatial spectrum of the residual.",
     "position_dependent_coulomb": "The Coulomb friction level varies along the stroke, always against the motion "
@@ -191,7 +196,9 @@ class Diagnosis:
             lines.append("nothing significant is missing from the model")
         for x in self.findings:
             ps = ", ".join(f"{k} = {v:.4g}" for k, v in x.params.items())
-            lines.append(f"- {x.effect}: {ps + '; ' if ps else ''}{x.evidence}")
+            label = {PHYSICS["friction_shape"]: " (the friction law's shape through zero speed)",
+                     PHYSICS["stribeck_deficit"]: " (a low-speed friction deficit)"}.get(x.physics, "")
+            lines.append(f"- {x.effect}{label}: {ps + '; ' if ps else ''}{x.evidence}")
         for x in self.rejected:
             lines.append(f"  (not confirmed on held-out data: {x.effect}: {x.evidence})")
         for a in self.ambiguities:
@@ -590,6 +597,11 @@ def _unnamed(data: _Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: 
     )
 
 
+#: A Stribeck speed below this (m/s; 10 × the Coulomb sign's default smoothing speed) describes the shape of the
+#: Coulomb law's transition through zero speed, which no smooth law matches, rather than a physical Stribeck effect:
+#: the finding then says so (PHYSICS["friction_shape"]).
+FRICTION_SHAPE_SPEED = 10 * DEFAULT_COULOMB_EPS
+
 #: Decimated training samples the doctor needs: its base fit, a candidate's few parameters and the AR-prewhitened
 #: residual tests (up to AR(8)) have no power on fewer.
 MIN_ROWS = 40
@@ -708,6 +720,8 @@ def doctor(
             physics = PHYSICS[c.effect]
             if c.effect == "stribeck" and params["Fs"] * _coulomb(st_new) < 0:
                 physics = PHYSICS["stribeck_deficit"]
+            elif c.effect == "stribeck" and params["vs"] < FRICTION_SHAPE_SPEED:
+                physics = PHYSICS["friction_shape"]
             f = Finding(c.effect, params, std, stat, evidence, physics, fit,
                         where={"hyper": c.hyper}, accepted=p_dm < alpha and practical)
             done.append(c.effect)
