@@ -183,3 +183,28 @@ def test_a_batch_too_large_for_memory_is_a_memory_error_not_an_abort(emps_path):
     r = subprocess.run([sys.executable, "-c", code, str(emps_path)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-500:]
     assert r.stdout.startswith("MemoryError") and "20000 simulations" in r.stdout and "GB" in r.stdout, r.stdout
+
+
+def test_an_interrupt_python_swallows_in_a_finaliser_still_ends_the_run_as_interrupted():
+    """Python cannot raise KeyboardInterrupt from a finaliser (a __del__ or weakref callback during garbage collection):
+    it prints "Exception ignored ... Traceback" and carries on. The CLI notes every signal, hides that report, and
+    exits 130 with its line once the command ends (found by a fresh-clone run of the fault-injection test)."""
+    code = (
+        "import os, signal, sys\n"
+        "import didim.cli as cli\n"
+        "class Finaliser:\n"
+        "    def __del__(self):\n"
+        "        os.kill(os.getpid(), signal.SIGINT)\n"
+        "        for _ in range(100000):\n"
+        "            pass\n"
+        "def command(args):\n"
+        "    Finaliser()\n"
+        "    print('command finished')\n"
+        "    return 0\n"
+        "cli.cmd_identify = command\n"
+        "sys.exit(cli.main(['identify', 'x.csv']))\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 130, (r.returncode, r.stdout, r.stderr)
+    assert "command finished" in r.stdout and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr.strip().splitlines()[-1].startswith("didim: interrupted"), r.stderr

@@ -377,12 +377,27 @@ def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
 
     parser = build_parser()
     args = parser.parse_args(argv)
-    previous = _terminate_as_exception()
+    received: List[str] = []  # the signals that arrived, even if Python swallowed their exception
+    previous = _signals_as_exceptions(received)
+    unraisable = sys.unraisablehook
+
+    def quiet_unraisable(u):  # a KeyboardInterrupt raised inside a finaliser (GC, weakref callback) is only reported
+        if u.exc_type is not None and issubclass(u.exc_type, KeyboardInterrupt):
+            return  # ... by Python: ``received`` keeps it, and the end of main acts on it
+        unraisable(u)
+
+    sys.unraisablehook = quiet_unraisable
     with warnings.catch_warnings():
         if not args.debug:
             warnings.showwarning = _show_warning  # one line per warning; restored by catch_warnings
         try:
-            return int(args.func(args))
+            code = int(args.func(args))
+            if received:  # the interrupt was swallowed where Python cannot raise it: the run went on to its end
+                sig = received[0]
+                print(f"didim: {'terminated (SIGTERM)' if sig == 'TERM' else 'interrupted'} as the run finished; its "
+                      "outputs are complete", file=sys.stderr)
+                return 143 if sig == "TERM" else 130
+            return code
         except (DidimError, OSError) as e:
             if args.debug:
                 raise
@@ -395,6 +410,7 @@ def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
             print("didim: interrupted; outputs left as they were", file=sys.stderr)
             return 130
         finally:
+            sys.unraisablehook = unraisable
             if previous is not None:
                 import signal
 
@@ -402,7 +418,8 @@ def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
                     signal.signal(signal.SIGINT, signal.SIG_IGN)
                     signal.signal(signal.SIGTERM, signal.SIG_IGN)
                 else:
-                    signal.signal(signal.SIGTERM, previous)
+                    signal.signal(signal.SIGINT, previous[0])
+                    signal.signal(signal.SIGTERM, previous[1])
 
 
 class Terminated(KeyboardInterrupt):
@@ -410,19 +427,28 @@ class Terminated(KeyboardInterrupt):
     worker processes stopped, and no output is half-written."""
 
 
-def _terminate_as_exception():
-    """Installs the SIGTERM handler that raises :class:`Terminated`; returns the previous handler (None when signals
-    cannot be set here, e.g. outside the main thread)."""
+def _signals_as_exceptions(received: List[str]):
+    """Installs handlers raising KeyboardInterrupt (SIGINT) and :class:`Terminated` (SIGTERM) that also note the
+    signal in ``received``; returns the previous handlers (None when signals cannot be set here, e.g. outside the
+    main thread)."""
     import signal
     import threading
 
     if threading.current_thread() is not threading.main_thread():
         return None
 
-    def handler(signum, frame):
+    def on_int(signum, frame):
+        received.append("INT")
+        raise KeyboardInterrupt()
+
+    def on_term(signum, frame):
+        received.append("TERM")
         raise Terminated()
 
-    return signal.signal(signal.SIGTERM, handler)
+    # a SIGINT ignored from the start (a job a shell runs in the background) stays ignored, as Python leaves it
+    keep = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    return (signal.getsignal(signal.SIGINT) if keep else signal.signal(signal.SIGINT, on_int)), \
+        signal.signal(signal.SIGTERM, on_term)
 
 
 def _describe_error(e: BaseException) -> str:
