@@ -10,6 +10,7 @@ from typing import Any, Dict, List, Mapping, Optional
 
 import numpy as np
 
+from . import _checks
 from ._io import jsonable
 
 #: Units of the paper's parameters (SI, load side).
@@ -150,11 +151,7 @@ class IdentificationResult:
             return float(x)
 
         def count(x, what):
-            if x is None:
-                return 0
-            if isinstance(x, bool) or not isinstance(x, int) or x < 0:
-                raise DataError(f"result field {what!r} must be a whole number >= 0, got {x!r}")
-            return x
+            return 0 if x is None else _checks.whole(f"result field {what!r}", x, lo=0)
 
         def typed(x, kind, what, default):
             if x is None:
