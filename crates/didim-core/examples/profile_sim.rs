@@ -21,7 +21,14 @@ fn main() {
         opts.integrator = Integrator::Rk4;
     }
     let model = flexible(DEFAULT_COULOMB_EPS).unwrap();
-    let chi = [68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5];
+    // DIDIM_CHI="M1,Fv1,Fc1,M2,Fv2,Fc2,K12" and DIDIM_TOL override the defaults.
+    let chi: Vec<f64> = std::env::var("DIDIM_CHI").map_or_else(
+        |_| vec![68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5],
+        |s| s.split(',').map(|x| x.parse().unwrap()).collect(),
+    );
+    if let Ok(t) = std::env::var("DIDIM_TOL") {
+        opts.tol = t.parse().unwrap();
+    }
     let t0 = Instant::now();
     let mut stats = None;
     for _ in 0..reps {

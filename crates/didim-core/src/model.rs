@@ -88,6 +88,22 @@ pub fn coulomb_sign_derivative(v: f64, eps: f64) -> f64 {
     }
 }
 
+/// [`coulomb_sign`] and [`coulomb_sign_derivative`] at once (one square root).
+#[inline(always)]
+pub fn coulomb_sign_and_derivative(v: f64, eps: f64) -> (f64, f64) {
+    if eps > 0.0 {
+        let d = v * v + eps * eps;
+        if d.is_normal() {
+            let r = d.sqrt();
+            (v / r, eps * eps / (d * r))
+        } else {
+            (coulomb_sign(v, eps), coulomb_sign_derivative(v, eps))
+        }
+    } else {
+        (coulomb_sign(v, eps), 0.0)
+    }
+}
+
 /// The basis function multiplying one parameter, per degree of freedom.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Basis {
@@ -185,6 +201,85 @@ impl Basis {
         }
     }
 
+    /// The dofs the term acts on, as the vector `d` of its force `value · φ · d`:
+    /// `e_dof` for a one-dof term, `e_a − e_b` for a coupling. The basis function reads
+    /// the state through `x = dᵀq` and `ẋ = dᵀq̇` only.
+    #[inline(always)]
+    pub(crate) fn direction<const N: usize>(&self) -> SVector<f64, N> {
+        let mut d = SVector::<f64, N>::zeros();
+        match self.dofs() {
+            (a, None) => d[a] = 1.0,
+            (a, Some(b)) => {
+                d[a] = 1.0;
+                d[b] = -1.0;
+            }
+        }
+        d
+    }
+
+    /// The scalar basis function `φ(x, ẋ)` of a non-inertial term and its derivatives
+    /// `(φ, ∂φ/∂x, ∂φ/∂ẋ)`, with `x = dᵀq`, `ẋ = dᵀq̇` (see [`Basis::direction`]). The
+    /// physics of every term is here and nowhere else: the direct model, the regressor,
+    /// both integrators and the sensitivities all read it.
+    #[inline(always)]
+    pub(crate) fn local(&self, x: f64, xd: f64, eps: f64) -> (f64, f64, f64) {
+        match *self {
+            Basis::Inertia { .. } => (0.0, 0.0, 0.0),
+            Basis::Viscous { .. } | Basis::Damper { .. } => (xd, 0.0, 1.0),
+            Basis::Offset { .. } => (1.0, 0.0, 0.0),
+            Basis::Spring { .. } => (x, 1.0, 0.0),
+            Basis::Coulomb { .. } => {
+                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                (s, 0.0, ds)
+            }
+            Basis::AbsViscous { .. } => {
+                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                (xd * s, 0.0, s + xd * ds)
+            }
+            Basis::AbsCoulomb { .. } => {
+                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                (s.abs(), 0.0, s.signum() * ds)
+            }
+            Basis::Stribeck { vs, .. } => {
+                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                let e = (-(xd / vs) * (xd / vs)).exp();
+                (s * e, 0.0, ds * e - s * e * 2.0 * xd / (vs * vs))
+            }
+            Basis::Ripple { period, phase, .. } => {
+                let w = std::f64::consts::TAU / period;
+                let (sn, cs) = (w * x + phase).sin_cos();
+                (sn, w * cs, 0.0)
+            }
+            Basis::CoulombRipple { period, phase, .. } => {
+                let w = std::f64::consts::TAU / period;
+                let (sn, cs) = (w * x + phase).sin_cos();
+                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                (s * sn, s * w * cs, ds * sn)
+            }
+            Basis::Backlash { gap, .. } => {
+                // slope 1 outside the gap, 0 inside
+                (
+                    dead_zone(x, gap),
+                    if x.abs() > 0.5 * gap { 1.0 } else { 0.0 },
+                    0.0,
+                )
+            }
+        }
+    }
+
+    /// `(x, ẋ) = (dᵀq, dᵀq̇)`, the arguments of [`Basis::local`].
+    #[inline(always)]
+    pub(crate) fn coordinates<const N: usize>(
+        &self,
+        q: &SVector<f64, N>,
+        qd: &SVector<f64, N>,
+    ) -> (f64, f64) {
+        match self.dofs() {
+            (a, None) => (q[a], qd[a]),
+            (a, Some(b)) => (q[a] - q[b], qd[a] - qd[b]),
+        }
+    }
+
     /// Adds `value · φ(q, q̇, q̈)` to `out`, one entry per dof.
     #[inline(always)]
     pub(crate) fn accumulate<const N: usize>(
@@ -196,37 +291,17 @@ impl Basis {
         eps: f64,
         out: &mut SVector<f64, N>,
     ) {
-        match *self {
-            Basis::Inertia { dof } => out[dof] += value * qdd[dof],
-            Basis::Viscous { dof } => out[dof] += value * qd[dof],
-            Basis::Coulomb { dof } => out[dof] += value * coulomb_sign(qd[dof], eps),
-            Basis::Offset { dof } => out[dof] += value,
-            Basis::Spring { a, b } => {
-                let f = value * (q[a] - q[b]);
-                out[a] += f;
-                out[b] -= f;
+        let phi = match *self {
+            Basis::Inertia { dof } => qdd[dof],
+            _ => {
+                let (x, xd) = self.coordinates(q, qd);
+                self.local(x, xd, eps).0
             }
-            Basis::Damper { a, b } => {
-                let f = value * (qd[a] - qd[b]);
-                out[a] += f;
-                out[b] -= f;
-            }
-            Basis::AbsViscous { dof } => out[dof] += value * qd[dof] * coulomb_sign(qd[dof], eps),
-            Basis::AbsCoulomb { dof } => out[dof] += value * coulomb_sign(qd[dof], eps).abs(),
-            Basis::Stribeck { dof, vs } => {
-                let r = qd[dof] / vs;
-                out[dof] += value * coulomb_sign(qd[dof], eps) * (-r * r).exp();
-            }
-            Basis::Ripple { dof, period, phase } => {
-                out[dof] += value * (std::f64::consts::TAU * q[dof] / period + phase).sin()
-            }
-            Basis::CoulombRipple { dof, period, phase } => {
-                out[dof] += value
-                    * coulomb_sign(qd[dof], eps)
-                    * (std::f64::consts::TAU * q[dof] / period + phase).sin()
-            }
-            Basis::Backlash { a, b, gap } => {
-                let f = value * dead_zone(q[a] - q[b], gap);
+        };
+        match self.dofs() {
+            (a, None) => out[a] += value * phi,
+            (a, Some(b)) => {
+                let f = value * phi;
                 out[a] += f;
                 out[b] -= f;
             }
@@ -260,57 +335,15 @@ impl Basis {
         dq: &mut SMatrix<f64, N, N>,
         dv: &mut SMatrix<f64, N, N>,
     ) {
-        match *self {
-            Basis::Inertia { .. } | Basis::Offset { .. } => {}
-            Basis::Viscous { dof } => dv[(dof, dof)] += value,
-            Basis::Coulomb { dof } => dv[(dof, dof)] += value * coulomb_sign_derivative(qd[dof], eps),
-            Basis::Spring { a, b } => {
-                dq[(a, a)] += value;
-                dq[(a, b)] -= value;
-                dq[(b, a)] -= value;
-                dq[(b, b)] += value;
-            }
-            Basis::Damper { a, b } => {
-                dv[(a, a)] += value;
-                dv[(a, b)] -= value;
-                dv[(b, a)] -= value;
-                dv[(b, b)] += value;
-            }
-            Basis::AbsViscous { dof } => {
-                let v = qd[dof];
-                dv[(dof, dof)] += value * (coulomb_sign(v, eps) + v * coulomb_sign_derivative(v, eps));
-            }
-            Basis::AbsCoulomb { dof } => {
-                let v = qd[dof];
-                dv[(dof, dof)] += value * coulomb_sign(v, eps).signum() * coulomb_sign_derivative(v, eps);
-            }
-            Basis::Stribeck { dof, vs } => {
-                let v = qd[dof];
-                let e = (-(v / vs) * (v / vs)).exp();
-                let ds = coulomb_sign_derivative(v, eps) * e - coulomb_sign(v, eps) * e * 2.0 * v / (vs * vs);
-                dv[(dof, dof)] += value * ds;
-            }
-            Basis::Ripple { dof, period, phase } => {
-                let w = std::f64::consts::TAU / period;
-                dq[(dof, dof)] += value * w * (w * q[dof] + phase).cos();
-            }
-            Basis::CoulombRipple { dof, period, phase } => {
-                let w = std::f64::consts::TAU / period;
-                let (s, c) = (w * q[dof] + phase).sin_cos();
-                dq[(dof, dof)] += value * coulomb_sign(qd[dof], eps) * w * c;
-                dv[(dof, dof)] += value * coulomb_sign_derivative(qd[dof], eps) * s;
-            }
-            Basis::Backlash { a, b, gap } => {
-                // slope 1 outside the gap, 0 inside
-                let x = q[a] - q[b];
-                if x.abs() > 0.5 * gap {
-                    dq[(a, a)] += value;
-                    dq[(a, b)] -= value;
-                    dq[(b, a)] -= value;
-                    dq[(b, b)] += value;
-                }
-            }
+        if self.is_inertia() {
+            return;
         }
+        let (x, xd) = self.coordinates(q, qd);
+        let (_, px, pv) = self.local(x, xd, eps);
+        let d = self.direction::<N>();
+        let dd = d * d.transpose();
+        *dq += dd * (value * px);
+        *dv += dd * (value * pv);
     }
 }
 

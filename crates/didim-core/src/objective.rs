@@ -9,7 +9,7 @@ use crate::controller::Controller;
 use crate::error::{invalid, Error, Result};
 use crate::filter::Decimator;
 use crate::model::Model;
-use crate::sim::{simulate, simulate_sensitivity, SimOptions, SimOutput};
+use crate::sim::{simulate, simulate_force, simulate_sensitivity, SimOptions, SimOutput};
 use rayon::prelude::*;
 
 /// Which simulated output is compared with the measurement.
@@ -65,13 +65,6 @@ impl<const N: usize> Problem<'_, N> {
         chis.par_iter().map(|chi| self.simulate(chi)).collect()
     }
 
-    fn output(out: &SimOutput, output: Output) -> &[f64] {
-        match output {
-            Output::Force => &out.force,
-            Output::MotorPosition => &out.q[0],
-        }
-    }
-
     /// `‖measured_dec − dec(simulated output)‖²`, the criterion of eq. (32) on decimated signals.
     pub fn output_error(
         &self,
@@ -80,8 +73,17 @@ impl<const N: usize> Problem<'_, N> {
         measured_dec: &[f64],
         dec: &Decimator,
     ) -> Result<f64> {
-        let out = self.simulate(chi)?;
-        let sim = dec.apply(Self::output(&out, output))?;
+        let sim = match output {
+            Output::Force => dec.apply(&simulate_force(
+                self.model,
+                chi,
+                &self.controller,
+                self.qr,
+                self.u_ext,
+                &self.opts,
+            )?)?,
+            Output::MotorPosition => dec.apply(&self.simulate(chi)?.q[0])?,
+        };
         if sim.len() != measured_dec.len() {
             return Err(invalid!(
                 "the decimated measurement has {} samples but the decimated simulation {}; decimate the measurement with the same decimator",

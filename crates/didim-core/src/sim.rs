@@ -138,12 +138,48 @@ pub fn simulate<const N: usize>(
     opts: &SimOptions,
 ) -> Result<SimOutput> {
     let out = match opts.integrator {
-        Integrator::Exponential => {
-            expint::run(model, chi, controller, qr, u_ext, opts, None, &mut expint::NoHook)?
-        }
-        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)?,
+        Integrator::Exponential => expint::run(
+            model,
+            chi,
+            controller,
+            qr,
+            u_ext,
+            opts,
+            true,
+            None,
+            &mut expint::NoHook,
+        )?,
+        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, true, &mut NoTangent)?,
     };
     finite_outputs(out, model, chi, opts)
+}
+
+/// The commanded force of [`simulate`] alone: the states are integrated but not kept
+/// (what an output-error criterion on the force needs, without writing and allocating
+/// six more signals).
+pub fn simulate_force<const N: usize>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+) -> Result<Vec<f64>> {
+    let out = match opts.integrator {
+        Integrator::Exponential => expint::run(
+            model,
+            chi,
+            controller,
+            qr,
+            u_ext,
+            opts,
+            false,
+            None,
+            &mut expint::NoHook,
+        )?,
+        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, false, &mut NoTangent)?,
+    };
+    Ok(finite_outputs(out, model, chi, opts)?.force)
 }
 
 /// Like [`simulate`], also returning the step counts of the exponential integrator
@@ -165,10 +201,11 @@ pub fn simulate_with_stats<const N: usize>(
             qr,
             u_ext,
             opts,
+            true,
             Some(&mut stats),
             &mut expint::NoHook,
         )?,
-        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, &mut NoTangent)?,
+        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, true, &mut NoTangent)?,
     };
     Ok((finite_outputs(out, model, chi, opts)?, stats))
 }
@@ -238,11 +275,11 @@ pub fn simulate_sensitivity<const N: usize>(
     check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
     let (sim, dforce, dq) = if opts.integrator == Integrator::Exponential {
         let mut t = expint::Sens::<N>::new(model, qr.len(), opts.delay)?;
-        let sim = expint::run(model, chi, controller, qr, u_ext, opts, None, &mut t)?;
+        let sim = expint::run(model, chi, controller, qr, u_ext, opts, true, None, &mut t)?;
         (sim, t.dforce, t.dq)
     } else {
         let mut t = Sensitivity::<N>::new(model.n_params(), qr.len(), opts.delay)?;
-        let sim = run(model, chi, controller, qr, u_ext, opts, &mut t)?;
+        let sim = run(model, chi, controller, qr, u_ext, opts, true, &mut t)?;
         (sim, t.dforce, t.dq)
     };
     let sim = finite_outputs(sim, model, chi, opts)?;
@@ -460,7 +497,9 @@ fn check_inputs<const N: usize>(
     Ok(n)
 }
 
-/// The simulation loop shared by [`simulate`] and [`simulate_sensitivity`].
+/// The simulation loop shared by [`simulate`] and [`simulate_sensitivity`]; `states`:
+/// record the positions, velocities and accelerations too (else only the force).
+#[allow(clippy::too_many_arguments)]
 fn run<const N: usize, T: Tangent<N>>(
     model: &Model<N>,
     chi: &[f64],
@@ -468,6 +507,7 @@ fn run<const N: usize, T: Tangent<N>>(
     qr: &[f64],
     u_ext: Option<&[f64]>,
     opts: &SimOptions,
+    states: bool,
     tangent: &mut T,
 ) -> Result<SimOutput> {
     let n = check_inputs(model, chi, controller, qr, u_ext, opts)?;
@@ -498,7 +538,8 @@ fn run<const N: usize, T: Tangent<N>>(
     let mut ctl = law.rest_state(qr[0], quantize(q[0]));
     let mut pending = vec![0.0; opts.delay]; // ring buffer of delayed commands
 
-    let signals = |what| (0..N).map(|_| room(n, what)).collect::<Result<Vec<_>>>();
+    let m = if states { n } else { 0 };
+    let signals = |what| (0..N).map(|_| room(m, what)).collect::<Result<Vec<_>>>();
     let mut out = SimOutput {
         force: room(n, "the simulated force")?,
         q: signals("the simulated positions")?,
@@ -521,10 +562,12 @@ fn run<const N: usize, T: Tangent<N>>(
 
         let a = accel(&q, &qd, tau);
         out.force.push(tau_cmd);
-        for d in 0..N {
-            out.q[d].push(q[d]);
-            out.qd[d].push(qd[d]);
-            out.qdd[d].push(a[d]);
+        if states {
+            for d in 0..N {
+                out.q[d].push(q[d]);
+                out.qd[d].push(qd[d]);
+                out.qdd[d].push(a[d]);
+            }
         }
         tangent.record(k);
         if k + 1 == n {

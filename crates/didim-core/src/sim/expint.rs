@@ -58,6 +58,16 @@ pub(super) struct Level<const N: usize> {
     pub p2v: Mat<N>,
 }
 
+/// A non-affine term of `g`: it adds `φ(x, ẋ) · dir` to `g` and `∂φ · outer` to its
+/// partials, with `d` the term's direction ([`Basis::direction`]), `dir = −χ M⁻¹ d` and
+/// `outer = dir dᵀ`.
+#[derive(Clone, Copy, Debug)]
+struct GTerm<const N: usize> {
+    basis: Basis,
+    dir: V<N>,
+    outer: Mat<N>,
+}
+
 /// The plant of one parameter set, split for the exponential integrator.
 pub(super) struct Plant<const N: usize> {
     pub inv_mass: V<N>,
@@ -65,8 +75,8 @@ pub(super) struct Plant<const N: usize> {
     pub aq: Mat<N>,
     pub av: Mat<N>,
     pub a0: V<N>,
-    /// The non-affine, non-inertial terms with their values.
-    pub terms: Vec<(Basis, f64)>,
+    /// The non-affine, non-inertial terms, each ready to add its acceleration.
+    terms: Vec<GTerm<N>>,
     pub eps: f64,
     pub dt: f64,
     /// Absolute position tolerance of one step (m).
@@ -94,12 +104,20 @@ impl<const N: usize> Plant<N> {
             .filter(|(b, _)| b.is_affine())
             .map(|(b, &x)| (*b, x))
             .collect();
-        let terms: Vec<(Basis, f64)> = model
+        let terms: Vec<GTerm<N>> = model
             .basis()
             .iter()
             .zip(chi)
             .filter(|(b, _)| !b.is_affine() && !b.is_inertia())
-            .map(|(b, &x)| (*b, x))
+            .map(|(b, &x)| {
+                let d = b.direction::<N>();
+                let dir = -(d * x).component_mul(&inv_mass);
+                GTerm {
+                    basis: *b,
+                    dir,
+                    outer: dir * d.transpose(),
+                }
+            })
             .collect();
         // The affine forces F(q, q̇) = Kq q + Kv q̇ + c, read off the basis functions.
         let force = |q: &V<N>, v: &V<N>| {
@@ -223,41 +241,46 @@ impl<const N: usize> Plant<N> {
     /// `g(q, q̇)`: accelerations of the non-affine terms.
     #[inline(always)]
     pub fn g(&self, q: &V<N>, v: &V<N>) -> V<N> {
-        let zero = V::<N>::zeros();
-        let mut f = V::<N>::zeros();
-        for (b, x) in &self.terms {
-            b.accumulate(*x, q, v, &zero, self.eps, &mut f);
+        let mut g = V::<N>::zeros();
+        for t in &self.terms {
+            let (x, xd) = t.basis.coordinates(q, v);
+            g += t.dir * t.basis.local(x, xd, self.eps).0;
         }
-        -f.component_mul(&self.inv_mass)
+        g
     }
 
-    /// `(∂g/∂q, ∂g/∂q̇)` (the basis partials depend on the velocities only so far).
+    /// `(g, ∂g/∂q, ∂g/∂q̇)` in one pass over the terms.
     #[inline(always)]
-    pub fn g_partials(&self, q: &V<N>, v: &V<N>) -> (Mat<N>, Mat<N>) {
+    pub fn g_and_partials(&self, q: &V<N>, v: &V<N>) -> (V<N>, Mat<N>, Mat<N>) {
+        let mut g = V::<N>::zeros();
         let mut dq = Mat::<N>::zeros();
         let mut dv = Mat::<N>::zeros();
-        for (b, x) in &self.terms {
-            b.accumulate_partials(*x, q, v, self.eps, &mut dq, &mut dv);
+        for t in &self.terms {
+            let (x, xd) = t.basis.coordinates(q, v);
+            let (phi, px, pv) = t.basis.local(x, xd, self.eps);
+            g += t.dir * phi;
+            dq += t.outer * px;
+            dv += t.outer * pv;
         }
-        for d in 0..N {
-            for e in 0..N {
-                dq[(d, e)] *= -self.inv_mass[d];
-                dv[(d, e)] *= -self.inv_mass[d];
-            }
-        }
+        (g, dq, dv)
+    }
+
+    /// `(∂g/∂q, ∂g/∂q̇)`.
+    #[inline(always)]
+    pub fn g_partials(&self, q: &V<N>, v: &V<N>) -> (Mat<N>, Mat<N>) {
+        let (_, dq, dv) = self.g_and_partials(q, v);
         (dq, dv)
     }
 
-    /// Whether `g` is too stiff at `(q, v)` for the quick step of length `h`. The quick step
-    /// extrapolates the change of `g` from the previous step, a recurrence whose
-    /// perturbations grow by about `h·|∂g/∂q̇|/2` per step: near rest the Coulomb sign's slope
-    /// `Fc/(εM)` makes that factor exceed 1 for a sample period, and while the prediction can
-    /// still pass the defect test, the computed trajectory then chatters and its derivatives
-    /// (the sensitivities) grow without bound. There the implicit solve, stable for any
-    /// slope, is used instead.
+    /// Whether `g`, with partials `(gq, gv)` at the end of a quick step of length `h`, is
+    /// too stiff for that step. The quick step extrapolates the change of `g` from the
+    /// previous step, a recurrence whose perturbations grow by about `h·|∂g/∂q̇|/2` per
+    /// step: near rest the Coulomb sign's slope `Fc/(εM)` makes that factor exceed 1 for a
+    /// sample period, and while the prediction can still pass the defect test, the computed
+    /// trajectory then chatters and its derivatives (the sensitivities) grow without bound.
+    /// There the implicit solve, stable for any slope, is used instead.
     #[inline(always)]
-    fn stiff(&self, q: &V<N>, v: &V<N>, h: f64) -> bool {
-        let (gq, gv) = self.g_partials(q, v);
+    fn stiff(gq: &Mat<N>, gv: &Mat<N>, h: f64) -> bool {
         h * (gv.amax() + h * gq.amax()) >= 1.0
     }
 
@@ -289,9 +312,9 @@ impl<const N: usize> Plant<N> {
         let pred = self.last_dg.get() * c;
         let q1 = qp + lv.p2q * pred;
         let v1 = vp + lv.p2v * pred;
-        let g1 = self.g(&q1, &v1);
+        let (g1, gq, gv) = self.g_and_partials(&q1, &v1);
         let scale = self.atol / (h * self.dt);
-        if (g1 - gn - pred).amax() <= 0.1 * scale && !self.stiff(&q1, &v1, h) {
+        if (g1 - gn - pred).amax() <= 0.1 * scale && !Self::stiff(&gq, &gv, h) {
             return Step {
                 q1,
                 v1,
@@ -339,14 +362,13 @@ impl<const N: usize> Plant<N> {
         for _ in 0..MAX_NEWTON {
             let q1 = qp + lv.p2q * dw;
             let v1 = vp + lv.p2v * dw;
-            let g1 = self.g(&q1, &v1);
+            let (g1, gq, gv) = self.g_and_partials(&q1, &v1);
             let r = g1 - gn - dw;
             (step.q1, step.v1, step.g1, step.dw) = (q1, v1, g1, dw);
             if r.amax() <= small {
                 converged = true;
                 break;
             }
-            let (gq, gv) = self.g_partials(&q1, &v1);
             let jac = gq * lv.p2q + gv * lv.p2v - Mat::<N>::identity();
             match jac.try_inverse() {
                 Some(ji) => dw -= ji * r,
@@ -521,6 +543,7 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
     qr: &[f64],
     u_ext: Option<&[f64]>,
     opts: &SimOptions,
+    states: bool,
     stats: Option<&mut StepStats>,
     tangent: &mut T,
 ) -> Result<SimOutput> {
@@ -547,7 +570,8 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
     let mut ctl = law.rest_state(qr[0], quantize(q[0]));
     let mut pending = vec![0.0; opts.delay];
 
-    let signals = |what| (0..N).map(|_| filled(n, 0.0, what)).collect::<Result<Vec<_>>>();
+    let m = if states { n } else { 0 };
+    let signals = |what| (0..N).map(|_| filled(m, 0.0, what)).collect::<Result<Vec<_>>>();
     let mut force = filled(n, 0.0, "the simulated force")?;
     let mut oq = signals("the simulated positions")?;
     let mut oqd = signals("the simulated velocities")?;
@@ -570,12 +594,14 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
         // Every step ends with g evaluated at its end state, so this is the direct model's
         // acceleration at the recorded state: the IDM of the outputs reproduces the applied
         // force to rounding.
-        let a = plant.accel(&q, &v, &b, &g);
         force[k] = tau_cmd;
-        for d in 0..N {
-            oq[d][k] = q[d];
-            oqd[d][k] = v[d];
-            oqdd[d][k] = a[d];
+        if states {
+            let a = plant.accel(&q, &v, &b, &g);
+            for d in 0..N {
+                oq[d][k] = q[d];
+                oqd[d][k] = v[d];
+                oqdd[d][k] = a[d];
+            }
         }
         tangent.record(k);
         if k + 1 == n {
