@@ -7,6 +7,7 @@ import glob
 import os
 import warnings
 
+import numpy as np
 import pytest
 
 import didim
@@ -58,6 +59,8 @@ def test_three_step_didim_with_motor_friction_only_is_within_2_percent(three_ste
     r, t = three_step["paperlike_motor_friction_only"], _truth(truthbench[1], "paperlike_motor_friction_only")
     assert r.converged, r.message
     assert r.options["variant"] == "paper"  # nothing on the load side to split
+    # and the split's Nelder-Mead was not even run: a load share raises step 2's criterion at the paper's optimum
+    assert any("split was not run" in note for note in r.notes), r.notes
     for n in ("M1", "Fv1", "Fc1", "M2", "K12"):
         assert r.params[n] == pytest.approx(t[n], rel=0.02), n
     assert r.frozen == {"Fv2": 0.0, "Fc2": 0.0}
@@ -147,3 +150,23 @@ def test_cli_variant_option(truthbench):
     assert paper.returncode == 1 and "friction-split" in paper.stderr  # not converged, says what to do
     wrong = run("--variant", "paper")  # the rigid model has no variants
     assert wrong.returncode == 2 and "--model flexible --method didim" in wrong.stderr
+
+
+@pytest.mark.parametrize("name", ["paperlike_moving_chirp", "paperlike_chirp_at_rest"])
+def test_the_coarse_grid_ranks_step_2_starts_as_the_fine_one(truthbench, name):
+    """Step 2's grid is simulated at GRID_SIM_TOL to rank its points only: its best points are those the default
+    tolerance ranks best, and its criterion is within 10 % of the fine one."""
+    from didim import identification as I
+    from didim.signal import Decimation
+
+    rec = truthbench[0](f"flexible/{name}")
+    r1 = I.didim_rigid(rec)
+    crit = I._ModeCriterion(rec, r1, Decimation.lowpass(I.FLEXIBLE_CUTOFF_HZ, rec.fs),
+                            dict(substeps=10, coulomb_eps=didim.DEFAULT_COULOMB_EPS, integrator="exponential",
+                                 tol=didim.simulation.DEFAULT_TOL))
+    pts, coarse = I._mode_grid(crit, 0.5, 40.0, friction_split=True, grid_start=True)
+    fine = didim.simulation.problem(rec, "flexible", tol=didim.simulation.DEFAULT_TOL)
+    vec = [didim.simulation.params_vector("flexible", crit.params(*x), False)[1] for x in pts]
+    fine_vals = fine.output_error_batch(np.array(vec), crit.yd, crit.dec.core)[0] ** 0.5 / crit.ny
+    assert coarse == pytest.approx(fine_vals, rel=0.10)
+    assert set(np.argsort(coarse)[:3]) == set(np.argsort(fine_vals)[:3])

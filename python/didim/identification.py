@@ -174,10 +174,6 @@ def idim_ls(
 # --------------------------------------------------------------------------------------------------------------------
 
 
-def _output_error(yd: np.ndarray, sim_force: np.ndarray, dec: Decimation) -> float:
-    return float(np.linalg.norm(yd - dec(sim_force)[: len(yd)]) / np.linalg.norm(yd))
-
-
 def nelder_mead_simplex(x0) -> np.ndarray:
     """scipy's default initial simplex for ``minimize(method="Nelder-Mead")``: x0 and, per coordinate, x0 with that
     coordinate times 1.05 (0.00025 where it is 0)."""
@@ -577,9 +573,11 @@ GRID_SIM_TOL = 1e-6
 #: optimum f_n_flex moves by less than 0.05 % against 1e-9 (the default of steps 1 and 3), and it runs 1.3-2 times
 #: faster on records played at rest, where the Coulomb friction's steep slope through zero speed makes the simulator
 #: refine.
-MODE_SIM_TOL = 1e-8
+MODE_SIM_TOL = 1e-7
 #: Load shares of the friction totals on the grid of the friction-split variant.
 MODE_GRID_SHARE = (0.0, 0.5)
+#: The friction split's grid plane (s = 0.5) is evaluated at this many best points of the paper's plane (s = 0).
+GRID_SPLIT_TOP = 8
 #: A step-2 optimum within this margin of the rigid model's output error explains nothing the rigid model does not.
 RIGID_LIMIT_MARGIN = 0.97
 #: The friction split is used when it lowers step 2's output error by more than this fraction.
@@ -690,6 +688,26 @@ def _degenerate(x, j: float, rigid_limit: float, cutoff_hz: float) -> str:
     return ""
 
 
+def _mode_grid(crit: _ModeCriterion, lambda0: float, f0: float, friction_split: bool, grid_start: bool,
+               tally: Optional[list] = None):
+    """Step 2's starting points and their criterion (coarse, see GRID_SIM_TOL): (λ⁰, f⁰) and eq. (28)'s grid with all
+    friction on the motor, then, for the friction split, the share MODE_GRID_SHARE[1] on the load at (λ⁰, f⁰) and at the
+    GRID_SPLIT_TOP best points of the first plane (the mode's frequency is set by the record's resonance whatever the
+    split, so the split's best start lies near the paper's)."""
+    pts = [(lambda0, f0, 0.0)]
+    if grid_start:
+        pts += [(a, b, 0.0) for a in MODE_GRID_LAMBDA for b in MODE_GRID_F_HZ]
+    pts_arr = np.array(pts)
+    vals = crit.batch(pts_arr, tally, coarse=True)
+    if friction_split:
+        s = MODE_GRID_SHARE[1]
+        top = np.argsort(vals)[:GRID_SPLIT_TOP] if grid_start else np.array([], dtype=int)
+        more = np.array([(lambda0, f0, s)] + [(pts_arr[i, 0], pts_arr[i, 1], s) for i in top if i > 0])
+        pts_arr = np.vstack([pts_arr, more])
+        vals = np.concatenate([vals, crit.batch(more, tally, coarse=True)])
+    return pts_arr, vals
+
+
 def fit_flexible_mode(
     rec: Recording,
     rigid: IdentificationResult,
@@ -713,8 +731,8 @@ def fit_flexible_mode(
     M1 = λ M_tot, M2 = (1 − λ) M_tot, K12 = 4π²(1 − λ) f² M_tot, Fv1 = Fv_tot, Fc1 = Fc_tot, Fv2 = Fc2 = 0.
 
     Starts: eq. (28) asks for initial values covering f_n_flex in [10, 80] Hz and λ in [0.1, 0.9]. With
-    ``grid_start`` (default) the criterion is evaluated on that grid (9 × 8 points, f geometric) and at (λ⁰, f⁰) in
-    one parallel batch, and Nelder-Mead starts from the best point; ``grid_start=False`` starts from (λ⁰, f⁰) alone.
+    ``grid_start`` (default) the criterion is evaluated on that grid (5 × 8 points, f geometric) and at (λ⁰, f⁰) in
+    one parallel batch (see :func:`_mode_grid`), and Nelder-Mead starts from the best point; ``grid_start=False`` starts from (λ⁰, f⁰) alone.
 
     ``friction_split=True`` (beyond the paper) also fits the load share s of the friction totals, Fv2 = s Fv_tot,
     Fc2 = s Fc_tot, Fv1 = (1 − s) Fv_tot, Fc1 = (1 − s) Fc_tot: the paper's model cannot reproduce the mode when the
@@ -731,12 +749,8 @@ def fit_flexible_mode(
                                                          integrator=integrator, tol=sim_tol))
     shares = MODE_GRID_SHARE if friction_split else (0.0,)
     if _grid is None:
-        pts = [(lambda0, f0, s) for s in shares]
-        if grid_start:
-            pts += [(a, b, s) for a in MODE_GRID_LAMBDA for b in MODE_GRID_F_HZ for s in shares]
-        pts_arr = np.array(pts)
         count = [0]
-        vals = crit.batch(pts_arr, count, coarse=True)
+        pts_arr, vals = _mode_grid(crit, lambda0, f0, friction_split, grid_start, count)
         grid_sims = count[0]
     else:
         pts_arr, vals = _grid
@@ -873,12 +887,7 @@ def didim_flexible(
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     crit = _ModeCriterion(rec, r1, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
                                              tol=sim_tol))
-    shares = (0.0,) if variant == "paper" else MODE_GRID_SHARE
-    pts = [(lambda0, f0, s) for s in shares]
-    if grid_start:
-        pts += [(a, b, s) for a in MODE_GRID_LAMBDA for b in MODE_GRID_F_HZ for s in shares]
-    grid = (np.array(pts), None)
-    grid = (grid[0], crit.batch(grid[0], coarse=True))
+    grid = _mode_grid(crit, lambda0, f0, variant != "paper", grid_start)
     mode_kw = dict(lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress, grid_start=grid_start,
                    _crit=crit, _grid=grid, **common)
     notes: List[str] = []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 from dataclasses import dataclass
@@ -94,7 +95,13 @@ def param_names(model: str = "rigid", offset: bool = False, terms: Sequence[Term
     """Parameter names of a model in the order of its parameter vector (M, Fv, Fc[, OF] or M1, Fv1, Fc1, M2, Fv2, Fc2,
     K12[, OF]), followed by the extra terms'."""
     _check_model(model)
-    return list(_core.param_names(model, offset, _specs(terms)))
+    return list(_names(model, bool(offset), tuple(_specs(terms) or ())))
+
+
+@functools.lru_cache(maxsize=256)
+def _names(model: str, offset: bool, specs: tuple) -> tuple:
+    """The core's names, kept per structure: identification loops ask for them at every step."""
+    return tuple(_core.param_names(model, offset, list(specs) or None))
 
 
 def params_vector(model: str, params: Params, offset: Optional[bool] = None, terms: Sequence[Term] = ()):

@@ -45,20 +45,6 @@ def newey_west_lag(n: int) -> int:
     return int(math.floor(4 * (n / 100.0) ** (2.0 / 9.0)))
 
 
-def hac_covariance(x: np.ndarray, e: np.ndarray, lag: Optional[int] = None) -> np.ndarray:
-    """Newey-West covariance of the OLS coefficients of ``e`` on ``x`` (x: n × k, e: the OLS residual)."""
-    n, k = x.shape
-    lag = newey_west_lag(n) if lag is None else lag
-    u = x * e[:, None]
-    s = u.T @ u
-    for l in range(1, lag + 1):
-        w = 1 - l / (lag + 1)
-        g = u[l:].T @ u[:-l]
-        s += w * (g + g.T)
-    xtx_inv = np.linalg.pinv(x.T @ x)
-    return xtx_inv @ s @ xtx_inv
-
-
 @dataclass
 class WaldTest:
     """Test that added regressors explain part of a residual."""
@@ -147,4 +133,4 @@ def orthogonalize(x: np.ndarray, w: np.ndarray) -> np.ndarray:
     return x - q @ (q.T @ x)
 
 
-__all__ = ["ar_fit", "prewhiten", "hac_covariance", "wald_added", "WaldTest", "holm", "diebold_mariano", "orthogonalize"]
+__all__ = ["ar_fit", "prewhiten", "wald_added", "WaldTest", "holm", "diebold_mariano", "orthogonalize"]

@@ -183,3 +183,25 @@ fn an_infinite_acceleration_at_the_last_sample_is_a_simulation_error() {
         "{e}"
     );
 }
+
+/// A linear part whose entries over a sample period exceed f64 (a sample period of 1e300 s, or a stiffness over a
+/// mass beyond f64) made nalgebra's matrix exponential take log2 of an infinite norm and square its Padé approximant
+/// 2^64 times: the simulation never returned (found by `simulate_flexible_never_panics`). Now an error, promptly.
+#[test]
+fn a_linear_part_beyond_f64_is_an_error_not_an_endless_exponential() {
+    let m = model::flexible(1e-4).unwrap();
+    for (chi, dt) in [
+        ([68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5], 1e300),
+        ([68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5], 1e60),
+        ([68.0, 104.0, 10.0, 1e-300, 96.5, 9.5, 1e300], 1e-3),
+    ] {
+        let o = SimOptions::new(dt);
+        let e = sim::simulate(&m, &chi, &Controller::EMPS, &ramp(10), None, &o).unwrap_err();
+        assert!(
+            matches!(&e, Error::InvalidInput(msg) if msg.contains("not finite")),
+            "{e:?}"
+        );
+        let e = sim::simulate_sensitivity(&m, &chi, &Controller::EMPS, &ramp(10), None, &o).unwrap_err();
+        assert!(matches!(e, Error::InvalidInput(_)), "{e:?}");
+    }
+}

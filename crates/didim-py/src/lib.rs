@@ -21,7 +21,9 @@ mod convert;
 mod problem;
 use convert::*;
 
-/// Runs a core computation without the interpreter lock, turning panics into errors.
+/// Runs a core computation without the interpreter lock on a thread of its own, while this
+/// thread answers signals, turning panics into errors. For the computations that take a
+/// while (simulations, filters, least squares); [`quick`] runs the others.
 fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> Result<T, Error> + Send) -> PyResult<T> {
     didim_core::interrupt::reset();
     // The core runs on a scoped thread while this (Python's) thread waits for it and, every
@@ -48,6 +50,17 @@ fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> Result<T, Error> + Send) -> 
             }
         })
     });
+    finish(py, out)
+}
+
+/// Runs a short core computation (building a model, a filter design) on this thread: starting
+/// a thread to watch for signals would cost more than the work. Panics become errors.
+fn quick<T>(py: Python<'_>, f: impl FnOnce() -> Result<T, Error>) -> PyResult<T> {
+    finish(py, catch_unwind(AssertUnwindSafe(f)))
+}
+
+/// The outcome of a core computation as Python sees it.
+fn finish<T>(py: Python<'_>, out: std::thread::Result<Result<T, Error>>) -> PyResult<T> {
     match out {
         Ok(Ok(v)) => Ok(v),
         Ok(Err(Error::Interrupted)) => Err(PENDING
@@ -319,7 +332,7 @@ fn sim_options(
 #[pyo3(signature = (model, offset=false, terms=None))]
 fn param_names(py: Python<'_>, model: &str, offset: bool, terms: Option<Terms>) -> PyResult<Vec<String>> {
     let terms = terms.unwrap_or_default();
-    let m = run(py, || {
+    let m = quick(py, || {
         make_model(model, offset, DEFAULT_COULOMB_EPS, &terms, None)
     })?;
     Ok(match m {
@@ -571,12 +584,12 @@ fn design<'py>(
     so: impl FnOnce() -> Result<flt::Sos, Error> + Send,
 ) -> PyResult<Bound<'py, PyAny>> {
     if sos {
-        let s = run(py, so)?;
+        let s = quick(py, so)?;
         let n = s.n_sections();
         let flat: Vec<f64> = s.sections().iter().flatten().copied().collect();
         Ok(PyArray1::from_vec(py, flat).reshape([n, 6])?.into_any())
     } else {
-        let tf = run(py, ba)?;
+        let tf = quick(py, ba)?;
         Ok((tf.b.into_pyarray(py), tf.a.into_pyarray(py))
             .into_pyobject(py)?
             .into_any())

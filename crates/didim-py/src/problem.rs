@@ -14,7 +14,7 @@ use pyo3::types::PyDict;
 
 use crate::convert::*;
 use crate::{
-    core_error, interrupted, make_controller, make_model, run, sim_options, AnyModel, Decimated, Terms,
+    core_error, interrupted, make_controller, make_model, quick, run, sim_options, AnyModel, Decimated, Terms,
 };
 
 type Arr<'py> = Bound<'py, PyArray1<f64>>;
@@ -213,7 +213,7 @@ impl Problem {
         let opts = sim_options(py, dt, substeps, quantization, delay, integrator, tol)?;
         let qr = slice1(&qr).into_owned();
         let u_ext = u_ext.as_ref().map(|u| slice1(u).into_owned());
-        let (model, controller) = run(py, || {
+        let (model, controller) = quick(py, || {
             opts.validate()?;
             Ok((
                 make_model(model, offset, coulomb_eps, &terms, backlash_gap)?,

@@ -213,7 +213,12 @@ impl<const N: usize> Plant<N> {
 
     /// `E`, `h φ1(Ah) B`, `h φ2(Ah) B` for a step `h`.
     fn propagators(&self, h: f64) -> Result<Level<N>> {
-        let x = Self::augmented(&self.aq, &self.av, h, true).exp();
+        let z = Self::augmented(&self.aq, &self.av, h, true);
+        let x = if exp_safe(&z) {
+            z.exp()
+        } else {
+            z.map(|_| f64::NAN)
+        };
         if x.iter().any(|v| !v.is_finite()) {
             return Err(invalid!(
                 "the exponential of the linear part of the model is not finite for a step of {h} s; \
@@ -234,7 +239,12 @@ impl<const N: usize> Plant<N> {
         big.view_mut((0, 0), (s, s)).copy_from(&z);
         big.view_mut((s, s), (s, s)).copy_from(&z);
         big.view_mut((0, s), (s, s)).copy_from(&dz);
-        let x = big.exp();
+        // NaN propagators make the sensitivities non-finite, which the caller reports
+        let x = if exp_safe(&big) {
+            big.exp()
+        } else {
+            big.map(|_| f64::NAN)
+        };
         Self::blocks(&x, s, h)
     }
 
@@ -281,7 +291,7 @@ impl<const N: usize> Plant<N> {
     /// There the implicit solve, stable for any slope, is used instead.
     #[inline(always)]
     fn stiff(gq: &Mat<N>, gv: &Mat<N>, h: f64) -> bool {
-        h * (gv.amax() + h * gq.amax()) >= 1.0
+        h * (amax(gv.as_slice()) + h * amax(gq.as_slice())) >= 1.0
     }
 
     /// Accelerations of the full direct model for the input accelerations `b` (= M⁻¹ u).
@@ -314,7 +324,7 @@ impl<const N: usize> Plant<N> {
         let v1 = vp + lv.p2v * pred;
         let (g1, gq, gv) = self.g_and_partials(&q1, &v1);
         let scale = self.atol / (h * self.dt);
-        if (g1 - gn - pred).amax() <= 0.1 * scale && !Self::stiff(&gq, &gv, h) {
+        if amax((g1 - gn - pred).as_slice()) <= 0.1 * scale && !Self::stiff(&gq, &gv, h) {
             return Step {
                 q1,
                 v1,
@@ -365,7 +375,7 @@ impl<const N: usize> Plant<N> {
             let (g1, gq, gv) = self.g_and_partials(&q1, &v1);
             let r = g1 - gn - dw;
             (step.q1, step.v1, step.g1, step.dw) = (q1, v1, g1, dw);
-            if r.amax() <= small {
+            if amax(r.as_slice()) <= small {
                 converged = true;
                 break;
             }
@@ -382,7 +392,7 @@ impl<const N: usize> Plant<N> {
             let qm = lm.eqq * q + lm.eqv * v + lm.p1q * f + lm.p2q * half;
             let vm = lm.evq * q + lm.evv * v + lm.p1v * f + lm.p2v * half;
             let d = self.g(&qm, &vm) - gn - half;
-            step.err = d.amax() * (2.0 / 3.0) / scale;
+            step.err = amax(d.as_slice()) * (2.0 / 3.0) / scale;
         }
         step
     }
@@ -474,6 +484,33 @@ impl<const N: usize> StepHook<N> for NoHook {
     fn step(&mut self, _: &Plant<N>, _: usize, _: &V<N>, _: &V<N>, _: &V<N>, _: &Step<N>) -> Result<()> {
         Ok(())
     }
+}
+
+/// Whether nalgebra's `exp` can be trusted with `z`: its scaling and squaring takes
+/// `log2` of norms of powers of `z` up to the tenth, and an infinite one (a non-finite
+/// entry, or entries beyond 1e30, e.g. a stiffness over a mass beyond f64) asks for
+/// 2^64 squarings, a loop without end. Such a matrix has no useful exponential anyway.
+fn exp_safe(z: &DMatrix<f64>) -> bool {
+    let norm1 = z
+        .column_iter()
+        .map(|c| c.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    norm1.is_finite() && norm1 <= 1e30 && z.iter().all(|v| v.is_finite())
+}
+
+/// The largest absolute value of `x` (0 for none; NaN entries are skipped, as by
+/// nalgebra's `amax`): a plain loop, which the compiler unrolls for the small static
+/// sizes here (nalgebra's generic reduction does not).
+#[inline(always)]
+fn amax(x: &[f64]) -> f64 {
+    let mut m = 0.0;
+    for v in x {
+        let a = v.abs();
+        if a > m {
+            m = a;
+        }
+    }
+    m
 }
 
 /// The nearest multiple of `step` (ties away from zero, like [`f64::round`]) without the
