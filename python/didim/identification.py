@@ -569,10 +569,10 @@ MODE_GRID_F_HZ = tuple(np.round(np.geomspace(10.0, 80.0, 8), 3))
 #: use a position tolerance of 1e-6 of the stroke (against 1e-9 by default), which on the truthbench flexible records
 #: changes the criterion by at most 6 % of itself, keeps the ranking of the best points and is 2.5-3 times faster.
 GRID_SIM_TOL = 1e-6
-#: Step 2's Nelder-Mead simulates at a position tolerance of 1e-8 of the stroke: on the truthbench flexible records its
-#: optimum f_n_flex moves by less than 0.05 % against 1e-9 (the default of steps 1 and 3), and it runs 1.3-2 times
-#: faster on records played at rest, where the Coulomb friction's steep slope through zero speed makes the simulator
-#: refine.
+#: Step 2's Nelder-Mead simulates at a position tolerance of 1e-7 of the stroke (force within 1e-3 of a fine
+#: integration): on the truthbench flexible records its optimum f_n_flex moves by less than 0.1 % against 1e-9 (the
+#: default of steps 1 and 3, which refine from it), and it runs 2-3 times faster on records played at rest, where the
+#: Coulomb friction's steep slope through zero speed makes the simulator refine.
 MODE_SIM_TOL = 1e-7
 #: Load shares of the friction totals on the grid of the friction-split variant.
 MODE_GRID_SHARE = (0.0, 0.5)
