@@ -913,10 +913,11 @@ def didim_flexible(
             jp, js = candidates["paper"].output_error, candidates["friction-split"].output_error
             if js < (1 - SPLIT_GAIN) * jp and not candidates["friction-split"].options["degenerate"]:
                 chosen = "friction-split"
-                notes.append(f"variant friction-split (beyond the paper): {split_why}; putting the share s = "
+                notes.append(f"variant friction-split (beyond the paper): putting the share s = "
                              f"{candidates['friction-split'].params['load_share']:.2f} of the friction on the load "
                              f"lowers step 2's output error from {100 * jp:.2f} % (paper, all friction on the motor) "
-                             f"to {100 * js:.2f} %, so Fv2 and Fc2 are identified too")
+                             f"to {100 * js:.2f} %, so Fv2 and Fc2 are identified too (the split was tried because "
+                             f"{split_why})")
             else:
                 notes.append(f"variant paper: the friction split does not explain the record better (step 2 output "
                              f"error {100 * js:.2f} % against {100 * jp:.2f} % with all friction on the motor)")
