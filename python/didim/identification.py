@@ -755,7 +755,7 @@ def fit_flexible_mode(
     else:
         pts_arr, vals = _grid
     dims = 3 if friction_split else 2
-    use = np.isin(pts_arr[:, 2], shares)
+    use = np.isin(pts_arr[:, 2], shares) | friction_split
     i = int(np.flatnonzero(use)[np.argmin(vals[use])])
     x0 = pts_arr[i, :dims]
     if grid_start:
@@ -905,6 +905,13 @@ def didim_flexible(
                          f"point of the grid with friction on the load does better), so the split was not run")
     if variant == "friction-split" or split_why:
         _say(progress, "step 2 (friction split, beyond the paper): Nelder-Mead on (λ, f_n_flex, s)")
+        if "paper" in candidates and not candidates["paper"].options["degenerate"]:
+            # the paper's optimum has found the record's resonance: the split starts there too if it does better
+            # than the grid's points (its f_n_flex is already converged, only s and λ have to move)
+            x = candidates["paper"].params
+            more = np.array([(x["lambda"], x["f_n_flex"], s) for s in MODE_GRID_SHARE[1:]])
+            grid = (np.vstack([grid[0], more]), np.concatenate([grid[1], crit.batch(more)]))
+            mode_kw["_grid"] = grid
         candidates["friction-split"] = fit_flexible_mode(rec, r1, friction_split=True, **mode_kw)
     chosen = variant
     if variant == "auto":
