@@ -9,7 +9,7 @@ import pytest
 
 import didim
 from didim import scenarios as sc
-from didim.identification import didim as didim_iterate
+from didim.identification import didim_iterate
 from didim.output_error import check_sensitivities, oe_gn
 
 P = 0.05

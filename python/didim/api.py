@@ -10,7 +10,7 @@ import numpy as np
 
 from . import _checks
 from ._errors import DataError, DidimWarning
-from .identification import Progress, didim, didim_flexible, didim_rigid, idim_ls, a_priori_mass
+from .identification import Progress, didim_iterate, didim_flexible, didim_rigid, idim_ls, a_priori_mass
 from .output_error import CRITERIA, oe_gn, oe_nm, pseudo_regular_initial
 from .recording import Recording
 from .result import IdentificationResult
@@ -37,7 +37,7 @@ def _targets(model: str, method: str):
     """The functions ``identify`` hands a method's options to, and the keywords it sets itself."""
     return {
         "idim-ls": ([idim_ls], ("offset",)),
-        "didim": ([didim_rigid, didim] if model == "rigid" else [didim_flexible], ("offset", "progress", "frozen", "method")),
+        "didim": ([didim_rigid, didim_iterate] if model == "rigid" else [didim_flexible], ("offset", "progress", "frozen", "method")),
         "oe-nm": ([oe_nm], ("criterion", "progress")),
         "oe-lm": ([oe_gn], ("criterion", "progress")),
     }[method]

@@ -30,7 +30,7 @@ import numpy as np
 from . import _checks, _core
 from ._errors import DataError, DidimError, SimulationError
 from ._io import jsonable as _clean
-from .identification import didim as didim_fit
+from .identification import didim_iterate
 from .identification import fit_flexible_mode, flexible_from_mode, a_priori_mass
 from .recording import Recording
 from .result import IdentificationResult
@@ -248,7 +248,7 @@ def _refit(data: _Data, state: State, init: Dict[str, float], progress) -> Tuple
     """DIDIM refit of ``state`` (with its new terms) from ``init``, on the training samples."""
     free_init = {k: v for k, v in {**state.params, **init}.items() if k not in state.frozen}
     # every sample: the effects the doctor looks for (Stribeck, backlash, ...) live around reversals and stops
-    r = didim_fit(data.rec, state.model, free_init, frozen=state.frozen, decimation=data.dec, tol=1e-4, max_iter=30,
+    r = didim_iterate(data.rec, state.model, free_init, frozen=state.frozen, decimation=data.dec, tol=1e-4, max_iter=30,
                   fit_samples=data.n_train, reversals="keep", **state.sim_kwargs())
     return replace(state, params=dict(r.params)), r
 

@@ -226,7 +226,7 @@ def _physical(names: Sequence[str], chi: np.ndarray, ref: Optional[np.ndarray] =
     return True
 
 
-def didim(
+def didim_iterate(
     rec: Recording,
     model: str,
     initial: Dict[str, float],
@@ -552,7 +552,7 @@ def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: bool = F
     init = {"M": float(apM), "Fv": 0.0, "Fc": 0.0}
     if offset:
         init["OF"] = 0.0
-    return didim(rec, "rigid", init, offset=offset, cutoff_hz=cutoff_hz, **kw)
+    return didim_iterate(rec, "rigid", init, offset=offset, cutoff_hz=cutoff_hz, **kw)
 
 
 def flexible_from_mode(m_tot: float, lam: float, f_n: float) -> Dict[str, float]:
@@ -952,7 +952,7 @@ def didim_flexible(
         frozen = {}
     if offset:
         init["OF"] = 0.0
-    r3 = didim(rec, "flexible", init, frozen=frozen, offset=offset, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter,
+    r3 = didim_iterate(rec, "flexible", init, frozen=frozen, offset=offset, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter,
                progress=progress, **common)
     r3.steps = {"rigid": r1, "mode": r2}
     r3.notes = notes + r3.notes
