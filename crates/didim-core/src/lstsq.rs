@@ -61,7 +61,7 @@ pub enum SigmaConvention {
     SampleStd,
 }
 
-/// Options of [`lstsq`] and [`lstsq_full_rank`].
+/// Options of [`lstsq`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LstsqOptions {
     /// Relative rank tolerance `τ`: pivot `k` of the column-pivoted QR counts
@@ -154,8 +154,9 @@ pub struct LstsqSolution {
 /// Returns the solution on the base columns with `σ̂ρ` (eq. (13), or the
 /// [`SigmaConvention::SampleStd`] variant), `C = σ̂ρ² (W_BᵀW_B)⁻¹` (eq. (14)) from
 /// `R_B⁻¹` (never forming `WᵀW`), `σ_i` and `%σ_i` (eq. (15)), the relative error
-/// and the condition number. Rank deficiency is *not* an error here (see
-/// [`lstsq_full_rank`]).
+/// and the condition number. Rank deficiency is *not* an error: the dependent
+/// columns are returned with their combinations of base columns (the Python layer
+/// turns them into an identifiability error naming the parameters).
 ///
 /// # Errors
 /// [`Error::InvalidInput`] when `cols == 0`; `w.len() != rows·cols`;
@@ -419,73 +420,6 @@ pub fn lstsq(w: &[f64], rows: usize, cols: usize, y: &[f64], opts: &LstsqOptions
     })
 }
 
-/// Same as [`lstsq`], for callers that need every column of `W` to be identifiable.
-///
-/// # Errors
-/// Everything [`lstsq`] returns, plus [`Error::InvalidInput`] when `names` is
-/// given with a length other than `cols`, and [`Error::Identifiability`] when the
-/// numerical rank `b` of `W` is below `cols`: the message lists every dependent
-/// column by index (and by name when `names` is given) with its linear
-/// combination of base columns (see [`Dependency`]), e.g.
-/// `column 3 ("fv") = 2 * column 0 ("ia") - 1 * column 2 ("fc")`.
-pub fn lstsq_full_rank(
-    w: &[f64],
-    rows: usize,
-    cols: usize,
-    y: &[f64],
-    names: Option<&[&str]>,
-    opts: &LstsqOptions,
-) -> Result<LstsqSolution> {
-    if let Some(names) = names {
-        if names.len() != cols {
-            return Err(invalid!(
-                "lstsq_full_rank: {} column names given for {} columns of W; pass one name \
-                 per column (or None)",
-                names.len(),
-                cols
-            ));
-        }
-    }
-    let sol = lstsq(w, rows, cols, y, opts)?;
-    if sol.rank == cols {
-        return Ok(sol);
-    }
-    let tau = rank_tolerance(opts.rank_tol, rows, cols)?;
-    let label = |j: usize| match names {
-        Some(names) => format!("column {j} ({:?})", names[j]),
-        None => format!("column {j}"),
-    };
-    let deps: Vec<String> = sol
-        .dependencies
-        .iter()
-        .map(|d| {
-            let mut s = format!("{} = ", label(d.column));
-            if d.combination.is_empty() {
-                s.push_str("0 (numerically zero column)");
-            }
-            for (t, &(k, coef)) in d.combination.iter().enumerate() {
-                if t == 0 {
-                    s.push_str(&format!("{} * {}", fmt_num(coef), label(k)));
-                } else {
-                    let sign = if coef < 0.0 { '-' } else { '+' };
-                    s.push_str(&format!(" {sign} {} * {}", fmt_num(coef.abs()), label(k)));
-                }
-            }
-            s
-        })
-        .collect();
-    Err(Error::Identifiability(format!(
-        "lstsq_full_rank: W is rank deficient: numerical rank {} < {} columns (relative rank \
-         tolerance {:e} on |R_kk|/|R_00|). Dependent columns: {}. Regroup each dependent \
-         parameter into the base parameters of its combination (or drop its column), or call \
-         lstsq to get the base-parameter solution.",
-        sol.rank,
-        cols,
-        tau,
-        deps.join("; ")
-    )))
-}
-
 /// Checks shapes and values; see the `# Errors` section of [`lstsq`].
 fn validate(w: &[f64], rows: usize, cols: usize, y: &[f64]) -> Result<()> {
     if cols == 0 {
@@ -705,22 +639,6 @@ impl SmallQr {
                 *e -= f * vi;
             }
         }
-    }
-}
-
-/// Compact formatting of a coefficient for messages (`2`, `-0.5`, `1.234568e-7`).
-fn fmt_num(x: f64) -> String {
-    let a = x.abs();
-    if a == 0.0 || (1e-3..1e6).contains(&a) {
-        let s = format!("{x:.6}");
-        let s = s.trim_end_matches('0').trim_end_matches('.');
-        if s == "-0" {
-            "0".to_string()
-        } else {
-            s.to_string()
-        }
-    } else {
-        format!("{x:.6e}")
     }
 }
 
@@ -1043,34 +961,6 @@ mod tests {
     }
 
     #[test]
-    fn full_rank_variant_names_dependent_columns() {
-        let (w, y) = deficient_problem();
-        let opts = LstsqOptions::default();
-        match lstsq_full_rank(&w, 200, 4, &y, None, &opts) {
-            Err(Error::Identifiability(m)) => {
-                assert!(m.contains("rank 3 < 4"), "{m}");
-                assert!(m.contains("column 3 = 2 * column 0 - 1 * column 2"), "{m}");
-            }
-            other => panic!("expected Identifiability, got {other:?}"),
-        }
-        let names = ["zz1", "fv1", "fc1", "ia1"];
-        match lstsq_full_rank(&w, 200, 4, &y, Some(&names), &opts) {
-            Err(Error::Identifiability(m)) => {
-                assert!(
-                    m.contains(r#"column 3 ("ia1") = 2 * column 0 ("zz1") - 1 * column 2 ("fc1")"#),
-                    "{m}"
-                );
-            }
-            other => panic!("expected Identifiability, got {other:?}"),
-        }
-        // Full rank: same result as lstsq.
-        let (w, y) = noisy_problem();
-        let a = lstsq_full_rank(&w, 500, 4, &y, Some(&names), &opts).unwrap();
-        let b = lstsq(&w, 500, 4, &y, &opts).unwrap();
-        assert_eq!(a, b);
-    }
-
-    #[test]
     fn zero_column_and_earlier_dependent_column() {
         // col 1 = 0.5 * col 0 (dependent on an earlier column, though smaller),
         // col 2 identically zero.
@@ -1098,13 +988,6 @@ mod tests {
         );
         assert_rel(s.params[0], 1.0, 1e-12, "chi0");
         assert_rel(s.params[3], -1.0, 1e-12, "chi3");
-        match lstsq_full_rank(&w, r, 4, &y, None, &LstsqOptions::default()) {
-            Err(Error::Identifiability(m)) => {
-                assert!(m.contains("column 1 = 0.5 * column 0"), "{m}");
-                assert!(m.contains("column 2 = 0 (numerically zero column)"), "{m}");
-            }
-            other => panic!("expected Identifiability, got {other:?}"),
-        }
     }
 
     #[test]
@@ -1234,10 +1117,6 @@ mod tests {
             };
             expect_invalid(lstsq(&w, 4, 3, &y, &opts), &["rank_tol", "[0, 1)"]);
         }
-        expect_invalid(
-            lstsq_full_rank(&w, 4, 3, &y, Some(&["a", "b"]), &o),
-            &["2 column names", "3 columns"],
-        );
         // An estimate beyond f64 range (tiny W, huge Y) is reported, not returned as inf.
         let tiny: Vec<f64> = w.iter().map(|v| v * 1e-300).collect();
         let huge_y: Vec<f64> = y.iter().map(|v| v * 1e300).collect();
