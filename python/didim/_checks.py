@@ -143,6 +143,11 @@ def options(**kw) -> None:
             _RULES[k](v)
 
 
+def is_option(name: str) -> bool:
+    """Whether :func:`options` has a rule for ``name``."""
+    return name in _RULES
+
+
 #: Parameters whose value must be strictly positive for a simulation: masses (kg) and stiffness (N/m).
 _POSITIVE = {"M": "mass", "M1": "mass", "M2": "mass", "K12": "stiffness"}
 _UNIT = {"mass": "kg", "stiffness": "N/m"}

@@ -127,7 +127,7 @@ def check_points(points: Sequence[Mapping[str, Any]]) -> None:
             checked.add((k, repr(v)))
             if k == "apM" and v is not None:
                 _checks.real("apM (a priori mass)", v, "kg", lo=0.0)
-            elif k in _checks._RULES and v is not None:
+            elif _checks.is_option(k) and v is not None:
                 _checks.options(**{k: v})
             elif k == "seed":
                 _checks.whole("seed", v, lo=0)
