@@ -172,192 +172,329 @@ pub fn lstsq(w: &[f64], rows: usize, cols: usize, y: &[f64], opts: &LstsqOptions
     validate(w, rows, cols, y)?;
     let tau = rank_tolerance(opts.rank_tol, rows, cols)?;
     let n = cols;
-
-    // --- Column-pivoted Householder QR of W: W P = Q R (faer). ---
-    let par = if rows.saturating_mul(cols) >= PAR_MIN_ENTRIES {
-        Par::rayon(0)
-    } else {
-        Par::Seq
-    };
     // W and Y are scaled by exact powers of two (max |W| and max |Y| in [0.5, 1))
     // so that neither subnormal nor huge entries under/overflow inside the
     // factorisation; everything is mapped back to the caller's units below.
     let kw = pow2_exponent(w);
     let ky = pow2_exponent(y);
-    let mut qr = Mat::<f64>::from_fn(rows, cols, |i, j| ldexp(w[j * rows + i], kw));
-    let block_size = recommended_block_size::<f64>(rows, cols).max(1);
-    let mut q_coeff = Mat::<f64>::zeros(block_size, n);
-    // perm[k] = original index of the k-th pivot column; perm_inv is its inverse.
-    let mut perm = vec![0usize; n];
-    let mut perm_inv = vec![0usize; n];
-    {
-        let mut mem = MemBuffer::new(qr_in_place_scratch::<usize, f64>(
-            rows,
-            cols,
-            block_size,
-            par,
-            Default::default(),
-        ));
-        qr_in_place(
-            qr.as_mut(),
-            q_coeff.as_mut(),
-            &mut perm,
-            &mut perm_inv,
-            par,
-            MemStack::new(&mut mem),
-            Default::default(),
-        );
-    }
-    // R (n × n, upper triangular, pivoted column order), column-major.
-    let mut r_fac = vec![0.0; n * n];
-    for j in 0..n {
-        for i in 0..=j {
-            r_fac[j * n + i] = qr[(i, j)];
-        }
-    }
-    if r_fac.iter().any(|v| !v.is_finite()) {
-        return Err(overflow_error());
-    }
-    // Householder basis: unit lower trapezoidal part of the factored matrix.
-    for j in 0..n {
-        for i in 0..j {
-            qr[(i, j)] = 0.0;
-        }
-        qr[(j, j)] = 1.0;
-    }
-    // Qᵀ Y; its first n entries are the coordinates of Y in range(Q_thin).
-    let mut qty = Mat::<f64>::from_fn(rows, 1, |i, _| ldexp(y[i], ky));
-    {
-        let mut mem = MemBuffer::new(
-            apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
-                rows, block_size, 1,
-            ),
-        );
-        apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-            qr.as_ref(),
-            q_coeff.as_ref(),
-            Conj::No,
-            qty.as_mut(),
-            par,
-            MemStack::new(&mut mem),
-        );
-    }
-    drop(qr);
+    let f = Factored::new(w, y, rows, cols, kw, ky)?;
+    let thr = tau * f.r_fac[0].abs();
+    let rank = f.rank(thr)?;
+    let base = Base::choose(&f, rank, thr);
+    let sol = base.solve(&f)?;
 
-    // --- Numerical rank from the pivots. ---
-    let r00 = r_fac[0].abs();
-    let thr = tau * r00;
-    let mut rank = 0;
-    while rank < n && r_fac[rank * n + rank].abs() > thr {
-        rank += 1;
-    }
-    if rank == 0 {
-        // Unreachable for a nonzero W (|R_00| > 0 and τ < 1); kept so that no
-        // division by zero can happen silently.
-        return Err(Error::Identifiability(
-            "lstsq: W has numerical rank 0; no parameter is identifiable".to_string(),
-        ));
-    }
-
-    // --- Base columns, chosen on M = R Pᵀ (same column geometry as W). ---
-    // Column j of W is Q_thin · m_cols[j].
-    let m_cols: Vec<Vec<f64>> = (0..n)
-        .map(|j| {
-            let p = perm_inv[j];
-            (0..n)
-                .map(|i| if i <= p { r_fac[p * n + i] } else { 0.0 })
-                .collect()
-        })
-        .collect();
-    let base_qr = if rank == n {
-        SmallQr::factor(&m_cols, &(0..n).collect::<Vec<_>>(), None)
-    } else {
-        let natural = SmallQr::factor(&m_cols, &(0..n).collect::<Vec<_>>(), Some(thr));
-        if natural.order.len() == rank {
-            natural
-        } else {
-            SmallQr::factor(&m_cols, &perm[..rank], None)
-        }
-    };
-    let b = base_qr.order.len();
-    let mut is_base = vec![false; n];
-    for &j in &base_qr.order {
-        is_base[j] = true;
-    }
-    let dependents: Vec<usize> = (0..n).filter(|&j| !is_base[j]).collect();
-
-    // R_B (b × b) and one triangular solve for [χ_B | dependency coefs | R_B⁻¹].
-    let r_b = Mat::<f64>::from_fn(b, b, |i, j| if i <= j { base_qr.r[j][i] } else { 0.0 });
-    if (0..b).any(|k| r_b[(k, k)] == 0.0) {
-        return Err(Error::Identifiability(
-            "lstsq: the triangular factor of the base columns is singular; \
-             increase rank_tol"
-                .to_string(),
-        ));
-    }
-    let nd = dependents.len();
-    let mut rhs = Mat::<f64>::zeros(b, 1 + nd + b);
-    let mut c: Vec<f64> = (0..n).map(|i| qty[(i, 0)]).collect();
-    base_qr.apply(&mut c);
-    for k in 0..b {
-        rhs[(k, 0)] = c[k];
-        rhs[(k, 1 + nd + k)] = 1.0;
-    }
-    for (t, &j) in dependents.iter().enumerate() {
-        let mut v = m_cols[j].clone();
-        base_qr.apply(&mut v);
-        for k in 0..b {
-            rhs[(k, 1 + t)] = v[k];
-        }
-    }
-    solve_upper_triangular_in_place(r_b.as_ref(), rhs.as_mut(), Par::Seq);
-
-    // --- χ̂ and residual. ---
     let mut params = vec![0.0; n];
-    for (k, &j) in base_qr.order.iter().enumerate() {
-        params[j] = ldexp(rhs[(k, 0)], kw - ky);
+    for (k, &j) in base.qr.order.iter().enumerate() {
+        params[j] = ldexp(sol.rhs[(k, 0)], kw - ky);
     }
     if params.iter().any(|v| !v.is_finite()) {
         return Err(overflow_error());
     }
-    let mut residual = y.to_vec();
-    for (j, &p) in params.iter().enumerate() {
-        if p != 0.0 {
-            let col = &w[j * rows..(j + 1) * rows];
-            for (e, &wij) in residual.iter_mut().zip(col) {
-                *e -= p * wij;
+    let fit = Fit::new(w, y, rows, &params, base.qr.order.len(), opts.sigma)?;
+    let (covariance, std, rel_std_pct) = uncertainty(&base, &sol, &params, fit.sigma_rho, kw, ky);
+    let dependencies = base.dependencies(&sol, thr);
+    let mut base_columns = base.qr.order.clone();
+    base_columns.sort_unstable();
+
+    Ok(LstsqSolution {
+        params,
+        std,
+        rel_std_pct,
+        covariance,
+        base_columns,
+        dependencies,
+        rank: base.qr.order.len(),
+        rows,
+        residual_norm: fit.residual_norm,
+        sigma_rho: fit.sigma_rho,
+        relative_error: fit.relative_error,
+        condition_number: condition_number(sol.r_b.as_ref()),
+        residual: fit.residual,
+    })
+}
+
+/// Phase 1: the column-pivoted Householder QR of the scaled `W` (faer), `W P = Q R`,
+/// and `Qᵀ Y`.
+struct Factored {
+    /// `R` (n × n, upper triangular, pivoted column order), column-major.
+    r_fac: Vec<f64>,
+    /// `perm[k]`: original index of the k-th pivot column; `perm_inv` its inverse.
+    perm: Vec<usize>,
+    perm_inv: Vec<usize>,
+    /// The first `n` entries of `Qᵀ Y`: the coordinates of `Y` in range(Q_thin).
+    qty: Vec<f64>,
+    n: usize,
+}
+
+impl Factored {
+    fn new(w: &[f64], y: &[f64], rows: usize, cols: usize, kw: i32, ky: i32) -> Result<Self> {
+        let n = cols;
+        let par = if rows.saturating_mul(cols) >= PAR_MIN_ENTRIES {
+            Par::rayon(0)
+        } else {
+            Par::Seq
+        };
+        let mut qr = Mat::<f64>::from_fn(rows, cols, |i, j| ldexp(w[j * rows + i], kw));
+        let block_size = recommended_block_size::<f64>(rows, cols).max(1);
+        let mut q_coeff = Mat::<f64>::zeros(block_size, n);
+        let mut perm = vec![0usize; n];
+        let mut perm_inv = vec![0usize; n];
+        {
+            let mut mem = MemBuffer::new(qr_in_place_scratch::<usize, f64>(
+                rows,
+                cols,
+                block_size,
+                par,
+                Default::default(),
+            ));
+            qr_in_place(
+                qr.as_mut(),
+                q_coeff.as_mut(),
+                &mut perm,
+                &mut perm_inv,
+                par,
+                MemStack::new(&mut mem),
+                Default::default(),
+            );
+        }
+        let mut r_fac = vec![0.0; n * n];
+        for j in 0..n {
+            for i in 0..=j {
+                r_fac[j * n + i] = qr[(i, j)];
             }
         }
-    }
-    let residual_norm = norm2(&residual);
-    let y_norm = norm2(y);
-    let relative_error = if y_norm > 0.0 {
-        residual_norm / y_norm
-    } else {
-        f64::NAN
-    };
-
-    // --- σ̂ρ, eq. (13) or sample std. ---
-    let sigma_rho = match opts.sigma {
-        SigmaConvention::Paper => residual_norm / ((rows - b) as f64).sqrt(),
-        SigmaConvention::SampleStd => {
-            let mean = residual.iter().sum::<f64>() / rows as f64;
-            let centered: Vec<f64> = residual.iter().map(|e| e - mean).collect();
-            norm2(&centered) / ((rows - 1) as f64).sqrt()
+        if r_fac.iter().any(|v| !v.is_finite()) {
+            return Err(overflow_error());
         }
-    };
-    if !residual_norm.is_finite() || !sigma_rho.is_finite() {
-        return Err(overflow_error());
+        // Householder basis: unit lower trapezoidal part of the factored matrix.
+        for j in 0..n {
+            for i in 0..j {
+                qr[(i, j)] = 0.0;
+            }
+            qr[(j, j)] = 1.0;
+        }
+        let mut qty = Mat::<f64>::from_fn(rows, 1, |i, _| ldexp(y[i], ky));
+        {
+            let mut mem = MemBuffer::new(
+                apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+                    rows, block_size, 1,
+                ),
+            );
+            apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+                qr.as_ref(),
+                q_coeff.as_ref(),
+                Conj::No,
+                qty.as_mut(),
+                par,
+                MemStack::new(&mut mem),
+            );
+        }
+        Ok(Self {
+            r_fac,
+            perm,
+            perm_inv,
+            qty: (0..n).map(|i| qty[(i, 0)]).collect(),
+            n,
+        })
     }
 
-    // --- C = σ̂ρ² R_B⁻¹ R_B⁻ᵀ, eq. (14); σ_i and %σ_i, eq. (15). ---
-    // σ̂ρ·R_B⁻¹ in the caller's units: with W' = 2^kw W and σ' = 2^ky σ̂ρ,
-    // σ̂ρ R_B⁻¹ = 2^(kw-ky) σ' R_B'⁻¹ (product formed in the scaled units).
+    /// Phase 2: the numerical rank, the pivots of `R` above `thr = τ |R_00|`.
+    fn rank(&self, thr: f64) -> Result<usize> {
+        let n = self.n;
+        let mut rank = 0;
+        while rank < n && self.r_fac[rank * n + rank].abs() > thr {
+            rank += 1;
+        }
+        if rank == 0 {
+            // Unreachable for a nonzero W (|R_00| > 0 and τ < 1); kept so that no
+            // division by zero can happen silently.
+            return Err(Error::Identifiability(
+                "lstsq: W has numerical rank 0; no parameter is identifiable".to_string(),
+            ));
+        }
+        Ok(rank)
+    }
+}
+
+/// Phase 3: the base columns, chosen on `M = R Pᵀ` (same column geometry as `W`:
+/// column j of `W` is `Q_thin · m_cols[j]`), and the small QR of them.
+struct Base {
+    m_cols: Vec<Vec<f64>>,
+    qr: SmallQr,
+    dependents: Vec<usize>,
+}
+
+impl Base {
+    fn choose(f: &Factored, rank: usize, thr: f64) -> Self {
+        let n = f.n;
+        let m_cols: Vec<Vec<f64>> = (0..n)
+            .map(|j| {
+                let p = f.perm_inv[j];
+                (0..n)
+                    .map(|i| if i <= p { f.r_fac[p * n + i] } else { 0.0 })
+                    .collect()
+            })
+            .collect();
+        let all: Vec<usize> = (0..n).collect();
+        let qr = if rank == n {
+            SmallQr::factor(&m_cols, &all, None)
+        } else {
+            let natural = SmallQr::factor(&m_cols, &all, Some(thr));
+            if natural.order.len() == rank {
+                natural
+            } else {
+                SmallQr::factor(&m_cols, &f.perm[..rank], None)
+            }
+        };
+        let mut is_base = vec![false; n];
+        for &j in &qr.order {
+            is_base[j] = true;
+        }
+        let dependents = (0..n).filter(|&j| !is_base[j]).collect();
+        Self {
+            m_cols,
+            qr,
+            dependents,
+        }
+    }
+
+    /// Phase 4: `R_B` (b × b) and one triangular solve for
+    /// `[χ_B | dependency coefficients | R_B⁻¹]` (scaled units).
+    fn solve(&self, f: &Factored) -> Result<BaseSolution> {
+        let b = self.qr.order.len();
+        let r_b = Mat::<f64>::from_fn(b, b, |i, j| if i <= j { self.qr.r[j][i] } else { 0.0 });
+        if (0..b).any(|k| r_b[(k, k)] == 0.0) {
+            return Err(Error::Identifiability(
+                "lstsq: the triangular factor of the base columns is singular; \
+                 increase rank_tol"
+                    .to_string(),
+            ));
+        }
+        let nd = self.dependents.len();
+        let mut rhs = Mat::<f64>::zeros(b, 1 + nd + b);
+        let mut c = f.qty.clone();
+        self.qr.apply(&mut c);
+        for k in 0..b {
+            rhs[(k, 0)] = c[k];
+            rhs[(k, 1 + nd + k)] = 1.0;
+        }
+        for (t, &j) in self.dependents.iter().enumerate() {
+            let mut v = self.m_cols[j].clone();
+            self.qr.apply(&mut v);
+            for k in 0..b {
+                rhs[(k, 1 + t)] = v[k];
+            }
+        }
+        solve_upper_triangular_in_place(r_b.as_ref(), rhs.as_mut(), Par::Seq);
+        Ok(BaseSolution { r_b, rhs, nd })
+    }
+
+    /// Phase 7: each dependent column as a combination of base columns (terms
+    /// below `thr` in the column's geometry left out).
+    fn dependencies(&self, sol: &BaseSolution, thr: f64) -> Vec<Dependency> {
+        let col_norms: Vec<f64> = self.m_cols.iter().map(|c| norm2(c)).collect();
+        self.dependents
+            .iter()
+            .enumerate()
+            .map(|(t, &j)| {
+                let mut combination: Vec<(usize, f64)> = self
+                    .qr
+                    .order
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &bk)| (bk, sol.rhs[(k, 1 + t)]))
+                    .filter(|&(bk, coef)| coef.abs() * col_norms[bk] > thr)
+                    .collect();
+                combination.sort_by_key(|&(bk, _)| bk);
+                Dependency {
+                    column: j,
+                    combination,
+                }
+            })
+            .collect()
+    }
+}
+
+/// `R_B` and the solved columns `[χ_B | dependency coefficients | R_B⁻¹]`.
+struct BaseSolution {
+    r_b: Mat<f64>,
+    rhs: Mat<f64>,
+    /// Number of dependent columns.
+    nd: usize,
+}
+
+/// Phase 5: the residual, its norm, the relative error and `σ̂ρ` (eq. (13) or the
+/// sample standard deviation), in the caller's units.
+struct Fit {
+    residual: Vec<f64>,
+    residual_norm: f64,
+    relative_error: f64,
+    sigma_rho: f64,
+}
+
+impl Fit {
+    fn new(
+        w: &[f64],
+        y: &[f64],
+        rows: usize,
+        params: &[f64],
+        b: usize,
+        sigma: SigmaConvention,
+    ) -> Result<Self> {
+        let mut residual = y.to_vec();
+        for (j, &p) in params.iter().enumerate() {
+            if p != 0.0 {
+                let col = &w[j * rows..(j + 1) * rows];
+                for (e, &wij) in residual.iter_mut().zip(col) {
+                    *e -= p * wij;
+                }
+            }
+        }
+        let residual_norm = norm2(&residual);
+        let y_norm = norm2(y);
+        let relative_error = if y_norm > 0.0 {
+            residual_norm / y_norm
+        } else {
+            f64::NAN
+        };
+        let sigma_rho = match sigma {
+            SigmaConvention::Paper => residual_norm / ((rows - b) as f64).sqrt(),
+            SigmaConvention::SampleStd => {
+                let mean = residual.iter().sum::<f64>() / rows as f64;
+                let centered: Vec<f64> = residual.iter().map(|e| e - mean).collect();
+                norm2(&centered) / ((rows - 1) as f64).sqrt()
+            }
+        };
+        if !residual_norm.is_finite() || !sigma_rho.is_finite() {
+            return Err(overflow_error());
+        }
+        Ok(Self {
+            residual,
+            residual_norm,
+            relative_error,
+            sigma_rho,
+        })
+    }
+}
+
+/// Phase 6: `C = σ̂ρ² R_B⁻¹ R_B⁻ᵀ` (eq. (14)), `σ_i` and `%σ_i` (eq. (15)). In the
+/// caller's units, with `W' = 2^kw W` and `σ' = 2^ky σ̂ρ`:
+/// `σ̂ρ R_B⁻¹ = 2^(kw−ky) σ' R_B'⁻¹` (the product formed in the scaled units).
+fn uncertainty(
+    base: &Base,
+    sol: &BaseSolution,
+    params: &[f64],
+    sigma_rho: f64,
+    kw: i32,
+    ky: i32,
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let n = params.len();
+    let b = base.qr.order.len();
     let sigma_scaled = ldexp(sigma_rho, ky);
-    let s_rinv = |k: usize, m: usize| ldexp(sigma_scaled * rhs[(k, 1 + nd + m)], kw - ky);
+    let s_rinv = |k: usize, m: usize| ldexp(sigma_scaled * sol.rhs[(k, 1 + sol.nd + m)], kw - ky);
     let mut covariance = vec![0.0; n * n];
-    for (k, &jk) in base_qr.order.iter().enumerate() {
-        for (l, &jl) in base_qr.order.iter().enumerate().skip(k) {
+    for (k, &jk) in base.qr.order.iter().enumerate() {
+        for (l, &jl) in base.qr.order.iter().enumerate().skip(k) {
             // R_B⁻¹ is upper triangular: row k is nonzero from column k on.
             let v: f64 = (l..b).map(|m| s_rinv(k, m) * s_rinv(l, m)).sum();
             covariance[jk * n + jl] = v;
@@ -366,7 +503,7 @@ pub fn lstsq(w: &[f64], rows: usize, cols: usize, y: &[f64], opts: &LstsqOptions
     }
     let mut std = vec![f64::NAN; n];
     let mut rel_std_pct = vec![f64::NAN; n];
-    for (k, &j) in base_qr.order.iter().enumerate() {
+    for (k, &j) in base.qr.order.iter().enumerate() {
         // σ_i = ‖row i of σ̂ρ R_B⁻¹‖ (= sqrt(C_ii), without squaring).
         let row: Vec<f64> = (k..b).map(|m| s_rinv(k, m)).collect();
         let s = norm2(&row);
@@ -377,47 +514,7 @@ pub fn lstsq(w: &[f64], rows: usize, cols: usize, y: &[f64], opts: &LstsqOptions
             100.0 * s / params[j].abs()
         };
     }
-
-    // --- Dependencies. ---
-    let col_norms: Vec<f64> = m_cols.iter().map(|c| norm2(c)).collect();
-    let dependencies = dependents
-        .iter()
-        .enumerate()
-        .map(|(t, &j)| {
-            let mut combination: Vec<(usize, f64)> = base_qr
-                .order
-                .iter()
-                .enumerate()
-                .map(|(k, &bk)| (bk, rhs[(k, 1 + t)]))
-                .filter(|&(bk, coef)| coef.abs() * col_norms[bk] > thr)
-                .collect();
-            combination.sort_by_key(|&(bk, _)| bk);
-            Dependency {
-                column: j,
-                combination,
-            }
-        })
-        .collect();
-
-    let condition_number = condition_number(r_b.as_ref());
-    let mut base_columns = base_qr.order.clone();
-    base_columns.sort_unstable();
-
-    Ok(LstsqSolution {
-        params,
-        std,
-        rel_std_pct,
-        covariance,
-        base_columns,
-        dependencies,
-        rank: b,
-        rows,
-        residual_norm,
-        sigma_rho,
-        relative_error,
-        condition_number,
-        residual,
-    })
+    (covariance, std, rel_std_pct)
 }
 
 /// Checks shapes and values; see the `# Errors` section of [`lstsq`].
