@@ -137,7 +137,25 @@ pub fn simulate<const N: usize>(
     u_ext: Option<&[f64]>,
     opts: &SimOptions,
 ) -> Result<SimOutput> {
-    let out = match opts.integrator {
+    let out = integrate(model, chi, controller, qr, u_ext, opts, true, None)?;
+    finite_outputs(out, model, chi, opts)
+}
+
+/// The closed loop with the chosen integrator and no tangent; `states`: keep the
+/// positions, velocities and accelerations; `stats`: the exponential integrator's
+/// step counts.
+#[allow(clippy::too_many_arguments)]
+fn integrate<const N: usize>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+    states: bool,
+    stats: Option<&mut StepStats>,
+) -> Result<SimOutput> {
+    match opts.integrator {
         Integrator::Exponential => expint::run(
             model,
             chi,
@@ -145,13 +163,12 @@ pub fn simulate<const N: usize>(
             qr,
             u_ext,
             opts,
-            true,
-            None,
+            states,
+            stats,
             &mut expint::NoHook,
-        )?,
-        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, true, &mut NoTangent)?,
-    };
-    finite_outputs(out, model, chi, opts)
+        ),
+        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, states, &mut NoTangent),
+    }
 }
 
 /// The commanded force of [`simulate`] alone: the states are integrated but not kept
@@ -165,20 +182,7 @@ pub fn simulate_force<const N: usize>(
     u_ext: Option<&[f64]>,
     opts: &SimOptions,
 ) -> Result<Vec<f64>> {
-    let out = match opts.integrator {
-        Integrator::Exponential => expint::run(
-            model,
-            chi,
-            controller,
-            qr,
-            u_ext,
-            opts,
-            false,
-            None,
-            &mut expint::NoHook,
-        )?,
-        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, false, &mut NoTangent)?,
-    };
+    let out = integrate(model, chi, controller, qr, u_ext, opts, false, None)?;
     Ok(finite_outputs(out, model, chi, opts)?.force)
 }
 
@@ -193,20 +197,7 @@ pub fn simulate_with_stats<const N: usize>(
     opts: &SimOptions,
 ) -> Result<(SimOutput, StepStats)> {
     let mut stats = StepStats::default();
-    let out = match opts.integrator {
-        Integrator::Exponential => expint::run(
-            model,
-            chi,
-            controller,
-            qr,
-            u_ext,
-            opts,
-            true,
-            Some(&mut stats),
-            &mut expint::NoHook,
-        )?,
-        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, true, &mut NoTangent)?,
-    };
+    let out = integrate(model, chi, controller, qr, u_ext, opts, true, Some(&mut stats))?;
     Ok((finite_outputs(out, model, chi, opts)?, stats))
 }
 
