@@ -240,7 +240,8 @@ class IdentificationResult:
             lines.append(f"regression error ‖Y − Wχ‖/‖Y‖ (decimated) = {100 * self.relative_error:.2f} %")
         if math.isfinite(self.output_error):
             lines.append(f"decimated output error ‖Y − Ys‖/‖Y‖ = {100 * self.output_error:.2f} %")
-        lines.append(f"{k} iterations, {self.simulations} simulations, {self.elapsed_s:.3f} s")
+        lines.append(f"{k} iteration{'' if k == 1 else 's'}, {self.simulations} simulation"
+                     f"{'' if self.simulations == 1 else 's'}, {self.elapsed_s:.3f} s")
         if not self.converged:
             lines.append(f"NOT CONVERGED: {self.message}")
         elif self.message:
