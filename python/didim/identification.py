@@ -19,7 +19,6 @@ exact-sensitivity solver (:func:`oe_gn`) has no such restriction.
 from __future__ import annotations
 
 import math
-import threading
 import time
 import warnings
 from typing import Callable, Dict, List, Optional, Sequence
@@ -604,7 +603,6 @@ class _ModeCriterion:
         coarse = dict(sim_kw, tol=max(GRID_SIM_TOL, tol))
         self.pb_grid = problem(rec, "flexible", offset=self.offset, **coarse)
         self.sims = 0
-        self._lock = threading.Lock()  # two Nelder-Mead runs may share the criterion from two threads
         self.bad = 1e3  # returned for points outside the domain or that fail to simulate (relative error 100000 %)
 
     def params(self, lam: float, f: float, s: float = 0.0) -> Dict[str, float]:
@@ -628,8 +626,7 @@ class _ModeCriterion:
         out = np.full(len(xs), self.bad)
         if ok.any():
             pts = np.array([params_vector("flexible", self.params(*x), self.offset)[1] for x in xs[ok]])
-            with self._lock:
-                self.sims += len(pts)
+            self.sims += len(pts)
             if tally is not None:
                 tally[0] += len(pts)
             vals, _ = (self.pb_grid if coarse else self.pb).output_error_batch(pts, self.yd, self.dec.core)
@@ -747,7 +744,6 @@ def fit_flexible_mode(
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     crit = _crit or _ModeCriterion(rec, rigid, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps,
                                                          integrator=integrator, tol=sim_tol))
-    shares = MODE_GRID_SHARE if friction_split else (0.0,)
     if _grid is None:
         count = [0]
         pts_arr, vals = _mode_grid(crit, lambda0, f0, friction_split, grid_start, count)
@@ -755,7 +751,7 @@ def fit_flexible_mode(
     else:
         pts_arr, vals = _grid
     dims = 3 if friction_split else 2
-    use = np.isin(pts_arr[:, 2], shares) | friction_split
+    use = np.full(len(pts_arr), True) if friction_split else pts_arr[:, 2] == 0.0  # the paper's: all friction on the motor
     i = int(np.flatnonzero(use)[np.argmin(vals[use])])
     x0 = pts_arr[i, :dims]
     if grid_start:

@@ -275,13 +275,6 @@ impl<const N: usize> Plant<N> {
         (g, dq, dv)
     }
 
-    /// `(∂g/∂q, ∂g/∂q̇)`.
-    #[inline(always)]
-    pub fn g_partials(&self, q: &V<N>, v: &V<N>) -> (Mat<N>, Mat<N>) {
-        let (_, dq, dv) = self.g_and_partials(q, v);
-        (dq, dv)
-    }
-
     /// Whether `g`, with partials `(gq, gv)` at the end of a quick step of length `h`, is
     /// too stiff for that step. The quick step extrapolates the change of `g` from the
     /// previous step, a recurrence whose perturbations grow by about `h·|∂g/∂q̇|/2` per
@@ -329,6 +322,8 @@ impl<const N: usize> Plant<N> {
                 q1,
                 v1,
                 g1,
+                gq,
+                gv,
                 dw: pred,
                 err: 0.0,
                 quick: true,
@@ -362,6 +357,8 @@ impl<const N: usize> Plant<N> {
             q1: qp,
             v1: vp,
             g1: *gn,
+            gq: Mat::<N>::zeros(),
+            gv: Mat::<N>::zeros(),
             dw,
             err: f64::INFINITY,
             quick: false,
@@ -374,7 +371,7 @@ impl<const N: usize> Plant<N> {
             let v1 = vp + lv.p2v * dw;
             let (g1, gq, gv) = self.g_and_partials(&q1, &v1);
             let r = g1 - gn - dw;
-            (step.q1, step.v1, step.g1, step.dw) = (q1, v1, g1, dw);
+            (step.q1, step.v1, step.g1, step.gq, step.gv, step.dw) = (q1, v1, g1, gq, gv, dw);
             if amax(r.as_slice()) <= small {
                 converged = true;
                 break;
@@ -447,8 +444,10 @@ impl<const N: usize> Plant<N> {
 pub(super) struct Step<const N: usize> {
     pub q1: V<N>,
     pub v1: V<N>,
-    /// `g(q1, v1)`.
+    /// `g(q1, v1)` and its partials `(∂g/∂q, ∂g/∂q̇)` there.
     pub g1: V<N>,
+    pub gq: Mat<N>,
+    pub gv: Mat<N>,
     /// The change of `g` in the state formula: the prediction (quick step) or the Newton
     /// iterate (implicit step).
     pub dw: V<N>,
@@ -874,7 +873,7 @@ impl<const N: usize> StepHook<N> for Sens<N> {
     ) -> Result<()> {
         self.dlevel(plant, l);
         let lv = *plant.level(l);
-        let (gq, gv) = plant.g_partials(&st.q1, &st.v1);
+        let (gq, gv) = (st.gq, st.gv);
         let jinv = if st.quick {
             Mat::<N>::identity()
         } else {
