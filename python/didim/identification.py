@@ -592,8 +592,11 @@ class _ModeCriterion:
     split (beyond the paper) puts the share s of both totals on the load side."""
 
     def __init__(self, rec: Recording, rigid: IdentificationResult, dec: Decimation, sim_kw: dict):
+        self.rec = rec
         self.rigid = rigid.params
         self.offset = "OF" in self.rigid
+        self.integrator = sim_kw.get("integrator", "exponential")
+        self._rigid_limit: Optional[float] = None
         self.dec = dec
         self.yd = dec(rec.force)
         self.ny = float(np.linalg.norm(self.yd))
@@ -636,38 +639,72 @@ class _ModeCriterion:
     def __call__(self, x, tally: Optional[list] = None) -> float:
         return float(self.batch([x], tally)[0])
 
+    def rigid_limit(self, tally: Optional[list] = None) -> float:
+        """The criterion of the flexible model moving as one mass (λ → 1, f_n_flex at the Nyquist frequency): what
+        the rigid model explains at this decimation."""
+        if self._rigid_limit is None:
+            self._rigid_limit = self(np.array([0.999, 0.5 * self.rec.fs]), tally)
+        return self._rigid_limit
+
 
 #: Step 2's Nelder-Mead stops when the simplex spans less than MODE_XTOL relatively in f_n_flex (0.05 %, i.e. 0.1 % in
 #: K12: step 3 keeps f_n_flex, so its precision is the final one) and MODE_XTOL_SHARE in λ and s (step 3 identifies
 #: M1, M2 and the friction split again), and the criterion varies less than ``tol`` relatively across it.
 MODE_XTOL = 5e-4
 MODE_XTOL_SHARE = 5e-3
+#: The "auto" variant first runs the paper's Nelder-Mead to tolerances this many times looser: enough to compare the
+#: paper's model with the friction split (the criterion is then within about a thousandth of its minimum), and the
+#: search resumes from its simplex, at no extra cost, only when the paper's variant is the one kept.
+MODE_LOOSE = 10.0
 
 
-def _nelder_mead(crit: _ModeCriterion, x0, tol: float, max_iter: int, progress: Progress, label: str, tally: list):
-    """Nelder-Mead (scipy's, as MATLAB's fminsearch) on the mode criterion from x0, its initial simplex in one batch.
-    f_n_flex is scaled by its start and λ, s by MODE_XTOL_SHARE / MODE_XTOL, so one tolerance serves all variables
-    (Nelder-Mead's moves are invariant to this scaling: only the stopping test sees it)."""
-    from scipy.optimize import minimize
+class _ModeSearch:
+    """scipy's Nelder-Mead (as MATLAB's fminsearch) on step 2's criterion from x0, resumable: :meth:`run` stops at a
+    tolerance and a later call continues from the simplex where it stopped (Nelder-Mead's state is its simplex), so
+    a loose search followed by a tight one takes the tight search's path. f_n_flex is scaled by its start and λ, s by
+    MODE_XTOL_SHARE / MODE_XTOL, so one tolerance serves all variables (the moves are invariant to this scaling: only
+    the stopping test sees it). The initial simplex is evaluated in one batch."""
 
-    scale = np.full(len(x0), MODE_XTOL_SHARE / MODE_XTOL)  # scipy's xatol is one number for all coordinates
-    scale[1] = float(x0[1])
-    trace: List[tuple] = []
+    def __init__(self, crit: _ModeCriterion, x0, max_iter: int, progress: Progress, label: str, tally: list):
+        self.crit, self.max_iter, self.progress, self.label, self.tally = crit, max_iter, progress, label, tally
+        self.x0 = np.asarray(x0, dtype=float)
+        self.scale = np.full(len(x0), MODE_XTOL_SHARE / MODE_XTOL)  # scipy's xatol is one number for all coordinates
+        self.scale[1] = float(x0[1])
+        self.simplex = nelder_mead_simplex(self.x0 / self.scale)
+        self.values = crit.batch(self.simplex * self.scale, tally)
+        self.f_ref = float(self.values[0])
+        self.trace: List[tuple] = []
+        self.nit = 0
+        self.success = False
+        self.message = ""
 
-    def callback(uk):
-        xk = uk * scale
-        trace.append(tuple(map(float, xk)))
-        _say(progress, f"step 2 ({label}) iteration {len(trace)}: " + ", ".join(
-            f"{n} = {v:.4g}" for n, v in zip(("λ", "f_n_flex", "s"), xk)))
+    @property
+    def x(self) -> np.ndarray:
+        return self.simplex[0] * self.scale
 
-    u0 = np.asarray(x0, dtype=float) / scale
-    simplex = nelder_mead_simplex(u0)
-    vals = crit.batch(simplex * scale, tally)
-    res = minimize(prefetch(lambda u: crit(u * scale, tally), lambda us: vals, simplex), u0, method="Nelder-Mead",
-                   callback=callback, options=dict(xatol=MODE_XTOL, fatol=tol * float(vals[0]), maxiter=max_iter,
-                                                   initial_simplex=simplex))
-    res.x = res.x * scale
-    return res, trace
+    @property
+    def fun(self) -> float:
+        return float(self.values[0])
+
+    def run(self, tol: float, loose: float = 1.0) -> "_ModeSearch":
+        """Continues until the simplex spans less than ``loose`` × MODE_XTOL (scaled) and its values vary less than
+        ``loose`` × ``tol`` of the criterion at the start."""
+        from scipy.optimize import minimize
+
+        def callback(uk):
+            xk = uk * self.scale
+            self.trace.append(tuple(map(float, xk)))
+            _say(self.progress, f"step 2 ({self.label}) iteration {len(self.trace)}: " + ", ".join(
+                f"{n} = {v:.4g}" for n, v in zip(("λ", "f_n_flex", "s"), xk)))
+
+        cost = prefetch(lambda u: self.crit(u * self.scale, self.tally), lambda us: self.values, self.simplex)
+        res = minimize(cost, self.simplex[0], method="Nelder-Mead", callback=callback,
+                       options=dict(xatol=loose * MODE_XTOL, fatol=loose * tol * self.f_ref,
+                                    maxiter=max(self.max_iter - self.nit, 1), initial_simplex=self.simplex))
+        self.simplex, self.values = res.final_simplex
+        self.nit += int(res.nit)
+        self.success, self.message = bool(res.success), str(res.message)
+        return self
 
 
 def _degenerate(x, j: float, rigid_limit: float, cutoff_hz: float) -> str:
@@ -721,8 +758,6 @@ def fit_flexible_mode(
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
     grid_start: bool = True,
-    _crit: Optional[_ModeCriterion] = None,
-    _grid: Optional[tuple] = None,
 ) -> IdentificationResult:
     """Step 2: Nelder-Mead on (λ, f_n_flex) with M_tot, Fv_tot, Fc_tot frozen from step 1, eqs. (23)-(28):
     M1 = λ M_tot, M2 = (1 − λ) M_tot, K12 = 4π²(1 − λ) f² M_tot, Fv1 = Fv_tot, Fc1 = Fc_tot, Fv2 = Fc2 = 0.
@@ -742,14 +777,18 @@ def fit_flexible_mode(
     _checks.options(lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps,
                     coulomb_eps=coulomb_eps)
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
-    crit = _crit or _ModeCriterion(rec, rigid, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps,
-                                                         integrator=integrator, tol=sim_tol))
-    if _grid is None:
-        count = [0]
-        pts_arr, vals = _mode_grid(crit, lambda0, f0, friction_split, grid_start, count)
-        grid_sims = count[0]
-    else:
-        pts_arr, vals = _grid
+    crit = _ModeCriterion(rec, rigid, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
+                                                 tol=sim_tol))
+    tally = [0]
+    grid = _mode_grid(crit, lambda0, f0, friction_split, grid_start, tally)
+    search = _mode_search(crit, grid, friction_split, grid_start, max_iter, progress, tally)
+    return _mode_result(search.run(tol), crit, grid, tally, t0, tol=tol, grid_start=grid_start)
+
+
+def _mode_search(crit: _ModeCriterion, grid: tuple, friction_split: bool, grid_start: bool, max_iter: int,
+                 progress: Progress, tally: list) -> _ModeSearch:
+    """Step 2's Nelder-Mead, not run yet, from the best point of the grid (of its plane: s = 0 for the paper's)."""
+    pts_arr, vals = grid
     dims = 3 if friction_split else 2
     use = np.full(len(pts_arr), True) if friction_split else pts_arr[:, 2] == 0.0  # the paper's: all friction on the motor
     i = int(np.flatnonzero(use)[np.argmin(vals[use])])
@@ -759,38 +798,38 @@ def fit_flexible_mode(
              f"f_n_flex = {x0[1]:.1f} Hz" + (f", s = {x0[2]:.2f}" if dims == 3 else ""))
     if dims == 3 and x0[2] == 0.0:
         x0 = np.array([x0[0], x0[1], 0.05])  # Nelder-Mead's simplex scales by x0: start s off its bound
-    tally = [0 if _grid is not None else grid_sims]
-    res, trace = _nelder_mead(crit, x0, tol, max_iter, progress, "friction split" if dims == 3 else "paper", tally)
-    x = np.asarray(res.x, dtype=float)
-    j = float(res.fun)
-    rigid_limit = crit(np.array([0.999, 0.5 * rec.fs, 0.0][:dims]), tally)  # flexible model moving as one mass
-    n_sims = tally[0]
-    why = _degenerate(x, j, rigid_limit, cutoff_hz)
+    return _ModeSearch(crit, x0, max_iter, progress, "friction split" if dims == 3 else "paper", tally)
+
+
+def _mode_result(search: _ModeSearch, crit: _ModeCriterion, grid: tuple, tally: list, t0: float, *, tol: float,
+                 grid_start: bool) -> IdentificationResult:
+    """Step 2's result from its search: converged unless Nelder-Mead stopped early or the optimum is degenerate."""
+    rec, dims = crit.rec, len(search.x0)
+    x, j = search.x, search.fun
+    rigid_limit = crit.rigid_limit(tally)
+    why = _degenerate(x, j, rigid_limit, crit.dec.cutoff_hz)
     names = ["lambda", "f_n_flex", "load_share"][:dims]
-    params = dict(zip(names, map(float, x)))
     history = [Iteration(k=i + 1, params=dict(zip(names, p)), rel_std_pct={}, relative_error=float("nan"),
-                         output_error=float("nan")) for i, p in enumerate(trace)]
-    converged = bool(res.success) and not why
-    message = why or ("" if res.success else str(res.message))
+                         output_error=float("nan")) for i, p in enumerate(search.trace)]
     return IdentificationResult(
         model="flexible",
         method="nelder-mead (" + ", ".join(names) + ")",
-        params=params,
+        params=dict(zip(names, map(float, x))),
         std={n: float("nan") for n in names},
         rel_std_pct={n: float("nan") for n in names},
         relative_error=j,
         output_error=j,
-        iterations=int(res.nit),
-        simulations=n_sims,
+        iterations=search.nit,
+        simulations=tally[0],
         elapsed_s=time.perf_counter() - t0,
-        converged=converged,
-        message=message,
-        initial=dict(zip(names, map(float, pts_arr[0, :dims]))),
+        converged=search.success and not why,
+        message=why or ("" if search.success else search.message),
+        initial=dict(zip(names, map(float, grid[0][0, :dims]))),
         frozen=crit.params(*x),
         history=history,
-        options=dict(decimation=dec.describe(), tol=tol, integrator=integrator, grid_start=grid_start,
-                     nelder_mead_start=dict(zip(names, map(float, x0))), rigid_output_error=rigid_limit,
-                     degenerate=why, friction_split=friction_split),
+        options=dict(decimation=crit.dec.describe(), tol=tol, integrator=crit.integrator, grid_start=grid_start,
+                     nelder_mead_start=dict(zip(names, map(float, search.x0))), rigid_output_error=rigid_limit,
+                     degenerate=why, friction_split=dims == 3),
     )
 
 
@@ -804,7 +843,7 @@ VARIANTS = ("auto", "paper", "friction-split")
 SPLIT_PROBE = 0.05
 
 
-def _split_needed(crit: _ModeCriterion, paper: IdentificationResult, grid: tuple) -> str:
+def _split_needed(crit: _ModeCriterion, paper: IdentificationResult, grid: tuple, tally: Optional[list] = None) -> str:
     """Why the friction split may explain the record better than the paper's step 2 ('' when it cannot locally).
 
     At the paper's optimum (λ*, f*) the criterion is stationary in λ and f; if moving the share SPLIT_PROBE of the
@@ -813,7 +852,7 @@ def _split_needed(crit: _ModeCriterion, paper: IdentificationResult, grid: tuple
     for the rest of the domain: when one of them beats every point with s = 0, another minimum may be there."""
     x = paper.params
     j0 = paper.output_error
-    j_probe = crit(np.array([x["lambda"], x["f_n_flex"], SPLIT_PROBE]))
+    j_probe = crit(np.array([x["lambda"], x["f_n_flex"], SPLIT_PROBE]), tally)
     if j_probe < j0:
         return (f"a load share s = {SPLIT_PROBE:g} lowers the paper's step-2 output error from {100 * j0:.2f} % to "
                 f"{100 * j_probe:.2f} %")
@@ -823,6 +862,66 @@ def _split_needed(crit: _ModeCriterion, paper: IdentificationResult, grid: tuple
         return (f"on the grid of eq. (28), friction on the load explains the record better ({100 * vals[on_load].min():.2f} "
                 f"% against {100 * vals[~on_load].min():.2f} %)")
     return ""
+
+
+def _step2(rec: Recording, r1: IdentificationResult, variant: str, *, lambda0: float, f0: float, cutoff_hz: float,
+           grid_start: bool, progress: Progress, sim_kw: dict, tol: float = 1e-4, max_iter: int = 300):
+    """Step 2 of :func:`didim_flexible` for ``variant``; returns its result (of the variant kept) and the notes that
+    say which variant was kept and why.
+
+    "auto": the grid of both planes in one batch (see :func:`_mode_grid`); the paper's Nelder-Mead to MODE_LOOSE
+    times its tolerances; the split's when it may do better (:func:`_split_needed`), started also from the paper's
+    optimum; the split is kept when it lowers the output error by more than SPLIT_GAIN, and otherwise the paper's
+    search resumes to its full tolerance. A split that wins by less than MODE_LOOSE × tol above the margin resumes
+    the paper's search before deciding, so the loose stop never decides a close call."""
+    t0 = time.perf_counter()
+    dec = Decimation.lowpass(cutoff_hz, rec.fs)
+    crit = _ModeCriterion(rec, r1, dec, sim_kw)
+    tally = [0]
+    grid = _mode_grid(crit, lambda0, f0, variant != "paper", grid_start, tally)
+    search = dict(grid_start=grid_start, max_iter=max_iter, progress=progress, tally=tally)
+    result = dict(tol=tol, grid_start=grid_start)
+    if variant == "friction-split":
+        _say(progress, "step 2 (friction split, beyond the paper): Nelder-Mead on (λ, f_n_flex, s)")
+        split = _mode_search(crit, grid, True, **search).run(tol)
+        return _mode_result(split, crit, grid, tally, t0, **result), []
+
+    _say(progress, "step 2: Nelder-Mead on (λ, f_n_flex)")
+    paper = _mode_search(crit, grid, False, **search)
+    if variant == "paper":
+        return _mode_result(paper.run(tol), crit, grid, tally, t0, **result), []
+
+    paper.run(tol, loose=MODE_LOOSE)
+    loose = _mode_result(paper, crit, grid, tally, t0, **result)
+    split_why = _split_needed(crit, loose, grid, tally)
+    jp = loose.output_error
+    if not split_why:
+        r = _mode_result(paper.run(tol), crit, grid, tally, t0, **result)
+        return r, [f"variant paper: all friction on the motor is a minimum of the friction-split criterion too (a load "
+                   f"share s = {SPLIT_PROBE:g} raises step 2's output error from {100 * jp:.2f} %, and no point of the "
+                   f"grid with friction on the load does better), so the split was not run"]
+
+    _say(progress, "step 2 (friction split, beyond the paper): Nelder-Mead on (λ, f_n_flex, s)")
+    if not loose.options["degenerate"]:
+        # the paper's optimum has found the record's resonance: the split starts there too if it does better than
+        # the grid's points (its f_n_flex is close already, only s and λ have to move)
+        x = loose.params
+        more = np.array([(x["lambda"], x["f_n_flex"], s) for s in MODE_GRID_SHARE[1:]])
+        grid = (np.vstack([grid[0], more]), np.concatenate([grid[1], crit.batch(more, tally)]))
+    split = _mode_result(_mode_search(crit, grid, True, **search).run(tol), crit, grid, tally, t0, **result)
+    js = split.output_error
+    if js >= (1 - SPLIT_GAIN) * (1 - MODE_LOOSE * tol) * jp:  # not a clear win over the loose paper optimum
+        paper_r = _mode_result(paper.run(tol), crit, grid, tally, t0, **result)
+        jp = paper_r.output_error
+    if js < (1 - SPLIT_GAIN) * jp and not split.options["degenerate"]:
+        split.simulations = tally[0]
+        return split, [f"variant friction-split (beyond the paper): putting the share s = "
+                       f"{split.params['load_share']:.2f} of the friction on the load lowers step 2's output error "
+                       f"from {100 * jp:.2f} % (paper, all friction on the motor) to {100 * js:.2f} %, so Fv2 and Fc2 "
+                       f"are identified too (the split was tried because {split_why})"]
+    paper_r = _mode_result(paper.run(tol), crit, grid, tally, t0, **result)  # resumes only if not done above
+    return paper_r, [f"variant paper: the friction split does not explain the record better (step 2 output error "
+                     f"{100 * js:.2f} % against {100 * paper_r.output_error:.2f} % with all friction on the motor)"]
 
 
 def _cannot_support(why: str, rec: Recording) -> str:
@@ -859,11 +958,11 @@ def didim_flexible(
     and Fc2 in step 3 (the load row of eq. (4) keeps their ratio to M2, so step 3 keeps s). ``"auto"`` (default) evaluates
     the grid of both step 2s in one batch, runs the paper's step 2, then the split's when it may do better (see
     :func:`_split_needed`), and takes the split when it lowers step 2's output error by more than ``SPLIT_GAIN``
-    (5 %); the result's ``options["variant"]`` and ``notes`` say which ran and why.
+    (5 %) (see :func:`_step2`); the result's ``options["variant"]`` and ``notes`` say which ran and why.
 
     Step 3 keeps step 2's f_n_flex (the load row moves M2 and K12 together; the paper's own Tables do the same). A
     step-3 output error above step 2's is normal (DIDIM's fixed point is not the output-error minimum) and is noted;
-    above ``STEP3_DRIFT_FACTOR`` (1.25) times step 2's, step 3 has drifted and the result is flagged. When step 2's optimum is degenerate (no visible mode), steps 3 is not run: the result holds step 2's
+    above ``STEP3_DRIFT_FACTOR`` (1.25) times step 2's, step 3 has drifted and the result is flagged. When step 2's optimum is degenerate (no visible mode), step 3 is not run: the result holds step 2's
     parameters with ``converged=False`` and a message naming the reason and the experiment that would fix it."""
     t0 = time.perf_counter()
     _checks.options(lambda0=lambda0, f0=f0, rigid_cutoff_hz=rigid_cutoff_hz, cutoff_hz=cutoff_hz, tol=tol,
@@ -880,53 +979,11 @@ def didim_flexible(
         r1.elapsed_s = time.perf_counter() - t0
         return r1
 
-    dec = Decimation.lowpass(cutoff_hz, rec.fs)
-    crit = _ModeCriterion(rec, r1, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
-                                             tol=sim_tol))
-    grid = _mode_grid(crit, lambda0, f0, variant != "paper", grid_start)
-    mode_kw = dict(lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, progress=progress, grid_start=grid_start,
-                   _crit=crit, _grid=grid, **common)
-    notes: List[str] = []
-    candidates = {}
-    if variant in ("auto", "paper"):
-        _say(progress, "step 2: Nelder-Mead on (λ, f_n_flex)")
-        candidates["paper"] = fit_flexible_mode(rec, r1, friction_split=False, **mode_kw)
-    split_why = ""
-    if variant == "auto":
-        split_why = _split_needed(crit, candidates["paper"], grid)
-        if not split_why:
-            jp = candidates["paper"].output_error
-            notes.append(f"variant paper: all friction on the motor is a minimum of the friction-split criterion too "
-                         f"(a load share s = {SPLIT_PROBE:g} raises step 2's output error from {100 * jp:.2f} %, and no "
-                         f"point of the grid with friction on the load does better), so the split was not run")
-    if variant == "friction-split" or split_why:
-        _say(progress, "step 2 (friction split, beyond the paper): Nelder-Mead on (λ, f_n_flex, s)")
-        if "paper" in candidates and not candidates["paper"].options["degenerate"]:
-            # the paper's optimum has found the record's resonance: the split starts there too if it does better
-            # than the grid's points (its f_n_flex is already converged, only s and λ have to move)
-            x = candidates["paper"].params
-            more = np.array([(x["lambda"], x["f_n_flex"], s) for s in MODE_GRID_SHARE[1:]])
-            grid = (np.vstack([grid[0], more]), np.concatenate([grid[1], crit.batch(more)]))
-            mode_kw["_grid"] = grid
-        candidates["friction-split"] = fit_flexible_mode(rec, r1, friction_split=True, **mode_kw)
-    chosen = variant
-    if variant == "auto":
-        chosen = "paper"
-        if "friction-split" in candidates:
-            jp, js = candidates["paper"].output_error, candidates["friction-split"].output_error
-            if js < (1 - SPLIT_GAIN) * jp and not candidates["friction-split"].options["degenerate"]:
-                chosen = "friction-split"
-                notes.append(f"variant friction-split (beyond the paper): putting the share s = "
-                             f"{candidates['friction-split'].params['load_share']:.2f} of the friction on the load "
-                             f"lowers step 2's output error from {100 * jp:.2f} % (paper, all friction on the motor) "
-                             f"to {100 * js:.2f} %, so Fv2 and Fc2 are identified too (the split was tried because "
-                             f"{split_why})")
-            else:
-                notes.append(f"variant paper: the friction split does not explain the record better (step 2 output "
-                             f"error {100 * js:.2f} % against {100 * jp:.2f} % with all friction on the motor)")
-    r2 = candidates[chosen]
-    r2.simulations = crit.sims
-    n_sim = r1.simulations + crit.sims
+    r2, notes = _step2(rec, r1, variant, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, grid_start=grid_start,
+                       progress=progress, sim_kw=dict(substeps=substeps, coulomb_eps=coulomb_eps,
+                                                      integrator=integrator, tol=sim_tol))
+    chosen = "friction-split" if r2.options["friction_split"] else "paper"
+    n_sim = r1.simulations + r2.simulations
     if r2.options["degenerate"]:
         r = IdentificationResult(
             model="flexible", method="didim", params=dict(r2.frozen), std={}, rel_std_pct={},

@@ -94,8 +94,9 @@ pub fn coulomb_sign_and_derivative(v: f64, eps: f64) -> (f64, f64) {
     if eps > 0.0 {
         let d = v * v + eps * eps;
         if d.is_normal() {
-            let r = d.sqrt();
-            (v / r, eps * eps / (d * r))
+            let inv = 1.0 / d.sqrt();
+            let s = v * inv;
+            (s, (eps * inv) * (eps * inv) * inv)
         } else {
             (coulomb_sign(v, eps), coulomb_sign_derivative(v, eps))
         }

@@ -589,7 +589,7 @@ fn run<const N: usize, T: Tangent<N>>(
         }
 
         let err = (q[0] - qr[k + 1]).abs();
-        if !(q.iter().chain(qd.iter()).all(|x| x.is_finite()) && err <= bound) {
+        if !(expint::finite(&q, &qd) && err <= bound) {
             return Err(Error::Simulation(format!(
                 "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
                  (bound {:.3e} m) with parameters {}; check the parameter values and units, the controller gains, \

@@ -48,6 +48,9 @@ const MAX_NEWTON: usize = 8;
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Level<const N: usize> {
     pub h: f64,
+    /// `atol / (h T)`: the change of `g` (an acceleration) over the step that moves the
+    /// velocity by about the tolerance over a sample period (see [`Plant::try_step`]).
+    pub g_scale: f64,
     pub eqq: Mat<N>,
     pub eqv: Mat<N>,
     pub evq: Mat<N>,
@@ -87,9 +90,16 @@ pub(super) struct Plant<const N: usize> {
     pub rejected: usize,
     /// Steps that needed the implicit solve.
     pub implicit: std::cell::Cell<usize>,
-    /// The change of `g` over the last accepted step and that step's length.
+    /// The change of `g` over the last accepted step and the inverse of that step's length.
     last_dg: std::cell::Cell<V<N>>,
-    last_h: std::cell::Cell<f64>,
+    last_inv_h: std::cell::Cell<f64>,
+}
+
+/// Whether every entry of `q` and `v` is finite: their sum is then finite too unless it
+/// overflows, which for a state is divergence as well (one test instead of `2N`).
+#[inline(always)]
+pub(super) fn finite<const N: usize>(q: &V<N>, v: &V<N>) -> bool {
+    (q.sum() + v.sum()).is_finite()
 }
 
 impl<const N: usize> Plant<N> {
@@ -155,7 +165,7 @@ impl<const N: usize> Plant<N> {
             rejected: 0,
             implicit: std::cell::Cell::new(0),
             last_dg: std::cell::Cell::new(V::<N>::zeros()),
-            last_h: std::cell::Cell::new(dt),
+            last_inv_h: std::cell::Cell::new(1.0 / dt),
         };
         plant.ensure(0)?;
         plant.ensure(1)?;
@@ -200,6 +210,7 @@ impl<const N: usize> Plant<N> {
             |r0: usize, c: usize, scale: f64| Mat::<N>::from_fn(|i, j| scale * x[(r0 + i, c0 + c + j)]);
         Level {
             h,
+            g_scale: f64::NAN,
             eqq: block(0, 0, 1.0),
             eqv: block(0, N, 1.0),
             evq: block(N, 0, 1.0),
@@ -225,7 +236,10 @@ impl<const N: usize> Plant<N> {
                  check the parameter values and units"
             ));
         }
-        Ok(Self::blocks(&x, 0, h))
+        Ok(Level {
+            g_scale: self.atol / (h * self.dt),
+            ..Self::blocks(&x, 0, h)
+        })
     }
 
     /// Derivatives of the propagators of a step `h` along a change `(daq, dav)` of the
@@ -311,12 +325,12 @@ impl<const N: usize> Plant<N> {
         let f = b + self.a0 + gn;
         let qp = lv.eqq * q + lv.eqv * v + lv.p1q * f;
         let vp = lv.evq * q + lv.evv * v + lv.p1v * f;
-        let c = h / self.last_h.get();
+        let c = h * self.last_inv_h.get();
         let pred = self.last_dg.get() * c;
         let q1 = qp + lv.p2q * pred;
         let v1 = vp + lv.p2v * pred;
         let (g1, gq, gv) = self.g_and_partials(&q1, &v1);
-        let scale = self.atol / (h * self.dt);
+        let scale = lv.g_scale;
         if amax((g1 - gn - pred).as_slice()) <= 0.1 * scale && !Self::stiff(&gq, &gv, h) {
             return Step {
                 q1,
@@ -410,7 +424,7 @@ impl<const N: usize> Plant<N> {
         if step.err <= 1.0 || l == MAX_LEVEL {
             hook.step(self, l, q, v, g, &step)?;
             self.last_dg.set(step.g1 - *g);
-            self.last_h.set(self.level(l).h);
+            self.last_inv_h.set(1.0 / self.level(l).h);
             *q = step.q1;
             *v = step.v1;
             *g = step.g1;
@@ -646,7 +660,7 @@ pub(super) fn run<const N: usize, T: Tangent<N>>(
         plant.advance(0, &mut q, &mut v, &mut g, &b, tangent)?;
 
         let err = (q[0] - qr[k + 1]).abs();
-        if !(q.iter().chain(v.iter()).all(|x| x.is_finite()) && err <= bound) {
+        if !(finite(&q, &v) && err <= bound) {
             return Err(Error::Simulation(format!(
                 "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
                  (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller gains",
