@@ -300,9 +300,10 @@ def main() -> int:
             t_py_full, "didim exponential", t_exp, acc(f_py, n_py), didim_row=False)
 
     # ---------------------------------------------------------------- sensitivities
-    t_sens, _ = best(lambda: _core.simulate_sensitivity("flexible", p, plain.qr, plain.dt, "emps", list(gains)), repeat=rep)
-    t_sens_rk4, _ = best(lambda: _core.simulate_sensitivity("flexible", p, plain.qr, plain.dt, "emps", list(gains),
-                                                           integrator="rk4"), repeat=2)
+    pb_exp = _core.Problem("flexible", plain.qr, plain.dt, "emps", list(gains))
+    pb_rk4 = _core.Problem("flexible", plain.qr, plain.dt, "emps", list(gains), integrator="rk4")
+    t_sens, _ = best(lambda: pb_exp.simulate_sensitivity(p), repeat=rep)
+    t_sens_rk4, _ = best(lambda: pb_rk4.simulate_sensitivity(p), repeat=2)
     tab.add(sec, "didim forward sensitivities (7 parameters), exponential", t_sens, "same with RK4 10 substeps",
             t_sens_rk4)
 

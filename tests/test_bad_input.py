@@ -308,7 +308,7 @@ def test_zero_substeps(emps):
     with pytest.raises(didim.DataError, match="substeps must be between 1 and 100000, got 0"):
         didim.identify(emps, "rigid", "didim", apM=78.0, substeps=0)
     with pytest.raises(didim.DataError, match="substeps must be a whole number between 0 and"):
-        didim._core.simulate("rigid", np.ones(3), emps.qr, 1e-3, "emps", [1.0, 1.0, 1.0, 1.0], substeps=-1)
+        didim._core.Problem("rigid", emps.qr, 1e-3, "emps", [1.0, 1.0, 1.0, 1.0], substeps=-1)
 
 
 def test_unknown_and_unused_options_are_refused_with_the_accepted_ones(emps):

@@ -108,7 +108,7 @@ def test_core_objectives_equal_their_python_definitions(emps):
     np.testing.assert_array_equal(force_dec, dec(sim.force))
     # the exact-sensitivity linearization
     r, jac = pb.linearize(TABLE3, emps.force, [0, 6], dec.core)
-    s = didim._core.simulate_sensitivity("flexible", TABLE3, emps.qr, emps.dt, "emps", list(emps.controller.gains))
+    s = pb.simulate_sensitivity(TABLE3)
     r2, j2 = dec.apply(emps.force - s["force"], s["dforce"][[0, 6]].T)
     np.testing.assert_array_equal(r, r2)
     np.testing.assert_allclose(jac, j2, rtol=1e-12, atol=0)

@@ -161,7 +161,8 @@ FLEX = [68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5]
 
 @st.composite
 def sim_args(draw):
-    """Valid arguments of _core.simulate: model, params, qr, dt, controller, gains and keyword options."""
+    """Valid arguments of a closed-loop simulation: model, params, qr, dt, controller, gains and the keyword options
+    of _core.Problem."""
     model = draw(st.sampled_from(["rigid", "flexible"]))
     offset = draw(st.booleans())
     n = draw(st.integers(3, 150))
@@ -204,11 +205,12 @@ def test_core_param_names_never_panics(model, offset):
 @given(data=st.data(), sens=st.booleans())
 def test_core_simulate_never_panics(data, sens):
     a = mutated(data, data.draw(sim_args()), SIM_HOSTILE)
-    f = _core.simulate_sensitivity if sens else _core.simulate
-    pos = [a.pop(k) for k in ("model", "params", "qr", "dt", "controller", "gains")]
-    out = attempt(f, *pos, **a)
+    params = a.pop("params")
+    pos = [a.pop(k) for k in ("model", "qr", "dt", "controller", "gains")]
+    pb = attempt(_core.Problem, *pos, **a)
+    out = None if pb is None else attempt(pb.simulate_sensitivity if sens else pb.simulate, params)
     if out is not None:
-        n = len(pos[2])
+        n = len(pos[1])
         for k, v in out.items():
             assert v.shape[-1] == n and np.all(np.isfinite(v)), k
 

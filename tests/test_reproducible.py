@@ -72,8 +72,7 @@ SCRIPT = textwrap.dedent(
     out["lstsq (parallel QR)"] = h(sol["params"], sol["covariance"], sol["residual"])
     sim = didim.simulate(rec, dict(M=95.1089, Fv=203.5034, Fc=20.3935, OF=-3.1648))
     out["simulate"] = h(sim.force, sim.q, sim.qd, sim.qdd)
-    s = _core.simulate_sensitivity("flexible", np.array(list(sc.TABLE3_TRUTH.values())), rec.qr, rec.dt, "emps",
-                                   list(rec.controller.gains))
+    s = didim.simulation.problem(rec, "flexible").simulate_sensitivity(np.array(list(sc.TABLE3_TRUTH.values())))
     out["sensitivities"] = h(*s.values())
     r = didim.identify(rec, "rigid", "didim", apM=78.0, offset=True)
     out["didim"] = h(list(r.params.values()), r.covariance, [x.output_error for x in r.history])

@@ -24,52 +24,12 @@ __all__ = [
     "lstsq",
     "param_names",
     "regressor",
-    "simulate",
-    "simulate_sensitivity",
     "sosfiltfilt",
 ]
 
 _Terms = Optional[Sequence[Tuple[str, str, float]]]
 
 def param_names(model: str, offset: bool = False, terms: _Terms = None) -> List[str]: ...
-def simulate(
-    model: str,
-    params: _F64,
-    qr: _F64,
-    dt: float,
-    controller: str,
-    gains: Sequence[float],
-    *,
-    u_ext: Optional[_F64] = None,
-    substeps: int = 10,
-    quantization: float = 0.0,
-    delay: int = 0,
-    coulomb_eps: float = ...,
-    offset: bool = False,
-    terms: _Terms = None,
-    backlash_gap: Optional[float] = None,
-    integrator: str = "exponential",
-    tol: float = ...,
-) -> Dict[str, _F64]: ...
-def simulate_sensitivity(
-    model: str,
-    params: _F64,
-    qr: _F64,
-    dt: float,
-    controller: str,
-    gains: Sequence[float],
-    *,
-    u_ext: Optional[_F64] = None,
-    substeps: int = 10,
-    quantization: float = 0.0,
-    delay: int = 0,
-    coulomb_eps: float = ...,
-    offset: bool = False,
-    terms: _Terms = None,
-    backlash_gap: Optional[float] = None,
-    integrator: str = "exponential",
-    tol: float = ...,
-) -> Dict[str, _F64]: ...
 def regressor(
     model: str,
     q: _F64,
@@ -142,6 +102,7 @@ class Problem:
     @property
     def n(self) -> int: ...
     def simulate(self, params: _F64) -> Dict[str, _F64]: ...
+    def simulate_sensitivity(self, params: _F64) -> Dict[str, _F64]: ...
     def simulate_batch(self, params: _F64, *, states: bool = False) -> Dict[str, Any]: ...
     def output_error(self, params: _F64, measured_dec: _F64, decimator: Decimator, *, output: str = "force") -> float: ...
     def output_error_batch(

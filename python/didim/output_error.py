@@ -15,7 +15,7 @@ from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_simp
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation
-from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, Term, params_vector, problem, sim_options
+from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, Term, params_vector, problem
 
 CRITERIA = ("force", "position")
 
@@ -280,9 +280,7 @@ def check_sensitivities(
     names, chi, offset = params_vector(model, params, offset, terms)
     if output not in ("force", "position"):
         raise DataError(f"output must be 'force' or 'position', got {output!r}")
-    sens = _core.simulate_sensitivity(
-        model, chi, rec.qr, rec.dt, rec.controller.kind, list(rec.controller.gains), u_ext=rec.u_ext, offset=offset,
-        terms=[t.spec() for t in terms] or None, backlash_gap=backlash_gap, **sim_options(rec, **sim_kw))
+    sens = problem(rec, model, offset=offset, terms=terms, backlash_gap=backlash_gap, **sim_kw).simulate_sensitivity(chi)
     exact = sens["dforce"] if output == "force" else sens["dq"][0]
     h = rel_step * np.maximum(np.abs(chi), 1e-3)
     sets = np.vstack([chi + np.diag(h), chi - np.diag(h)])

@@ -291,21 +291,9 @@ def simulate(
     if offset is not None:
         offset = _checks.flag("offset", offset)
     names, vec, offset = params_vector(model, params, offset, terms)
-    opts = sim_options(recording, substeps=substeps, quantization=quantization, delay=delay, coulomb_eps=coulomb_eps,
-                       integrator=integrator, tol=tol)
-    out = _core.simulate(
-        model,
-        vec,
-        recording.qr,
-        recording.dt,
-        recording.controller.kind,
-        list(recording.controller.gains),
-        u_ext=recording.u_ext,
-        offset=offset,
-        terms=_specs(terms),
-        backlash_gap=backlash_gap,
-        **opts,
-    )
+    out = problem(recording, model, offset=offset, terms=terms, backlash_gap=backlash_gap, substeps=substeps,
+                  quantization=quantization, delay=delay, coulomb_eps=coulomb_eps, integrator=integrator,
+                  tol=tol).simulate(vec)
     return SimResult(
         model=model,
         params=dict(zip(names, map(float, vec))),

@@ -234,14 +234,14 @@ impl TransferFunction {
     /// The force command (N) of one sample from the reference `qr`, the measurement `qm`
     /// and the known external force `u_ext` (N), and whether the loop is linear there
     /// (not saturated). Advances the state `z`.
-    #[inline]
+    #[inline(always)]
     pub fn step(&self, z: &mut FilterState, qr: f64, qm: f64, u_ext: f64) -> (f64, bool) {
         let n = self.taps;
         let u = self.num_r[0] * qr - self.num_y[0] * qm + z[0];
         for i in 0..n - 1 {
             z[i] = self.num_r[i + 1] * qr - self.num_y[i + 1] * qm - self.den[i + 1] * u + z[i + 1];
         }
-        let v = u + u_ext / self.gain;
+        let v = if u_ext != 0.0 { u + u_ext / self.gain } else { u };
         let active = v.abs() < self.saturation;
         (self.gain * saturate(v, self.saturation), active)
     }

@@ -9,7 +9,7 @@ use crate::controller::Controller;
 use crate::error::{invalid, Error, Result};
 use crate::filter::Decimator;
 use crate::model::Model;
-use crate::sim::{simulate, simulate_force, simulate_sensitivity, SimOptions, SimOutput};
+use crate::sim::{simulate, simulate_force, simulate_sensitivity, SensOutput, SimOptions, SimOutput};
 use rayon::prelude::*;
 
 /// Which simulated output is compared with the measurement.
@@ -58,6 +58,11 @@ impl<const N: usize> Problem<'_, N> {
     /// The closed-loop simulation with parameters `chi`.
     pub fn simulate(&self, chi: &[f64]) -> Result<SimOutput> {
         simulate(self.model, chi, &self.controller, self.qr, self.u_ext, &self.opts)
+    }
+
+    /// The closed-loop simulation with parameters `chi` and its forward sensitivities.
+    pub fn simulate_sensitivity(&self, chi: &[f64]) -> Result<SensOutput> {
+        simulate_sensitivity(self.model, chi, &self.controller, self.qr, self.u_ext, &self.opts)
     }
 
     /// Simulations of many parameter sets, in parallel, in input order.

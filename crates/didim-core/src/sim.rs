@@ -15,13 +15,17 @@
 //! over `[t_k, t_{k+1})`. Without delay the IDM of these states reproduces the
 //! commanded force exactly.
 
-use crate::controller::{Controller, FilterState, TransferFunction, MAX_TAPS};
-use crate::error::{filled, invalid, room, Error, Result};
+use crate::controller::Controller;
+use crate::error::{invalid, Error, Result};
 use crate::model::Model;
-use nalgebra::SVector;
 
+mod driver;
 mod expint;
+mod rk4;
+use driver::NoTangent;
+use expint::Exponential;
 pub use expint::StepStats;
+use rk4::Rk4;
 
 /// How the plant is integrated over each sample period.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -155,19 +159,21 @@ fn integrate<const N: usize>(
     states: bool,
     stats: Option<&mut StepStats>,
 ) -> Result<SimOutput> {
+    check_inputs(model, chi, controller, qr, u_ext, opts)?;
+    let nt = &mut NoTangent;
     match opts.integrator {
-        Integrator::Exponential => expint::run(
-            model,
-            chi,
-            controller,
-            qr,
-            u_ext,
-            opts,
-            states,
-            stats,
-            &mut expint::NoHook,
-        ),
-        Integrator::Rk4 => run(model, chi, controller, qr, u_ext, opts, states, &mut NoTangent),
+        Integrator::Exponential => {
+            let stepper = Exponential::new(model, chi, qr, opts)?;
+            let (out, stepper) = driver::run(model, chi, controller, qr, u_ext, opts, states, stepper, nt)?;
+            if let Some(s) = stats {
+                *s = stepper.stats();
+            }
+            Ok(out)
+        }
+        Integrator::Rk4 => {
+            let stepper = Rk4::new(model, chi, opts)?;
+            Ok(driver::run(model, chi, controller, qr, u_ext, opts, states, stepper, nt)?.0)
+        }
     }
 }
 
@@ -266,11 +272,13 @@ pub fn simulate_sensitivity<const N: usize>(
     check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
     let (sim, dforce, dq) = if opts.integrator == Integrator::Exponential {
         let mut t = expint::Sens::<N>::new(model, qr.len(), opts.delay)?;
-        let sim = expint::run(model, chi, controller, qr, u_ext, opts, true, None, &mut t)?;
+        let stepper = Exponential::new(model, chi, qr, opts)?;
+        let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
         (sim, t.dforce, t.dq)
     } else {
-        let mut t = Sensitivity::<N>::new(model.n_params(), qr.len(), opts.delay)?;
-        let sim = run(model, chi, controller, qr, u_ext, opts, true, &mut t)?;
+        let mut t = rk4::Sensitivity::<N>::new(model.n_params(), qr.len(), opts.delay)?;
+        let stepper = Rk4::new(model, chi, opts)?;
+        let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
         (sim, t.dforce, t.dq)
     };
     let sim = finite_outputs(sim, model, chi, opts)?;
@@ -293,155 +301,6 @@ pub fn simulate_sensitivity<const N: usize>(
         )));
     }
     Ok(SensOutput { sim, dforce, dq })
-}
-
-/// One RK4 stage of the state: position, velocity, acceleration.
-type Stage<const N: usize> = (SVector<f64, N>, SVector<f64, N>, SVector<f64, N>);
-
-/// What rides along the state through the simulation loop: nothing for a plain
-/// simulation, the sensitivity matrices for [`simulate_sensitivity`].
-trait Tangent<const N: usize> {
-    /// The command of sample `k` has been computed by `law` (`active`: not saturated).
-    fn command(&mut self, k: usize, law: &TransferFunction, active: bool);
-    /// Records the state outputs of sample `k`.
-    fn record(&mut self, k: usize);
-    /// Advances by one RK4 substep of length `h` through the state's four stages.
-    fn substep(
-        &mut self,
-        model: &Model<N>,
-        chi: &[f64],
-        inv_mass: &SVector<f64, N>,
-        stages: &[Stage<N>; 4],
-        h: f64,
-    );
-}
-
-struct NoTangent;
-
-impl<const N: usize> Tangent<N> for NoTangent {
-    #[inline(always)]
-    fn command(&mut self, _: usize, _: &TransferFunction, _: bool) {}
-    #[inline(always)]
-    fn record(&mut self, _: usize) {}
-    #[inline(always)]
-    fn substep(&mut self, _: &Model<N>, _: &[f64], _: &SVector<f64, N>, _: &[Stage<N>; 4], _: f64) {}
-}
-
-/// Sensitivities `Sq = ∂q/∂χ`, `Sv = ∂q̇/∂χ` (dof × parameter, flat `[d * p + j]`)
-/// and the work buffers of their RK4 integration.
-struct Sensitivity<const N: usize> {
-    p: usize,
-    n: usize,
-    sq: Vec<f64>,
-    sv: Vec<f64>,
-    /// The controller's state on `∂q1/∂χ`, one per parameter.
-    ctl: Vec<FilterState>,
-    /// Sensitivity of the force applied over the current period.
-    dtau: Vec<f64>,
-    /// Delayed command sensitivities (ring buffer, like the commands).
-    pending: Vec<Vec<f64>>,
-    dforce: Vec<f64>,
-    dq: Vec<f64>,
-    // RK4 work buffers
-    kq: [Vec<f64>; 4],
-    kv: [Vec<f64>; 4],
-    stage_q: Vec<f64>,
-    stage_v: Vec<f64>,
-    phi: Vec<f64>,
-}
-
-impl<const N: usize> Sensitivity<N> {
-    fn new(p: usize, n: usize, delay: usize) -> Result<Self> {
-        let z = vec![0.0; N * p];
-        Ok(Self {
-            p,
-            n,
-            sq: z.clone(),
-            sv: z.clone(),
-            ctl: vec![[0.0; MAX_TAPS]; p],
-            dtau: vec![0.0; p],
-            pending: vec![vec![0.0; p]; delay],
-            dforce: filled(p * n, 0.0, "the force sensitivities")?,
-            dq: filled(N * p * n, 0.0, "the position sensitivities")?,
-            kq: [z.clone(), z.clone(), z.clone(), z.clone()],
-            kv: [z.clone(), z.clone(), z.clone(), z.clone()],
-            stage_q: z.clone(),
-            stage_v: z.clone(),
-            phi: z,
-        })
-    }
-}
-
-impl<const N: usize> Tangent<N> for Sensitivity<N> {
-    fn command(&mut self, k: usize, law: &TransferFunction, active: bool) {
-        let (p, n, d) = (self.p, self.n, self.pending.len());
-        // ∂τ[k]/∂χ: the controller's law on ∂q1/∂χ (zero while the command saturates).
-        let cmd = if d == 0 {
-            &mut self.dtau
-        } else {
-            // the slot of sample k held the command of sample k − d: apply it now
-            let slot = &mut self.pending[k % d];
-            std::mem::swap(&mut self.dtau, slot);
-            slot
-        };
-        let gain = if active { law.gain() } else { 0.0 };
-        for j in 0..p {
-            cmd[j] = gain * law.sensitivity_step(&mut self.ctl[j], self.sq[j]);
-            self.dforce[j * n + k] = cmd[j];
-        }
-    }
-
-    fn record(&mut self, k: usize) {
-        let (p, n) = (self.p, self.n);
-        for d in 0..N {
-            for j in 0..p {
-                self.dq[(d * p + j) * n + k] = self.sq[d * p + j];
-            }
-        }
-    }
-
-    fn substep(
-        &mut self,
-        model: &Model<N>,
-        chi: &[f64],
-        inv_mass: &SVector<f64, N>,
-        stages: &[Stage<N>; 4],
-        h: f64,
-    ) {
-        let p = self.p;
-        let len = N * p;
-        for (i, (q, v, a)) in stages.iter().enumerate() {
-            if i == 0 {
-                self.stage_q.copy_from_slice(&self.sq);
-                self.stage_v.copy_from_slice(&self.sv);
-            } else {
-                let f = if i == 3 { h } else { 0.5 * h };
-                for x in 0..len {
-                    self.stage_q[x] = self.sq[x] + f * self.kq[i - 1][x];
-                    self.stage_v[x] = self.sv[x] + f * self.kv[i - 1][x];
-                }
-            }
-            let (aq, av) = model.accel_partials(chi, inv_mass, q, v);
-            model.regressor_into(q, v, a, &mut self.phi);
-            for d in 0..N {
-                for j in 0..p {
-                    let mut s = -self.phi[d * p + j] * inv_mass[d];
-                    for e in 0..N {
-                        s += aq[(d, e)] * self.stage_q[e * p + j] + av[(d, e)] * self.stage_v[e * p + j];
-                    }
-                    if d == 0 {
-                        s += inv_mass[0] * self.dtau[j];
-                    }
-                    self.kv[i][d * p + j] = s;
-                    self.kq[i][d * p + j] = self.stage_v[d * p + j];
-                }
-            }
-        }
-        for x in 0..len {
-            self.sq[x] += h / 6.0 * (self.kq[0][x] + 2.0 * (self.kq[1][x] + self.kq[2][x]) + self.kq[3][x]);
-            self.sv[x] += h / 6.0 * (self.kv[0][x] + 2.0 * (self.kv[1][x] + self.kv[2][x]) + self.kv[3][x]);
-        }
-    }
 }
 
 fn validate_signals(qr: &[f64], u_ext: Option<&[f64]>) -> Result<usize> {
@@ -486,123 +345,6 @@ fn check_inputs<const N: usize>(
         ));
     }
     Ok(n)
-}
-
-/// The simulation loop shared by [`simulate`] and [`simulate_sensitivity`]; `states`:
-/// record the positions, velocities and accelerations too (else only the force).
-#[allow(clippy::too_many_arguments)]
-fn run<const N: usize, T: Tangent<N>>(
-    model: &Model<N>,
-    chi: &[f64],
-    controller: &Controller,
-    qr: &[f64],
-    u_ext: Option<&[f64]>,
-    opts: &SimOptions,
-    states: bool,
-    tangent: &mut T,
-) -> Result<SimOutput> {
-    let n = check_inputs(model, chi, controller, qr, u_ext, opts)?;
-
-    let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-        (a.min(x), b.max(x))
-    });
-    let bound = 10.0 * (hi - lo) + 1.0;
-
-    let inv_mass = model.masses(chi).map(|m| 1.0 / m);
-    let h = opts.dt / opts.substeps as f64;
-    let quantize = |x: f64| {
-        if opts.quantization > 0.0 {
-            (x / opts.quantization).round() * opts.quantization
-        } else {
-            x
-        }
-    };
-    let accel = |q: &SVector<f64, N>, qd: &SVector<f64, N>, tau: f64| {
-        let mut u = SVector::<f64, N>::zeros();
-        u[0] = tau;
-        model.accel(chi, &inv_mass, q, qd, &u)
-    };
-
-    let mut q = SVector::<f64, N>::repeat(qr[0]);
-    let mut qd = SVector::<f64, N>::zeros();
-    let law = controller.law(opts.dt)?;
-    let mut ctl = law.rest_state(qr[0], quantize(q[0]));
-    let mut pending = vec![0.0; opts.delay]; // ring buffer of delayed commands
-
-    let m = if states { n } else { 0 };
-    let signals = |what| (0..N).map(|_| room(m, what)).collect::<Result<Vec<_>>>();
-    let mut out = SimOutput {
-        force: room(n, "the simulated force")?,
-        q: signals("the simulated positions")?,
-        qd: signals("the simulated velocities")?,
-        qdd: signals("the simulated accelerations")?,
-    };
-
-    for k in 0..n {
-        if k % crate::interrupt::EVERY == 0 {
-            crate::interrupt::check()?;
-        }
-        let qm = quantize(q[0]);
-        let (tau_cmd, active) = law.step(&mut ctl, qr[k], qm, u_ext.map_or(0.0, |u| u[k]));
-        tangent.command(k, &law, active);
-        let tau = if opts.delay == 0 {
-            tau_cmd
-        } else {
-            std::mem::replace(&mut pending[k % opts.delay], tau_cmd)
-        };
-
-        let a = accel(&q, &qd, tau);
-        out.force.push(tau_cmd);
-        if states {
-            for d in 0..N {
-                out.q[d].push(q[d]);
-                out.qd[d].push(qd[d]);
-                out.qdd[d].push(a[d]);
-            }
-        }
-        tangent.record(k);
-        if k + 1 == n {
-            break;
-        }
-
-        // RK4 over the sample period with the force held.
-        let mut a1 = a;
-        for s in 0..opts.substeps {
-            if s > 0 {
-                a1 = accel(&q, &qd, tau);
-            }
-            let (q2, v2) = (q + qd * (0.5 * h), qd + a1 * (0.5 * h));
-            let a2 = accel(&q2, &v2, tau);
-            let (q3, v3) = (q + v2 * (0.5 * h), qd + a2 * (0.5 * h));
-            let a3 = accel(&q3, &v3, tau);
-            let (q4, v4) = (q + v3 * h, qd + a3 * h);
-            let a4 = accel(&q4, &v4, tau);
-            tangent.substep(
-                model,
-                chi,
-                &inv_mass,
-                &[(q, qd, a1), (q2, v2, a2), (q3, v3, a3), (q4, v4, a4)],
-                h,
-            );
-            q += (qd + (v2 + v3) * 2.0 + v4) * (h / 6.0);
-            qd += (a1 + (a2 + a3) * 2.0 + a4) * (h / 6.0);
-        }
-
-        let err = (q[0] - qr[k + 1]).abs();
-        if !(expint::finite(&q, &qd) && err <= bound) {
-            return Err(Error::Simulation(format!(
-                "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
-                 (bound {:.3e} m) with parameters {}; check the parameter values and units, the controller gains, \
-                 and try more substeps",
-                k + 1,
-                (k + 1) as f64 * opts.dt,
-                err,
-                bound,
-                describe(model, chi)
-            )));
-        }
-    }
-    Ok(out)
 }
 
 /// `name=value` list of a parameter set, for messages.

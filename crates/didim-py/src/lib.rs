@@ -341,63 +341,6 @@ fn param_names(py: Python<'_>, model: &str, offset: bool, terms: Option<Terms>) 
     })
 }
 
-/// Closed-loop simulation; returns a dict of arrays: force (n,), q, qd, qdd (ndof, n).
-#[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None, integrator="exponential", tol=Real(sim::DEFAULT_TOL)))]
-#[pyo3(
-    text_signature = "(model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, terms=None, backlash_gap=None, integrator='exponential', tol=...)"
-)]
-#[allow(clippy::too_many_arguments)]
-fn simulate<'py>(
-    py: Python<'py>,
-    model: &str,
-    params: PyReadonlyArray1<'py, f64>,
-    qr: PyReadonlyArray1<'py, f64>,
-    dt: Real,
-    controller: &str,
-    gains: Vec<Real>,
-    u_ext: Option<PyReadonlyArray1<'py, f64>>,
-    substeps: Whole,
-    quantization: Real,
-    delay: Whole,
-    coulomb_eps: Real,
-    offset: bool,
-    terms: Option<Terms>,
-    backlash_gap: Option<f64>,
-    integrator: &str,
-    tol: Real,
-) -> PyResult<Bound<'py, PyDict>> {
-    let terms = terms.unwrap_or_default();
-    let chi = slice1(&params);
-    let qr = slice1(&qr);
-    let u = u_ext.as_ref().map(slice1);
-    let gains = reals(gains);
-    let coulomb_eps = coulomb_eps.0;
-    let opts = sim_options(
-        py,
-        dt.0,
-        substeps.get("substeps").map_err(|e| core_error(py, e))?,
-        quantization.0,
-        delay.get("delay").map_err(|e| core_error(py, e))?,
-        integrator,
-        tol.0,
-    )?;
-    let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
-    let out = run(py, || {
-        let c = make_controller(controller, &gains)?;
-        match make_model(model, offset, coulomb_eps, &terms, backlash_gap)? {
-            AnyModel::Rigid(m) => sim::simulate(&m, chi, &c, qr, u, &opts),
-            AnyModel::Flexible(m) => sim::simulate(&m, chi, &c, qr, u, &opts),
-        }
-    })?;
-    let d = PyDict::new(py);
-    d.set_item("force", out.force.into_pyarray(py))?;
-    d.set_item("q", rows_to_array(py, out.q)?)?;
-    d.set_item("qd", rows_to_array(py, out.qd)?)?;
-    d.set_item("qdd", rows_to_array(py, out.qdd)?)?;
-    Ok(d)
-}
-
 /// The IDM regressor of a trajectory: q, qd, qdd of shape (ndof, n) -> W of shape (ndof, n, p).
 #[pyfunction]
 #[pyo3(signature = (model, q, qd, qdd, *, coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None))]
@@ -426,68 +369,6 @@ fn regressor<'py>(
     // core layout [dof][param][sample] -> numpy (ndof, p, n) -> view (ndof, n, p)
     let a = PyArray1::from_vec(py, w).reshape([ndof, p, n])?;
     a.call_method1("transpose", ((0, 2, 1),))
-}
-
-/// Closed-loop simulation with forward sensitivities; the dict of `simulate` plus
-/// dforce (p, n) and dq (ndof, p, n).
-#[pyfunction]
-#[pyo3(signature = (model, params, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None, integrator="exponential", tol=Real(sim::DEFAULT_TOL)))]
-#[pyo3(
-    text_signature = "(model, params, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, terms=None, backlash_gap=None, integrator='exponential', tol=...)"
-)]
-#[allow(clippy::too_many_arguments)]
-fn simulate_sensitivity<'py>(
-    py: Python<'py>,
-    model: &str,
-    params: PyReadonlyArray1<'py, f64>,
-    qr: PyReadonlyArray1<'py, f64>,
-    dt: Real,
-    controller: &str,
-    gains: Vec<Real>,
-    u_ext: Option<PyReadonlyArray1<'py, f64>>,
-    substeps: Whole,
-    quantization: Real,
-    delay: Whole,
-    coulomb_eps: Real,
-    offset: bool,
-    terms: Option<Terms>,
-    backlash_gap: Option<f64>,
-    integrator: &str,
-    tol: Real,
-) -> PyResult<Bound<'py, PyDict>> {
-    let terms = terms.unwrap_or_default();
-    let chi = slice1(&params);
-    let qr = slice1(&qr);
-    let u = u_ext.as_ref().map(slice1);
-    let gains = reals(gains);
-    let coulomb_eps = coulomb_eps.0;
-    let opts = sim_options(
-        py,
-        dt.0,
-        substeps.get("substeps").map_err(|e| core_error(py, e))?,
-        quantization.0,
-        delay.get("delay").map_err(|e| core_error(py, e))?,
-        integrator,
-        tol.0,
-    )?;
-    let (chi, qr, u): (&[f64], &[f64], Option<&[f64]>) = (&chi, &qr, u.as_deref());
-    let n = qr.len();
-    let (ndof, out) = run(py, || {
-        let c = make_controller(controller, &gains)?;
-        match make_model(model, offset, coulomb_eps, &terms, backlash_gap)? {
-            AnyModel::Rigid(m) => Ok((1, sim::simulate_sensitivity(&m, chi, &c, qr, u, &opts)?)),
-            AnyModel::Flexible(m) => Ok((2, sim::simulate_sensitivity(&m, chi, &c, qr, u, &opts)?)),
-        }
-    })?;
-    let p = chi.len();
-    let d = PyDict::new(py);
-    d.set_item("force", out.sim.force.into_pyarray(py))?;
-    d.set_item("q", rows_to_array(py, out.sim.q)?)?;
-    d.set_item("qd", rows_to_array(py, out.sim.qd)?)?;
-    d.set_item("qdd", rows_to_array(py, out.sim.qdd)?)?;
-    d.set_item("dforce", PyArray1::from_vec(py, out.dforce).reshape([p, n])?)?;
-    d.set_item("dq", PyArray1::from_vec(py, out.dq).reshape([ndof, p, n])?)?;
-    Ok(d)
 }
 
 /// QR least squares with covariance, paper eqs. (11)-(15). W is (r, n), y is (r,).
@@ -711,9 +592,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_COULOMB_EPS", DEFAULT_COULOMB_EPS)?;
     m.add("DEFAULT_TOL", sim::DEFAULT_TOL)?;
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
-    m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(regressor, m)?)?;
-    m.add_function(wrap_pyfunction!(simulate_sensitivity, m)?)?;
     m.add_function(wrap_pyfunction!(lstsq, m)?)?;
     m.add_function(wrap_pyfunction!(butter, m)?)?;
     m.add_function(wrap_pyfunction!(cheby1, m)?)?;

@@ -189,28 +189,42 @@ fn sim_dict<'py>(py: Python<'py>, out: SimOutput) -> PyResult<Bound<'py, PyDict>
 #[pymethods]
 impl Problem {
     #[new]
-    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=DEFAULT_COULOMB_EPS, offset=false, integrator="exponential", tol=sim::DEFAULT_TOL, terms=None, backlash_gap=None))]
+    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, integrator="exponential", tol=Real(sim::DEFAULT_TOL), terms=None, backlash_gap=None))]
+    #[pyo3(
+        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, integrator='exponential', tol=..., terms=None, backlash_gap=None)"
+    )]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         model: &str,
         qr: PyReadonlyArray1<'_, f64>,
-        dt: f64,
+        dt: Real,
         controller: &str,
-        gains: Vec<f64>,
+        gains: Vec<Real>,
         u_ext: Option<PyReadonlyArray1<'_, f64>>,
-        substeps: usize,
-        quantization: f64,
-        delay: usize,
-        coulomb_eps: f64,
+        substeps: Whole,
+        quantization: Real,
+        delay: Whole,
+        coulomb_eps: Real,
         offset: bool,
         integrator: &str,
-        tol: f64,
+        tol: Real,
         terms: Option<Terms>,
         backlash_gap: Option<f64>,
     ) -> PyResult<Self> {
         let terms = terms.unwrap_or_default();
-        let opts = sim_options(py, dt, substeps, quantization, delay, integrator, tol)?;
+        let gains = reals(gains);
+        let whole = |w: Whole, name: &str| w.get(name).map_err(|e| core_error(py, e));
+        let opts = sim_options(
+            py,
+            dt.0,
+            whole(substeps, "substeps")?,
+            quantization.0,
+            whole(delay, "delay")?,
+            integrator,
+            tol.0,
+        )?;
+        let coulomb_eps = coulomb_eps.0;
         let qr = slice1(&qr).into_owned();
         let u_ext = u_ext.as_ref().map(|u| slice1(u).into_owned());
         let (model, controller) = quick(py, || {
@@ -257,6 +271,23 @@ impl Problem {
         let chi: &[f64] = &chi;
         let out = run(py, || with_problem!(self, pb => pb.simulate(chi)))?;
         sim_dict(py, out)
+    }
+
+    /// One simulation and its forward sensitivities: dict of force (n,), q, qd, qdd (ndof, n),
+    /// dforce (p, n) and dq (ndof, p, n), the derivatives of force and q with respect to params.
+    fn simulate_sensitivity<'py>(
+        &self,
+        py: Python<'py>,
+        params: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let chi = slice1(&params);
+        let chi: &[f64] = &chi;
+        let out = run(py, || with_problem!(self, pb => pb.simulate_sensitivity(chi)))?;
+        let (p, n, ndof) = (chi.len(), self.qr.len(), self.ndof_());
+        let d = sim_dict(py, out.sim)?;
+        d.set_item("dforce", PyArray1::from_vec(py, out.dforce).reshape([p, n])?)?;
+        d.set_item("dq", PyArray1::from_vec(py, out.dq).reshape([ndof, p, n])?)?;
+        Ok(d)
     }
 
     /// Simulations of the rows of params (m, p) in parallel: dict of force (m, n), q (m, ndof, n),

@@ -29,13 +29,13 @@
 //! `tol` times the reference stroke, the step is halved, recursively down to `T / 2^12`.
 //! The steps depend only on the inputs, so a simulation is deterministic.
 
-use super::{describe, SimOptions, SimOutput};
-use crate::controller::{Controller, FilterState, TransferFunction, MAX_TAPS};
+use super::driver::{Stepper, Tangent, V};
+use super::SimOptions;
+use crate::controller::{FilterState, TransferFunction, MAX_TAPS};
 use crate::error::{filled, invalid, Error, Result};
 use crate::model::{Basis, Model};
-use nalgebra::{DMatrix, SMatrix, SVector};
+use nalgebra::{DMatrix, SMatrix};
 
-type V<const N: usize> = SVector<f64, N>;
 type Mat<const N: usize> = SMatrix<f64, N, N>;
 
 /// Deepest halving of the sample period (`T / 4096`).
@@ -61,9 +61,10 @@ pub(super) struct Level<const N: usize> {
     pub p2v: Mat<N>,
 }
 
-/// A non-affine term of `g`: it adds `φ(x, ẋ) · dir` to `g` and `∂φ · outer` to its
-/// partials, with `d` the term's direction ([`Basis::direction`]), `dir = −χ M⁻¹ d` and
-/// `outer = dir dᵀ`.
+/// A non-affine term of `g`: it adds `φ(x, ẋ) · dir` to the force sum and `∂φ · outer`
+/// to its partials, with `d` the term's direction ([`Basis::direction`]), `dir = −χ d` and
+/// `outer = dir dᵀ`; `g` is that sum divided by the masses (after the sum, so that a huge
+/// parameter times a zero basis function stays zero).
 #[derive(Clone, Copy, Debug)]
 struct GTerm<const N: usize> {
     basis: Basis,
@@ -95,13 +96,6 @@ pub(super) struct Plant<const N: usize> {
     last_inv_h: std::cell::Cell<f64>,
 }
 
-/// Whether every entry of `q` and `v` is finite: their sum is then finite too unless it
-/// overflows, which for a state is divergence as well (one test instead of `2N`).
-#[inline(always)]
-pub(super) fn finite<const N: usize>(q: &V<N>, v: &V<N>) -> bool {
-    (q.sum() + v.sum()).is_finite()
-}
-
 impl<const N: usize> Plant<N> {
     pub fn new(model: &Model<N>, chi: &[f64], dt: f64, atol: f64) -> Result<Self> {
         let inv_mass = model.masses(chi).map(|m| 1.0 / m);
@@ -121,7 +115,7 @@ impl<const N: usize> Plant<N> {
             .filter(|(b, _)| !b.is_affine() && !b.is_inertia())
             .map(|(b, &x)| {
                 let d = b.direction::<N>();
-                let dir = -(d * x).component_mul(&inv_mass);
+                let dir = -(d * x);
                 GTerm {
                     basis: *b,
                     dir,
@@ -151,7 +145,7 @@ impl<const N: usize> Plant<N> {
             }
         }
         let a0 = -c.component_mul(&inv_mass);
-        let mut plant = Self {
+        let plant = Self {
             inv_mass,
             aq,
             av,
@@ -167,8 +161,6 @@ impl<const N: usize> Plant<N> {
             last_dg: std::cell::Cell::new(V::<N>::zeros()),
             last_inv_h: std::cell::Cell::new(1.0 / dt),
         };
-        plant.ensure(0)?;
-        plant.ensure(1)?;
         Ok(plant)
     }
 
@@ -270,7 +262,7 @@ impl<const N: usize> Plant<N> {
             let (x, xd) = t.basis.coordinates(q, v);
             g += t.dir * t.basis.local(x, xd, self.eps).0;
         }
-        g
+        g.component_mul(&self.inv_mass)
     }
 
     /// `(g, ∂g/∂q, ∂g/∂q̇)` in one pass over the terms.
@@ -286,7 +278,13 @@ impl<const N: usize> Plant<N> {
             dq += t.outer * px;
             dv += t.outer * pv;
         }
-        (g, dq, dv)
+        for d in 0..N {
+            for e in 0..N {
+                dq[(d, e)] *= self.inv_mass[d];
+                dv[(d, e)] *= self.inv_mass[d];
+            }
+        }
+        (g.component_mul(&self.inv_mass), dq, dv)
     }
 
     /// Whether `g`, with partials `(gq, gv)` at the end of a quick step of length `h`, is
@@ -411,7 +409,7 @@ impl<const N: usize> Plant<N> {
     /// Advances `(q, v, g)` over one step of level `l`, halving it while the error is too
     /// large; `hook` sees every accepted step.
     #[inline(always)]
-    pub fn advance<H: StepHook<N>>(
+    pub fn advance<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
         &mut self,
         l: usize,
         q: &mut V<N>,
@@ -422,7 +420,13 @@ impl<const N: usize> Plant<N> {
     ) -> Result<()> {
         let step = self.try_step(l, q, v, g, b);
         if step.err <= 1.0 || l == MAX_LEVEL {
-            hook.step(self, l, q, v, g, &step)?;
+            let accepted = Accepted {
+                l,
+                q: *q,
+                v: *v,
+                step,
+            };
+            hook(self, &accepted)?;
             self.last_dg.set(step.g1 - *g);
             self.last_inv_h.set(1.0 / self.level(l).h);
             *q = step.q1;
@@ -435,7 +439,7 @@ impl<const N: usize> Plant<N> {
     }
 
     #[inline(never)]
-    fn subdivide<H: StepHook<N>>(
+    fn subdivide<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
         &mut self,
         l: usize,
         q: &mut V<N>,
@@ -474,28 +478,80 @@ pub(super) struct Step<const N: usize> {
     pub f: V<N>,
 }
 
-/// What rides along accepted steps: nothing for a plain simulation, the sensitivities
-/// for `simulate_sensitivity`.
-pub(super) trait StepHook<const N: usize> {
-    /// Step of level `l` accepted from `(q, v)` with `g_n = gn`.
-    fn step(
-        &mut self,
-        plant: &Plant<N>,
-        l: usize,
-        q: &V<N>,
-        v: &V<N>,
-        gn: &V<N>,
-        step: &Step<N>,
-    ) -> Result<()>;
+/// An accepted step of level `l` from `(q, v)`, as the sensitivities differentiate it.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Accepted<const N: usize> {
+    pub l: usize,
+    pub q: V<N>,
+    pub v: V<N>,
+    pub step: Step<N>,
 }
 
-/// The hook of a plain simulation.
-pub(super) struct NoHook;
+/// The exponential integrator as a [`Stepper`]: the plant and `g` at the current state.
+pub(super) struct Exponential<const N: usize> {
+    plant: Plant<N>,
+    g: V<N>,
+}
 
-impl<const N: usize> StepHook<N> for NoHook {
+impl<const N: usize> Exponential<N> {
+    pub fn new(model: &Model<N>, chi: &[f64], qr: &[f64], opts: &SimOptions) -> Result<Self> {
+        let mut plant = Plant::new(model, chi, opts.dt, step_tolerance(qr, opts.tol))?;
+        plant.ensure(0)?;
+        plant.ensure(1)?;
+        Ok(Self {
+            plant,
+            g: V::<N>::zeros(),
+        })
+    }
+
+    pub fn stats(&self) -> StepStats {
+        StepStats {
+            steps: self.plant.steps,
+            rejected: self.plant.rejected,
+            implicit: self.plant.implicit.get(),
+        }
+    }
+
     #[inline(always)]
-    fn step(&mut self, _: &Plant<N>, _: usize, _: &V<N>, _: &V<N>, _: &V<N>, _: &Step<N>) -> Result<()> {
-        Ok(())
+    fn input(&self, tau: f64) -> V<N> {
+        let mut b = V::<N>::zeros();
+        b[0] = tau * self.plant.inv_mass[0];
+        b
+    }
+}
+
+impl<const N: usize> Stepper<N> for Exponential<N> {
+    type Ctx = Plant<N>;
+    type Step = Accepted<N>;
+    const DIVERGENCE_HINT: &'static str = "";
+
+    fn ctx(&self) -> &Plant<N> {
+        &self.plant
+    }
+
+    fn start(&mut self, q: &V<N>, v: &V<N>) {
+        self.g = self.plant.g(q, v);
+    }
+
+    /// Every step ends with `g` evaluated at its end state, so this is the direct model
+    /// at the state itself.
+    #[inline(always)]
+    fn accel(&self, q: &V<N>, v: &V<N>, tau: f64) -> V<N> {
+        self.plant.accel(q, v, &self.input(tau), &self.g)
+    }
+
+    #[inline(always)]
+    fn advance<T: Tangent<N, Self>>(
+        &mut self,
+        q: &mut V<N>,
+        v: &mut V<N>,
+        tau: f64,
+        tangent: &mut T,
+    ) -> Result<()> {
+        let b = self.input(tau);
+        self.plant.advance(0, q, v, &mut self.g, &b, &mut |plant, step| {
+            tangent.step(plant, step)
+        })
     }
 }
 
@@ -526,24 +582,6 @@ fn amax(x: &[f64]) -> f64 {
     m
 }
 
-/// The nearest multiple of `step` (ties away from zero, like [`f64::round`]) without the
-/// libm call `round` compiles to on baseline x86-64: adding and removing 1.5·2⁵² rounds to
-/// the nearest integer (ties to even), exact ties are then moved away from zero, and the
-/// sign of zero is kept.
-#[inline(always)]
-fn round_to(x: f64, step: f64) -> f64 {
-    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
-    let y = x / step;
-    if y.abs() >= 4_503_599_627_370_496.0 {
-        return y.round() * step; // beyond 2^52 every double is an integer already
-    }
-    let mut r = (y + MAGIC) - MAGIC;
-    if (r - y).abs() == 0.5 {
-        r = y + 0.5 * y.signum();
-    }
-    r.copysign(y) * step
-}
-
 /// Position tolerance of one step (m): `tol` times the reference stroke (1 m if flat).
 pub(super) fn step_tolerance(qr: &[f64], tol: f64) -> f64 {
     let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
@@ -562,127 +600,6 @@ pub struct StepStats {
     pub rejected: usize,
     /// Steps (taken or rejected) that needed the implicit solve.
     pub implicit: usize,
-}
-
-/// What rides along the samples: the command's sensitivity and the recorded outputs.
-pub(super) trait Tangent<const N: usize>: StepHook<N> {
-    /// Sets up the tangent for the plant (initial state `(q, v)` with `g = g0`).
-    fn start(&mut self, plant: &Plant<N>, q: &V<N>, v: &V<N>, g0: &V<N>);
-    /// The command of sample `k` has been computed by `law` (`active`: not saturated);
-    /// `tau` is the force applied over the coming period (after the delay).
-    fn command(&mut self, k: usize, law: &TransferFunction, active: bool, tau: f64);
-    /// Records the outputs of sample `k`.
-    fn record(&mut self, k: usize);
-}
-
-impl<const N: usize> Tangent<N> for NoHook {
-    #[inline(always)]
-    fn start(&mut self, _: &Plant<N>, _: &V<N>, _: &V<N>, _: &V<N>) {}
-    #[inline(always)]
-    fn command(&mut self, _: usize, _: &TransferFunction, _: bool, _: f64) {}
-    #[inline(always)]
-    fn record(&mut self, _: usize) {}
-}
-
-/// The closed-loop simulation with the exponential integrator (see the module documentation).
-#[allow(clippy::too_many_arguments)]
-pub(super) fn run<const N: usize, T: Tangent<N>>(
-    model: &Model<N>,
-    chi: &[f64],
-    controller: &Controller,
-    qr: &[f64],
-    u_ext: Option<&[f64]>,
-    opts: &SimOptions,
-    states: bool,
-    stats: Option<&mut StepStats>,
-    tangent: &mut T,
-) -> Result<SimOutput> {
-    let n = super::check_inputs(model, chi, controller, qr, u_ext, opts)?;
-
-    let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-        (a.min(x), b.max(x))
-    });
-    let bound = 10.0 * (hi - lo) + 1.0;
-    let mut plant = Plant::new(model, chi, opts.dt, step_tolerance(qr, opts.tol))?;
-    let quantize = |x: f64| {
-        if opts.quantization > 0.0 {
-            round_to(x, opts.quantization)
-        } else {
-            x
-        }
-    };
-
-    let mut q = V::<N>::repeat(qr[0]);
-    let mut v = V::<N>::zeros();
-    let mut g = plant.g(&q, &v);
-    tangent.start(&plant, &q, &v, &g);
-    let law = controller.law(opts.dt)?;
-    let mut ctl = law.rest_state(qr[0], quantize(q[0]));
-    let mut pending = vec![0.0; opts.delay];
-
-    let m = if states { n } else { 0 };
-    let signals = |what| (0..N).map(|_| filled(m, 0.0, what)).collect::<Result<Vec<_>>>();
-    let mut force = filled(n, 0.0, "the simulated force")?;
-    let mut oq = signals("the simulated positions")?;
-    let mut oqd = signals("the simulated velocities")?;
-    let mut oqdd = signals("the simulated accelerations")?;
-
-    for k in 0..n {
-        if k % crate::interrupt::EVERY == 0 {
-            crate::interrupt::check()?;
-        }
-        let qm = quantize(q[0]);
-        let (tau_cmd, active) = law.step(&mut ctl, qr[k], qm, u_ext.map_or(0.0, |u| u[k]));
-        let tau = if opts.delay == 0 {
-            tau_cmd
-        } else {
-            std::mem::replace(&mut pending[k % opts.delay], tau_cmd)
-        };
-        tangent.command(k, &law, active, tau);
-        let mut b = V::<N>::zeros();
-        b[0] = tau * plant.inv_mass[0];
-        // Every step ends with g evaluated at its end state, so this is the direct model's
-        // acceleration at the recorded state: the IDM of the outputs reproduces the applied
-        // force to rounding.
-        force[k] = tau_cmd;
-        if states {
-            let a = plant.accel(&q, &v, &b, &g);
-            for d in 0..N {
-                oq[d][k] = q[d];
-                oqd[d][k] = v[d];
-                oqdd[d][k] = a[d];
-            }
-        }
-        tangent.record(k);
-        if k + 1 == n {
-            break;
-        }
-        plant.advance(0, &mut q, &mut v, &mut g, &b, tangent)?;
-
-        let err = (q[0] - qr[k + 1]).abs();
-        if !(finite(&q, &v) && err <= bound) {
-            return Err(Error::Simulation(format!(
-                "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
-                 (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller gains",
-                k + 1,
-                (k + 1) as f64 * opts.dt,
-                err,
-                bound,
-                describe(model, chi)
-            )));
-        }
-    }
-    if let Some(s) = stats {
-        s.steps = plant.steps;
-        s.rejected = plant.rejected;
-        s.implicit = plant.implicit.get();
-    }
-    Ok(SimOutput {
-        force,
-        q: oq,
-        qd: oqd,
-        qdd: oqdd,
-    })
 }
 
 /// How a parameter enters the split model.
@@ -800,8 +717,9 @@ impl<const N: usize> Sens<N> {
     }
 }
 
-impl<const N: usize> Tangent<N> for Sens<N> {
-    fn start(&mut self, plant: &Plant<N>, q: &V<N>, v: &V<N>, g0: &V<N>) {
+impl<const N: usize> Tangent<N, Exponential<N>> for Sens<N> {
+    fn start(&mut self, plant: &Plant<N>, q: &V<N>, v: &V<N>) {
+        let g0 = &plant.g(q, v);
         let zero = V::<N>::zeros();
         for j in 0..self.p {
             match self.role[j] {
@@ -873,18 +791,9 @@ impl<const N: usize> Tangent<N> for Sens<N> {
             }
         }
     }
-}
 
-impl<const N: usize> StepHook<N> for Sens<N> {
-    fn step(
-        &mut self,
-        plant: &Plant<N>,
-        l: usize,
-        q: &V<N>,
-        v: &V<N>,
-        _gn: &V<N>,
-        st: &Step<N>,
-    ) -> Result<()> {
+    fn step(&mut self, plant: &Plant<N>, acc: &Accepted<N>) -> Result<()> {
+        let (l, q, v, st) = (acc.l, &acc.q, &acc.v, &acc.step);
         self.dlevel(plant, l);
         let lv = *plant.level(l);
         let (gq, gv) = (st.gq, st.gv);
@@ -929,35 +838,5 @@ impl<const N: usize> StepHook<N> for Sens<N> {
             self.dg[j] = dg1;
         }
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::round_to;
-
-    #[test]
-    fn round_to_matches_f64_round_including_ties() {
-        for &step in &[5e-8, 1.0, 0.1, 3e-3] {
-            for i in -2000..2000 {
-                let x = i as f64 * 0.37e-3 * step / 5e-8 + 1e-3 * (i as f64).sin();
-                assert_eq!(round_to(x, step), (x / step).round() * step, "{x} {step}");
-            }
-        }
-        for x in [
-            0.5,
-            -0.5,
-            1.5,
-            -1.5,
-            2.5,
-            -2.5,
-            0.49999999999999994,
-            -0.0,
-            0.0,
-            4.6e15,
-            -9.1e15,
-        ] {
-            assert_eq!(round_to(x, 1.0).to_bits(), x.round().to_bits(), "{x}");
-        }
     }
 }

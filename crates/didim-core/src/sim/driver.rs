@@ -1,0 +1,216 @@
+//! The closed loop, once for every integrator: each sample the controller reads the
+//! (quantized) motor position and computes the force held over the coming period
+//! (optionally delayed), the outputs of the sample are recorded, and a [`Stepper`]
+//! integrates the plant over the period. A [`Tangent`] rides along: nothing for a plain
+//! simulation, the forward sensitivities for `simulate_sensitivity`.
+
+use super::{describe, SimOptions, SimOutput};
+use crate::controller::{Controller, TransferFunction};
+use crate::error::{filled, Error, Result};
+use crate::model::Model;
+use nalgebra::SVector;
+
+pub(super) type V<const N: usize> = SVector<f64, N>;
+
+/// An integrator of the plant over one sample period with the force held constant.
+pub(super) trait Stepper<const N: usize>: Sized {
+    /// What a tangent reads beside each accepted step (the plant split, the model).
+    type Ctx;
+    /// One accepted (sub)step, as the tangent needs it to differentiate the step.
+    type Step;
+    /// Extra advice for a diverged simulation (e.g. "try more substeps").
+    const DIVERGENCE_HINT: &'static str;
+
+    /// The context of the tangent.
+    fn ctx(&self) -> &Self::Ctx;
+    /// Sets the initial state.
+    fn start(&mut self, q: &V<N>, v: &V<N>);
+    /// The accelerations of the direct model at the current state `(q, v)` under the
+    /// motor force `tau` (N).
+    fn accel(&self, q: &V<N>, v: &V<N>, tau: f64) -> V<N>;
+    /// Advances `(q, v)` over one sample period under the held motor force `tau`;
+    /// `tangent` sees every accepted step.
+    fn advance<T: Tangent<N, Self>>(
+        &mut self,
+        q: &mut V<N>,
+        v: &mut V<N>,
+        tau: f64,
+        tangent: &mut T,
+    ) -> Result<()>;
+}
+
+/// What rides along the samples and the steps of a [`Stepper`] `S`.
+pub(super) trait Tangent<const N: usize, S: Stepper<N>> {
+    /// Sets up the tangent at the initial state.
+    fn start(&mut self, ctx: &S::Ctx, q: &V<N>, v: &V<N>);
+    /// The command of sample `k` has been computed by `law` (`active`: not saturated);
+    /// `tau` is the force applied over the coming period (after the delay).
+    fn command(&mut self, k: usize, law: &TransferFunction, active: bool, tau: f64);
+    /// Records the outputs of sample `k`.
+    fn record(&mut self, k: usize);
+    /// Differentiates one accepted step.
+    fn step(&mut self, ctx: &S::Ctx, step: &S::Step) -> Result<()>;
+}
+
+/// The tangent of a plain simulation.
+pub(super) struct NoTangent;
+
+impl<const N: usize, S: Stepper<N>> Tangent<N, S> for NoTangent {
+    #[inline(always)]
+    fn start(&mut self, _: &S::Ctx, _: &V<N>, _: &V<N>) {}
+    #[inline(always)]
+    fn command(&mut self, _: usize, _: &TransferFunction, _: bool, _: f64) {}
+    #[inline(always)]
+    fn record(&mut self, _: usize) {}
+    #[inline(always)]
+    fn step(&mut self, _: &S::Ctx, _: &S::Step) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Whether every entry of `q` and `v` is finite: their sum is then finite too unless it
+/// overflows, which for a state is divergence as well (one test instead of `2N`).
+#[inline(always)]
+fn finite<const N: usize>(q: &V<N>, v: &V<N>) -> bool {
+    (q.sum() + v.sum()).is_finite()
+}
+
+/// The nearest multiple of `step` (ties away from zero, like [`f64::round`]) without the
+/// libm call `round` compiles to on baseline x86-64: adding and removing 1.5·2⁵² rounds to
+/// the nearest integer (ties to even), exact ties are then moved away from zero, and the
+/// sign of zero is kept.
+#[inline(always)]
+pub(super) fn round_to(x: f64, step: f64) -> f64 {
+    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+    let y = x / step;
+    if y.abs() >= 4_503_599_627_370_496.0 {
+        return y.round() * step; // beyond 2^52 every double is an integer already
+    }
+    let mut r = (y + MAGIC) - MAGIC;
+    if (r - y).abs() == 0.5 {
+        r = y + 0.5 * y.signum();
+    }
+    r.copysign(y) * step
+}
+
+/// The closed-loop simulation of `model` with parameters `chi` (already checked, with
+/// the signals and options) integrated by `stepper`; `states`: record the positions,
+/// velocities and accelerations too (else only the force). Returns the stepper for its
+/// statistics.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+    states: bool,
+    mut stepper: S,
+    tangent: &mut T,
+) -> Result<(SimOutput, S)> {
+    let n = qr.len();
+    let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+        (a.min(x), b.max(x))
+    });
+    let bound = 10.0 * (hi - lo) + 1.0;
+    let quantize = |x: f64| {
+        if opts.quantization > 0.0 {
+            round_to(x, opts.quantization)
+        } else {
+            x
+        }
+    };
+
+    let mut q = V::<N>::repeat(qr[0]);
+    let mut v = V::<N>::zeros();
+    stepper.start(&q, &v);
+    tangent.start(stepper.ctx(), &q, &v);
+    let law = controller.law(opts.dt)?;
+    let mut ctl = law.rest_state(qr[0], quantize(q[0]));
+    let mut pending = vec![0.0; opts.delay]; // ring buffer of delayed commands
+
+    let m = if states { n } else { 0 };
+    let signals = |what| (0..N).map(|_| filled(m, 0.0, what)).collect::<Result<Vec<_>>>();
+    let mut out = SimOutput {
+        force: filled(n, 0.0, "the simulated force")?,
+        q: signals("the simulated positions")?,
+        qd: signals("the simulated velocities")?,
+        qdd: signals("the simulated accelerations")?,
+    };
+
+    for k in 0..n {
+        if k % crate::interrupt::EVERY == 0 {
+            crate::interrupt::check()?;
+        }
+        let (tau_cmd, active) = law.step(&mut ctl, qr[k], quantize(q[0]), u_ext.map_or(0.0, |u| u[k]));
+        let tau = if opts.delay == 0 {
+            tau_cmd
+        } else {
+            std::mem::replace(&mut pending[k % opts.delay], tau_cmd)
+        };
+        tangent.command(k, &law, active, tau);
+        out.force[k] = tau_cmd;
+        if states {
+            // the direct model's acceleration at the recorded state: the IDM of the
+            // outputs reproduces the applied force to rounding
+            let a = stepper.accel(&q, &v, tau);
+            for d in 0..N {
+                out.q[d][k] = q[d];
+                out.qd[d][k] = v[d];
+                out.qdd[d][k] = a[d];
+            }
+        }
+        tangent.record(k);
+        if k + 1 == n {
+            break;
+        }
+        stepper.advance(&mut q, &mut v, tau, tangent)?;
+
+        let err = (q[0] - qr[k + 1]).abs();
+        if !(finite(&q, &v) && err <= bound) {
+            return Err(Error::Simulation(format!(
+                "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
+                 (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller \
+                 gains{}",
+                k + 1,
+                (k + 1) as f64 * opts.dt,
+                err,
+                bound,
+                describe(model, chi),
+                S::DIVERGENCE_HINT,
+            )));
+        }
+    }
+    Ok((out, stepper))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::round_to;
+
+    #[test]
+    fn round_to_matches_f64_round_including_ties() {
+        for &step in &[5e-8, 1.0, 0.1, 3e-3] {
+            for i in -2000..2000 {
+                let x = i as f64 * 0.37e-3 * step / 5e-8 + 1e-3 * (i as f64).sin();
+                assert_eq!(round_to(x, step), (x / step).round() * step, "{x} {step}");
+            }
+        }
+        for x in [
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.5,
+            0.49999999999999994,
+            -0.0,
+            0.0,
+            4.6e15,
+            -9.1e15,
+        ] {
+            assert_eq!(round_to(x, 1.0).to_bits(), x.round().to_bits(), "{x}");
+        }
+    }
+}

@@ -1,0 +1,206 @@
+//! Classical RK4 with `substeps` equal substeps per sample period ([`Integrator::Rk4`],
+//! the reference), and the forward sensitivities integrated with the same stages.
+//!
+//! [`Integrator::Rk4`]: super::Integrator::Rk4
+
+use super::driver::{Stepper, Tangent, V};
+use super::expint::Plant;
+use super::SimOptions;
+use crate::controller::{FilterState, TransferFunction, MAX_TAPS};
+use crate::error::{filled, Result};
+use crate::model::Model;
+
+/// One RK4 stage of the state: position, velocity, acceleration.
+pub(super) type Stage<const N: usize> = (V<N>, V<N>, V<N>);
+
+/// One RK4 substep of length `h`: the state's four stages.
+pub(super) struct Substep<const N: usize> {
+    pub stages: [Stage<N>; 4],
+    pub h: f64,
+}
+
+/// RK4 as a [`Stepper`]. The accelerations come from the model split into its affine
+/// part and the rest ([`Plant`]): per stage, a few small matrix products and the
+/// nonlinear terms only.
+pub(super) struct Rk4<'a, const N: usize> {
+    pub model: &'a Model<N>,
+    pub chi: &'a [f64],
+    pub plant: Plant<N>,
+    h: f64,
+    substeps: usize,
+}
+
+impl<'a, const N: usize> Rk4<'a, N> {
+    pub fn new(model: &'a Model<N>, chi: &'a [f64], opts: &SimOptions) -> Result<Self> {
+        Ok(Self {
+            model,
+            chi,
+            plant: Plant::new(model, chi, opts.dt, 0.0)?,
+            h: opts.dt / opts.substeps as f64,
+            substeps: opts.substeps,
+        })
+    }
+}
+
+impl<'a, const N: usize> Stepper<N> for Rk4<'a, N> {
+    type Ctx = Self;
+    type Step = Substep<N>;
+    const DIVERGENCE_HINT: &'static str = ", and try more substeps";
+
+    fn ctx(&self) -> &Self {
+        self
+    }
+
+    fn start(&mut self, _: &V<N>, _: &V<N>) {}
+
+    #[inline(always)]
+    fn accel(&self, q: &V<N>, v: &V<N>, tau: f64) -> V<N> {
+        let mut b = V::<N>::zeros();
+        b[0] = tau * self.plant.inv_mass[0];
+        self.plant.accel(q, v, &b, &self.plant.g(q, v))
+    }
+
+    #[inline(always)]
+    fn advance<T: Tangent<N, Self>>(
+        &mut self,
+        q: &mut V<N>,
+        v: &mut V<N>,
+        tau: f64,
+        tangent: &mut T,
+    ) -> Result<()> {
+        let h = self.h;
+        for _ in 0..self.substeps {
+            let (q1, v1) = (*q, *v);
+            let a1 = self.accel(&q1, &v1, tau);
+            let (q2, v2) = (q1 + v1 * (0.5 * h), v1 + a1 * (0.5 * h));
+            let a2 = self.accel(&q2, &v2, tau);
+            let (q3, v3) = (q1 + v2 * (0.5 * h), v1 + a2 * (0.5 * h));
+            let a3 = self.accel(&q3, &v3, tau);
+            let (q4, v4) = (q1 + v3 * h, v1 + a3 * h);
+            let a4 = self.accel(&q4, &v4, tau);
+            let step = Substep {
+                stages: [(q1, v1, a1), (q2, v2, a2), (q3, v3, a3), (q4, v4, a4)],
+                h,
+            };
+            tangent.step(self, &step)?;
+            *q += (v1 + (v2 + v3) * 2.0 + v4) * (h / 6.0);
+            *v += (a1 + (a2 + a3) * 2.0 + a4) * (h / 6.0);
+        }
+        Ok(())
+    }
+}
+
+/// Sensitivities `Sq = ∂q/∂χ`, `Sv = ∂q̇/∂χ` (dof × parameter, flat `[d * p + j]`)
+/// and the work buffers of their RK4 integration.
+pub(super) struct Sensitivity<const N: usize> {
+    p: usize,
+    n: usize,
+    sq: Vec<f64>,
+    sv: Vec<f64>,
+    /// The controller's state on `∂q1/∂χ`, one per parameter.
+    ctl: Vec<FilterState>,
+    /// Sensitivity of the force applied over the current period.
+    dtau: Vec<f64>,
+    /// Delayed command sensitivities (ring buffer, like the commands).
+    pending: Vec<Vec<f64>>,
+    pub dforce: Vec<f64>,
+    pub dq: Vec<f64>,
+    // RK4 work buffers
+    kq: [Vec<f64>; 4],
+    kv: [Vec<f64>; 4],
+    stage_q: Vec<f64>,
+    stage_v: Vec<f64>,
+    phi: Vec<f64>,
+}
+
+impl<const N: usize> Sensitivity<N> {
+    pub fn new(p: usize, n: usize, delay: usize) -> Result<Self> {
+        let z = vec![0.0; N * p];
+        Ok(Self {
+            p,
+            n,
+            sq: z.clone(),
+            sv: z.clone(),
+            ctl: vec![[0.0; MAX_TAPS]; p],
+            dtau: vec![0.0; p],
+            pending: vec![vec![0.0; p]; delay],
+            dforce: filled(p * n, 0.0, "the force sensitivities")?,
+            dq: filled(N * p * n, 0.0, "the position sensitivities")?,
+            kq: [z.clone(), z.clone(), z.clone(), z.clone()],
+            kv: [z.clone(), z.clone(), z.clone(), z.clone()],
+            stage_q: z.clone(),
+            stage_v: z.clone(),
+            phi: z,
+        })
+    }
+}
+
+impl<'a, const N: usize> Tangent<N, Rk4<'a, N>> for Sensitivity<N> {
+    fn start(&mut self, _: &Rk4<'a, N>, _: &V<N>, _: &V<N>) {}
+
+    fn command(&mut self, k: usize, law: &TransferFunction, active: bool, _: f64) {
+        let (p, n, d) = (self.p, self.n, self.pending.len());
+        // ∂τ[k]/∂χ: the controller's law on ∂q1/∂χ (zero while the command saturates).
+        let cmd = if d == 0 {
+            &mut self.dtau
+        } else {
+            // the slot of sample k held the command of sample k − d: apply it now
+            let slot = &mut self.pending[k % d];
+            std::mem::swap(&mut self.dtau, slot);
+            slot
+        };
+        let gain = if active { law.gain() } else { 0.0 };
+        for j in 0..p {
+            cmd[j] = gain * law.sensitivity_step(&mut self.ctl[j], self.sq[j]);
+            self.dforce[j * n + k] = cmd[j];
+        }
+    }
+
+    fn record(&mut self, k: usize) {
+        let (p, n) = (self.p, self.n);
+        for d in 0..N {
+            for j in 0..p {
+                self.dq[(d * p + j) * n + k] = self.sq[d * p + j];
+            }
+        }
+    }
+
+    fn step(&mut self, ctx: &Rk4<'a, N>, s: &Substep<N>) -> Result<()> {
+        let (model, chi, inv_mass) = (ctx.model, ctx.chi, &ctx.plant.inv_mass);
+        let (stages, h) = (&s.stages, s.h);
+        let p = self.p;
+        let len = N * p;
+        for (i, (q, v, a)) in stages.iter().enumerate() {
+            if i == 0 {
+                self.stage_q.copy_from_slice(&self.sq);
+                self.stage_v.copy_from_slice(&self.sv);
+            } else {
+                let f = if i == 3 { h } else { 0.5 * h };
+                for x in 0..len {
+                    self.stage_q[x] = self.sq[x] + f * self.kq[i - 1][x];
+                    self.stage_v[x] = self.sv[x] + f * self.kv[i - 1][x];
+                }
+            }
+            let (aq, av) = model.accel_partials(chi, inv_mass, q, v);
+            model.regressor_into(q, v, a, &mut self.phi);
+            for d in 0..N {
+                for j in 0..p {
+                    let mut s = -self.phi[d * p + j] * inv_mass[d];
+                    for e in 0..N {
+                        s += aq[(d, e)] * self.stage_q[e * p + j] + av[(d, e)] * self.stage_v[e * p + j];
+                    }
+                    if d == 0 {
+                        s += inv_mass[0] * self.dtau[j];
+                    }
+                    self.kv[i][d * p + j] = s;
+                    self.kq[i][d * p + j] = self.stage_v[d * p + j];
+                }
+            }
+        }
+        for x in 0..len {
+            self.sq[x] += h / 6.0 * (self.kq[0][x] + 2.0 * (self.kq[1][x] + self.kq[2][x]) + self.kq[3][x]);
+            self.sv[x] += h / 6.0 * (self.kv[0][x] + 2.0 * (self.kv[1][x] + self.kv[2][x]) + self.kv[3][x]);
+        }
+        Ok(())
+    }
+}
