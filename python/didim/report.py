@@ -8,9 +8,12 @@ import html
 import io
 from typing import Any, Dict
 
-VIEW_OF = {"offset": "velocity", "asymmetric_friction": "velocity", "stribeck": "velocity", "load_friction": "velocity",
-           "position_ripple": "position", "flexibility": "spectrum", "delay": "spectrum", "backlash": "spectrum",
-           "coupling_damping": "spectrum", "position_dependent_coulomb": "position"}
+def _view(effect: str, where: Dict[str, Any], default: Any = "time") -> Any:
+    """The residual view where an effect shows (its registry entry's), else where the finding says it lives."""
+    from .doctor.effects import REGISTRY
+
+    e = REGISTRY.get(effect)
+    return e.view if e is not None else where.get("view", default)
 
 
 def _png(fig) -> str:
@@ -120,7 +123,7 @@ def diagnosis_html(diag) -> str:
                      "no candidate effect passes the corrected tests, and no view of the residual (time, speed, "
                      "position) shows significant structure.</p>")
     for i, x in enumerate(diag.findings, 1):
-        view = VIEW_OF.get(x.effect, x.where.get("view", "time"))
+        view = _view(x.effect, x.where)
         parts.append(f"<h2>{i}. {e(x.effect)}</h2><p class='phys'>{e(x.physics)}</p><p>{e(x.evidence)}</p>")
         if x.params:
             parts.append("<table><tr><th>parameter</th><th>value</th><th>σ</th></tr>" + "".join(
@@ -149,7 +152,7 @@ def diagnosis_html(diag) -> str:
                          f"<td>{c['p_value']:.2g}</td><td>{c['p_adjusted']:.2g}</td><td>{c['explained_pct']:.2f}</td></tr>")
         parts.append("</table>")
     for view in ("velocity", "position", "spectrum", "time"):
-        if not any(VIEW_OF.get(x.effect, x.where.get("view")) == view for x in diag.findings):
+        if not any(_view(x.effect, x.where, None) == view for x in diag.findings):
             parts.append(f"<details><summary>residual against {view}</summary>"
                          f"<img src='data:image/png;base64,{_png(figure(diag, view))}'></details>")
     parts.append("</body></html>")

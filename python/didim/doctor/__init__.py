@@ -1,0 +1,487 @@
+"""The model-mismatch doctor: locate where simulation and recording differ, name the physics that was left out,
+model it, refit with DIDIM in closed loop, and keep it only when the fit improves on data the fit did not see.
+
+The loop (``doctor``):
+1. fit the base model (rigid or flexible) with DIDIM on the training part;
+2. locate: the residual Y − Y_s (decimated measured minus simulated force) along time, frequency, velocity and
+   position (each direction apart) and around events, with confidence bands;
+3. name: each candidate effect's regressor is built from the simulated, noise-free states (with the core's basis
+   functions where the effect is a model term), orthogonalized against the current model's regressor, and scored
+   by a Wald test on the AR-prewhitened residual with a HAC (Newey-West) covariance; hyper-parameters (Stribeck
+   speed, ripple period, backlash gap) by grid search with a Bonferroni factor for the grid; Holm's correction
+   across candidates;
+4. model: the best significant candidate is added to the model (simulator and regressor alike) and refitted in
+   closed loop;
+5. show: it is accepted only if the output error on held-out data (a validation recording, or the last part of
+   the record) falls, by a one-sided Diebold-Mariano test at level ``alpha`` (HAC variance of the loss difference);
+   repeat until nothing significant is left. Remaining structure that no candidate explains is reported as
+   ``unnamed`` with where it lives.
+
+Layout: :mod:`.effects` holds one :class:`~didim.doctor.effects.Effect` per effect it can name (the registry),
+:mod:`.fit` the model as the doctor grows it and its refit; this module the rounds, the tests and the diagnosis.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from .. import _checks
+from .._errors import DataError, DidimError
+from .._io import jsonable as _clean
+from ..identification import a_priori_mass
+from ..recording import Recording
+from ..result import IdentificationResult
+from ..signal import Decimation
+from ..simulation import SimResult, param_names
+from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, wald_added
+from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect,
+                      separating_experiment)
+from .fit import Data, State, base_columns, refit
+
+#: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
+#: of it (besides being statistically significant). Real friction differs from any smooth law, and at low noise a test
+#: finds such differences; an engineer cares about an effect that changes the fit, not about one that is detectable.
+MIN_HELDOUT_GAIN = 0.05
+#: Practical significance of the ``unnamed`` check: structure left in the residual is reported only when its mean in
+#: the worst bin of a view reaches this share of the force RMS (1 %: e.g. 0.4 N on a 44 N axis). Below that it is
+#: the size of the differences between any smooth friction law and real friction, which a low-noise record makes
+#: detectable but no engineer would model.
+MIN_UNNAMED_SHARE = 0.01
+#: The names of the effects the doctor can report (see :data:`didim.doctor.effects.REGISTRY`), and ``unnamed``.
+EFFECTS = tuple(REGISTRY) + ("unnamed",)
+#: The sentence of physics of each effect, and of the variants a fitted Stribeck term can turn out to be.
+PHYSICS = {**{name: e.physics for name, e in REGISTRY.items()}, "stribeck_deficit": STRIBECK_DEFICIT,
+           "friction_shape": FRICTION_SHAPE, "unnamed": UNNAMED}
+
+#: Decimated training samples the doctor needs: its base fit, a candidate's few parameters and the AR-prewhitened
+#: residual tests (up to AR(8)) have no power on fewer.
+MIN_ROWS = 40
+
+
+@dataclass
+class Finding:
+    """One effect the doctor found: its name (see ``EFFECTS``), estimated parameters with σ, the evidence (test
+    statistic, p-values, share of the residual it explains), the fit before and after on training and validation
+    data (relative force errors), and a sentence of physics."""
+
+    effect: str
+    params: Dict[str, float]
+    std: Dict[str, float]
+    statistic: Dict[str, float]
+    evidence: str
+    physics: str
+    fit: Dict[str, float] = field(default_factory=dict)
+    where: Dict[str, Any] = field(default_factory=dict)
+    accepted: bool = True
+
+    def to_dict(self) -> Dict[str, Any]:
+        return _clean({
+            "effect": self.effect, "params": self.params, "std": self.std, "statistic": self.statistic,
+            "evidence": self.evidence, "physics": self.physics, "fit": self.fit, "where": self.where,
+        })
+
+
+@dataclass
+class Diagnosis:
+    """What the doctor found. ``findings`` lists the accepted effects (empty: nothing is missing), ``rejected`` the
+    candidates that were significant on the training data but did not improve the held-out fit, ``fit`` the relative
+    force errors before and after on training and validation data."""
+
+    recording: str
+    model: str
+    findings: List[Finding]
+    rejected: List[Finding]
+    fit: Dict[str, float]
+    base: IdentificationResult
+    final_params: Dict[str, float]
+    final_state: State
+    ambiguities: List[Dict[str, Any]]
+    rounds: List[Dict[str, Any]]
+    locate: Dict[str, Any]
+    options: Dict[str, Any]
+    elapsed_s: float
+    _figures: Dict[str, Any] = field(default_factory=dict, repr=False)
+    _context: Dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> Dict[str, Any]:
+        return _clean({
+            "recording": self.recording,
+            "model": self.model,
+            "findings": [f.to_dict() for f in self.findings],
+            "rejected": [f.to_dict() for f in self.rejected],
+            "fit": self.fit,
+            "base_params": self.base.params,
+            "final_params": self.final_params,
+            "ambiguities": self.ambiguities,
+            "rounds": self.rounds,
+            "locate": {k: v for k, v in self.locate.items() if not k.startswith("_")},
+            "options": self.options,
+            "elapsed_s": self.elapsed_s,
+        })
+
+    def to_json(self) -> str:
+        import json
+
+        return json.dumps(self.to_dict(), indent=2)
+
+    def to_html(self) -> str:
+        from ..report import diagnosis_html
+
+        return diagnosis_html(self)
+
+    def summary(self) -> str:
+        lines = [f"doctor: {self.recording}, base model {self.model}"]
+        f = self.fit
+        lines.append(f"relative force error: training {100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, "
+                     f"validation {100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %")
+        if not self.findings:
+            lines.append("nothing significant is missing from the model")
+        for x in self.findings:
+            ps = ", ".join(f"{k} = {v:.4g}" for k, v in x.params.items())
+            label = {PHYSICS["friction_shape"]: " (the friction law's shape through zero speed)",
+                     PHYSICS["stribeck_deficit"]: " (a low-speed friction deficit)"}.get(x.physics, "")
+            lines.append(f"- {x.effect}{label}: {ps + '; ' if ps else ''}{x.evidence}")
+        for x in self.rejected:
+            lines.append(f"  (not confirmed on held-out data: {x.effect}: {x.evidence})")
+        for a in self.ambiguities:
+            lines.append(f"  cannot tell apart {' / '.join(a['effects'])}: {a['experiment']}")
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.summary()
+
+
+def _score(groups: List[List[Candidate]], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> List[Candidate]:
+    """Best variant of each candidate, scored; Holm-adjusted p-values set in place."""
+    best: List[Candidate] = []
+    for variants in groups:
+        top = None
+        for c in variants:
+            x = orthogonalize(data.train_columns(c.columns), wb)
+            c.test = wald_added(r, x, a)
+            if top is None or c.test.p_value < top.test.p_value or (
+                c.test.p_value == top.test.p_value and c.test.explained > top.test.explained
+            ):
+                top = c
+        if top is not None and top.rebuild is not None:
+            # refine the hyper-parameter between the grid neighbours of the best value
+            (key, h0), = top.hyper.items()
+            fine = h0 * np.geomspace(1 / top.step, top.step, 21)
+            for h in fine:
+                c = Candidate(top.effect, top.rebuild(float(h)), {key: float(h)}, top.grid, rebuild=top.rebuild, step=top.step)
+                x = orthogonalize(data.train_columns(c.columns), wb)
+                c.test = wald_added(r, x, a)
+                if c.test.explained > top.test.explained:
+                    top = c
+            top.grid = len(variants) + len(fine)
+        if top is not None:
+            best.append(top)
+    raw = [min(1.0, c.test.p_value * c.grid) for c in best]
+    for c, p in zip(best, holm(raw) if raw else []):
+        c.p_adj = float(p)
+    return sorted(best, key=lambda c: (c.p_adj, -c.test.explained))
+
+
+def _locate(data: Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:
+    """Residual along time, frequency, velocity and position (each direction apart), with 95 % bands; and a
+    test of remaining structure per view (the ``unnamed`` check)."""
+    dec, m = data.dec, data.m_train
+    v = dec(sim.qd[0])[:m]
+    q = dec(sim.q[0])[:m]
+    fs = data.rec.fs / dec.factor
+    rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if len(r) > 3 else 0.0
+    n_eff_factor = max((1 - rho) / (1 + rho), 1e-3)
+    out: Dict[str, Any] = {"residual_rms": float(np.sqrt(np.mean(r**2))), "lag1_correlation": rho, "fs_hz": fs}
+
+    def binned(x, mask, edges):
+        idx = np.digitize(x[mask], edges) - 1
+        rows = []
+        for b in range(len(edges) - 1):
+            sel = r[mask][idx == b]
+            if len(sel) >= 5:
+                se = float(np.std(sel, ddof=1) / math.sqrt(max(len(sel) * n_eff_factor, 1.0)))
+                rows.append((float(0.5 * (edges[b] + edges[b + 1])), float(np.mean(sel)), 1.96 * se, int(len(sel))))
+        return rows
+
+    vmax = float(np.max(np.abs(v))) or 1.0
+    moving = np.abs(v) > 0.02 * vmax
+    out["velocity"] = {
+        "forward": binned(v, moving & (v > 0), np.linspace(0.02 * vmax, vmax, 11)),
+        "backward": binned(-v, moving & (v < 0), np.linspace(0.02 * vmax, vmax, 11)),
+    }
+    qe = np.linspace(float(q.min()), float(q.max()) + 1e-12, 13)
+    out["position"] = {"forward": binned(q, moving & (v > 0), qe), "backward": binned(q, moving & (v < 0), qe)}
+    t = np.arange(len(r)) / fs
+    out["time"] = binned(t, np.ones(len(r), bool), np.linspace(0, t[-1] + 1e-9, 21))
+    from scipy.signal import welch
+
+    f, pxx = welch(r, fs=fs, nperseg=min(1024, len(r)))
+    out["spectrum"] = {"f": f.tolist(), "psd": pxx.tolist()}
+    return out
+
+
+def _unnamed(data: Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: float) -> Optional[Finding]:
+    """Tests the residual for structure along time, velocity and position bins; a significant view that no
+    candidate explains becomes an ``unnamed`` finding saying where it lives."""
+    dec, m = data.dec, data.m_train
+    v = dec(sim.qd[0])[:m]
+    q = dec(sim.q[0])[:m]
+    n = len(r)
+    views = {}
+    t_idx = np.minimum((np.arange(n) * 10) // n, 9)
+    views["time"] = (t_idx, [f"{k * n / 10 / (data.rec.fs / dec.factor):.2f}-{(k + 1) * n / 10 / (data.rec.fs / dec.factor):.2f} s" for k in range(10)])
+    vmax = float(np.max(np.abs(v))) or 1.0
+    ve = np.linspace(-vmax, vmax, 11)
+    views["velocity"] = (np.clip(np.digitize(v, ve) - 1, 0, 9), [f"{ve[k]:.3g}..{ve[k + 1]:.3g} m/s" for k in range(10)])
+    qe = np.linspace(q.min(), q.max() + 1e-12, 11)
+    views["position"] = (np.clip(np.digitize(q, qe) - 1, 0, 9), [f"{qe[k]:.4g}..{qe[k + 1]:.4g} m" for k in range(10)])
+    tests = {}
+    a = ar_fit(r)
+    for name, (idx, labels) in views.items():
+        x = np.zeros((n, 10))
+        x[np.arange(n), idx] = 1.0
+        x = orthogonalize(x, wb)
+        tests[name] = (wald_added(r, x, a), idx, labels)
+    names = list(tests)
+    padj = holm([tests[k][0].p_value for k in names])
+    sig = [(names[i], padj[i]) for i in range(len(names)) if padj[i] < alpha]
+    if not sig:
+        return None
+    name, p = min(sig, key=lambda s: s[1])
+    test, idx, labels = tests[name]
+    means = np.array([np.mean(r[idx == k]) if np.any(idx == k) else 0.0 for k in range(10)])
+    worst = int(np.argmax(np.abs(means)))
+    force_rms = float(np.sqrt(np.mean(data.y[:m] ** 2)))
+    if abs(means[worst]) < MIN_UNNAMED_SHARE * force_rms:
+        return None  # detectable, but too small to matter (see MIN_UNNAMED_SHARE)
+    return Finding(
+        effect="unnamed", params={}, std={},
+        statistic={"wald": test.statistic, "dof": test.dof, "p_value": test.p_value, "p_adjusted": float(p),
+                   "explained_pct": 100 * test.explained},
+        evidence=f"the residual depends on {name} (Wald {test.statistic:.1f} on {test.dof} dof, adjusted p = {p:.2g}); "
+                 f"largest mean residual {means[worst]:+.3g} N at {labels[worst]}",
+        physics=UNNAMED,
+        where={"view": name, "range": labels[worst], "mean_residual_N": float(means[worst])},
+    )
+
+
+def _check_arguments(recording, model, validate, apM, alpha, max_findings, cutoff_hz, holdout, progress):
+    if model not in ("rigid", "flexible"):
+        raise DataError(f"unknown model {model!r}: use rigid or flexible")
+    for what, rec in (("recording", recording), ("validate", validate)):
+        if (rec is not None or what == "recording") and not isinstance(rec, Recording):
+            raise DataError(f"{what} must be a didim.Recording (read a file with didim.load_record), got "
+                            f"{type(rec).__name__}")
+    alpha = _checks.real("alpha", alpha, lo=0.0, hi=0.5, hint=" (family-wise test level)")
+    if validate is None and not (0.1 <= _checks.real("holdout", holdout) <= 0.5):
+        raise DataError(f"holdout must be between 0.1 and 0.5 of the record, got {holdout}")
+    max_findings = _checks.whole("max_findings", max_findings, lo=0, hi=20)
+    _checks.options(cutoff_hz=cutoff_hz)
+    if apM is not None:
+        apM = _checks.real("the a priori mass apM", apM, "kg", lo=0.0)
+    if progress is not None and not callable(progress):
+        raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
+    _checks.excitation(recording.qr, recording.u_ext, param_names(model, False))
+    return apM, alpha, max_findings
+
+
+def _base_fit(data: Data, model: str, apM: Optional[float], progress) -> Tuple[State, IdentificationResult]:
+    """The base model fitted by DIDIM on the training part: rigid from the a priori mass, flexible by the paper's
+    three steps (all friction on the motor: load friction is one of the effects to name)."""
+    m0 = apM if apM is not None else a_priori_mass(data.rec)
+    if model == "rigid":
+        return refit(data, State("rigid", {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}), {}, progress)
+    from ..identification import didim_flexible
+
+    fl = didim_flexible(data.rec, m0, variant="paper", reversals="keep")
+    return refit(data, State("flexible", dict(fl.params), dict(fl.frozen)), {}, progress)
+
+
+#: The model, its decimated training and validation residuals and its training simulation.
+Fitted = Tuple[State, np.ndarray, np.ndarray, SimResult]
+
+
+class _Search:
+    """The doctor's rounds: the findings so far, the candidates rejected, the effects tried on the current model."""
+
+    def __init__(self, data: Data, alpha: float, progress):
+        self.data, self.alpha, self.progress = data, alpha, progress
+        self.say = progress or (lambda s: None)
+        self.findings: List[Finding] = []
+        self.rejected: List[Finding] = []
+        self.ambiguities: List[Dict[str, Any]] = []
+        self.rounds: List[Dict[str, Any]] = []
+        self.done: List[str] = []
+        self.history: List[Fitted] = []
+
+    def rank(self, cur: Fitted) -> Tuple[List[Candidate], np.ndarray]:
+        """Every effect not tried on this model, at its best hyper-parameter, by adjusted p-value."""
+        state, rt, _, sim = cur
+        wb = orthogonalize(self.data.train_columns(base_columns(state, sim)), np.zeros((self.data.m_train, 0)))
+        groups = [e.candidates(state, sim, self.data) for name, e in REGISTRY.items() if name not in self.done]
+        ranked = _score([g for g in groups if g], rt, wb, self.data, ar_fit(rt))
+        self.rounds.append({"round": len(self.rounds) + 1, "candidates": [
+            {"effect": c.effect, "hyper": c.hyper, "wald": c.test.statistic, "dof": c.test.dof, "p_value": c.test.p_value,
+             "p_adjusted": c.p_adj, "explained_pct": 100 * c.test.explained} for c in ranked]})
+        self.say(f"round {len(self.rounds)}: " + ", ".join(
+            f"{c.effect} p={c.p_adj:.2g} ({100 * c.test.explained:.1f} %)" for c in ranked[:4]))
+        return ranked, wb
+
+    def tries(self, state: State, ranked: List[Candidate], significant: List[Candidate]) -> List[Candidate]:
+        """The two best significant candidates, and the look-alike of either (Effect.tried_with) on a rigid model."""
+        out = significant[:2]
+        for lead in list(out):
+            partner = REGISTRY[lead.effect].tried_with
+            if state.model == "rigid" and partner and partner not in self.done \
+                    and not any(c.effect == partner for c in out):
+                out += [c for c in ranked if c.effect == partner]
+        return out
+
+    def attempt(self, c: Candidate, cur: Fitted) -> Tuple[Optional[Finding], Optional[Fitted]]:
+        """Adopts candidate ``c`` into the model and judges it on held-out data: the finding and the new fit."""
+        state, rt, rv, _ = cur
+        effect: Effect = REGISTRY[c.effect]
+        self.done.append(c.effect)
+        try:
+            st_new, _, params, std = effect.adopt(c, state, self.data, self.progress)
+            new = (st_new, *self.data.errors(st_new))
+        except DidimError as e:
+            self.rejected.append(Finding(c.effect, {}, {}, {"p_adjusted": c.p_adj}, f"refit failed: {e}",
+                                         effect.physics, accepted=False))
+            return None, None
+        rt_n, rv_n = new[1], new[2]
+        dm, p_dm, gain = diebold_mariano(rv, rv_n)
+        stat = {"wald": c.test.statistic, "dof": c.test.dof, "p_value": c.test.p_value, "p_adjusted": c.p_adj,
+                "explained_pct": 100 * c.test.explained, "dm_statistic": dm, "dm_p_value": p_dm,
+                "valid_mse_reduction_pct": 100 * gain}
+        rel = self.data.rel
+        fit = {"train_before": rel(rt, True), "train_after": rel(rt_n, True), "valid_before": rel(rv, False),
+               "valid_after": rel(rv_n, False)}
+        evidence = (f"explains {100 * c.test.explained:.1f} % of the prewhitened training residual (Wald "
+                    f"{c.test.statistic:.1f} on {c.test.dof} dof, adjusted p = {c.p_adj:.2g}); held-out error "
+                    f"{100 * fit['valid_before']:.2f} % -> {100 * fit['valid_after']:.2f} % (Diebold-Mariano p = {p_dm:.2g})")
+        practical = fit["valid_after"] < (1 - MIN_HELDOUT_GAIN) * fit["valid_before"]
+        if p_dm < self.alpha and not practical:
+            evidence += (f"; below the practical threshold: an effect must lower the held-out force error by at "
+                         f"least {100 * MIN_HELDOUT_GAIN:.0f} % of itself")
+        f = Finding(c.effect, params, std, stat, evidence, effect.describe(params, st_new), fit,
+                    where={"hyper": c.hyper}, accepted=p_dm < self.alpha and practical)
+        if not f.accepted:
+            self.rejected.append(f)
+            self.say(f"rejected {c.effect}: {evidence}")
+            return f, None
+        return f, new
+
+    def note_ambiguities(self, c: Candidate, significant: List[Candidate], wb: np.ndarray) -> None:
+        """Records the significant candidates whose regressor is (over 90 %) that of the accepted ``c``."""
+        xc = orthogonalize(self.data.train_columns(c.columns), wb)
+        for other in significant:
+            if other is c:
+                continue
+            xo = orthogonalize(self.data.train_columns(other.columns), wb)
+            res_o = orthogonalize(xo, xc)
+            share = 1 - float(np.sum(res_o**2) / max(np.sum(xo**2), 1e-300))
+            if share > 0.9:
+                self.ambiguities.append({"effects": [c.effect, other.effect], "shared_pct": 100 * share,
+                                         "experiment": separating_experiment(c.effect, other.effect)})
+
+    def accept(self, f: Finding, new: Fitted) -> Fitted:
+        """Adds the finding; the candidates rejected on the old model get another chance on the new one; an earlier
+        finding the new one makes redundant (no longer improving the held-out fit) is taken out again."""
+        self.findings.append(f)
+        self.done = [x.effect for x in self.findings]
+        self.history.append(new)
+        self.say(f"accepted {f.effect}: {f.evidence}")
+        cur = new
+        for old in [x for x in self.findings[:-1] if x.effect != "unnamed"]:
+            remove = REGISTRY[old.effect].remove
+            if remove is None:
+                continue
+            try:
+                st_drop, _ = refit(self.data, remove(cur[0]), {}, self.progress)
+                dropped = (st_drop, *self.data.errors(st_drop))
+            except DidimError:
+                continue
+            _, p_keep, _ = diebold_mariano(dropped[2], cur[2])
+            if p_keep >= self.alpha:
+                old.accepted = False
+                old.evidence += (f"; taken out again once {f.effect} was modelled (held-out error without it "
+                                 f"{100 * self.data.rel(dropped[2], False):.2f} %, Diebold-Mariano p = {p_keep:.2g})")
+                self.findings.remove(old)
+                self.rejected.append(old)
+                cur = dropped
+                self.say(f"removed {old.effect}: no longer improves the held-out fit")
+        return cur
+
+
+def doctor(
+    recording: Recording,
+    model: str = "rigid",
+    validate: Optional[Recording] = None,
+    *,
+    apM: Optional[float] = None,
+    alpha: float = 0.01,
+    max_findings: int = 4,
+    cutoff_hz: float = 40.0,
+    holdout: float = 0.3,
+    progress: Optional[Callable[[str], None]] = None,
+) -> Diagnosis:
+    """Diagnoses what the ``model`` ("rigid" or "flexible") misses on ``recording``; ``validate`` is a recording the
+    fit does not see (otherwise the last ``holdout`` share of the record is held out). ``alpha`` is the family-wise
+    level of the candidate tests and of the held-out confirmation. ``cutoff_hz`` is the decimation cutoff of the fits
+    and of the residual analysis."""
+    apM, alpha, max_findings = _check_arguments(recording, model, validate, apM, alpha, max_findings, cutoff_hz,
+                                                holdout, progress)
+    t0 = time.perf_counter()
+    dec = Decimation.lowpass(cutoff_hz, recording.fs)
+    n_fit = recording.n if validate is not None else int(recording.n * (1 - holdout))
+    _checks.record_long_enough(dec, n_fit, recording.dt, MIN_ROWS, 1, "the doctor",
+                               of="(the minimum of its fits and tests; the validation share is held out)")
+    data = Data(recording, validate, dec, holdout)
+    search = _Search(data, alpha, progress)
+    search.say(f"base fit: DIDIM {model}")
+    state, base = _base_fit(data, model, apM, progress)
+    cur: Fitted = (state, *data.errors(state))
+    search.history.append(cur)
+    fit0 = {"train_before": data.rel(cur[1], True), "valid_before": data.rel(cur[2], False)}
+    locate_before = _locate(data, cur[1], cur[3])
+
+    for _ in range(max_findings):
+        ranked, wb = search.rank(cur)
+        significant = [c for c in ranked if c.p_adj < alpha]
+        if not significant:
+            break
+        accepted = False
+        for c in search.tries(cur[0], ranked, significant):
+            f, new = search.attempt(c, cur)
+            if new is not None:
+                search.note_ambiguities(c, significant, wb)
+                cur, accepted = search.accept(f, new), True
+                break
+        if not accepted and len(search.done) >= len(REGISTRY):
+            break
+
+    state, rt, rv, sim = cur
+    un = _unnamed(data, rt, sim, data.train_columns(base_columns(state, sim)), alpha)
+    if un is not None:
+        search.findings.append(un)
+    diag = Diagnosis(
+        recording=recording.name or "recording", model=model, findings=search.findings, rejected=search.rejected,
+        fit={**fit0, "train_after": data.rel(rt, True), "valid_after": data.rel(rv, False)}, base=base,
+        final_params=state.all_params(), final_state=state, ambiguities=search.ambiguities, rounds=search.rounds,
+        locate={"before": locate_before, "after": _locate(data, rt, sim)},
+        options=dict(alpha=alpha, max_findings=max_findings, cutoff_hz=cutoff_hz, holdout=None if validate else holdout,
+                     validation=(validate.name or "validation recording") if validate else
+                     f"last {int(100 * holdout)} % of the record"),
+        elapsed_s=time.perf_counter() - t0,
+    )
+    diag._context = {"data": data, "history": search.history}
+    return diag
+
+
+__all__ = ["doctor", "Diagnosis", "Finding", "EFFECTS", "PHYSICS", "REGISTRY", "Effect"]

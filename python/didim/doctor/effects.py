@@ -1,0 +1,390 @@
+"""The effects the doctor can name, one :class:`Effect` each in :data:`REGISTRY`: its physics in a sentence, the view
+where it shows, the effects it can be confused with (and the experiment that separates them), how to build its
+candidate regressors on the current model's simulated states, how to adopt it into the model (refit in closed loop)
+and how to take it out again. A new effect is one entry here plus its basis function in the core (``model.rs``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from .._errors import DidimError, SimulationError
+from ..identification import fit_flexible_mode, flexible_from_mode
+from ..result import IdentificationResult
+from ..signal import diffcent
+from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign
+from .fit import Data, State, motor_columns, refit
+
+
+@dataclass
+class Candidate:
+    """One variant of an effect's regressor: columns (n × k, full rate) on the simulated states, its
+    hyper-parameters, and the size of the grid it was searched on (Bonferroni factor)."""
+
+    effect: str
+    columns: np.ndarray
+    hyper: Dict[str, float]
+    grid: int
+    test: Any = None
+    p_adj: float = 1.0
+    rebuild: Optional[Callable[[float], np.ndarray]] = None  # columns for another hyper-parameter value
+    step: float = 1.0  # ratio between neighbouring grid values
+
+
+#: What adopting an effect gives: the new state, its fit, the parameters to report and their σ.
+Adopted = Tuple[State, IdentificationResult, Dict[str, float], Dict[str, float]]
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One effect: ``candidates(state, sim, data)`` lists its regressor variants ([] where it does not apply to the
+    state), ``adopt(candidate, state, data, progress)`` refits the model with it, ``remove(state)`` takes it out
+    again (None: cannot be), ``physics_of(params, state)`` the sentence for a fitted effect (default ``physics``),
+    ``confusable`` the effects it shares regressors with → the experiment that separates them, ``view`` where the
+    residual shows it (velocity, position, spectrum, time), ``tried_with`` an effect that looks so much like this
+    one on a rigid model that it is tried too whenever this one is (a whole-sample delay and a mode near the top of
+    the analysed band: each one's test takes most of the other's residual)."""
+
+    name: str
+    physics: str
+    view: str
+    candidates: Callable[[State, SimResult, Data], List[Candidate]]
+    adopt: Callable[[Candidate, State, Data, Any], Adopted]
+    remove: Optional[Callable[[State], State]] = None
+    physics_of: Optional[Callable[[Dict[str, float], State], str]] = None
+    confusable: Dict[str, str] = field(default_factory=dict)
+    tried_with: Optional[str] = None
+
+    def describe(self, params: Dict[str, float], state: State) -> str:
+        return self.physics_of(params, state) if self.physics_of else self.physics
+
+
+def _std(r: IdentificationResult, names) -> Dict[str, float]:
+    return {k: r.std.get(k, math.nan) for k in names}
+
+
+def _with_terms(effect: str, *terms: Tuple[str, str]):
+    """candidates/adopt/remove of an effect made of motor terms (name, kind) without hyper-parameter: its parameters
+    start at the Wald test's estimates."""
+    names = tuple(n for n, _ in terms)
+
+    def candidates_of(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+        return [Candidate(effect, motor_columns(state, sim, [Term(n, k) for n, k in terms]), {}, 1)]
+
+    def adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+        st = replace(state, terms=state.terms + tuple(Term(n, k) for n, k in terms))
+        st, r = refit(data, st, {n: float(b) for n, b in zip(names, c.test.beta)}, progress)
+        return st, r, {k: st.params[k] for k in names}, _std(r, names)
+
+    return candidates_of, adopt, _remove_terms(names)
+
+
+def _remove_terms(names):
+    def remove(state: State) -> State:
+        return replace(state, terms=tuple(t for t in state.terms if t.name not in names),
+                       params={k: v for k, v in state.params.items() if k not in names})
+
+    return remove
+
+
+# ---------------------------------------------------------------------------------------------------- offset
+
+
+def _offset_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    return [] if state.offset else [Candidate("offset", np.ones((data.rec.n, 1)), {}, 1)]
+
+
+def _offset_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    st, r = refit(data, replace(state, offset=True), {"OF": float(c.test.beta[0])}, progress)
+    return st, r, {"OF": st.params["OF"]}, _std(r, ["OF"])
+
+
+def _offset_remove(state: State) -> State:
+    return replace(state, offset=False, params={k: v for k, v in state.params.items() if k != "OF"})
+
+
+# ---------------------------------------------------------------------------------------------------- Stribeck
+
+#: A Stribeck speed below this (m/s; 10 × the Coulomb sign's default smoothing speed) describes the shape of the
+#: Coulomb law's transition through zero speed, which no smooth law matches, rather than a physical Stribeck effect:
+#: the finding then says so (PHYSICS["friction_shape"]).
+FRICTION_SHAPE_SPEED = 10 * DEFAULT_COULOMB_EPS
+
+STRIBECK_DEFICIT = ("Friction is lower at low speed than the Coulomb-plus-viscous law says and recovers as the speed "
+                    "grows: a low-speed friction deficit (lubricant, preload or seal behaviour that no smooth Coulomb "
+                    "law captures); modelled by the Stribeck shape with the opposite sign.")
+FRICTION_SHAPE = ("Friction reaches its Coulomb level at lower speed than the model's smoothed sign v/sqrt(v² + ε²) "
+                  "(ε = 0.1 mm/s by default): the shape of the friction law through zero speed (a sharper transition, "
+                  "or sticking), not necessarily a Stribeck effect; modelled by a Stribeck term at that low speed, or "
+                  "by a smaller coulomb_eps.")
+
+
+def _stribeck_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    vmax = float(np.max(np.abs(sim.qd[0])))
+    grid = np.geomspace(max(2e-4, vmax / 500), max(vmax / 3, 3e-4), 10)
+
+    def make(vs):
+        return motor_columns(state, sim, [Term("Fs", "stribeck", vs)])
+
+    return [Candidate("stribeck", make(vs), {"vs": float(vs)}, len(grid), rebuild=make, step=float(grid[1] / grid[0]))
+            for vs in grid]
+
+
+def _stribeck_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    vs = c.hyper["vs"]
+    best = None
+    for f in (0.7, 1.0, 1.4):  # refine the Stribeck speed around the grid optimum
+        st = replace(state, terms=state.terms + (Term("Fs", "stribeck", vs * f),))
+        try:
+            st, r = refit(data, st, {"Fs": float(c.test.beta[0])}, progress)
+        except DidimError:
+            continue
+        if best is None or r.output_error < best[1].output_error:
+            best = (st, r, vs * f)
+    if best is None:
+        raise SimulationError("the Stribeck refit failed")
+    st, r, vs = best
+    return st, r, {"Fs": st.params["Fs"], "vs": vs}, _std(r, ["Fs"])
+
+
+def _stribeck_physics(params: Dict[str, float], state: State) -> str:
+    # free sign: Fs opposite to the Coulomb friction is a low-speed deficit, named as such
+    if params["Fs"] * state.coulomb() < 0:
+        return STRIBECK_DEFICIT
+    if params["vs"] < FRICTION_SHAPE_SPEED:
+        return FRICTION_SHAPE
+    return REGISTRY["stribeck"].physics
+
+
+# ---------------------------------------------------------------------------------------------------- periodic
+
+
+def _period_grid(v: np.ndarray, q: np.ndarray, data: Data, share: float) -> Optional[np.ndarray]:
+    """80 periods (m), geometric, from what the decimated record resolves at the typical speed to 1/``share`` of the
+    stroke; None when the record cannot show a period."""
+    stroke = float(np.ptp(q))
+    moving = np.abs(v) > 0.05 * np.max(np.abs(v))
+    vtyp = float(np.median(np.abs(v[moving]))) if moving.any() else 0.0
+    pmin = max(4 * vtyp * data.rec.dt * data.dec.factor, 2e-4)
+    pmax = stroke / share if stroke > 0 else 0.0
+    return np.geomspace(pmin, pmax, 80) if pmax > pmin else None
+
+
+def _periodic(name: str, names: Tuple[str, str], kinds: Tuple[str, str], share: float, relative: bool):
+    """A force periodic in position, as a sine and a cosine term of the period searched over :func:`_period_grid`
+    (up to 1/``share`` of the stroke); ``relative``: report the amplitude relative to the Coulomb friction too."""
+
+    def terms(P):
+        return [Term(names[0], kinds[0], P), Term(names[1], kinds[1], P)]
+
+    def candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+        grid = _period_grid(sim.qd[0], sim.q[0], data, share)
+        if grid is None:
+            return []
+
+        def make(P):
+            return motor_columns(state, sim, terms(P))
+
+        return [Candidate(name, make(P), {"period": float(P)}, len(grid), rebuild=make, step=float(grid[1] / grid[0]))
+                for P in grid]
+
+    def adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+        P = c.hyper["period"]
+        st, r = refit(data, replace(state, terms=state.terms + tuple(terms(P))),
+                      {names[0]: float(c.test.beta[0]), names[1]: float(c.test.beta[1])}, progress)
+        amp = math.hypot(st.params[names[0]], st.params[names[1]])
+        out = {"amplitude": amp, "period": P}
+        if relative:
+            fc = st.coulomb()
+            out["relative_amplitude"] = amp / abs(fc) if fc else math.nan
+        return st, r, {**out, **{k: st.params[k] for k in names}}, _std(r, names)
+
+    return candidates, adopt, _remove_terms(names)
+
+
+# ---------------------------------------------------------------------------------------------------- delay
+
+
+def _delay_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    if state.delay:
+        return []
+    return [Candidate("delay", diffcent(sim.force, data.rec.dt)[:, None] * data.rec.dt, {}, 1)]
+
+
+def _delay_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    best = None
+    for d in range(1, 9):  # search the delay in whole samples, upward until the fit gets clearly worse
+        try:
+            st, r = refit(data, replace(state, delay=d), {}, progress)
+        except DidimError:
+            break  # a longer delay destabilises the simulated loop even more
+        if best is None or r.output_error < best[1].output_error:
+            best = (st, r)
+        elif not r.converged or r.output_error > 1.1 * best[1].output_error:
+            break  # past the minimum: longer delays only make the simulated loop less stable
+    if best is None:
+        raise SimulationError("the delay refit failed")
+    st, r = best
+    return st, r, {"delay_samples": float(st.delay), "delay_s": st.delay * data.rec.dt}, {}
+
+
+# ---------------------------------------------------------------------------------------------------- flexibility
+
+
+def _flexibility_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    if state.model != "rigid":
+        return []
+    q4 = diffcent(diffcent(sim.qdd[0], data.rec.dt), data.rec.dt)
+    return [Candidate("flexibility", q4[:, None], {}, 1)]
+
+
+def _flexibility_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    p0 = state.params
+    rigid_like = IdentificationResult(
+        model="rigid", method="didim", params={k: p0[k] for k in ("M", "Fv", "Fc", "OF") if k in p0}, std={},
+        rel_std_pct={}, relative_error=math.nan, iterations=0, simulations=0, elapsed_s=0.0)
+    # start the mode search at the residual's spectral peak (the rigid model cannot follow the resonance)
+    from scipy.signal import welch
+
+    rt, _, _ = data.errors(state)
+    fs_d = data.rec.fs / data.dec.factor
+    fr, pxx = welch(rt, fs=fs_d, nperseg=min(512, len(rt)))
+    band = (fr >= 5.0) & (fr <= 0.45 * fs_d)
+    f0 = float(fr[band][np.argmax(pxx[band])]) if band.any() else 40.0
+    r2 = fit_flexible_mode(data.rec, rigid_like, f0=max(f0, 10.0), cutoff_hz=60.0)
+    init = flexible_from_mode(p0["M"], r2.params["lambda"], r2.params["f_n_flex"])
+    init.update({"Fv1": p0["Fv"], "Fc1": p0["Fc"]})
+    if state.offset:
+        init["OF"] = p0["OF"]
+    extra = {t.name: p0[t.name] for t in state.terms}
+    st = State("flexible", {**init, **extra}, {"Fv2": 0.0, "Fc2": 0.0}, state.offset, state.terms, None, state.delay)
+    st, r = refit(data, st, {}, progress)
+    p = st.params
+    return st, r, {"f_n_flex": math.sqrt(p["K12"] / p["M2"]) / (2 * math.pi), "lambda": p["M1"] / (p["M1"] + p["M2"]),
+                   "M1": p["M1"], "M2": p["M2"], "K12": p["K12"]}, _std(r, ("M1", "M2", "K12"))
+
+
+# ---------------------------------------------------------------------------------------------------- flexible base
+
+
+def _load_friction_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    if state.model != "flexible" or state.frozen.get("Fv2", None) != 0.0:
+        return []
+    v12 = sim.qd[1]
+    return [Candidate("load_friction", np.column_stack([v12, coulomb_sign(v12)]), {}, 1)]
+
+
+def _load_friction_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    from ..output_error import oe_gn
+
+    st = replace(state, frozen={k: v for k, v in state.frozen.items() if k not in ("Fv2", "Fc2")})
+    init = {**st.params, "Fv2": max(float(c.test.beta[0]), 1.0), "Fc2": max(float(c.test.beta[1]), 0.1)}
+    init["Fv1"] = max(init["Fv1"] - init["Fv2"], 1.0)
+    init["Fc1"] = max(init["Fc1"] - init["Fc2"], 0.1)
+    r = oe_gn(data.rec, st.model, init, frozen=st.frozen, cutoff_hz=data.dec.cutoff_hz or 60.0, terms=st.terms,
+              backlash_gap=st.backlash_gap, delay=st.delay)
+    st = replace(st, params=dict(r.params))
+    return st, r, {"Fv2": st.params["Fv2"], "Fc2": st.params["Fc2"]}, _std(r, ("Fv2", "Fc2"))
+
+
+def _damping_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    if state.model != "flexible" or any(t.kind == "damper" for t in state.terms):
+        return []
+    return [Candidate("coupling_damping", (sim.qd[0] - sim.qd[1])[:, None], {}, 1)]
+
+
+def _damping_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    st = replace(state, terms=state.terms + (Term("C12", "damper"),))
+    st, r = refit(data, st, {"C12": max(float(c.test.beta[0]), 1.0)}, progress)
+    if st.params["C12"] <= 0:
+        raise SimulationError(f"the coupling damping came out non-positive (C12 = {st.params['C12']:.3g} N/(m/s)): "
+                              "not a damper")
+    return st, r, {"C12": st.params["C12"]}, _std(r, ["C12"])
+
+
+def _backlash_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    if state.model != "flexible" or state.backlash_gap is not None:
+        return []
+    q2 = sim.q[1] - sim.q[0]
+    amp = float(np.percentile(np.abs(q2), 90))
+    grid = np.geomspace(max(amp / 100, 1e-8), max(amp, 2e-8), 8)
+    k12 = state.all_params()["K12"]
+    return [Candidate("backlash", (k12 * (np.sign(q2) * np.maximum(np.abs(q2) - g / 2, 0) - q2))[:, None],
+                      {"gap": float(g)}, len(grid)) for g in grid]
+
+
+def _backlash_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    g = c.hyper["gap"]
+    st, r = refit(data, replace(state, backlash_gap=g), {}, progress)
+    return st, r, {"gap": g}, {}
+
+
+# ---------------------------------------------------------------------------------------------------- registry
+
+
+def _registry(*effects: Effect) -> Dict[str, Effect]:
+    return {e.name: e for e in effects}
+
+
+_asym = _with_terms("asymmetric_friction", ("dFv", "abs_viscous"), ("dFc", "abs_coulomb"))
+_ripple = _periodic("position_ripple", ("Ar_sin", "Ar_cos"), ("ripple_sin", "ripple_cos"), 3.0, relative=False)
+_pdc = _periodic("position_dependent_coulomb", ("Aq_sin", "Aq_cos"), ("coulomb_ripple_sin", "coulomb_ripple_cos"), 2.0,
+                 relative=True)
+
+#: Every effect the doctor can name, in the order candidates are listed.
+REGISTRY: Dict[str, Effect] = _registry(
+    Effect("offset", "A constant force acts on the axis whatever it does: an amplifier or current-sensor offset, a "
+           "cable chain or a gravity component along the axis.", "velocity",
+           _offset_candidates, _offset_adopt, _offset_remove,
+           confusable={"asymmetric_friction": "record rests (stops) and moves in both directions: an offset acts at "
+                       "rest, direction-dependent friction only while moving"}),
+    Effect("asymmetric_friction", "Friction depends on the direction of motion: preload, seal or wiper drag, or a "
+           "lubricant film that differs going forward and backward.", "velocity",
+           _asym[0], _asym[1], _asym[2],
+           confusable={"stribeck": "move at several low constant speeds in both directions"}),
+    Effect("stribeck", "Friction is higher at low speed and decays as the speed grows (Stribeck effect): boundary "
+           "lubrication before a fluid film forms.", "velocity",
+           _stribeck_candidates, _stribeck_adopt, _remove_terms(("Fs",)), physics_of=_stribeck_physics),
+    Effect("position_ripple", "A force periodic in position: motor cogging, ball-screw lead error or "
+           "position-dependent friction, with the period found in the spatial spectrum of the residual.", "position",
+           _ripple[0], _ripple[1], _ripple[2],
+           confusable={"position_dependent_coulomb": "move over the same positions in both directions: a ripple keeps "
+                       "its sign, position-dependent friction flips it with the direction"}),
+    Effect("position_dependent_coulomb", "The Coulomb friction level varies along the stroke, always against the "
+           "motion (a preload or lubrication that changes along the screw, a worn or tight zone of a guide): the force "
+           "flips sign with the direction, unlike a position ripple.", "position", _pdc[0], _pdc[1], _pdc[2]),
+    Effect("delay", "The force is applied later than commanded: current-loop lag, communication or computation "
+           "delay.", "spectrum", _delay_candidates, _delay_adopt, lambda state: replace(state, delay=0),
+           tried_with="flexibility"),
+    Effect("flexibility", "The drive is not rigid: a flexible coupling (a two-mass model) shows as a resonance that the "
+           "rigid model cannot follow.", "spectrum", _flexibility_candidates, _flexibility_adopt,
+           confusable={"delay": "excite with a chirp through the expected mode and measure the load position",
+                       "load_friction": "add a load encoder or move at several constant speeds"},
+           tried_with="delay"),
+    Effect("load_friction", "Part of the friction acts on the load side of the coupling, so it reaches the motor "
+           "through the spring, delayed and filtered by the flexible mode.", "velocity",
+           _load_friction_candidates, _load_friction_adopt,
+           confusable={"coupling_damping": "move at several constant speeds (load friction acts at every speed, "
+                       "coupling damping only while the coupling deflects) or add a load encoder"}),
+    Effect("coupling_damping", "The coupling dissipates energy as it deflects (a damper in parallel with the spring: "
+           "elastomer, belt or joint friction that depends on the deflection rate): the flexible mode is more damped "
+           "than load friction alone would make it.", "spectrum",
+           _damping_candidates, _damping_adopt, _remove_terms(("C12",))),
+    Effect("backlash", "The coupling has a dead zone: the load is free over a small gap each time the force "
+           "reverses.", "spectrum", _backlash_candidates, _backlash_adopt,
+           lambda state: replace(state, backlash_gap=None)),
+)
+
+UNNAMED = "Structure remains in the residual that none of the candidate effects explains."
+
+
+def separating_experiment(a: str, b: str) -> str:
+    """The experiment that tells effects ``a`` and ``b`` apart."""
+    for x, y in ((a, b), (b, a)):
+        e = REGISTRY.get(x)
+        if e is not None and y in e.confusable:
+            return e.confusable[y]
+    return "excite the axis differently (other speeds, rests, both directions)"

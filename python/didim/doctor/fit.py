@@ -1,0 +1,100 @@
+"""The model as the doctor grows it (:class:`State`), the training and validation views of the data, and the DIDIM
+refit every effect uses."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any, Dict, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .. import _core
+from ..identification import didim_iterate
+from ..recording import Recording
+from ..result import IdentificationResult
+from ..signal import Decimation
+from ..simulation import SimResult, Term, param_names, simulate
+
+
+@dataclass
+class State:
+    """The model as the doctor grows it."""
+
+    model: str
+    params: Dict[str, float]
+    frozen: Dict[str, float]
+    offset: bool = False
+    terms: Tuple[Term, ...] = ()
+    backlash_gap: Optional[float] = None
+    delay: int = 0
+
+    def sim_kwargs(self) -> Dict[str, Any]:
+        return dict(offset=self.offset, terms=self.terms, backlash_gap=self.backlash_gap, delay=self.delay)
+
+    def all_params(self) -> Dict[str, float]:
+        return {**self.frozen, **self.params}
+
+    def coulomb(self) -> float:
+        """The Coulomb friction on the motor side (Fc or Fc1)."""
+        return self.params.get("Fc", self.params.get("Fc1", 1.0))
+
+
+class Data:
+    """Training and validation views of the data, in the decimated domain of the doctor."""
+
+    def __init__(self, rec: Recording, validate: Optional[Recording], dec: Decimation, holdout: float):
+        self.rec, self.validate, self.dec = rec, validate, dec
+        self.y = dec(rec.force)
+        if validate is None:
+            self.n_train = int(round(rec.n * (1 - holdout)))
+            self.m_train = -(-self.n_train // dec.factor)
+            self.yv = self.y[self.m_train:]
+        else:
+            self.n_train = rec.n
+            self.m_train = len(self.y)
+            self.yv = dec(validate.force)
+
+    def errors(self, state: State) -> Tuple[np.ndarray, np.ndarray, SimResult]:
+        """Decimated residuals on training and validation rows, and the training simulation."""
+        sim = simulate(self.rec, state.all_params(), state.model, **state.sim_kwargs())
+        ys = self.dec(sim.force)
+        rt = self.y[: self.m_train] - ys[: self.m_train]
+        if self.validate is None:
+            rv = self.yv - ys[self.m_train:]
+        else:
+            simv = simulate(self.validate, state.all_params(), state.model, **state.sim_kwargs())
+            rv = self.yv - self.dec(simv.force)
+        return rt, rv, sim
+
+    def rel(self, r: np.ndarray, train: bool) -> float:
+        y = self.y[: self.m_train] if train else self.yv
+        return float(np.linalg.norm(r) / np.linalg.norm(y))
+
+    def train_columns(self, columns: np.ndarray) -> np.ndarray:
+        """Full-rate regressor columns (n × k), decimated, on the training rows."""
+        return self.dec.apply(np.zeros(self.rec.n), columns)[1][: self.m_train]
+
+
+def refit(data: Data, state: State, init: Dict[str, float], progress) -> Tuple[State, IdentificationResult]:
+    """DIDIM refit of ``state`` (with its new terms) from ``init``, on the training samples."""
+    free_init = {k: v for k, v in {**state.params, **init}.items() if k not in state.frozen}
+    # every sample: the effects the doctor looks for (Stribeck, backlash, ...) live around reversals and stops
+    r = didim_iterate(data.rec, state.model, free_init, frozen=state.frozen, decimation=data.dec, tol=1e-4,
+                      max_iter=30, fit_samples=data.n_train, reversals="keep", **state.sim_kwargs())
+    return replace(state, params=dict(r.params)), r
+
+
+def motor_columns(state: State, sim: SimResult, extra: Sequence[Term]) -> np.ndarray:
+    """Columns (n × k) of the motor-row regressor of ``extra`` terms on the simulated states, from the core."""
+    w = _core.regressor(state.model, sim.q, sim.qd, sim.qdd, offset=state.offset,
+                        terms=[t.spec() for t in (*state.terms, *extra)], backlash_gap=state.backlash_gap)
+    return w[0][:, -len(extra):]
+
+
+def base_columns(state: State, sim: SimResult) -> np.ndarray:
+    """Columns of the motor-row regressor of the state's free parameters."""
+    w = _core.regressor(state.model, sim.q, sim.qd, sim.qdd, offset=state.offset,
+                        terms=[t.spec() for t in state.terms] or None, backlash_gap=state.backlash_gap)
+    names = param_names(state.model, state.offset, state.terms)
+    keep = [i for i, n in enumerate(names) if n not in state.frozen]
+    return w[0][:, keep]
