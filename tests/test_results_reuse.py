@@ -91,3 +91,34 @@ def test_a_step_2_result_cannot_be_simulated_and_says_why(results):
     rec, r = results["didim flexible"]
     with pytest.raises(didim.DataError, match="no parameter set of a model"):
         didim.simulate(rec, r.steps["mode"])
+
+
+def test_a_model_object_stands_for_its_kind_and_structure_everywhere(emps):
+    """``didim.Model`` is accepted wherever a model kind is: simulate, simulate_batch, problem and identify take its
+    structure (offset, delay, terms...) as if given one by one, and refuse the same field given twice."""
+    p = dict(M=95.1089, Fv=203.5034, Fc=20.3935, OF=-3.1648)
+    m = didim.Model("rigid", offset=True, delay=1)
+    # the same computation either way: the structure is only spelled differently
+    a = didim.simulate(emps, p, m)
+    b = didim.simulate(emps, p, "rigid", delay=1)
+    np.testing.assert_array_equal(a.force, b.force)
+    batch = didim.simulate_batch(emps, [p, {**p, "Fc": 25.0}], m)
+    np.testing.assert_array_equal(batch.force[0], a.force)
+    assert not np.array_equal(batch.force[1], a.force)
+    with pytest.raises(didim.DataError, match=r"carries its structure: leave delay out"):
+        didim.simulate(emps, p, m, delay=2)
+    with pytest.raises(didim.DataError, match=r"carries its structure: leave offset out"):
+        didim.simulate(emps, {k: v for k, v in p.items() if k != "OF"}, didim.Model("rigid"), offset=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        r1 = didim.identify(emps, didim.Model("rigid", offset=True), "didim")
+        r2 = didim.identify(emps, "rigid", "didim", offset=True)
+        assert r1.params == r2.params and r1.structure == didim.Model("rigid", offset=True)
+        # a delayed model: the result carries the delay, and its force error is that of its own closed loop
+        r3 = didim.identify(emps, m, "didim")
+    assert r3.structure == m
+    assert r3.force_error == pytest.approx(didim.simulate(emps, r3).relative_error(emps), rel=1e-12)
+    with pytest.raises(didim.DataError, match=r"unknown option\(s\) 'delay' for method 'idim-ls'"):
+        didim.identify(emps, m, "idim-ls")
+    with pytest.raises(didim.DataError, match=r"carries its structure: leave delay out"):
+        didim.identify(emps, m, "didim", delay=2)

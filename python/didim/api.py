@@ -4,17 +4,18 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Dict, Optional
+from typing import Any, Dict, Optional, Tuple, Union
 
 import numpy as np
 
 from . import _checks
 from ._errors import DataError, DidimWarning
+from .model import Model
 from .identification import Progress, didim_iterate, didim_flexible, didim_rigid, idim_ls, a_priori_mass
 from .output_error import CRITERIA, oe_gn, oe_nm, pseudo_regular_initial
 from .recording import Recording
 from .result import IdentificationResult
-from .simulation import MODELS, param_names
+from .simulation import DEFAULT_COULOMB_EPS, MODELS, param_names
 
 METHODS = ("idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn")
 #: Other names of the methods: "oe-gn" is the exact-sensitivity Levenberg-Marquardt solver's former name.
@@ -66,7 +67,7 @@ def check_sampling(recording: Recording, model: str, method: str, options) -> No
 
 def identify(
     recording: Recording,
-    model: str = "rigid",
+    model: Union[str, Model] = "rigid",
     method: str = "didim",
     *,
     offset: bool = False,
@@ -76,7 +77,8 @@ def identify(
     progress: Progress = None,
     **options,
 ) -> IdentificationResult:
-    """Identifies the ``model`` ("rigid" or "flexible") of a recording with ``method``:
+    """Identifies the ``model`` ("rigid" or "flexible", or a :class:`didim.Model` with its structure: offset, terms,
+    delay, backlash, Coulomb smoothing) of a recording with ``method``:
 
     - ``"idim-ls"``: inverse model on measured positions (the flexible model needs the load position ``ql``);
     - ``"didim"``: rigid DIDIM, or for "flexible" the three-step procedure (rigid DIDIM, Nelder-Mead on
@@ -97,8 +99,10 @@ def identify(
     each finding of :meth:`Recording.diagnose` (saturated command, force scale not matching the controller). A
     method that stops without converging returns ``converged=False`` with a message and its history.
     """
+    if isinstance(model, Model):
+        model, offset, options = _model_options(model, offset, options)
     if not isinstance(model, str) or model not in MODELS:
-        raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)}")
+        raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)} or a didim.Model")
     if not isinstance(method, str) or method not in METHODS:
         raise DataError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     method = ALIASES.get(method, method)
@@ -166,6 +170,21 @@ def identify(
         r.simulations += pre.simulations
     r.elapsed_s = time.perf_counter() - t0
     return _with_force_error(recording, r)
+
+
+def _model_options(model: Model, offset: bool, options: Dict[str, Any]) -> Tuple[str, bool, Dict[str, Any]]:
+    """A :class:`Model` as identify's model kind, offset and options: its structure fields that are not the default
+    become options (a method that cannot take one refuses it by name), and giving one again is an error."""
+    st = {k: v for k, v in model.sim_kw().items() if k != "offset"}
+    default = {"terms": (), "delay": 0, "backlash_gap": None, "coulomb_eps": DEFAULT_COULOMB_EPS}
+    st = {k: v for k, v in st.items() if v != default[k]}
+    again = (["offset"] if offset and not model.offset else []) + [k for k in st if k in options]
+    if again:
+        raise DataError(f"a didim.Model ({model.describe()}) carries its structure: leave {', '.join(again)} out, or give "
+                        "the model's kind as text with the options you want")
+    if "terms" in st:
+        st["terms"] = list(st["terms"])
+    return model.kind, model.offset, {**options, **st}
 
 
 def _with_force_error(recording: Recording, r: IdentificationResult) -> IdentificationResult:

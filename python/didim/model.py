@@ -59,6 +59,21 @@ class Model:
                 or not math.isfinite(self.coulomb_eps) or self.coulomb_eps < 0):
             raise DataError(f"coulomb_eps must be a finite speed >= 0 m/s, got {self.coulomb_eps!r}")
 
+    def describe(self) -> str:
+        """In words: the kind and every structure field that is not the default."""
+        parts = [f"{self.kind} model"]
+        if self.offset:
+            parts.append("an offset OF")
+        if self.terms:
+            parts.append("terms " + ", ".join(f"{t.name} ({t.kind})" for t in self.terms))
+        if self.delay:
+            parts.append(f"a delay of {self.delay} sample{'s' if self.delay != 1 else ''}")
+        if self.backlash_gap is not None:
+            parts.append(f"a backlash gap of {self.backlash_gap:g} m")
+        if self.coulomb_eps != DEFAULT_COULOMB_EPS:
+            parts.append(f"coulomb_eps {self.coulomb_eps:g} m/s")
+        return parts[0] + (" with " + "; ".join(parts[1:]) if len(parts) > 1 else "")
+
     def param_names(self) -> list:
         """Parameter names in the order of the parameter vector."""
         return param_names(self.kind, self.offset, self.terms)

@@ -6,13 +6,16 @@ import functools
 import math
 import numbers
 from dataclasses import dataclass
-from typing import Dict, Mapping, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Dict, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _checks, _core
 from ._errors import DataError, DidimError
 from .recording import Recording
+
+if TYPE_CHECKING:
+    from .model import Model
 
 MODELS = ("rigid", "flexible")
 
@@ -89,6 +92,30 @@ def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
 def _check_model(model: str) -> None:
     if model not in MODELS:
         raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)}")
+
+
+def _is_model(x) -> bool:
+    from .model import Model
+
+    return isinstance(x, Model)
+
+
+def unpack_model(model, offset: Optional[bool], given: Dict[str, Any]) -> Tuple[str, Optional[bool], Dict[str, Any]]:
+    """``model`` as a kind name ("rigid", "flexible") or a :class:`didim.Model`: returns the kind, the offset and the
+    structure keywords (terms, delay, backlash_gap, coulomb_eps) merged into ``given``. A Model carries its structure:
+    giving one of its fields again (``offset`` or any of ``given``'s structure keywords, set to anything but its
+    default) is an error naming it."""
+    if not _is_model(model):
+        return model, offset, given
+    st = model.sim_kw()
+    again = [k for k in ("terms", "delay", "backlash_gap", "coulomb_eps") if k in given
+             and given[k] not in ((), None, 0, DEFAULT_COULOMB_EPS)]
+    if offset is not None and bool(offset) != model.offset:
+        again.insert(0, "offset")
+    if again:
+        raise DataError(f"a didim.Model ({model.describe()}) carries its structure: leave {', '.join(again)} out, or give "
+                        "the model's kind as text with the structure you want")
+    return model.kind, model.offset, {**given, **{k: v for k, v in st.items() if k != "offset"}}
 
 
 def param_names(model: str = "rigid", offset: bool = False, terms: Sequence[Term] = ()) -> list:
@@ -227,10 +254,14 @@ def sim_options(
                 coulomb_eps=float(coulomb_eps), integrator=integrator, tol=float(tol))
 
 
-def problem(recording: Recording, model: str = "rigid", *, offset: bool = False, terms: Sequence[Term] = (),
-            backlash_gap: Optional[float] = None, **sim_kw) -> "_core.Problem":
+def problem(recording: Recording, model: Union[str, "Model"] = "rigid", *, offset: Optional[bool] = None,
+            terms: Sequence[Term] = (), backlash_gap: Optional[float] = None, **sim_kw) -> "_core.Problem":
     """The recording's closed loop held by the Rust core (reference, controller, external input, model structure and
-    simulator options), for repeated simulations with varying parameters. ``sim_kw`` as for :func:`simulate`."""
+    simulator options), for repeated simulations with varying parameters. ``model`` is a kind name or a
+    :class:`didim.Model`; ``sim_kw`` as for :func:`simulate`."""
+    model, offset, kw = unpack_model(model, offset, dict(sim_kw, terms=terms, backlash_gap=backlash_gap))
+    terms, backlash_gap = kw.pop("terms"), kw.pop("backlash_gap")
+    sim_kw = kw
     _check_model(model)
     _checks.known_options([sim_options, problem], sim_kw, "the simulator")
     opts = sim_options(recording, **sim_kw)
@@ -242,7 +273,7 @@ def problem(recording: Recording, model: str = "rigid", *, offset: bool = False,
 def simulate(
     recording: Recording,
     params: Params,
-    model: str = "rigid",
+    model: Union[str, "Model"] = "rigid",
     *,
     offset: Optional[bool] = None,
     substeps: int = 10,
@@ -260,7 +291,8 @@ def simulate(
     Args:
         recording: the record whose reference, controller, sample period and external input drive the simulation.
         params: a mapping name → value (SI units, load side) or a sequence in the order of :func:`param_names`.
-        model: "rigid" (eq. (6)) or "flexible" (eq. (2)).
+        model: "rigid" (eq. (6)) or "flexible" (eq. (2)), or a :class:`didim.Model` (its kind and structure: offset,
+            terms, delay, backlash, Coulomb smoothing).
         offset: rigid model with a constant force OF; by default, when params names OF or has 4 values.
         substeps: RK4 substeps per sample period (``integrator="rk4"`` only).
         quantization: resolution of the simulated motor encoder (m); default the recording's ``position_resolution``.
@@ -288,6 +320,9 @@ def simulate(
         tol = params.options.get("sim_tol", tol)
         substeps = params.options.get("substeps", substeps)
         params = params.all_params
+    model, offset, st = unpack_model(model, offset, dict(terms=terms, delay=delay, backlash_gap=backlash_gap,
+                                                        coulomb_eps=coulomb_eps))
+    terms, delay, backlash_gap, coulomb_eps = st["terms"], st["delay"], st["backlash_gap"], st["coulomb_eps"]
     if offset is not None:
         offset = _checks.flag("offset", offset)
     names, vec, offset = params_vector(model, params, offset, terms)
@@ -365,7 +400,7 @@ class BatchResult:
 def simulate_batch(
     recording: Recording,
     params,
-    model: str = "rigid",
+    model: Union[str, "Model"] = "rigid",
     *,
     offset: Optional[bool] = None,
     states: bool = False,
@@ -389,6 +424,7 @@ def simulate_batch(
         raise DataError("simulate_batch takes a sequence of parameter sets (a list of mappings or results, or an "
                         f"(m, p) array), got {type(params).__name__}")
     states = _checks.flag("states", states)
+    model, offset, sim_kw = unpack_model(model, offset, sim_kw)
     rows = list(params) if not isinstance(params, np.ndarray) else params
     if len(rows) and all(_is_result(r) for r in rows):  # results: one structure for all, its options by default
         structures = {_structure(r) for r in rows}
