@@ -7,7 +7,7 @@ import pytest
 import didim
 from didim import scenarios as sc
 from didim.identification import didim_rigid
-from didim.output_error import oe_gn, pseudo_regular_initial
+from didim.oe import oe_lm, pseudo_regular_initial
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +97,7 @@ def test_exact_sensitivity_solver_sees_the_payload():
     r = {}
     for name, truth, seed in (("empty", sc.TABLE3_TRUTH, 21), ("payload", sc.TABLE4_TRUTH, 22)):
         rec = sc.make_recording(truth, "flexible", force_noise=1.0, seed=seed)
-        r[name] = oe_gn(rec, "flexible", pseudo_regular_initial(dict(M=truth["M1"] + truth["M2"] * 0.9, Fv=200.0, Fc=19.0)))
+        r[name] = oe_lm(rec, "flexible", pseudo_regular_initial(dict(M=truth["M1"] + truth["M2"] * 0.9, Fv=200.0, Fc=19.0)))
     dm2 = r["payload"].params["M2"] - r["empty"].params["M2"]
     assert dm2 == pytest.approx(46.5 - 38.0, abs=0.3)
 

@@ -92,8 +92,8 @@ def test_core_objectives_equal_their_python_definitions(emps):
     yd = dec(emps.force)
     sim = didim.simulate(emps, TABLE3, "flexible")
     e = yd - dec(sim.force)
-    assert pb.output_error(TABLE3, yd, dec.core) == pytest.approx(float(e @ e), rel=1e-12)
-    costs, errors = pb.output_error_batch(np.array([TABLE3, 1.1 * TABLE3]), yd, dec.core)
+    assert pb.squared_error(TABLE3, yd, dec.core) == pytest.approx(float(e @ e), rel=1e-12)
+    costs, errors = pb.squared_error_batch(np.array([TABLE3, 1.1 * TABLE3]), yd, dec.core)
     assert costs[0] == pytest.approx(float(e @ e), rel=1e-12) and errors == [None, None]
     # DIDIM's system: both rows of eq. (4), frozen Fv2 and Fc2 moved to the targets
     free = [0, 1, 2, 3, 6]
@@ -163,7 +163,7 @@ def test_identification_results_do_not_depend_on_the_integrator(emps):
 
 
 def test_exact_sensitivities_agree_with_central_differences_from_one_batch(emps_plain):
-    from didim.output_error import check_sensitivities
+    from didim.oe import check_sensitivities
 
     err = check_sensitivities(emps_plain, TABLE3, "flexible")
     assert max(err.values()) < 1e-3, err

@@ -6,7 +6,7 @@ import pytest
 
 import didim
 from didim import scenarios as sc
-from didim.output_error import check_sensitivities, oe_gn
+from didim.oe import check_sensitivities, oe_lm
 
 ASYM = [didim.Term("dFv", "abs_viscous")]
 TRUTH = dict(M=95.0, Fv=200.0, Fc=20.0, dFv=-30.0)
@@ -28,7 +28,7 @@ def test_oe_lm_sensitivities_with_a_term_and_a_delay_match_central_differences(r
 
 def test_oe_lm_recovers_a_direction_dependent_friction_behind_a_delay(record):
     start = {k: 0.9 * v for k, v in TRUTH.items()}
-    r = oe_gn(record, "rigid", start, terms=ASYM, delay=2, cutoff_hz=20.0)
+    r = oe_lm(record, "rigid", start, terms=ASYM, delay=2, cutoff_hz=20.0)
     assert r.converged, r.message
     for k, v in TRUTH.items():
         assert r.params[k] == pytest.approx(v, rel=0.01), k

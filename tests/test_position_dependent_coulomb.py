@@ -10,7 +10,7 @@ import pytest
 import didim
 from didim import scenarios as sc
 from didim.identification import didim_iterate
-from didim.output_error import check_sensitivities, oe_gn
+from didim.oe import check_sensitivities, oe_lm
 
 P = 0.05
 TERMS = [didim.Term("Aq_sin", "coulomb_ripple_sin", P), didim.Term("Aq_cos", "coulomb_ripple_cos", P)]
@@ -45,7 +45,7 @@ def test_didim_and_oe_lm_recover_it(record, method):
     if method == "didim":
         r = didim_iterate(record, "rigid", start, terms=TERMS, cutoff_hz=20.0)
     else:
-        r = oe_gn(record, "rigid", {k: (v if v else 0.5) for k, v in start.items()}, terms=TERMS, cutoff_hz=20.0)
+        r = oe_lm(record, "rigid", {k: (v if v else 0.5) for k, v in start.items()}, terms=TERMS, cutoff_hz=20.0)
     assert r.converged, r.message
     for k in ("M", "Fv", "Fc"):
         assert r.params[k] == pytest.approx(TRUTH[k], rel=0.02), k

@@ -167,7 +167,7 @@ def test_the_coarse_grid_ranks_step_2_starts_as_the_fine_one(truthbench, name):
     pts, coarse = I._mode_grid(crit, 0.5, 40.0, friction_split=True, grid_start=True)
     fine = didim.simulation.problem(rec, "flexible", tol=didim.simulation.DEFAULT_TOL)
     vec = [didim.simulation.params_vector("flexible", crit.params(*x), False)[1] for x in pts]
-    fine_vals = fine.output_error_batch(np.array(vec), crit.yd, crit.dec.core)[0] ** 0.5 / crit.ny
+    fine_vals = fine.squared_error_batch(np.array(vec), crit.yd, crit.dec.core)[0] ** 0.5 / crit.ny
     assert coarse == pytest.approx(fine_vals, rel=0.10)
     assert set(np.argsort(coarse)[:3]) == set(np.argsort(fine_vals)[:3])
 

@@ -12,7 +12,7 @@ from . import _checks
 from ._errors import DataError, DidimWarning
 from .model import Model
 from .identification import Progress, didim_iterate, didim_flexible, didim_rigid, idim_ls, a_priori_mass
-from .output_error import CRITERIA, oe_gn, oe_nm, pseudo_regular_initial
+from .oe import CRITERIA, oe_lm, oe_nm, pseudo_regular_initial
 from .recording import Recording
 from .result import IdentificationResult
 from .simulation import DEFAULT_COULOMB_EPS, MODELS, param_names
@@ -40,7 +40,7 @@ def _targets(model: str, method: str):
         "idim-ls": ([idim_ls], ("offset",)),
         "didim": ([didim_rigid, didim_iterate] if model == "rigid" else [didim_flexible], ("offset", "progress", "frozen", "method")),
         "oe-nm": ([oe_nm], ("criterion", "progress")),
-        "oe-lm": ([oe_gn], ("criterion", "progress")),
+        "oe-lm": ([oe_lm], ("criterion", "progress")),
     }[method]
 
 
@@ -160,7 +160,7 @@ def identify(
         else:
             pre = didim_rigid(recording, m0, offset=offset, progress=progress, **sim_kw)
             initial = pseudo_regular_initial(pre.params)
-    solver = oe_nm if method == "oe-nm" else oe_gn
+    solver = oe_nm if method == "oe-nm" else oe_lm
     if method == "oe-nm" and model == "rigid" and any(v == 0 for v in initial.values()):
         # Nelder-Mead scales by the initial values: zero frictions start from a small fraction of the force scale
         initial = {k: (v if v != 0 else 1.0) for k, v in initial.items()}

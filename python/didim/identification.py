@@ -13,7 +13,7 @@ the load row only fixes their scale: the regression moves M2, Fv2, Fc2 and K12 t
 f_n_flex of step 2) and the load friction at their current values. With eq. (30) (Fv2 = Fc2 = 0) the load friction
 therefore stays at zero, and the motor friction absorbs the totals Fv1 + Fv2, Fc1 + Fc2: from the motor force alone,
 DIDIM estimates M1, Fv_tot, Fc_tot, M2 and K12 (with f_n_flex from step 2), as in Tables 3 and 4 of the paper. The
-exact-sensitivity solver (:func:`oe_gn`) has no such restriction.
+exact-sensitivity solver (:func:`oe_lm`) has no such restriction.
 """
 
 from __future__ import annotations
@@ -413,7 +413,7 @@ def didim_iterate(
     if converged:
         try:
             if m_fit is None:
-                final_out = math.sqrt(pb.output_error(chi, yd_motor, dec.core)) / ny
+                final_out = math.sqrt(pb.squared_error(chi, yd_motor, dec.core)) / ny
             else:
                 final_out = float(np.linalg.norm(yd_motor - dec(pb.simulate(chi)["force"])[:m_fit])) / ny
             n_sim += 1
@@ -632,7 +632,7 @@ class _ModeCriterion:
             self.sims += len(pts)
             if tally is not None:
                 tally[0] += len(pts)
-            vals, _ = (self.pb_grid if coarse else self.pb).output_error_batch(pts, self.yd, self.dec.core)
+            vals, _ = (self.pb_grid if coarse else self.pb).squared_error_batch(pts, self.yd, self.dec.core)
             out[ok] = np.where(np.isfinite(vals), np.sqrt(np.abs(vals)) / self.ny, self.bad)
         return out
 
@@ -804,7 +804,7 @@ def _mode_search(crit: _ModeCriterion, grid: tuple, friction_split: bool, grid_s
 def _mode_result(search: _ModeSearch, crit: _ModeCriterion, grid: tuple, tally: list, t0: float, *, tol: float,
                  grid_start: bool) -> IdentificationResult:
     """Step 2's result from its search: converged unless Nelder-Mead stopped early or the optimum is degenerate."""
-    rec, dims = crit.rec, len(search.x0)
+    dims = len(search.x0)
     x, j = search.x, search.fun
     rigid_limit = crit.rigid_limit(tally)
     why = _degenerate(x, j, rigid_limit, crit.dec.cutoff_hz)

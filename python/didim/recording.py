@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import List, Optional
 
 import numpy as np
 
-from ._errors import DataError, DidimWarning
+from ._errors import DataError
 from .controllers import PD, Controller, EmpsCascade, TransferFunction
 
 #: Relative tolerance on the sample-time jitter accepted by :func:`load_mat` (the EMPS logs ±2.5e-8 s on 1e-3 s).

@@ -82,7 +82,7 @@ def fit_figure(diag):
     ctx = diag._context
     data, hist = ctx["data"], ctx["history"]
     t = diag._context["data"].rec.t
-    (_, rt0, _, s0), (_, rt1, _, s1) = hist[0], hist[-1]
+    (_, rt0, _, _), (_, rt1, _, s1) = hist[0], hist[-1]
     fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
     axes[0].plot(t, data.rec.force, color="tab:red", lw=0.6, label="measured")
     axes[0].plot(t, s1.force, color="tab:blue", lw=0.6, label="simulated (final model)")

@@ -71,7 +71,7 @@ impl<const N: usize> Problem<'_, N> {
     }
 
     /// `‖measured_dec − dec(simulated output)‖²`, the criterion of eq. (32) on decimated signals.
-    pub fn output_error(
+    pub fn squared_error(
         &self,
         chi: &[f64],
         output: Output,
@@ -103,8 +103,8 @@ impl<const N: usize> Problem<'_, N> {
             .sum())
     }
 
-    /// [`Problem::output_error`] of many parameter sets, in parallel, in input order.
-    pub fn output_error_batch(
+    /// [`Problem::squared_error`] of many parameter sets, in parallel, in input order.
+    pub fn squared_error_batch(
         &self,
         chis: &[Vec<f64>],
         output: Output,
@@ -112,7 +112,7 @@ impl<const N: usize> Problem<'_, N> {
         dec: &Decimator,
     ) -> Vec<Result<f64>> {
         chis.par_iter()
-            .map(|chi| self.output_error(chi, output, measured_dec, dec))
+            .map(|chi| self.squared_error(chi, output, measured_dec, dec))
             .collect()
     }
 
@@ -282,13 +282,13 @@ mod tests {
         }
         let dec = Decimator::butterworth(4, 60.0, 1000.0, 6, FilterForm::Sos).unwrap();
         let meas = dec.apply(&batch[0].as_ref().unwrap().force).unwrap();
-        let costs = pb.output_error_batch(&chis, Output::Force, &meas, &dec);
+        let costs = pb.squared_error_batch(&chis, Output::Force, &meas, &dec);
         assert_eq!(*costs[0].as_ref().unwrap(), 0.0);
         assert!(costs[1..].iter().all(|c| *c.as_ref().unwrap() > 0.0));
         // a failing member does not spoil the others
         let mut bad = chis.clone();
         bad[2][0] = -1.0;
-        let (vals, errs) = split_errors(pb.output_error_batch(&bad, Output::Force, &meas, &dec));
+        let (vals, errs) = split_errors(pb.squared_error_batch(&bad, Output::Force, &meas, &dec));
         assert!(errs[2].is_some() && vals[2].is_none());
         assert_eq!(vals[3], Some(*costs[3].as_ref().unwrap()));
     }

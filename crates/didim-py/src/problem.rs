@@ -357,7 +357,7 @@ impl Problem {
 
     /// ‖measured_dec − decimator(simulated output)‖² (output "force" or "position").
     #[pyo3(signature = (params, measured_dec, decimator, *, output="force"))]
-    fn output_error(
+    fn squared_error(
         &self,
         py: Python<'_>,
         params: PyReadonlyArray1<'_, f64>,
@@ -370,14 +370,14 @@ impl Problem {
         let (chi, meas): (&[f64], &[f64]) = (&chi, &meas);
         run(py, || {
             let out = parse_output(output)?;
-            with_problem!(self, pb => pb.output_error(chi, out, meas, &decimator.inner))
+            with_problem!(self, pb => pb.squared_error(chi, out, meas, &decimator.inner))
         })
     }
 
-    /// output_error of the rows of params (m, p) in parallel: (costs (m,), errors), NaN cost where
+    /// squared_error of the rows of params (m, p) in parallel: (costs (m,), errors), NaN cost where
     /// the simulation failed.
     #[pyo3(signature = (params, measured_dec, decimator, *, output="force"))]
-    fn output_error_batch<'py>(
+    fn squared_error_batch<'py>(
         &self,
         py: Python<'py>,
         params: PyReadonlyArray2<'py, f64>,
@@ -390,7 +390,7 @@ impl Problem {
         let meas: &[f64] = &meas;
         let results = run(py, || {
             let out = parse_output(output)?;
-            interrupted(with_problem!(self, pb => pb.output_error_batch(&chis, out, meas, &decimator.inner)))
+            interrupted(with_problem!(self, pb => pb.squared_error_batch(&chis, out, meas, &decimator.inner)))
         })?;
         let (vals, errs) = split_errors(results);
         let costs: Vec<f64> = vals.into_iter().map(|v| v.unwrap_or(f64::NAN)).collect();

@@ -84,13 +84,13 @@ def oe_nm(
     def cost(z):
         count["sim"] += 1
         try:
-            return pb.output_error(np.asarray(z, dtype=float) * scale, yd, dec.core, output=output)
+            return pb.squared_error(np.asarray(z, dtype=float) * scale, yd, dec.core, output=output)
         except (SimulationError, DataError):
             return penalty
 
     def cost_batch(zs):
         count["sim"] += len(zs)
-        vals, _ = pb.output_error_batch(np.ascontiguousarray(zs * scale), yd, dec.core, output=output)
+        vals, _ = pb.squared_error_batch(np.ascontiguousarray(zs * scale), yd, dec.core, output=output)
         return np.where(np.isfinite(vals), vals, penalty)
 
     def callback(zk):
@@ -120,7 +120,7 @@ def oe_nm(
     )
 
 
-def oe_gn(
+def oe_lm(
     rec: Recording,
     model: str,
     initial: Dict[str, float],
