@@ -545,7 +545,7 @@ def _edited(tmp_path, emps, edit):
 
 @pytest.mark.parametrize("edit, match", [
     (lambda d: d["structure"].update(delay="x"), "delay must be a whole number"),
-    (lambda d: d["structure"].update(coulomb_eps="x"), "coulomb_eps must be a finite speed"),
+    (lambda d: d["structure"].update(coulomb_eps="x"), "coulomb_eps must be a real number m/s"),
     (lambda d: d["structure"].update(backlash_gap="x"), "backlash_gap must be a real number"),
     (lambda d: d.update(history=[1, 2]), r"'history\[0\]' must be an object"),
     (lambda d: d.update(steps=[1]), "'steps' must be an object"),

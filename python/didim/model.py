@@ -9,12 +9,10 @@ the result's own closed loop, and a saved result reloads with it (:func:`load_re
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import dataclass, field
 from typing import Any, Dict, Optional, Tuple
 
-import numpy as np
 
 from . import _checks
 from ._errors import DataError
@@ -52,12 +50,10 @@ class Model:
                 raise DataError(f"a model term is a didim.Term or a (name, kind, hyper) triple, got {t!r}")
         object.__setattr__(self, "terms", tuple(t if isinstance(t, Term) else Term(*t) for t in self.terms))
         if self.backlash_gap is not None:
-            _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0)
-        if isinstance(self.delay, (bool, np.bool_)) or not (isinstance(self.delay, (int, np.integer)) and self.delay >= 0):
-            raise DataError(f"delay must be a whole number of samples >= 0, got {self.delay!r}")
-        if (isinstance(self.coulomb_eps, (bool, np.bool_)) or not isinstance(self.coulomb_eps, (int, float, np.number))
-                or not math.isfinite(self.coulomb_eps) or self.coulomb_eps < 0):
-            raise DataError(f"coulomb_eps must be a finite speed >= 0 m/s, got {self.coulomb_eps!r}")
+            object.__setattr__(self, "backlash_gap", _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0))
+        object.__setattr__(self, "delay", _checks.whole("delay", self.delay, hint=" (samples)"))
+        object.__setattr__(self, "coulomb_eps", _checks.real("coulomb_eps", self.coulomb_eps, "m/s", lo=0.0,
+                                                             lo_open=False))
 
     def describe(self) -> str:
         """In words: the kind and every structure field that is not the default."""
