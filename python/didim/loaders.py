@@ -9,14 +9,13 @@ not given, a controller file beside the record (``NAME_controller.json`` or ``.t
 
 from __future__ import annotations
 
-import math
-import numbers
 import os
 import warnings
 from typing import Callable, Dict, List, Mapping, Optional, Union
 
 import numpy as np
 
+from . import _checks
 from ._errors import DataError
 from .controllers import Controller, load_controller
 from .recording import Recording, load_mat
@@ -79,10 +78,9 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
     if unknown:
         raise DataError(f"{where}: unknown key(s) {', '.join(unknown)} in the column map; the keys are "
                         f"{', '.join(REQUIRED + OPTIONAL)}")
-    scale = force_scale
-    if (isinstance(scale, (bool, np.bool_)) or not isinstance(scale, (numbers.Real, np.floating, np.integer))
-            or not math.isfinite(scale) or scale == 0):
-        raise DataError(f"force_scale must be a finite non-zero number (N per unit of the logged force), got {scale!r}")
+    scale = _checks.real("force_scale", force_scale, hint=" (N per unit of the logged force)")
+    if scale == 0:
+        raise DataError("force_scale must not be zero (N per unit of the logged force)")
     signals: Dict[str, Optional[np.ndarray]] = {}
     for key in REQUIRED + OPTIONAL:
         col = columns.get(key, key)
@@ -106,11 +104,11 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
     assert qm is not None
     if position_resolution == "auto":
         res = detect_resolution(qm) if np.all(np.isfinite(qm)) else None
-    elif position_resolution is None or (isinstance(position_resolution, (numbers.Real, np.floating, np.integer))
-                                         and not isinstance(position_resolution, (bool, np.bool_))):
-        res = position_resolution
+    elif position_resolution is None:
+        res = None
     else:
-        raise DataError(f"position_resolution must be a length in m, None or 'auto', got {position_resolution!r}")
+        res = _checks.real("position_resolution", position_resolution, "m", lo=0.0, lo_open=False,
+                           hint=" (the encoder step; None for none, 'auto' to detect it)")
     if controller is None:
         raise DataError(f"{where}: no controller given: didim simulates the closed loop, so it needs the law that ran "
                         "the axis. Give controller=didim.load_controller('controller.json') (CLI: --controller FILE) "
