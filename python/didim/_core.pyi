@@ -23,13 +23,16 @@ __all__ = [
     "filtfilt",
     "lstsq",
     "param_names",
+    "param_units",
     "regressor",
     "sosfiltfilt",
 ]
 
-_Terms = Optional[Sequence[Tuple[str, str, float]]]
+_Terms = Optional[Sequence[Tuple[str, str, float, str]]]
 
 def param_names(model: str, offset: bool = False, terms: _Terms = None) -> List[str]: ...
+def param_units(model: str, offset: bool = False, terms: _Terms = None,
+                backlash_gap: Optional[float] = None) -> List[str]: ...
 def regressor(
     model: str,
     q: _F64,

@@ -538,9 +538,9 @@ def _check_apm(rec: Recording, apM: float) -> Optional[str]:
 
 def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: bool = False, cutoff_hz: float = RIGID_CUTOFF_HZ,
                 **kw) -> IdentificationResult:
-    """Step 1: rigid DIDIM from χ⁰ = (apM, 0, 0[, 0]), eq. (22), decimation cutoff 5 Hz by default. Without ``apM``,
-    χ⁰ starts from :func:`a_priori_mass`; an ``apM`` outside the robust range around it gives a
-    :class:`~didim.DidimWarning`."""
+    """Step 1: rigid DIDIM from χ⁰ = (apM, 0, 0[, 0]), eq. (22), decimation cutoff 5 Hz by default; extra ``terms``
+    (in ``kw``) start at 0 like the frictions. Without ``apM``, χ⁰ starts from :func:`a_priori_mass`; an ``apM``
+    outside the robust range around it gives a :class:`~didim.DidimWarning`."""
     if apM is None:
         apM = a_priori_mass(rec)
     else:
@@ -551,6 +551,7 @@ def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: bool = F
     init = {"M": float(apM), "Fv": 0.0, "Fc": 0.0}
     if offset:
         init["OF"] = 0.0
+    init.update({t.name: 0.0 for t in kw.get("terms", ())})
     return didim_iterate(rec, "rigid", init, offset=offset, cutoff_hz=cutoff_hz, **kw)
 
 

@@ -14,17 +14,9 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, Optional, Tuple
 
 
-from . import _checks
+from . import _checks, _core
 from ._errors import DataError
 from .simulation import DEFAULT_COULOMB_EPS, MODELS, Term, param_names
-
-#: Units of the parameters (SI, load side), by name; extra terms' units follow their kind (see :meth:`Model.units`).
-UNITS = {"M": "kg", "Fv": "N/(m/s)", "Fc": "N", "OF": "N", "M1": "kg", "Fv1": "N/(m/s)", "Fc1": "N", "M2": "kg",
-         "Fv2": "N/(m/s)", "Fc2": "N", "K12": "N/m"}
-_TERM_UNITS = {"offset": "N", "viscous": "N/(m/s)", "coulomb": "N", "abs_viscous": "N/(m/s)", "abs_coulomb": "N",
-               "stribeck": "N", "ripple_sin": "N", "ripple_cos": "N", "coulomb_ripple_sin": "N",
-               "coulomb_ripple_cos": "N", "damper": "N/(m/s)"}
-
 
 @dataclass(frozen=True)
 class Model:
@@ -46,8 +38,8 @@ class Model:
         if not isinstance(self.kind, str) or not isinstance(self.terms, (tuple, list)):
             raise DataError(f"a model needs a kind (text) and a list of terms, got {self.kind!r}, {self.terms!r}")
         for t in self.terms:
-            if not isinstance(t, (Term, tuple, list)) or (not isinstance(t, Term) and len(t) not in (2, 3)):
-                raise DataError(f"a model term is a didim.Term or a (name, kind, hyper) triple, got {t!r}")
+            if not isinstance(t, (Term, tuple, list)) or (not isinstance(t, Term) and len(t) not in (2, 3, 4)):
+                raise DataError(f"a model term is a didim.Term or a (name, kind, hyper[, dof]) tuple, got {t!r}")
         object.__setattr__(self, "terms", tuple(t if isinstance(t, Term) else Term(*t) for t in self.terms))
         if self.backlash_gap is not None:
             object.__setattr__(self, "backlash_gap", _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0))
@@ -75,12 +67,9 @@ class Model:
         return param_names(self.kind, self.offset, self.terms)
 
     def units(self) -> Dict[str, str]:
-        """Unit of each parameter."""
-        out = {}
-        for n in self.param_names():
-            term = next((t for t in self.terms if t.name == n), None)
-            out[n] = _TERM_UNITS.get(term.kind, "") if term is not None else UNITS.get(n, "")
-        return out
+        """Unit of each parameter (SI, load side), as the core's basis functions give them."""
+        specs = [t.spec() for t in self.terms] or None
+        return dict(zip(self.param_names(), _core.param_units(self.kind, self.offset, specs, self.backlash_gap)))
 
     def sim_kw(self) -> Dict[str, Any]:
         """Keyword arguments of :func:`didim.simulate` that describe this structure."""
@@ -99,9 +88,9 @@ class Model:
         if unknown:
             raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
         raw = d.get("terms") or []
-        if not isinstance(raw, list) or not all(isinstance(t, list) and len(t) == 3 for t in raw):
-            raise DataError("model terms must be a list of [name, kind, hyper] triples")
-        terms = tuple(Term(n, k, h) for n, k, h in raw)
+        if not isinstance(raw, list) or not all(isinstance(t, list) and len(t) in (3, 4) for t in raw):
+            raise DataError("model terms must be a list of [name, kind, hyper, dof] lists (dof 'motor' by default)")
+        terms = tuple(Term(*t) for t in raw)
         offset = d.get("offset", False)
         if not isinstance(offset, bool):
             raise DataError(f"model field offset must be true or false, got {offset!r}")
@@ -151,4 +140,4 @@ def load_result(path) -> "IdentificationResult":  # noqa: F821
         raise DataError(f"{os.fspath(path)}: not a didim result (its steps are nested too deeply)") from None
 
 
-__all__ = ["Model", "load_result", "UNITS"]
+__all__ = ["Model", "load_result"]

@@ -13,7 +13,8 @@ import numpy as np
 from . import _checks
 from ._io import jsonable
 
-#: Units of the paper's parameters (SI, load side).
+#: Units of the paper's parameters (SI, load side) and of step 2's mode parameters; a result with a model structure
+#: takes its units from the model's basis functions (:attr:`IdentificationResult.units`).
 UNITS = {
     "M": "kg",
     "Fv": "N/(m/s)",
@@ -82,6 +83,12 @@ class IdentificationResult:
             self.structure = Model.of_result(self.model, self.all_params, self.options)
 
     @property
+    def units(self) -> Dict[str, str]:
+        """The SI unit of each parameter (from the model's basis functions where the result has a structure)."""
+        known = self.structure.units() if self.structure is not None else {}
+        return {k: known.get(k, UNITS.get(k, "")) for k in (*self.params, *self.frozen)}
+
+    @property
     def all_params(self) -> Dict[str, float]:
         """Every parameter of the model, the frozen ones included, in the order of the parameter vector."""
         full = {**self.frozen, **self.params}
@@ -116,7 +123,7 @@ class IdentificationResult:
             "history": [asdict(h) for h in self.history],
             "steps": {k: v.to_dict() for k, v in self.steps.items()},
             "notes": list(self.notes),
-            "units": {k: UNITS.get(k, "") for k in self.params},
+            "units": self.units,
             "structure": self.structure.to_dict() if self.structure is not None else None,
             "force_error": self.force_error,
         }
@@ -225,7 +232,7 @@ class IdentificationResult:
         est = f"χ{k}" if k > 0 else "χ̂"  # the paper's χᵏ after k iterations (none: a result not iterated)
         lines.append(f"{'parameter':<18}{'χ0':>12}{est:>14}{'σ':>12}{'%σ':>8}")
         for name, v in self.params.items():
-            unit = UNITS.get(name, "")
+            unit = self.units.get(name, "")
             label = f"{name} ({unit})" if unit else name
             x0 = self.initial.get(name, float("nan"))
             lines.append(
@@ -324,9 +331,10 @@ def compare(results: Dict[str, IdentificationResult], reference: Optional[str] =
             )
     cols = list(results)
     w = 20  # label column: name and unit
+    units = {k: u for r in results.values() for k, u in r.units.items()}
 
     def label(name: str) -> str:
-        unit = UNITS.get(name.split(" ")[0], "")
+        unit = units.get(name.split(" ")[0], UNITS.get(name.split(" ")[0], ""))
         return f"{name} ({unit})" if unit and unit != "-" else name
 
     head = f"{'parameter':<{w}}" + ("".join(f"{'truth':>12}") if truth else "")

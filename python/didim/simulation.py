@@ -32,7 +32,9 @@ DEFAULT_TOL: float = _core.DEFAULT_TOL
 
 Params = Union[Mapping[str, float], Sequence[float], np.ndarray]
 
-#: Kinds of extra model terms (all on the motor side): see :class:`Term`.
+#: Degrees of freedom a term can act on (the load only in the flexible model).
+TERM_DOFS = ("motor", "load")
+#: Kinds of extra model terms: see :class:`Term`.
 TERM_KINDS = ("offset", "viscous", "coulomb", "abs_viscous", "abs_coulomb", "stribeck", "ripple_sin", "ripple_cos",
               "coulomb_ripple_sin", "coulomb_ripple_cos", "damper")
 
@@ -49,11 +51,15 @@ class Term:
       that varies along the stroke, always against the motion;
     - ``damper`` (flexible model): coupling damping in parallel with K12, q̇1 − q̇12 on the motor row and its opposite
       on the load row (N/(m/s)).
+
+    ``dof``: the degree of freedom whose state the term reads and whose row it acts on, "motor" (default) or "load"
+    (flexible model: e.g. a Stribeck friction of the load, read on q̇12); a ``damper`` always couples the two.
     """
 
     name: str
     kind: str
     hyper: float = 0.0
+    dof: str = "motor"
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
@@ -61,9 +67,13 @@ class Term:
         if not isinstance(self.kind, str) or self.kind not in TERM_KINDS:
             raise DataError(f"unknown term kind {self.kind!r}: use one of {', '.join(TERM_KINDS)}")
         object.__setattr__(self, "hyper", _checks.real(f"term {self.name}'s hyper-parameter", self.hyper))
+        _checks.one_of(f"term {self.name}'s dof", self.dof, TERM_DOFS)
+        if self.kind == "damper" and self.dof != "motor":
+            raise DataError(f"term {self.name}: a damper couples the motor and the load; leave its dof out")
 
     def spec(self) -> tuple:
-        return (self.name, self.kind, float(self.hyper))
+        """(name, kind, hyper, dof), as the core and a saved model take it."""
+        return (self.name, self.kind, float(self.hyper), self.dof)
 
 
 def _specs(terms) -> Optional[list]:

@@ -202,6 +202,21 @@ impl Basis {
         }
     }
 
+    /// The SI unit of the parameter that multiplies this basis function (load side).
+    pub fn unit(&self) -> &'static str {
+        match self {
+            Basis::Inertia { .. } => "kg",
+            Basis::Viscous { .. } | Basis::AbsViscous { .. } | Basis::Damper { .. } => "N/(m/s)",
+            Basis::Spring { .. } | Basis::Backlash { .. } => "N/m",
+            Basis::Offset { .. }
+            | Basis::Coulomb { .. }
+            | Basis::AbsCoulomb { .. }
+            | Basis::Stribeck { .. }
+            | Basis::Ripple { .. }
+            | Basis::CoulombRipple { .. } => "N",
+        }
+    }
+
     /// The dofs the term acts on, as the vector `d` of its force `value · φ · d`:
     /// `e_dof` for a one-dof term, `e_a − e_b` for a coupling. The basis function reads
     /// the state through `x = dᵀq` and `ẋ = dᵀq̇` only.
@@ -411,6 +426,11 @@ impl<const N: usize> Model<N> {
     /// Parameter names, in the order of `χ`.
     pub fn names(&self) -> &[String] {
         &self.names
+    }
+
+    /// The SI unit of each parameter, in the order of `χ`.
+    pub fn units(&self) -> Vec<&'static str> {
+        self.basis.iter().map(Basis::unit).collect()
     }
 
     /// Basis functions, in the order of `χ`.

@@ -149,11 +149,19 @@ enum AnyModel {
     Flexible(Model<2>),
 }
 
-/// Extra terms of a model: (name, kind, hyper-parameter), all on the motor dof.
-pub(crate) type Terms = Vec<(String, String, f64)>;
+/// Extra terms of a model: (name, kind, hyper-parameter, dof "motor" or "load").
+pub(crate) type Terms = Vec<(String, String, f64, String)>;
 
-fn extra_basis(kind: &str, hyper: f64) -> Result<Basis, Error> {
-    let dof = model::MOTOR;
+fn extra_basis(kind: &str, hyper: f64, dof: &str) -> Result<Basis, Error> {
+    let dof = match dof {
+        "motor" => model::MOTOR,
+        "load" => model::LOAD,
+        other => {
+            return Err(Error::InvalidInput(format!(
+                "unknown degree of freedom {other:?} of a term: use \"motor\" or \"load\""
+            )))
+        }
+    };
     Ok(match kind {
         "offset" => Basis::Offset { dof },
         "viscous" => Basis::Viscous { dof },
@@ -172,7 +180,7 @@ fn extra_basis(kind: &str, hyper: f64) -> Result<Basis, Error> {
             phase: std::f64::consts::FRAC_PI_2,
         },
         "damper" => Basis::Damper {
-            a: dof,
+            a: model::MOTOR,
             b: model::LOAD,
         },
         "ripple_sin" => Basis::Ripple {
@@ -198,12 +206,12 @@ fn make_model(
     kind: &str,
     offset: bool,
     coulomb_eps: f64,
-    terms: &[(String, String, f64)],
+    terms: &[(String, String, f64, String)],
     backlash_gap: Option<f64>,
 ) -> Result<AnyModel, Error> {
     let extra = terms
         .iter()
-        .map(|(n, k, h)| Ok((n.clone(), extra_basis(k, *h)?)))
+        .map(|(n, k, h, d)| Ok((n.clone(), extra_basis(k, *h, d)?)))
         .collect::<Result<Vec<_>, Error>>()?;
     match kind {
         "rigid" => {
@@ -338,6 +346,27 @@ fn param_names(py: Python<'_>, model: &str, offset: bool, terms: Option<Terms>) 
     Ok(match m {
         AnyModel::Rigid(m) => m.names().to_vec(),
         AnyModel::Flexible(m) => m.names().to_vec(),
+    })
+}
+
+/// The SI unit of each parameter of a model, in the order of the parameter vector (the basis
+/// functions know them).
+#[pyfunction]
+#[pyo3(signature = (model, offset=false, terms=None, backlash_gap=None))]
+fn param_units(
+    py: Python<'_>,
+    model: &str,
+    offset: bool,
+    terms: Option<Terms>,
+    backlash_gap: Option<f64>,
+) -> PyResult<Vec<&'static str>> {
+    let terms = terms.unwrap_or_default();
+    let m = quick(py, || {
+        make_model(model, offset, DEFAULT_COULOMB_EPS, &terms, backlash_gap)
+    })?;
+    Ok(match m {
+        AnyModel::Rigid(m) => m.units(),
+        AnyModel::Flexible(m) => m.units(),
     })
 }
 
@@ -592,6 +621,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_COULOMB_EPS", DEFAULT_COULOMB_EPS)?;
     m.add("DEFAULT_TOL", sim::DEFAULT_TOL)?;
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
+    m.add_function(wrap_pyfunction!(param_units, m)?)?;
     m.add_function(wrap_pyfunction!(regressor, m)?)?;
     m.add_function(wrap_pyfunction!(lstsq, m)?)?;
     m.add_function(wrap_pyfunction!(butter, m)?)?;
