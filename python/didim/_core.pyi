@@ -14,7 +14,7 @@ _F64 = npt.NDArray[np.float64]
 __all__ = [
     "DEFAULT_COULOMB_EPS",
     "DEFAULT_TOL",
-    "Decimator",
+    "Decimation",
     "Problem",
     "butter",
     "cheby1",
@@ -63,7 +63,7 @@ def decimate(
 def default_factor(fs_hz: float, cutoff_hz: float) -> int: ...
 
 @final
-class Decimator:
+class Decimation:
     def __new__(
         cls,
         factor: int,
@@ -73,7 +73,7 @@ class Decimator:
         cutoff_hz: Optional[float] = None,
         fs_hz: Optional[float] = None,
         form: str = "sos",
-    ) -> "Decimator": ...
+    ) -> "Decimation": ...
     def output_len(self, n: int) -> int: ...
     def apply(self, y: _F64, w: Optional[_F64] = None) -> Tuple[_F64, Optional[_F64]]: ...
 
@@ -107,13 +107,13 @@ class Problem:
     def simulate(self, params: _F64) -> Dict[str, _F64]: ...
     def simulate_sensitivity(self, params: _F64) -> Dict[str, _F64]: ...
     def simulate_batch(self, params: _F64, *, states: bool = False) -> Dict[str, Any]: ...
-    def squared_error(self, params: _F64, measured_dec: _F64, decimator: Decimator, *, output: str = "force") -> float: ...
+    def squared_error(self, params: _F64, measured_dec: _F64, decimator: Decimation, *, output: str = "force") -> float: ...
     def squared_error_batch(
-        self, params: _F64, measured_dec: _F64, decimator: Decimator, *, output: str = "force"
+        self, params: _F64, measured_dec: _F64, decimator: Decimation, *, output: str = "force"
     ) -> Tuple[_F64, List[Optional[str]]]: ...
     def didim_system(
-        self, params: _F64, force: _F64, free: Sequence[int], decimator: Decimator
+        self, params: _F64, force: _F64, free: Sequence[int], decimator: Decimation
     ) -> Tuple[_F64, _F64, _F64]: ...
     def linearize(
-        self, params: _F64, measured: _F64, free: Sequence[int], decimator: Decimator, *, output: str = "force"
+        self, params: _F64, measured: _F64, free: Sequence[int], decimator: Decimation, *, output: str = "force"
     ) -> Tuple[_F64, _F64]: ...

@@ -101,11 +101,11 @@ class Decimation:
         return cls(factor=factor, kind="matlab", order=8, form="ba")
 
     @property
-    def core(self) -> "_core.Decimator":
+    def core(self) -> "_core.Decimation":
         """The design held by the Rust core (made once per instance)."""
         d = self.__dict__.get("_core_decimator")
         if d is None:
-            d = _core.Decimator(
+            d = _core.Decimation(
                 self.factor, kind=self.kind, order=self.order, cutoff_hz=self.cutoff_hz, fs_hz=self.fs_hz, form=self.form
             )
             object.__setattr__(self, "_core_decimator", d)

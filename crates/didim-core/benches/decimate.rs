@@ -4,7 +4,7 @@
 //! `decimate` by 10 (Chebyshev I of order 8, ba).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use didim_core::filter::{Decimator, FilterForm};
+use didim_core::filter::{Decimation, FilterForm};
 use std::hint::black_box;
 
 mod common;
@@ -26,9 +26,9 @@ fn bench_decimation(c: &mut Criterion) {
     for (name, d) in [
         (
             "butter4_60Hz_sos_r6",
-            Decimator::butterworth(4, 60.0, 1000.0, 6, FilterForm::Sos).unwrap(),
+            Decimation::butterworth(4, 60.0, 1000.0, 6, FilterForm::Sos).unwrap(),
         ),
-        ("matlab_r10", Decimator::matlab(10).unwrap()),
+        ("matlab_r10", Decimation::matlab(10).unwrap()),
     ] {
         g.bench_function(format!("{name}/y"), |b| {
             b.iter(|| d.apply(black_box(&y)).unwrap())

@@ -17,8 +17,8 @@
 //! - causal filtering: [`lfilter`], [`lfilter_zi`], [`sosfilt`], [`sosfilt_zi`];
 //! - zero-phase filtering: [`filtfilt`], [`sosfiltfilt`] (odd extension at both
 //!   ends, steady-state initial conditions, forward then backward pass);
-//! - decimation: [`Decimator`] (Butterworth with scipy's conventions, or
-//!   MATLAB's `decimate(x, r)`), [`Decimator::apply_parallel`] for `Y` and `W`,
+//! - decimation: [`Decimation`] (Butterworth with scipy's conventions, or
+//!   MATLAB's `decimate(x, r)`), [`Decimation::apply_parallel`] for `Y` and `W`,
 //!   and [`default_factor`].
 //!
 //! # Which form: ba or sos
@@ -112,7 +112,7 @@ impl Sos {
     }
 }
 
-/// Representation used for a zero-phase filter of a [`Decimator`].
+/// Representation used for a zero-phase filter of a [`Decimation`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FilterForm {
     /// Transfer function, filtered with [`filtfilt`] (ill-conditioned at low

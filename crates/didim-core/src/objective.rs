@@ -7,7 +7,7 @@
 
 use crate::controller::Controller;
 use crate::error::{invalid, Error, Result};
-use crate::filter::Decimator;
+use crate::filter::Decimation;
 use crate::model::Model;
 use crate::sim::{simulate, simulate_force, simulate_sensitivity, SensOutput, SimOptions, SimOutput};
 use rayon::prelude::*;
@@ -76,7 +76,7 @@ impl<const N: usize> Problem<'_, N> {
         chi: &[f64],
         output: Output,
         measured_dec: &[f64],
-        dec: &Decimator,
+        dec: &Decimation,
     ) -> Result<f64> {
         let sim = match output {
             Output::Force => dec.apply(&simulate_force(
@@ -109,7 +109,7 @@ impl<const N: usize> Problem<'_, N> {
         chis: &[Vec<f64>],
         output: Output,
         measured_dec: &[f64],
-        dec: &Decimator,
+        dec: &Decimation,
     ) -> Vec<Result<f64>> {
         chis.par_iter()
             .map(|chi| self.squared_error(chi, output, measured_dec, dec))
@@ -124,7 +124,7 @@ impl<const N: usize> Problem<'_, N> {
         chi: &[f64],
         force: &[f64],
         free: &[usize],
-        dec: &Decimator,
+        dec: &Decimation,
     ) -> Result<DidimSystem> {
         let n = self.qr.len();
         if force.len() != n {
@@ -194,7 +194,7 @@ impl<const N: usize> Problem<'_, N> {
         output: Output,
         measured: &[f64],
         free: &[usize],
-        dec: &Decimator,
+        dec: &Decimation,
     ) -> Result<Linearization> {
         let n = self.qr.len();
         if measured.len() != n {
@@ -280,7 +280,7 @@ mod tests {
         for (chi, b) in chis.iter().zip(&batch) {
             assert_eq!(b.as_ref().unwrap(), &pb.simulate(chi).unwrap());
         }
-        let dec = Decimator::butterworth(4, 60.0, 1000.0, 6, FilterForm::Sos).unwrap();
+        let dec = Decimation::butterworth(4, 60.0, 1000.0, 6, FilterForm::Sos).unwrap();
         let meas = dec.apply(&batch[0].as_ref().unwrap().force).unwrap();
         let costs = pb.squared_error_batch(&chis, Output::Force, &meas, &dec);
         assert_eq!(*costs[0].as_ref().unwrap(), 0.0);
@@ -306,7 +306,7 @@ mod tests {
         };
         let chi = [68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5];
         let out = pb.simulate(&chi).unwrap();
-        let dec = Decimator::butterworth(4, 60.0, 1000.0, 6, FilterForm::Sos).unwrap();
+        let dec = Decimation::butterworth(4, 60.0, 1000.0, 6, FilterForm::Sos).unwrap();
         let free = [0, 1, 2, 3, 6];
         let sys = pb.didim_system(&chi, &out.force, &free, &dec).unwrap();
         let m = dec.output_len(qr.len());

@@ -6,7 +6,7 @@
 //! sized for CI (the tests build in debug mode there).
 
 use didim_core::controller::{Controller, TransferFunction};
-use didim_core::filter::{self, Decimator, FilterForm, Sos, Tf};
+use didim_core::filter::{self, Decimation, FilterForm, Sos, Tf};
 use didim_core::lstsq::{lstsq, LstsqOptions, SigmaConvention};
 use didim_core::model::{self, Basis, Model};
 use didim_core::sim::{self, Integrator, SimOptions, DEFAULT_TOL};
@@ -410,7 +410,7 @@ proptest! {
         wvals in prop::collection::vec(hostile(), 0..8),
     ) {
         let form = if sos { FilterForm::Sos } else { FilterForm::Ba };
-        let decs = [Decimator::butterworth(order, cutoff, fs, factor, form), Decimator::matlab(factor)];
+        let decs = [Decimation::butterworth(order, cutoff, fs, factor, form), Decimation::matlab(factor)];
         let n = y.len();
         // a regressor with the right shape (columns copied from y with hostile values mixed in), or a wrong length
         let mut w: Vec<f64> = (0..ncols).flat_map(|_| y.iter().copied()).collect();
@@ -512,10 +512,10 @@ fn outcome_mix() {
     let (mut ok, mut total) = (0, 0);
     for _ in 0..cases {
         let (order, cutoff, fs, factor, y) = strat.new_tree(&mut runner).unwrap().current();
-        if let Ok(d) = Decimator::butterworth(order, cutoff, fs, factor, FilterForm::Sos) {
+        if let Ok(d) = Decimation::butterworth(order, cutoff, fs, factor, FilterForm::Sos) {
             total += 1;
             ok += d.apply(&y).is_ok() as usize;
         }
     }
-    eprintln!("Decimator::apply (valid decimators): {ok} results in {total} cases");
+    eprintln!("Decimation::apply (valid decimators): {ok} results in {total} cases");
 }

@@ -591,7 +591,7 @@ fn decimate<'py>(
         None => (Vec::new(), y.len(), 0),
     };
     let (yd, wd) = run(py, || {
-        let dec = problem::make_decimator(factor, kind, order, cutoff_hz, fs_hz, form)?;
+        let dec = problem::make_decimation(factor, kind, order, cutoff_hz, fs_hz, form)?;
         if p > 0 && n != y.len() {
             return Err(Error::InvalidInput(format!(
                 "w has {n} rows but y has {} samples",
@@ -630,7 +630,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sosfiltfilt, m)?)?;
     m.add_function(wrap_pyfunction!(decimate, m)?)?;
     m.add_function(wrap_pyfunction!(default_factor, m)?)?;
-    m.add_class::<problem::Decimator>()?;
+    m.add_class::<problem::Decimation>()?;
     m.add_class::<problem::Problem>()?;
     Ok(())
 }

@@ -1,9 +1,9 @@
-//! `Decimator` and `Problem`: a decimation design and a record's closed loop held on the
+//! `Decimation` and `Problem`: a decimation design and a record's closed loop held on the
 //! Rust side, so that an identification builds them once and then iterates with one call
 //! per step (simulation, decimation, residuals and regressors stay in Rust).
 
 use didim_core::error::Error;
-use didim_core::filter::{Decimator as CoreDecimator, FilterForm};
+use didim_core::filter::{Decimation as CoreDecimation, FilterForm};
 use didim_core::model::{Model, DEFAULT_COULOMB_EPS};
 use didim_core::objective::{split_errors, Output, Problem as CoreProblem};
 use didim_core::sim::{self, SimOutput};
@@ -22,16 +22,16 @@ type Costs<'py> = (Arr<'py>, Vec<Option<String>>);
 type System<'py> = (Arr<'py>, Bound<'py, PyAny>, Arr<'py>);
 
 /// Builds a core decimator from the keyword options of `decimate`.
-pub fn make_decimator(
+pub fn make_decimation(
     factor: usize,
     kind: &str,
     order: usize,
     cutoff_hz: Option<f64>,
     fs_hz: Option<f64>,
     form: &str,
-) -> Result<CoreDecimator, Error> {
+) -> Result<CoreDecimation, Error> {
     match (kind, cutoff_hz, fs_hz) {
-        ("matlab", _, _) => CoreDecimator::matlab(factor),
+        ("matlab", _, _) => CoreDecimation::matlab(factor),
         ("butter", Some(c), Some(fs)) => {
             let form = match form {
                 "sos" => FilterForm::Sos,
@@ -42,7 +42,7 @@ pub fn make_decimator(
                     )))
                 }
             };
-            CoreDecimator::butterworth(order, c, fs, factor, form)
+            CoreDecimation::butterworth(order, c, fs, factor, form)
         }
         ("butter", _, _) => Err(Error::InvalidInput(
             "a Butterworth decimation needs cutoff_hz and fs_hz".into(),
@@ -55,12 +55,12 @@ pub fn make_decimator(
 
 /// A decimation design (zero-phase low-pass and down-sampling), designed once.
 #[pyclass(frozen, module = "didim._core")]
-pub struct Decimator {
-    pub inner: CoreDecimator,
+pub struct Decimation {
+    pub inner: CoreDecimation,
 }
 
 #[pymethods]
-impl Decimator {
+impl Decimation {
     #[new]
     #[pyo3(signature = (factor, *, kind="butter", order=4, cutoff_hz=None, fs_hz=None, form="sos"))]
     fn new(
@@ -73,7 +73,7 @@ impl Decimator {
         form: &str,
     ) -> PyResult<Self> {
         let inner =
-            make_decimator(factor, kind, order, cutoff_hz, fs_hz, form).map_err(|e| core_error(py, e))?;
+            make_decimation(factor, kind, order, cutoff_hz, fs_hz, form).map_err(|e| core_error(py, e))?;
         Ok(Self { inner })
     }
 
@@ -362,7 +362,7 @@ impl Problem {
         py: Python<'_>,
         params: PyReadonlyArray1<'_, f64>,
         measured_dec: PyReadonlyArray1<'_, f64>,
-        decimator: &Decimator,
+        decimator: &Decimation,
         output: &str,
     ) -> PyResult<f64> {
         let chi = slice1(&params);
@@ -382,7 +382,7 @@ impl Problem {
         py: Python<'py>,
         params: PyReadonlyArray2<'py, f64>,
         measured_dec: PyReadonlyArray1<'py, f64>,
-        decimator: &Decimator,
+        decimator: &Decimation,
         output: &str,
     ) -> PyResult<Costs<'py>> {
         let chis = rows2(&params);
@@ -409,7 +409,7 @@ impl Problem {
         params: PyReadonlyArray1<'py, f64>,
         force: PyReadonlyArray1<'py, f64>,
         free: Vec<usize>,
-        decimator: &Decimator,
+        decimator: &Decimation,
     ) -> PyResult<System<'py>> {
         let chi = slice1(&params);
         let f = slice1(&force);
@@ -436,7 +436,7 @@ impl Problem {
         params: PyReadonlyArray1<'py, f64>,
         measured: PyReadonlyArray1<'py, f64>,
         free: Vec<usize>,
-        decimator: &Decimator,
+        decimator: &Decimation,
         output: &str,
     ) -> PyResult<(Arr<'py>, Bound<'py, PyAny>)> {
         let chi = slice1(&params);

@@ -1,4 +1,4 @@
-//! Parallel decimation: the [`Decimator`] of `Y` and `W` and the default factor.
+//! Parallel decimation: the [`Decimation`] of `Y` and `W` and the default factor.
 
 use super::*;
 
@@ -23,9 +23,9 @@ pub(super) enum Prepared {
 /// Zero-phase low-pass filter followed by downsampling by an integer factor:
 /// the "parallel decimation" of paper section III, applied identically to the
 /// measured force `Y` and to every column of the regressor `W`
-/// ([`Decimator::apply_parallel`]) so that `Y = W·θ` still holds after it.
+/// ([`Decimation::apply_parallel`]) so that `Y = W·θ` still holds after it.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Decimator {
+pub struct Decimation {
     filter: Option<ZeroPhase>,
     prepared: Prepared,
     factor: usize,
@@ -34,7 +34,7 @@ pub struct Decimator {
     alignment: Alignment,
 }
 
-impl Decimator {
+impl Decimation {
     /// Butterworth low-pass of `order` (1..=20) at `cutoff_hz` for a sampling
     /// frequency `fs_hz` (both in Hz, `0 < cutoff_hz < fs_hz / 2`), applied with
     /// zero phase, then keep `x[0], x[r], x[2r], …` with `r = factor ≥ 1`:
@@ -96,7 +96,7 @@ impl Decimator {
     /// order for such factors. `factor = 1` returns the input unchanged, as
     /// MATLAB does. Errors if no order passes. The ba form is ill-conditioned
     /// for large `r` (module documentation): for `r` beyond about 10 prefer
-    /// [`Decimator::butterworth`] with [`FilterForm::Sos`] or decimating in
+    /// [`Decimation::butterworth`] with [`FilterForm::Sos`] or decimating in
     /// stages. Paper section III.
     pub fn matlab(factor: usize) -> Result<Self> {
         check_factor(factor)?;
@@ -128,7 +128,7 @@ impl Decimator {
             order -= 1;
             if order == 0 {
                 return Err(invalid!(
-                    "decimation factor {factor} is too large for MATLAB's decimate filter (no Chebyshev order passes its accuracy check at 0.8/{factor}); decimate in several stages or use Decimator::butterworth with FilterForm::Sos"
+                    "decimation factor {factor} is too large for MATLAB's decimate filter (no Chebyshev order passes its accuracy check at 0.8/{factor}); decimate in several stages or use Decimation::butterworth with FilterForm::Sos"
                 ));
             }
             tf = cheby1(order, RIPPLE, wn);
@@ -176,13 +176,13 @@ impl Decimator {
         self.factor
     }
 
-    /// The zero-phase filter, `None` for the identity (`Decimator::matlab(1)`).
+    /// The zero-phase filter, `None` for the identity (`Decimation::matlab(1)`).
     pub fn filter(&self) -> Option<&ZeroPhase> {
         self.filter.as_ref()
     }
 
     /// Order of the low-pass filter (after MATLAB's reduction for
-    /// [`Decimator::matlab`]; 0 for the identity).
+    /// [`Decimation::matlab`]; 0 for the identity).
     pub fn order(&self) -> usize {
         self.order
     }
@@ -192,7 +192,7 @@ impl Decimator {
         self.padlen
     }
 
-    /// Number of samples [`Decimator::apply`] returns for an input of `n`
+    /// Number of samples [`Decimation::apply`] returns for an input of `n`
     /// samples: `ceil(n / r)`.
     pub fn output_len(&self, n: usize) -> usize {
         n.div_ceil(self.factor)
@@ -207,7 +207,7 @@ impl Decimator {
 
     /// Filters `x` (uniformly sampled at the design's `fs`) with zero phase and
     /// keeps one sample in `r` (see the constructors for which ones). Errors
-    /// (`InvalidInput`) if `x` is shorter than [`Decimator::min_input_len`] or
+    /// (`InvalidInput`) if `x` is shorter than [`Decimation::min_input_len`] or
     /// has a non-finite value. Paper section III.
     pub fn apply(&self, x: &[f64]) -> Result<Vec<f64>> {
         self.apply_named(x, "x")
@@ -251,7 +251,7 @@ impl Decimator {
     /// applied to `y` (length `n`) and to each of the `ncols` columns of `w`,
     /// stored column-major (`w[j*n + i]` is row `i` of column `j`, so
     /// `w.len() == n * ncols`). Columns are processed in parallel with rayon;
-    /// every column gives bit-for-bit the result of [`Decimator::apply`].
+    /// every column gives bit-for-bit the result of [`Decimation::apply`].
     ///
     /// Returns `(y_dec, w_dec)` with `w_dec` column-major
     /// (`output_len(n)` rows, `ncols` columns). Errors (`InvalidInput`, naming
@@ -285,7 +285,7 @@ impl Decimator {
     }
 
     /// Decimates equal-length columns alike, [`lanes::LANES`] columns at a time through
-    /// the filter (column-interleaved, bit-for-bit the result of [`Decimator::apply`]),
+    /// the filter (column-interleaved, bit-for-bit the result of [`Decimation::apply`]),
     /// the groups in parallel with rayon. `name(j)` names column `j` in errors.
     pub fn apply_columns(&self, cols: &[&[f64]], name: impl Fn(usize) -> String) -> Result<Vec<Vec<f64>>> {
         let Some(n) = cols.first().map(|c| c.len()) else {

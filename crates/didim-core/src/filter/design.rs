@@ -20,7 +20,7 @@ pub fn butter(order: usize, wn: f64) -> Result<Tf> {
 /// drops below `-rp_db` dB there), in transfer-function form.
 ///
 /// Same as `scipy.signal.cheby1(order, rp_db, wn)`. MATLAB's `decimate` uses
-/// `cheby1(8, 0.05, 0.8/r)` (see [`Decimator::matlab`], paper section III).
+/// `cheby1(8, 0.05, 0.8/r)` (see [`Decimation::matlab`], paper section III).
 pub fn cheby1(order: usize, rp_db: f64, wn: f64) -> Result<Tf> {
     let zpk = design_zpk(order, wn, Proto::Cheby1 { rp_db })?;
     check_tf(zpk.to_tf(), order, wn)

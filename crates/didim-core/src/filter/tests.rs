@@ -266,7 +266,7 @@ fn butterworth_decimation_matches_scipy() {
         } else {
             FilterForm::Sos
         };
-        let d = Decimator::butterworth(p[0] as usize, p[1], p[2], p[3] as usize, form).unwrap();
+        let d = Decimation::butterworth(p[0] as usize, p[1], p[2], p[3] as usize, form).unwrap();
         let xs = &x[..p[5] as usize];
         let y = d.apply(xs).unwrap();
         assert_eq!(y.len(), d.output_len(xs.len()));
@@ -281,7 +281,7 @@ fn matlab_decimation_matches_scipy_model() {
     let x = x_ref();
     for i in cases("dec_matlab") {
         let p = get(&format!("dec_matlab.{i}.params"));
-        let d = Decimator::matlab(p[0] as usize).unwrap();
+        let d = Decimation::matlab(p[0] as usize).unwrap();
         assert_eq!(d.order(), p[2] as usize, "order for r = {}", p[0]);
         assert_eq!(d.padlen(), 3 * d.order());
         let xs = &x[..p[1] as usize];
@@ -298,14 +298,14 @@ fn matlab_order_safeguard_matches_reference() {
     let rs = get("matlab_order.r");
     let orders = get("matlab_order.order");
     for (&r, &o) in rs.iter().zip(orders) {
-        let d = Decimator::matlab(r as usize).unwrap();
+        let d = Decimation::matlab(r as usize).unwrap();
         assert_eq!(d.order(), o as usize, "r = {r}");
     }
 }
 
 #[test]
 fn matlab_alignment_keeps_the_last_sample() {
-    let d = Decimator::matlab(10).unwrap();
+    let d = Decimation::matlab(10).unwrap();
     let x = x_ref();
     let full = filtfilt(&cheby1(8, 0.05, 0.08).unwrap(), x, Some(24)).unwrap();
     // n = 1237: nout = 124, nbeg = 10 - (1240 - 1237) = 7 (1-based).
@@ -319,7 +319,7 @@ fn matlab_alignment_keeps_the_last_sample() {
     let full = filtfilt(&cheby1(8, 0.05, 0.08).unwrap(), &x[..1230], Some(24)).unwrap();
     assert_eq!((y.len(), y[0], y[122]), (123, full[9], full[1229]));
     let x: Vec<f64> = x.to_vec();
-    let one = Decimator::matlab(1).unwrap();
+    let one = Decimation::matlab(1).unwrap();
     assert_eq!(one.apply(&x).unwrap(), x);
     assert!(one.filter().is_none());
     assert_eq!(one.min_input_len(), 1);
@@ -335,9 +335,9 @@ fn parallel_decimation_equals_sequential_bit_for_bit() {
         .flat_map(|j| (0..n).map(move |i| x[(i * (j + 1) + 3 * j) % x.len()] * (j as f64 + 0.5)))
         .collect();
     for d in [
-        Decimator::butterworth(4, 40.0, 1000.0, 5, FilterForm::Sos).unwrap(),
-        Decimator::butterworth(4, 40.0, 1000.0, 5, FilterForm::Ba).unwrap(),
-        Decimator::matlab(10).unwrap(),
+        Decimation::butterworth(4, 40.0, 1000.0, 5, FilterForm::Sos).unwrap(),
+        Decimation::butterworth(4, 40.0, 1000.0, 5, FilterForm::Ba).unwrap(),
+        Decimation::matlab(10).unwrap(),
     ] {
         let (yd, wd) = d.apply_parallel(y, &w, ncols).unwrap();
         let nout = d.output_len(n);
@@ -355,7 +355,7 @@ fn parallel_decimation_equals_sequential_bit_for_bit() {
         }
     }
     // No columns.
-    let d = Decimator::matlab(4).unwrap();
+    let d = Decimation::matlab(4).unwrap();
     let (yd, wd) = d.apply_parallel(y, &[], 0).unwrap();
     assert_eq!(yd.len(), d.output_len(n));
     assert!(wd.is_empty());
@@ -383,12 +383,12 @@ fn too_short_records_are_rejected() {
         "{m}"
     );
     assert!(sosfiltfilt(&sos, &[1.0; 16], None).is_ok());
-    let d = Decimator::matlab(10).unwrap();
+    let d = Decimation::matlab(10).unwrap();
     assert_eq!(d.min_input_len(), 25);
     let m = msg(d.apply(&[0.0; 24]).unwrap_err());
     assert!(m.contains("x has 24 samples") && m.contains("too short"), "{m}");
     assert!(d.apply(&[0.0; 25]).is_ok());
-    let d = Decimator::butterworth(3, 10.0, 100.0, 2, FilterForm::Sos).unwrap();
+    let d = Decimation::butterworth(3, 10.0, 100.0, 2, FilterForm::Sos).unwrap();
     assert_eq!(d.padlen(), 12);
     assert!(d.apply(&[0.0; 12]).is_err());
     let m = msg(d.apply_parallel(&[0.0; 12], &[0.0; 24], 2).unwrap_err());
@@ -411,22 +411,22 @@ fn bad_design_arguments_are_rejected() {
         assert!(m.contains("rp_db"), "{m}");
     }
     for cutoff in [0.0, -5.0, 50.0, 60.0, f64::NAN] {
-        let m = msg(Decimator::butterworth(4, cutoff, 100.0, 2, FilterForm::Sos).unwrap_err());
+        let m = msg(Decimation::butterworth(4, cutoff, 100.0, 2, FilterForm::Sos).unwrap_err());
         assert!(m.contains("cutoff_hz"), "{m}");
     }
     for fs in [0.0, -100.0, f64::NAN] {
-        let m = msg(Decimator::butterworth(4, 10.0, fs, 2, FilterForm::Ba).unwrap_err());
+        let m = msg(Decimation::butterworth(4, 10.0, fs, 2, FilterForm::Ba).unwrap_err());
         assert!(m.contains("fs_hz"), "{m}");
     }
-    let m = msg(Decimator::butterworth(0, 10.0, 100.0, 2, FilterForm::Ba).unwrap_err());
+    let m = msg(Decimation::butterworth(0, 10.0, 100.0, 2, FilterForm::Ba).unwrap_err());
     assert!(m.contains("order"), "{m}");
 }
 
 #[test]
 fn zero_factor_is_rejected() {
-    let m = msg(Decimator::butterworth(4, 10.0, 100.0, 0, FilterForm::Sos).unwrap_err());
+    let m = msg(Decimation::butterworth(4, 10.0, 100.0, 0, FilterForm::Sos).unwrap_err());
     assert!(m.contains("factor") && m.contains('0'), "{m}");
-    let m = msg(Decimator::matlab(0).unwrap_err());
+    let m = msg(Decimation::matlab(0).unwrap_err());
     assert!(m.contains("factor"), "{m}");
 }
 
@@ -438,7 +438,7 @@ fn non_finite_input_is_rejected() {
     assert!(m.contains("x has a non-finite value at index 57 (NaN)"), "{m}");
     let m = msg(sosfiltfilt(&butter_sos(2, 0.3).unwrap(), &x, None).unwrap_err());
     assert!(m.contains("x has a non-finite value at index 57"), "{m}");
-    let d = Decimator::butterworth(2, 100.0, 1000.0, 2, FilterForm::Sos).unwrap();
+    let d = Decimation::butterworth(2, 100.0, 1000.0, 2, FilterForm::Sos).unwrap();
     let m = msg(d.apply(&x).unwrap_err());
     assert!(m.contains("x has a non-finite value at index 57"), "{m}");
     let y = x_ref()[..200].to_vec();
@@ -461,7 +461,7 @@ fn non_finite_input_is_rejected() {
 
 #[test]
 fn mismatched_lengths_are_rejected() {
-    let d = Decimator::matlab(2).unwrap();
+    let d = Decimation::matlab(2).unwrap();
     let y = vec![0.0; 100];
     let m = msg(d.apply_parallel(&y, &[0.0; 299], 3).unwrap_err());
     assert!(
@@ -580,9 +580,9 @@ fn malformed_filters_never_panic() {
     assert!(filtfilt(&tf, &x, Some(0)).is_ok());
     assert!(filtfilt(&tf, &x, Some(usize::MAX)).is_err());
     // Extreme factors do not panic.
-    let d = Decimator::matlab(usize::MAX);
+    let d = Decimation::matlab(usize::MAX);
     assert!(d.is_err() || d.unwrap().apply(&[0.0; 30]).is_ok());
-    let d = Decimator::butterworth(2, 10.0, 100.0, usize::MAX, FilterForm::Sos).unwrap();
+    let d = Decimation::butterworth(2, 10.0, 100.0, usize::MAX, FilterForm::Sos).unwrap();
     assert_eq!(d.apply(&[1.0; 20]).unwrap().len(), 1);
     assert_eq!(d.output_len(0), 0);
 }
@@ -613,7 +613,7 @@ fn default_factor_follows_matlab_relation() {
 
 #[test]
 fn accessors_describe_the_decimator() {
-    let d = Decimator::butterworth(5, 30.0, 1000.0, 4, FilterForm::Sos).unwrap();
+    let d = Decimation::butterworth(5, 30.0, 1000.0, 4, FilterForm::Sos).unwrap();
     assert_eq!(d.factor(), 4);
     assert_eq!(d.order(), 5);
     assert_eq!(d.padlen(), 18); // scipy: 3 * (2*3 + 1 - 1)
@@ -623,9 +623,9 @@ fn accessors_describe_the_decimator() {
         Some(ZeroPhase::Sos(s)) => assert_eq!(s.n_sections(), 3),
         other => panic!("{other:?}"),
     }
-    let d = Decimator::butterworth(5, 30.0, 1000.0, 4, FilterForm::Ba).unwrap();
+    let d = Decimation::butterworth(5, 30.0, 1000.0, 4, FilterForm::Ba).unwrap();
     assert_eq!(d.padlen(), 18); // scipy: 3 * max(len(a), len(b))
-    let d = Decimator::matlab(10).unwrap();
+    let d = Decimation::matlab(10).unwrap();
     assert_eq!((d.order(), d.padlen(), d.factor()), (8, 24, 10));
     match d.filter() {
         Some(ZeroPhase::Ba(tf)) => assert_eq!(tf.a.len(), 9),
