@@ -91,6 +91,7 @@ class Problem:
         substeps: int = 10,
         quantization: float = 0.0,
         delay: int = 0,
+        force_lag: float = 0.0,
         coulomb_eps: float = ...,
         offset: bool = False,
         integrator: str = "exponential",

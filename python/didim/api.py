@@ -176,7 +176,7 @@ def _model_options(model: Model, offset: bool, options: Dict[str, Any]) -> Tuple
     """A :class:`Model` as identify's model kind, offset and options: its structure fields that are not the default
     become options (a method that cannot take one refuses it by name), and giving one again is an error."""
     st = {k: v for k, v in model.sim_kw().items() if k != "offset"}
-    default = {"terms": (), "delay": 0, "backlash_gap": None, "coulomb_eps": DEFAULT_COULOMB_EPS}
+    default = {"terms": (), "delay": 0, "force_lag": 0.0, "backlash_gap": None, "coulomb_eps": DEFAULT_COULOMB_EPS}
     st = {k: v for k, v in st.items() if v != default[k]}
     again = (["offset"] if offset and not model.offset else []) + [k for k in st if k in options]
     if again:

@@ -29,7 +29,7 @@ from . import _checks, _core
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .recording import Recording
 from .result import IdentificationResult, Iteration
-from .signal import Decimation, diffcent, lowpass
+from .signal import Decimation, diffcent, force_lag_mean, lowpass
 from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, param_names, params_vector, problem
 
 Progress = Optional[Callable[[str], None]]
@@ -212,6 +212,11 @@ MAX_BACKTRACKS = 6
 MAX_STEP_RATIO = 4.0
 
 
+#: A regression error ‖Y − Wχ‖/‖Y‖ below this is rounding: the model reproduces the data exactly (noise-free data
+#: made by the same model), and criterion (21), a relative change of that rounding, would never settle.
+EXACT_FIT = 1e-10
+
+
 def _physical(names: Sequence[str], chi: np.ndarray, ref: Optional[np.ndarray] = None) -> bool:
     """Masses and stiffness positive (and within MAX_STEP_RATIO of ``ref``), every value finite."""
     if not np.all(np.isfinite(chi)):
@@ -244,6 +249,7 @@ def didim_iterate(
     terms: Sequence = (),
     backlash_gap: Optional[float] = None,
     delay: int = 0,
+    force_lag: float = 0.0,
     fit_samples: Optional[int] = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
@@ -265,7 +271,8 @@ def didim_iterate(
 
     ``fit_samples`` restricts the regression and the output errors to the first samples (the rest of the record is
     then held out for validation). ``integrator``, ``sim_tol`` and ``substeps`` choose the simulator's scheme (see
-    :func:`didim.simulate`); ``terms``, ``backlash_gap`` and ``delay`` extend the model (see :func:`didim.simulate`).
+    :func:`didim.simulate`); ``terms``, ``backlash_gap``, ``delay`` and ``force_lag`` extend the model (see
+    :func:`didim.simulate`).
 
     ``reversals`` (not in the paper): ``"exclude"`` leaves out of the regression the decimated samples around velocity
     reversals and stops, where the decimated Coulomb regressor of the simulated velocity is not saturated
@@ -303,7 +310,7 @@ def didim_iterate(
     exclude = reversals != "keep" and model == "rigid" and _coulomb_column(free) is not None
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, tol=sim_tol,
-                 terms=terms, backlash_gap=backlash_gap, delay=delay)
+                 terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
     m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
     yd_motor = dec(rec.force)[:m_fit]
     ny = float(np.linalg.norm(yd_motor))
@@ -311,6 +318,8 @@ def didim_iterate(
     y_motor = rec.force
     if delay:  # the states answer the force applied, which is the command `delay` samples earlier
         y_motor = np.concatenate([np.zeros(delay), rec.force[:-delay]])
+    if force_lag:  # ... and through the lag, its mean over each period
+        y_motor = force_lag_mean(y_motor, force_lag, rec.dt)
 
     history: List[Iteration] = []
     notes: List[str] = []
@@ -402,7 +411,8 @@ def didim_iterate(
         )
         _say(progress, f"{method} {model} iteration {len(history)}: ‖Y−Wχ‖/‖Y‖ = {100 * sol['relative_error']:.3f} %, "
              f"output error of χ{len(history) - 1} = {100 * out_err:.3f} %")
-        if alpha == 1 and rho_prev is not None and abs(rho - rho_prev) / rho_prev <= tol:
+        if alpha == 1 and rho_prev is not None and (abs(rho - rho_prev) / rho_prev <= tol
+                                                     or sol["relative_error"] <= EXACT_FIT):
             converged = True
             break
         rho_prev = rho
@@ -454,7 +464,8 @@ def didim_iterate(
         frozen=frozen,
         history=history,
         options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset,
-                     terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, integrator=integrator,
+                     terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, force_lag=force_lag,
+                     integrator=integrator,
                      sim_tol=sim_tol, reversals="exclude" if exclude else "keep"),
         covariance=sol["covariance"],
         notes=notes,

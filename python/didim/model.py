@@ -30,6 +30,7 @@ class Model:
     terms: Tuple[Term, ...] = field(default_factory=tuple)
     delay: int = 0
     backlash_gap: Optional[float] = None
+    force_lag: float = 0.0
     coulomb_eps: float = DEFAULT_COULOMB_EPS
 
     def __post_init__(self):
@@ -44,6 +45,7 @@ class Model:
         if self.backlash_gap is not None:
             object.__setattr__(self, "backlash_gap", _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0))
         object.__setattr__(self, "delay", _checks.whole("delay", self.delay, hint=" (samples)"))
+        object.__setattr__(self, "force_lag", _checks.real("force_lag", self.force_lag, "s", lo=0.0, lo_open=False))
         object.__setattr__(self, "coulomb_eps", _checks.real("coulomb_eps", self.coulomb_eps, "m/s", lo=0.0,
                                                              lo_open=False))
 
@@ -56,6 +58,8 @@ class Model:
             parts.append("terms " + ", ".join(f"{t.name} ({t.kind})" for t in self.terms))
         if self.delay:
             parts.append(f"a delay of {self.delay} sample{'s' if self.delay != 1 else ''}")
+        if self.force_lag:
+            parts.append(f"a force lag of {1e3 * self.force_lag:.3g} ms")
         if self.backlash_gap is not None:
             parts.append(f"a backlash gap of {self.backlash_gap:g} m")
         if self.coulomb_eps != DEFAULT_COULOMB_EPS:
@@ -73,18 +77,20 @@ class Model:
 
     def sim_kw(self) -> Dict[str, Any]:
         """Keyword arguments of :func:`didim.simulate` that describe this structure."""
-        return dict(offset=self.offset, terms=self.terms, delay=self.delay, backlash_gap=self.backlash_gap,
+        return dict(offset=self.offset, terms=self.terms, delay=self.delay, force_lag=self.force_lag,
+                    backlash_gap=self.backlash_gap,
                     coulomb_eps=self.coulomb_eps)
 
     def to_dict(self) -> Dict[str, Any]:
         return {"kind": self.kind, "offset": self.offset, "terms": [list(t.spec()) for t in self.terms],
-                "delay": self.delay, "backlash_gap": self.backlash_gap, "coulomb_eps": self.coulomb_eps}
+                "delay": self.delay, "force_lag": self.force_lag, "backlash_gap": self.backlash_gap,
+                "coulomb_eps": self.coulomb_eps}
 
     @classmethod
     def from_dict(cls, d: Dict[str, Any]) -> "Model":
         if not isinstance(d, dict):
             raise DataError(f"a model structure must be a JSON object, got {type(d).__name__}")
-        unknown = set(d) - {"kind", "offset", "terms", "delay", "backlash_gap", "coulomb_eps"}
+        unknown = set(d) - {"kind", "offset", "terms", "delay", "force_lag", "backlash_gap", "coulomb_eps"}
         if unknown:
             raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
         raw = d.get("terms") or []
@@ -95,6 +101,7 @@ class Model:
         if not isinstance(offset, bool):
             raise DataError(f"model field offset must be true or false, got {offset!r}")
         return cls(kind=d.get("kind", "rigid"), offset=offset, terms=terms, delay=d.get("delay", 0),
+                   force_lag=d.get("force_lag", 0.0),
                    backlash_gap=d.get("backlash_gap"), coulomb_eps=d.get("coulomb_eps", DEFAULT_COULOMB_EPS))
 
     @classmethod
@@ -105,6 +112,7 @@ class Model:
             return None
         terms = tuple(Term(*t) for t in options.get("terms") or ())
         m = cls(kind=kind, offset="OF" in params, terms=terms, delay=int(options.get("delay") or 0),
+                force_lag=float(options.get("force_lag") or 0.0),
                 backlash_gap=options.get("backlash_gap"),
                 coulomb_eps=float(options.get("coulomb_eps", DEFAULT_COULOMB_EPS)))
         return m if set(m.param_names()) >= set(params) else None

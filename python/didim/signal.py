@@ -139,4 +139,20 @@ class Decimation:
         return f"Butterworth order {self.order} at {self.cutoff_hz:g} Hz, zero phase, factor {self.factor}"
 
 
-__all__ = ["lowpass", "diffcent", "default_factor", "Decimation", "PADDINGS"]
+def force_lag_mean(force: np.ndarray, lag: float, dt: float) -> np.ndarray:
+    """The mean over each sample period of the force a first-order lag ``lag`` (s) applies under the held commands
+    ``force`` (the core's ``SimOptions::force_lag``): what the plant answers when the drive logs ``force``."""
+    force = np.asarray(force, dtype=float)
+    if lag <= 0 or len(force) == 0:
+        return force
+    decay = math.exp(-dt / lag)
+    share = lag / dt * (1.0 - decay)
+    out = np.empty_like(force)
+    f = force[0]
+    for k, tau in enumerate(force):
+        out[k] = tau + (f - tau) * share
+        f = tau + (f - tau) * decay
+    return out
+
+
+__all__ = ["lowpass", "diffcent", "default_factor", "Decimation", "PADDINGS", "force_lag_mean"]

@@ -112,13 +112,13 @@ def _is_model(x) -> bool:
 
 def unpack_model(model, offset: Optional[bool], given: Dict[str, Any]) -> Tuple[str, Optional[bool], Dict[str, Any]]:
     """``model`` as a kind name ("rigid", "flexible") or a :class:`didim.Model`: returns the kind, the offset and the
-    structure keywords (terms, delay, backlash_gap, coulomb_eps) merged into ``given``. A Model carries its structure:
+    structure keywords (terms, delay, force_lag, backlash_gap, coulomb_eps) merged into ``given``. A Model carries its structure:
     giving one of its fields again (``offset`` or any of ``given``'s structure keywords, set to anything but its
     default) is an error naming it."""
     if not _is_model(model):
         return model, offset, given
     st = model.sim_kw()
-    again = [k for k in ("terms", "delay", "backlash_gap", "coulomb_eps") if k in given
+    again = [k for k in ("terms", "delay", "force_lag", "backlash_gap", "coulomb_eps") if k in given
              and given[k] not in ((), None, 0, DEFAULT_COULOMB_EPS)]
     if offset is not None and bool(offset) != model.offset:
         again.insert(0, "offset")
@@ -246,6 +246,7 @@ def sim_options(
     substeps: int = 10,
     quantization: Optional[float] = None,
     delay: int = 0,
+    force_lag: float = 0.0,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
     integrator: str = "exponential",
     tol: float = DEFAULT_TOL,
@@ -260,7 +261,8 @@ def sim_options(
         raise DataError(f"unknown integrator {integrator!r}: use one of {', '.join(INTEGRATORS)}")
     if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0 < tol < 1):
         raise DataError(f"tol must be a fraction of the stroke between 0 and 1, got {tol!r}")
-    return dict(substeps=int(substeps), quantization=float(quantization), delay=int(delay),
+    force_lag = _checks.real("force_lag", force_lag, "s", lo=0.0, lo_open=False, hint=" (0 for none)")
+    return dict(substeps=int(substeps), quantization=float(quantization), delay=int(delay), force_lag=force_lag,
                 coulomb_eps=float(coulomb_eps), integrator=integrator, tol=float(tol))
 
 
@@ -289,6 +291,7 @@ def simulate(
     substeps: int = 10,
     quantization: Optional[float] = None,
     delay: int = 0,
+    force_lag: float = 0.0,
     coulomb_eps: float = DEFAULT_COULOMB_EPS,
     terms: Sequence[Term] = (),
     backlash_gap: Optional[float] = None,
@@ -307,6 +310,7 @@ def simulate(
         substeps: RK4 substeps per sample period (``integrator="rk4"`` only).
         quantization: resolution of the simulated motor encoder (m); default the recording's ``position_resolution``.
         delay: extra actuation delay in samples.
+        force_lag: time constant (s) of a first-order lag from the command to the applied force (a current loop).
         coulomb_eps: velocity scale of the Coulomb sign (m/s), 0 for the hard sign.
         terms: extra model terms (:class:`Term`), whose parameters ``params`` must include.
         backlash_gap: flexible model only: total width (m) of a dead zone in the coupling K12.
@@ -319,25 +323,28 @@ def simulate(
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
     if _is_result(params):  # a result carries its model structure and its simulator's numerics
-        given = [k for k, v in (("terms", terms), ("backlash_gap", backlash_gap), ("delay", delay)) if v not in ((), None, 0)]
+        given = [k for k, v in (("terms", terms), ("backlash_gap", backlash_gap), ("delay", delay), ("force_lag", force_lag))
+                 if v not in ((), None, 0)]
         if given:
             raise DataError(f"a result carries its model structure: leave {', '.join(given)} out, or simulate "
                             "result.all_params with the structure you want")
         st = _structure(params)
-        model, offset, terms, backlash_gap, delay, coulomb_eps = (st.kind, st.offset, st.terms, st.backlash_gap,
-                                                                  st.delay, st.coulomb_eps)
+        model, offset, terms, backlash_gap, delay, force_lag, coulomb_eps = (
+            st.kind, st.offset, st.terms, st.backlash_gap, st.delay, st.force_lag, st.coulomb_eps)
         integrator = params.options.get("integrator", integrator)
         tol = params.options.get("sim_tol", tol)
         substeps = params.options.get("substeps", substeps)
         params = params.all_params
-    model, offset, st = unpack_model(model, offset, dict(terms=terms, delay=delay, backlash_gap=backlash_gap,
-                                                        coulomb_eps=coulomb_eps))
-    terms, delay, backlash_gap, coulomb_eps = st["terms"], st["delay"], st["backlash_gap"], st["coulomb_eps"]
+    model, offset, st = unpack_model(model, offset, dict(terms=terms, delay=delay, force_lag=force_lag,
+                                                        backlash_gap=backlash_gap, coulomb_eps=coulomb_eps))
+    terms, delay, force_lag = st["terms"], st["delay"], st["force_lag"]
+    backlash_gap, coulomb_eps = st["backlash_gap"], st["coulomb_eps"]
     if offset is not None:
         offset = _checks.flag("offset", offset)
     names, vec, offset = params_vector(model, params, offset, terms)
     out = problem(recording, model, offset=offset, terms=terms, backlash_gap=backlash_gap, substeps=substeps,
-                  quantization=quantization, delay=delay, coulomb_eps=coulomb_eps, integrator=integrator,
+                  quantization=quantization, delay=delay, force_lag=force_lag, coulomb_eps=coulomb_eps,
+                  integrator=integrator,
                   tol=tol).simulate(vec)
     return SimResult(
         model=model,
@@ -443,7 +450,8 @@ def simulate_batch(
                             "backlash, Coulomb smoothing); simulate them one by one")
         st = structures.pop()
         model, offset = st.kind, st.offset
-        for k, v in dict(terms=st.terms, delay=st.delay, backlash_gap=st.backlash_gap, coulomb_eps=st.coulomb_eps).items():
+        for k, v in dict(terms=st.terms, delay=st.delay, force_lag=st.force_lag, backlash_gap=st.backlash_gap,
+                         coulomb_eps=st.coulomb_eps).items():
             sim_kw.setdefault(k, v)
         sim_kw.setdefault("integrator", rows[0].options.get("integrator", "exponential"))
         rows = [r.all_params for r in rows]

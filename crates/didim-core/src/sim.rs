@@ -57,6 +57,12 @@ pub struct SimOptions {
     /// Extra actuation delay in samples: the force applied over `[t_k, t_{k+1})`
     /// is the command of sample `k − delay` (0 before the first command).
     pub delay: usize,
+    /// Time constant (s) of a first-order lag between the command and the force the
+    /// motor applies (a current loop's bandwidth, `1/(2π·force_lag)`); 0 for none.
+    /// Over each period the applied force relaxes exponentially towards the held
+    /// command; the plant sees its mean over the period (exact for the velocity it
+    /// gives a mass), the drive logs the command.
+    pub force_lag: f64,
     /// The integration scheme (default [`Integrator::Exponential`]).
     pub integrator: Integrator,
     /// Local error tolerance of the exponential integrator per step, as a fraction
@@ -72,6 +78,7 @@ impl SimOptions {
             substeps: 10,
             quantization: 0.0,
             delay: 0,
+            force_lag: 0.0,
             integrator: Integrator::Exponential,
             tol: DEFAULT_TOL,
         }
@@ -98,6 +105,12 @@ impl SimOptions {
             return Err(invalid!(
                 "tol must be a finite fraction of the stroke between 0 and 1 (default {DEFAULT_TOL:e}), got {}",
                 self.tol
+            ));
+        }
+        if !(self.force_lag.is_finite() && self.force_lag >= 0.0) {
+            return Err(invalid!(
+                "force_lag must be a finite time constant >= 0 s (0 = none), got {}",
+                self.force_lag
             ));
         }
         if !(self.quantization.is_finite() && self.quantization >= 0.0) {
@@ -270,6 +283,13 @@ pub fn simulate_sensitivity<const N: usize>(
     opts: &SimOptions,
 ) -> Result<SensOutput> {
     check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
+    if opts.force_lag > 0.0 {
+        return Err(invalid!(
+            "the forward sensitivities do not cover a force lag yet (force_lag = {} s): identify it with DIDIM or \
+             Nelder-Mead, or set force_lag to 0",
+            opts.force_lag
+        ));
+    }
     let (sim, dforce, dq) = if opts.integrator == Integrator::Exponential {
         let mut t = expint::Sens::<N>::new(model, qr.len(), opts.delay)?;
         let stepper = Exponential::new(model, chi, qr, opts)?;

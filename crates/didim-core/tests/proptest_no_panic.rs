@@ -97,13 +97,15 @@ fn sim_options() -> impl Strategy<Value = SimOptions> {
         prop_oneof![4 => 0usize..6, 1 => prop::sample::select(vec![200usize, usize::MAX, 1 << 40])],
         prop_oneof![Just(Integrator::Exponential), Just(Integrator::Rk4)],
         prop_oneof![4 => Just(DEFAULT_TOL), 1 => hostile()],
+        prop_oneof![3 => Just(0.0), 1 => mostly(0.0, 2e-3)],
     )
         .prop_map(
-            |(dt, substeps, quantization, delay, integrator, tol)| SimOptions {
+            |(dt, substeps, quantization, delay, integrator, tol, force_lag)| SimOptions {
                 dt,
                 substeps,
                 quantization,
                 delay,
+                force_lag,
                 integrator,
                 tol,
             },
@@ -189,6 +191,7 @@ fn valid_case(n_params: usize, max_len: usize) -> impl Strategy<Value = SimCase>
                     substeps,
                     quantization,
                     delay,
+                    force_lag: if delay == 1 { 3e-4 } else { 0.0 },
                     // valid cases alternate the integrators
                     integrator: if substeps % 2 == 0 {
                         Integrator::Exponential

@@ -315,12 +315,14 @@ fn parse_integrator(name: &str) -> Result<sim::Integrator, Error> {
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn sim_options(
     py: Python<'_>,
     dt: f64,
     substeps: usize,
     quantization: f64,
     delay: usize,
+    force_lag: f64,
     integrator: &str,
     tol: f64,
 ) -> PyResult<sim::SimOptions> {
@@ -330,6 +332,7 @@ fn sim_options(
         substeps,
         quantization,
         delay,
+        force_lag,
         integrator,
         tol,
     })

@@ -189,9 +189,9 @@ fn sim_dict<'py>(py: Python<'py>, out: SimOutput) -> PyResult<Bound<'py, PyDict>
 #[pymethods]
 impl Problem {
     #[new]
-    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, integrator="exponential", tol=Real(sim::DEFAULT_TOL), terms=None, backlash_gap=None))]
+    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), force_lag=Real(0.0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, integrator="exponential", tol=Real(sim::DEFAULT_TOL), terms=None, backlash_gap=None))]
     #[pyo3(
-        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, coulomb_eps=..., offset=False, integrator='exponential', tol=..., terms=None, backlash_gap=None)"
+        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, force_lag=0.0, coulomb_eps=..., offset=False, integrator='exponential', tol=..., terms=None, backlash_gap=None)"
     )]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -205,6 +205,7 @@ impl Problem {
         substeps: Whole,
         quantization: Real,
         delay: Whole,
+        force_lag: Real,
         coulomb_eps: Real,
         offset: bool,
         integrator: &str,
@@ -221,6 +222,7 @@ impl Problem {
             whole(substeps, "substeps")?,
             quantization.0,
             whole(delay, "delay")?,
+            force_lag.0,
             integrator,
             tol.0,
         )?;

@@ -209,26 +209,45 @@ def _periodic(name: str, names: Tuple[str, str], kinds: Tuple[str, str], share: 
 
 
 def _delay_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
-    if state.delay:
+    if state.delay or state.force_lag:
         return []
     return [Candidate("delay", diffcent(sim.force, data.rec.dt)[:, None] * data.rec.dt, {}, 1)]
 
 
+#: Force lags tried (fractions of the sample period): a current loop's lag is a fraction of a period, whose regressor
+#: (−T·τ̇) is a whole-sample delay's too; longer lags are tried as whole-sample delays.
+LAG_PERIODS = (0.1, 0.2, 0.3, 0.45, 0.65, 0.9)
+
+
 def _delay_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
-    best = None
-    for d in range(1, 9):  # search the delay in whole samples, upward until the fit gets clearly worse
-        try:
-            st, r = refit(data, replace(state, delay=d), {}, progress)
-        except DidimError:
-            break  # a longer delay destabilises the simulated loop even more
-        if best is None or r.output_error < best[1].output_error:
-            best = (st, r)
-        elif not r.converged or r.output_error > 1.1 * best[1].output_error:
-            break  # past the minimum: longer delays only make the simulated loop less stable
+    """The force reaches the plant late: a first-order force lag below a sample period (a current loop), else a
+    whole-sample delay, each searched upward until the training fit gets clearly worse; the better one is kept."""
+    dt = data.rec.dt
+
+    def search(states):
+        best = None
+        for st in states:
+            try:
+                st, r = refit(data, st, {}, progress)
+            except DidimError:
+                break  # a longer delay destabilises the simulated loop even more
+            if best is None or r.output_error < best[1].output_error:
+                best = (st, r)
+            elif not r.converged or r.output_error > 1.1 * best[1].output_error:
+                break  # past the minimum: longer delays only make the simulated loop less stable
+        return best
+
+    best = search(replace(state, force_lag=f * dt) for f in LAG_PERIODS)
+    if best is None or best[0].force_lag >= LAG_PERIODS[-1] * dt:
+        whole = search(replace(state, delay=d) for d in range(1, 9))
+        if whole is not None and (best is None or whole[1].output_error < best[1].output_error):
+            best = whole
     if best is None:
         raise SimulationError("the delay refit failed")
     st, r = best
-    return st, r, {"delay_samples": float(st.delay), "delay_s": st.delay * data.rec.dt}, {}
+    if st.force_lag:
+        return st, r, {"force_lag_s": st.force_lag, "bandwidth_hz": 1 / (2 * math.pi * st.force_lag)}, {}
+    return st, r, {"delay_samples": float(st.delay), "delay_s": st.delay * dt}, {}
 
 
 # ---------------------------------------------------------------------------------------------------- flexibility
@@ -356,8 +375,9 @@ REGISTRY: Dict[str, Effect] = _registry(
     Effect("position_dependent_coulomb", "The Coulomb friction level varies along the stroke, always against the "
            "motion (a preload or lubrication that changes along the screw, a worn or tight zone of a guide): the force "
            "flips sign with the direction, unlike a position ripple.", "position", _pdc[0], _pdc[1], _pdc[2]),
-    Effect("delay", "The force is applied later than commanded: current-loop lag, communication or computation "
-           "delay.", "spectrum", _delay_candidates, _delay_adopt, lambda state: replace(state, delay=0),
+    Effect("delay", "The force is applied later than commanded: a current loop's lag (a first-order lag below a "
+           "sample period) or a communication or computation delay (whole samples).", "spectrum", _delay_candidates,
+           _delay_adopt, lambda state: replace(state, delay=0, force_lag=0.0),
            tried_with="flexibility"),
     Effect("flexibility", "The drive is not rigid: a flexible coupling (a two-mass model) shows as a resonance that the "
            "rigid model cannot follow.", "spectrum", _flexibility_candidates, _flexibility_adopt,

@@ -27,9 +27,11 @@ class State:
     terms: Tuple[Term, ...] = ()
     backlash_gap: Optional[float] = None
     delay: int = 0
+    force_lag: float = 0.0
 
     def sim_kwargs(self) -> Dict[str, Any]:
-        return dict(offset=self.offset, terms=self.terms, backlash_gap=self.backlash_gap, delay=self.delay)
+        return dict(offset=self.offset, terms=self.terms, backlash_gap=self.backlash_gap, delay=self.delay,
+                    force_lag=self.force_lag)
 
     def all_params(self) -> Dict[str, float]:
         return {**self.frozen, **self.params}

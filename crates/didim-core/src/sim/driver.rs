@@ -93,6 +93,35 @@ pub(super) fn round_to(x: f64, step: f64) -> f64 {
     r.copysign(y) * step
 }
 
+/// A first-order lag `T ḟ = τ − f` between the held command `τ` and the applied force `f`
+/// (see [`SimOptions::force_lag`]).
+#[derive(Clone, Copy, Debug)]
+struct ForceLag {
+    /// `e^{−T_s/T}`: what remains of the gap `f − τ` after one period.
+    decay: f64,
+    /// `(T/T_s)(1 − e^{−T_s/T})`: the share of the initial gap in the period's mean force.
+    mean: f64,
+}
+
+impl ForceLag {
+    fn new(lag: f64, dt: f64) -> Option<Self> {
+        (lag > 0.0).then(|| {
+            let decay = (-dt / lag).exp();
+            Self {
+                decay,
+                mean: lag / dt * (1.0 - decay),
+            }
+        })
+    }
+
+    /// The mean applied force over a period from `f0` under the command `tau`, and the
+    /// applied force at its end.
+    #[inline(always)]
+    fn period(&self, f0: f64, tau: f64) -> (f64, f64) {
+        (tau + (f0 - tau) * self.mean, tau + (f0 - tau) * self.decay)
+    }
+}
+
 /// The closed-loop simulation of `model` with parameters `chi` (already checked, with
 /// the signals and options) integrated by `stepper`; `states`: record the positions,
 /// velocities and accelerations too (else only the force). Returns the stepper for its
@@ -129,6 +158,8 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
     let law = controller.law(opts.dt)?;
     let mut ctl = law.rest_state(qr[0], quantize(q[0]));
     let mut pending = vec![0.0; opts.delay]; // ring buffer of delayed commands
+    let lag = ForceLag::new(opts.force_lag, opts.dt);
+    let mut applied: Option<f64> = None; // the lagged force at the start of the period
 
     let m = if states { n } else { 0 };
     let signals = |what| (0..N).map(|_| filled(m, 0.0, what)).collect::<Result<Vec<_>>>();
@@ -148,6 +179,14 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
             tau_cmd
         } else {
             std::mem::replace(&mut pending[k % opts.delay], tau_cmd)
+        };
+        let tau = match lag {
+            None => tau,
+            Some(lag) => {
+                let (mean, end) = lag.period(*applied.get_or_insert(tau), tau);
+                applied = Some(end);
+                mean
+            }
         };
         tangent.command(k, &law, active, tau);
         out.force[k] = tau_cmd;
