@@ -90,7 +90,9 @@ class Finding:
 class Diagnosis:
     """What the doctor found. ``findings`` lists the accepted effects (empty: nothing is missing), ``rejected`` the
     candidates that were significant on the training data but did not improve the held-out fit, ``fit`` the relative
-    force errors before and after on training and validation data."""
+    force errors before and after on training and validation data: ``train_force_*``/``valid_force_*`` the closed-loop
+    force error at the full rate (the measure of ``result.force_error``), ``train_*``/``valid_*`` on the decimated
+    force the tests work on."""
 
     recording: str
     model: str
@@ -137,8 +139,12 @@ class Diagnosis:
     def summary(self) -> str:
         lines = [f"doctor: {self.recording}, base model {self.model}"]
         f = self.fit
-        lines.append(f"relative force error: training {100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, "
-                     f"validation {100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %")
+        lines.append(f"closed-loop force error: training {100 * f['train_force_before']:.2f} % -> "
+                     f"{100 * f['train_force_after']:.2f} %, validation ({self.options['validation']}) "
+                     f"{100 * f['valid_force_before']:.2f} % -> {100 * f['valid_force_after']:.2f} %")
+        lines.append(f"  on the force decimated at {self.options['cutoff_hz']:g} Hz (where the effects are tested): "
+                     f"training {100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, validation "
+                     f"{100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %")
         if not self.findings:
             lines.append("nothing significant is missing from the model")
         for x in self.findings:
@@ -393,6 +399,7 @@ class _Search:
     def accept(self, f: Finding, new: Fitted) -> Fitted:
         """Adds the finding; the candidates rejected on the old model get another chance on the new one; an earlier
         finding the new one makes redundant (no longer improving the held-out fit) is taken out again."""
+        f.fit["train_force_after"], f.fit["valid_force_after"] = self.data.force_errors(new[0])
         self.findings.append(f)
         self.done = [x.effect for x in self.findings]
         self.history.append(new)
@@ -449,6 +456,7 @@ def doctor(
     cur: Fitted = (state, *data.errors(state))
     search.history.append(cur)
     fit0 = {"train_before": data.rel(cur[1], True), "valid_before": data.rel(cur[2], False)}
+    fit0["train_force_before"], fit0["valid_force_before"] = data.force_errors(state)
     locate_before = _locate(data, cur[1], cur[3])
 
     for _ in range(max_findings):
@@ -472,7 +480,8 @@ def doctor(
         search.findings.append(un)
     diag = Diagnosis(
         recording=recording.name or "recording", model=model, findings=search.findings, rejected=search.rejected,
-        fit={**fit0, "train_after": data.rel(rt, True), "valid_after": data.rel(rv, False)}, base=base,
+        fit={**fit0, "train_after": data.rel(rt, True), "valid_after": data.rel(rv, False),
+             **dict(zip(("train_force_after", "valid_force_after"), data.force_errors(state)))}, base=base,
         final_params=state.all_params(), final_state=state, ambiguities=search.ambiguities, rounds=search.rounds,
         locate={"before": locate_before, "after": _locate(data, rt, sim)},
         options=dict(alpha=alpha, max_findings=max_findings, cutoff_hz=cutoff_hz, holdout=None if validate else holdout,

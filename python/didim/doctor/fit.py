@@ -68,6 +68,19 @@ class Data:
             rv = self.yv - self.dec(simv.force)
         return rt, rv, sim
 
+    def force_errors(self, state: State) -> Tuple[float, float]:
+        """Closed-loop force errors ‖τ − τ_sim‖/‖τ‖ at the full rate on the training and the validation samples: the
+        measure of ``result.force_error`` and of the EMPS benchmark (the residual tests work on the decimated force)."""
+        def rel(y, ys):
+            return float(np.linalg.norm(y - ys) / np.linalg.norm(y))
+
+        ys = simulate(self.rec, state.all_params(), state.model, **state.sim_kwargs()).force
+        y, n = self.rec.force, self.n_train
+        if self.validate is None:
+            return rel(y[:n], ys[:n]), rel(y[n:], ys[n:])
+        yv = simulate(self.validate, state.all_params(), state.model, **state.sim_kwargs()).force
+        return rel(y, ys), rel(self.validate.force, yv)
+
     def rel(self, r: np.ndarray, train: bool) -> float:
         y = self.y[: self.m_train] if train else self.yv
         return float(np.linalg.norm(r) / np.linalg.norm(y))
