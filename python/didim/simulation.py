@@ -446,7 +446,7 @@ def simulate_batch(
     if len(rows) and all(_is_result(r) for r in rows):  # results: one structure for all, its options by default
         structures = {_structure(r) for r in rows}
         if len(structures) > 1:
-            raise DataError("the results of a batch must share one model structure (kind, offset, terms, delay, "
+            raise DataError("the results of a batch must share one model structure (kind, offset, terms, delay, force lag, "
                             "backlash, Coulomb smoothing); simulate them one by one")
         st = structures.pop()
         model, offset = st.kind, st.offset
