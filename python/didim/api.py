@@ -99,8 +99,9 @@ def identify(
     each finding of :meth:`Recording.diagnose` (saturated command, force scale not matching the controller). A
     method that stops without converging returns ``converged=False`` with a message and its history.
     """
-    if isinstance(model, Model):
-        model, offset, options = _model_options(model, offset, options)
+    structure = model if isinstance(model, Model) else None
+    if structure is not None:
+        model, offset, options = _model_options(structure, offset, options)
     if not isinstance(model, str) or model not in MODELS:
         raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)} or a didim.Model")
     if not isinstance(method, str) or method not in METHODS:
@@ -125,7 +126,13 @@ def identify(
         raise DataError(f"criterion={criterion!r} applies to the output-error methods (oe-nm, oe-lm), not to {method}")
     if progress is not None and not callable(progress):
         raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
-    check_options(model, method, options)
+    try:
+        check_options(model, method, options)
+    except DataError as e:
+        if structure is None:
+            raise
+        raise DataError(f"{method} cannot identify {structure.describe()}: {e}. Give a didim.Model without those fields, "
+                        "or use method 'didim'") from None
     check_sampling(recording, model, method, options)
     _checks.excitation(recording.qr, recording.u_ext, param_names(model, offset))
     if not np.any(recording.force):

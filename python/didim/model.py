@@ -21,7 +21,8 @@ from .simulation import DEFAULT_COULOMB_EPS, MODELS, Term, param_names
 @dataclass(frozen=True)
 class Model:
     """A model structure. ``kind``: "rigid" (eq. (6), M, Fv, Fc) or "flexible" (eq. (2), M1, Fv1, Fc1, M2, Fv2, Fc2,
-    K12); ``offset``: a constant force OF (N); ``terms``: extra :class:`didim.Term` s; ``delay``: actuation delay in
+    K12); ``offset``: a constant force OF (N); ``terms``: extra :class:`didim.Term` s (each on the motor or the load);
+    ``force_lag``: time constant (s) of a first-order lag from the command to the applied force; ``delay``: actuation delay in
     samples; ``backlash_gap``: total width (m) of a dead zone in K12 (flexible only); ``coulomb_eps``: velocity scale
     (m/s) of the smoothed Coulomb sign, 0 for the hard sign."""
 

@@ -294,12 +294,12 @@ pub fn simulate_sensitivity<const N: usize>(
         let mut t = expint::Sens::<N>::new(model, qr.len(), opts.delay)?;
         let stepper = Exponential::new(model, chi, qr, opts)?;
         let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
-        (sim, t.dforce, t.dq)
+        (sim, t.cmd.dforce, t.dq)
     } else {
         let mut t = rk4::Sensitivity::<N>::new(model.n_params(), qr.len(), opts.delay)?;
         let stepper = Rk4::new(model, chi, opts)?;
         let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
-        (sim, t.dforce, t.dq)
+        (sim, t.cmd.dforce, t.dq)
     };
     let sim = finite_outputs(sim, model, chi, opts)?;
     // finite states can still have non-finite sensitivities (e.g. a Coulomb force of 1e308 N at rest, whose

@@ -5,7 +5,7 @@
 //! simulation, the forward sensitivities for `simulate_sensitivity`.
 
 use super::{describe, SimOptions, SimOutput};
-use crate::controller::{Controller, TransferFunction};
+use crate::controller::{Controller, FilterState, TransferFunction, MAX_TAPS};
 use crate::error::{filled, Error, Result};
 use crate::model::Model;
 use nalgebra::SVector;
@@ -50,6 +50,52 @@ pub(super) trait Tangent<const N: usize, S: Stepper<N>> {
     fn record(&mut self, k: usize);
     /// Differentiates one accepted step.
     fn step(&mut self, ctx: &S::Ctx, step: &S::Step) -> Result<()>;
+}
+
+/// The command's part of the sensitivities, the same for every integrator: the
+/// controller's law run on `∂q1/∂χ_j` per parameter (zero while the command saturates),
+/// delayed like the command, and recorded as `∂force[k]/∂χ_j`.
+pub(super) struct CommandSens {
+    n: usize,
+    /// The controller's state on `∂q1/∂χ`, one per parameter.
+    ctl: Vec<FilterState>,
+    /// Delayed command sensitivities (ring buffer, like the commands).
+    pending: Vec<Vec<f64>>,
+    /// Sensitivity of the force applied over the current period.
+    pub dtau: Vec<f64>,
+    /// `∂force[k]/∂χ_j`, layout `[j][k]`.
+    pub dforce: Vec<f64>,
+}
+
+impl CommandSens {
+    pub fn new(p: usize, n: usize, delay: usize) -> Result<Self> {
+        Ok(Self {
+            n,
+            ctl: vec![[0.0; MAX_TAPS]; p],
+            pending: vec![vec![0.0; p]; delay],
+            dtau: vec![0.0; p],
+            dforce: filled(p * n, 0.0, "the force sensitivities")?,
+        })
+    }
+
+    /// The command of sample `k` (by `law`, `active`: not saturated) with `dq1(j)` the
+    /// sensitivity of the measured motor position to parameter `j`.
+    pub fn command(&mut self, k: usize, law: &TransferFunction, active: bool, dq1: impl Fn(usize) -> f64) {
+        let d = self.pending.len();
+        let cmd = if d == 0 {
+            &mut self.dtau
+        } else {
+            // the slot of sample k held the command of sample k − d: apply it now
+            let slot = &mut self.pending[k % d];
+            std::mem::swap(&mut self.dtau, slot);
+            slot
+        };
+        let gain = if active { law.gain() } else { 0.0 };
+        for (j, c) in cmd.iter_mut().enumerate() {
+            *c = gain * law.sensitivity_step(&mut self.ctl[j], dq1(j));
+            self.dforce[j * self.n + k] = *c;
+        }
+    }
 }
 
 /// The tangent of a plain simulation.
@@ -211,12 +257,20 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
             return Err(Error::Simulation(format!(
                 "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
                  (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller \
-                 gains{}",
+                 gains{}{}",
                 k + 1,
                 (k + 1) as f64 * opts.dt,
                 err,
                 bound,
                 describe(model, chi),
+                if opts.force_lag > 0.0 {
+                    format!(
+                        ", and the force lag of {} s (a current loop's is a fraction of a millisecond)",
+                        opts.force_lag
+                    )
+                } else {
+                    String::new()
+                },
                 S::DIVERGENCE_HINT,
             )));
         }

@@ -29,9 +29,9 @@
 //! `tol` times the reference stroke, the step is halved, recursively down to `T / 2^12`.
 //! The steps depend only on the inputs, so a simulation is deterministic.
 
-use super::driver::{Stepper, Tangent, V};
+use super::driver::{CommandSens, Stepper, Tangent, V};
 use super::SimOptions;
-use crate::controller::{FilterState, TransferFunction, MAX_TAPS};
+use crate::controller::TransferFunction;
 use crate::error::{filled, invalid, Error, Result};
 use crate::model::{Basis, Model};
 use nalgebra::{DMatrix, SMatrix};
@@ -638,12 +638,8 @@ pub(super) struct Sens<const N: usize> {
     dlast: Vec<V<N>>,
     gchi: Vec<V<N>>,
     tau: f64,
-    /// Sensitivity of the force applied over the current period.
-    dtau: Vec<f64>,
-    /// The controller's state on `∂q1/∂χ`, one per parameter.
-    ctl: Vec<FilterState>,
-    pending: Vec<Vec<f64>>,
-    pub dforce: Vec<f64>,
+    /// The command's sensitivities.
+    pub cmd: CommandSens,
     pub dq: Vec<f64>,
 }
 
@@ -673,10 +669,7 @@ impl<const N: usize> Sens<N> {
             dlast: vec![V::<N>::zeros(); p],
             gchi: vec![V::<N>::zeros(); p],
             tau: 0.0,
-            dtau: vec![0.0; p],
-            ctl: vec![[0.0; MAX_TAPS]; p],
-            pending: vec![vec![0.0; p]; delay],
-            dforce: filled(p * n, 0.0, "the force sensitivities")?,
+            cmd: CommandSens::new(p, n, delay)?,
             dq: filled(N * p * n, 0.0, "the position sensitivities")?,
         })
     }
@@ -767,20 +760,9 @@ impl<const N: usize> Tangent<N, Exponential<N>> for Sens<N> {
     }
 
     fn command(&mut self, k: usize, law: &TransferFunction, active: bool, tau: f64) {
-        let (p, n, d) = (self.p, self.n, self.pending.len());
         self.tau = tau;
-        let cmd = if d == 0 {
-            &mut self.dtau
-        } else {
-            let slot = &mut self.pending[k % d];
-            std::mem::swap(&mut self.dtau, slot);
-            slot
-        };
-        let gain = if active { law.gain() } else { 0.0 };
-        for j in 0..p {
-            cmd[j] = gain * law.sensitivity_step(&mut self.ctl[j], self.sq[j][0]);
-            self.dforce[j * n + k] = cmd[j];
-        }
+        let sq = &self.sq;
+        self.cmd.command(k, law, active, |j| sq[j][0]);
     }
 
     fn record(&mut self, k: usize) {
@@ -810,7 +792,7 @@ impl<const N: usize> Tangent<N, Exponential<N>> for Sens<N> {
         let dl = self.dlevels[l].as_ref().expect("computed above");
         for j in 0..self.p {
             let mut df = self.da0[j] + self.dg[j];
-            df[0] += self.dinv[j][0] * self.tau + plant.inv_mass[0] * self.dtau[j];
+            df[0] += self.dinv[j][0] * self.tau + plant.inv_mass[0] * self.cmd.dtau[j];
             let (sq, sv) = (self.sq[j], self.sv[j]);
             // tangent of x_p = E x + h φ1 f, plus that of h φ2 along the step's Δg
             let mut yq = lv.eqq * sq + lv.eqv * sv + lv.p1q * df;

@@ -3,10 +3,10 @@
 //!
 //! [`Integrator::Rk4`]: super::Integrator::Rk4
 
-use super::driver::{Stepper, Tangent, V};
+use super::driver::{CommandSens, Stepper, Tangent, V};
 use super::expint::Plant;
 use super::SimOptions;
-use crate::controller::{FilterState, TransferFunction, MAX_TAPS};
+use crate::controller::TransferFunction;
 use crate::error::{filled, Result};
 use crate::model::Model;
 
@@ -97,13 +97,8 @@ pub(super) struct Sensitivity<const N: usize> {
     n: usize,
     sq: Vec<f64>,
     sv: Vec<f64>,
-    /// The controller's state on `∂q1/∂χ`, one per parameter.
-    ctl: Vec<FilterState>,
-    /// Sensitivity of the force applied over the current period.
-    dtau: Vec<f64>,
-    /// Delayed command sensitivities (ring buffer, like the commands).
-    pending: Vec<Vec<f64>>,
-    pub dforce: Vec<f64>,
+    /// The command's sensitivities.
+    pub cmd: CommandSens,
     pub dq: Vec<f64>,
     // RK4 work buffers
     kq: [Vec<f64>; 4],
@@ -121,10 +116,7 @@ impl<const N: usize> Sensitivity<N> {
             n,
             sq: z.clone(),
             sv: z.clone(),
-            ctl: vec![[0.0; MAX_TAPS]; p],
-            dtau: vec![0.0; p],
-            pending: vec![vec![0.0; p]; delay],
-            dforce: filled(p * n, 0.0, "the force sensitivities")?,
+            cmd: CommandSens::new(p, n, delay)?,
             dq: filled(N * p * n, 0.0, "the position sensitivities")?,
             kq: [z.clone(), z.clone(), z.clone(), z.clone()],
             kv: [z.clone(), z.clone(), z.clone(), z.clone()],
@@ -139,21 +131,8 @@ impl<'a, const N: usize> Tangent<N, Rk4<'a, N>> for Sensitivity<N> {
     fn start(&mut self, _: &Rk4<'a, N>, _: &V<N>, _: &V<N>) {}
 
     fn command(&mut self, k: usize, law: &TransferFunction, active: bool, _: f64) {
-        let (p, n, d) = (self.p, self.n, self.pending.len());
-        // ∂τ[k]/∂χ: the controller's law on ∂q1/∂χ (zero while the command saturates).
-        let cmd = if d == 0 {
-            &mut self.dtau
-        } else {
-            // the slot of sample k held the command of sample k − d: apply it now
-            let slot = &mut self.pending[k % d];
-            std::mem::swap(&mut self.dtau, slot);
-            slot
-        };
-        let gain = if active { law.gain() } else { 0.0 };
-        for j in 0..p {
-            cmd[j] = gain * law.sensitivity_step(&mut self.ctl[j], self.sq[j]);
-            self.dforce[j * n + k] = cmd[j];
-        }
+        let sq = &self.sq;
+        self.cmd.command(k, law, active, |j| sq[j]);
     }
 
     fn record(&mut self, k: usize) {
@@ -190,7 +169,7 @@ impl<'a, const N: usize> Tangent<N, Rk4<'a, N>> for Sensitivity<N> {
                         s += aq[(d, e)] * self.stage_q[e * p + j] + av[(d, e)] * self.stage_v[e * p + j];
                     }
                     if d == 0 {
-                        s += inv_mass[0] * self.dtau[j];
+                        s += inv_mass[0] * self.cmd.dtau[j];
                     }
                     self.kv[i][d * p + j] = s;
                     self.kq[i][d * p + j] = self.stage_v[d * p + j];
