@@ -617,7 +617,6 @@ class _ModeCriterion:
         self.pb = problem(rec, "flexible", offset=self.offset, **dict(sim_kw, tol=max(MODE_SIM_TOL, tol)))
         coarse = dict(sim_kw, tol=max(GRID_SIM_TOL, tol))
         self.pb_grid = problem(rec, "flexible", offset=self.offset, **coarse)
-        self.sims = 0
         self.bad = 1e3  # returned for points outside the domain or that fail to simulate (relative error 100000 %)
 
     def params(self, lam: float, f: float, s: float = 0.0) -> Dict[str, float]:
@@ -634,14 +633,13 @@ class _ModeCriterion:
         return 0.0 < x[0] < 1.0 and x[1] > 0.0 and (len(x) < 3 or 0.0 <= x[2] <= 1.0)
 
     def batch(self, xs, tally: Optional[list] = None, coarse: bool = False) -> np.ndarray:
-        """The criterion at each row of ``xs``; the number of simulations run is added to ``tally[0]`` too.
+        """The criterion at each row of ``xs``; the number of simulations run is added to ``tally[0]``.
         ``coarse``: simulated at ``GRID_SIM_TOL``, to rank the grid's points (see there)."""
         xs = np.atleast_2d(np.asarray(xs, dtype=float))
         ok = np.array([self.valid(x) for x in xs], dtype=bool)
         out = np.full(len(xs), self.bad)
         if ok.any():
             pts = np.array([params_vector("flexible", self.params(*x), self.offset)[1] for x in xs[ok]])
-            self.sims += len(pts)
             if tally is not None:
                 tally[0] += len(pts)
             vals, _ = (self.pb_grid if coarse else self.pb).squared_error_batch(pts, self.yd, self.dec.core)
