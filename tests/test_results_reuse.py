@@ -122,3 +122,23 @@ def test_a_model_object_stands_for_its_kind_and_structure_everywhere(emps):
         didim.identify(emps, m, "idim-ls")
     with pytest.raises(didim.DataError, match=r"carries its structure: leave delay out"):
         didim.identify(emps, m, "didim", delay=2)
+
+
+def test_the_doctor_s_final_model_is_a_result_that_reproduces_its_own_errors(emps_path, emps_pulses_path, tmp_path):
+    """The doctor's final model (its effects, force lag included) as a result: simulate reproduces the doctor's own
+    full-rate errors on the training and the validation record, in Python and through ``didim simulate``."""
+    out = subprocess.run([sys.executable, "-m", "didim.cli", "doctor", str(emps_path), "--validate",
+                          str(emps_pulses_path), "--result", str(tmp_path / "m.json"), "--json", str(tmp_path / "d.json"),
+                          "--quiet"], capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr
+    fit = json.loads((tmp_path / "d.json").read_text())["fit"]
+    r = didim.load_result(tmp_path / "m.json")
+    emps, pulses = didim.load_mat(emps_path), didim.load_mat(emps_pulses_path)
+    assert r.structure.terms, "the EMPS doctor adds friction terms"
+    assert didim.simulate(emps, r).relative_error(emps) == pytest.approx(fit["train_force_after"], rel=1e-9)
+    assert didim.simulate(pulses, r).relative_error(pulses) == pytest.approx(fit["valid_force_after"], rel=1e-9)
+    cli = subprocess.run([sys.executable, "-m", "didim.cli", "simulate", str(emps_pulses_path), str(tmp_path / "m.json"),
+                          "--json", str(tmp_path / "s.json")], capture_output=True, text=True, timeout=300)
+    assert cli.returncode == 0, cli.stderr
+    assert json.loads((tmp_path / "s.json").read_text())["force_error"] == pytest.approx(fit["valid_force_after"],
+                                                                                        rel=1e-9)

@@ -8,6 +8,7 @@ from typing_extensions import final
 
 DEFAULT_COULOMB_EPS: float
 DEFAULT_TOL: float
+TERM_KINDS: List[str]
 
 _F64 = npt.NDArray[np.float64]
 
@@ -16,6 +17,7 @@ __all__ = [
     "DEFAULT_TOL",
     "Decimation",
     "Problem",
+    "TERM_KINDS",
     "butter",
     "cheby1",
     "decimate",

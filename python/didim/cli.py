@@ -175,7 +175,7 @@ def cmd_doctor(args) -> int:
     from ._io import write_text
     from .doctor import doctor
 
-    _check_outputs([args.file, args.validate, args.controller], [args.json, args.html])
+    _check_outputs([args.file, args.validate, args.controller], [args.json, args.html, args.result])
     rec = _load(args, args.file)
     val = _load(args, args.validate) if args.validate else None
     d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet))
@@ -186,6 +186,9 @@ def cmd_doctor(args) -> int:
     if args.html:
         write_text(args.html, d.to_html())
         print(f"wrote {args.html}")
+    if args.result:
+        d.final_result.save(args.result)
+        print(f"wrote {args.result} (the final model: didim simulate RECORD {args.result})")
     return 0
 
 
@@ -321,6 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--alpha", type=float, default=0.01, help="family-wise test level (default 0.01)")
     o.add_argument("--json", metavar="OUT")
     o.add_argument("--html", metavar="OUT", help="the report an engineer reads (plots embedded)")
+    o.add_argument("--result", metavar="OUT.json", help="the final model as a result (for didim simulate)")
     o.add_argument("--quiet", action="store_true")
     o.set_defaults(func=cmd_doctor)
 

@@ -34,9 +34,8 @@ Params = Union[Mapping[str, float], Sequence[float], np.ndarray]
 
 #: Degrees of freedom a term can act on (the load only in the flexible model).
 TERM_DOFS = ("motor", "load")
-#: Kinds of extra model terms: see :class:`Term`.
-TERM_KINDS = ("offset", "viscous", "coulomb", "abs_viscous", "abs_coulomb", "stribeck", "ripple_sin", "ripple_cos",
-              "coulomb_ripple_sin", "coulomb_ripple_cos", "damper")
+#: Kinds of extra model terms, as the core's model defines them (``Basis::from_kind``): see :class:`Term`.
+TERM_KINDS = tuple(_core.TERM_KINDS)
 
 
 @dataclass(frozen=True)

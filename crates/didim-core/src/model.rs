@@ -27,6 +27,21 @@ pub const MOTOR: usize = 0;
 /// Index of the load degree of freedom of the flexible model (`q12`).
 pub const LOAD: usize = 1;
 
+/// The kinds of extra model terms [`Basis::from_kind`] builds (the Python layer's `TERM_KINDS`).
+pub const TERM_KINDS: &[&str] = &[
+    "offset",
+    "viscous",
+    "coulomb",
+    "abs_viscous",
+    "abs_coulomb",
+    "stribeck",
+    "ripple_sin",
+    "ripple_cos",
+    "coulomb_ripple_sin",
+    "coulomb_ripple_cos",
+    "damper",
+];
+
 /// Default velocity scale of the smoothed Coulomb sign, in m/s.
 ///
 /// Small against the EMPS speeds (plateaus at 0.042 to 0.125 m/s, sign > 0.9999
@@ -200,6 +215,42 @@ impl Basis {
             }
             _ => Ok(()),
         }
+    }
+
+    /// The basis function of an extra model term named by its kind (the names of
+    /// [`TERM_KINDS`]), its hyper-parameter (a Stribeck speed in m/s, a period in m; unused
+    /// otherwise) and the dof it acts on (a `damper` always couples the motor and the load).
+    pub fn from_kind(kind: &str, hyper: f64, dof: usize) -> Result<Basis> {
+        use std::f64::consts::FRAC_PI_2;
+        Ok(match kind {
+            "offset" => Basis::Offset { dof },
+            "viscous" => Basis::Viscous { dof },
+            "coulomb" => Basis::Coulomb { dof },
+            "abs_viscous" => Basis::AbsViscous { dof },
+            "abs_coulomb" => Basis::AbsCoulomb { dof },
+            "stribeck" => Basis::Stribeck { dof, vs: hyper },
+            "ripple_sin" | "ripple_cos" => Basis::Ripple {
+                dof,
+                period: hyper,
+                phase: if kind == "ripple_cos" { FRAC_PI_2 } else { 0.0 },
+            },
+            "coulomb_ripple_sin" | "coulomb_ripple_cos" => Basis::CoulombRipple {
+                dof,
+                period: hyper,
+                phase: if kind == "coulomb_ripple_cos" {
+                    FRAC_PI_2
+                } else {
+                    0.0
+                },
+            },
+            "damper" => Basis::Damper { a: MOTOR, b: LOAD },
+            other => {
+                return Err(invalid!(
+                    "unknown term kind {other:?}: use one of {} (damper: flexible model)",
+                    TERM_KINDS.join(", ")
+                ))
+            }
+        })
     }
 
     /// The SI unit of the parameter that multiplies this basis function (load side).
@@ -705,6 +756,26 @@ pub fn flexible_with(offset: bool, coulomb_eps: f64) -> Result<Model<2>> {
 mod tests {
     use super::*;
     use nalgebra::Vector2;
+
+    #[test]
+    fn every_term_kind_builds_its_basis_and_knows_its_unit() {
+        for kind in TERM_KINDS {
+            let b = Basis::from_kind(kind, 0.01, LOAD).unwrap();
+            let unit = b.unit();
+            assert!(["N", "N/(m/s)"].contains(&unit), "{kind}: {unit}");
+            // a load term acts on the load row only; the damper couples both
+            let (a, other) = b.dofs();
+            if *kind == "damper" {
+                assert_eq!((a, other), (MOTOR, Some(LOAD)));
+            } else {
+                assert_eq!((a, other), (LOAD, None), "{kind}");
+            }
+        }
+        let e = Basis::from_kind("stribek", 0.01, MOTOR).unwrap_err();
+        assert!(e.to_string().contains("unknown term kind \"stribek\""), "{e}");
+        assert_eq!(Basis::Inertia { dof: 0 }.unit(), "kg");
+        assert_eq!(Basis::Spring { a: 0, b: 1 }.unit(), "N/m");
+    }
 
     #[test]
     fn coulomb_sign_is_odd_saturating_and_hard_at_zero_eps() {

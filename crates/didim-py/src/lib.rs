@@ -162,44 +162,7 @@ fn extra_basis(kind: &str, hyper: f64, dof: &str) -> Result<Basis, Error> {
             )))
         }
     };
-    Ok(match kind {
-        "offset" => Basis::Offset { dof },
-        "viscous" => Basis::Viscous { dof },
-        "coulomb" => Basis::Coulomb { dof },
-        "abs_viscous" => Basis::AbsViscous { dof },
-        "abs_coulomb" => Basis::AbsCoulomb { dof },
-        "stribeck" => Basis::Stribeck { dof, vs: hyper },
-        "coulomb_ripple_sin" => Basis::CoulombRipple {
-            dof,
-            period: hyper,
-            phase: 0.0,
-        },
-        "coulomb_ripple_cos" => Basis::CoulombRipple {
-            dof,
-            period: hyper,
-            phase: std::f64::consts::FRAC_PI_2,
-        },
-        "damper" => Basis::Damper {
-            a: model::MOTOR,
-            b: model::LOAD,
-        },
-        "ripple_sin" => Basis::Ripple {
-            dof,
-            period: hyper,
-            phase: 0.0,
-        },
-        "ripple_cos" => Basis::Ripple {
-            dof,
-            period: hyper,
-            phase: std::f64::consts::FRAC_PI_2,
-        },
-        other => {
-            return Err(Error::InvalidInput(format!(
-            "unknown term kind {other:?}: use offset, viscous, coulomb, abs_viscous, abs_coulomb, stribeck, \
-                 ripple_sin, ripple_cos, coulomb_ripple_sin, coulomb_ripple_cos or damper (flexible model)"
-        )))
-        }
-    })
+    Basis::from_kind(kind, hyper, dof)
 }
 
 fn make_model(
@@ -623,6 +586,7 @@ fn default_factor(fs_hz: Real, cutoff_hz: Real) -> usize {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_COULOMB_EPS", DEFAULT_COULOMB_EPS)?;
     m.add("DEFAULT_TOL", sim::DEFAULT_TOL)?;
+    m.add("TERM_KINDS", model::TERM_KINDS.to_vec())?;
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
     m.add_function(wrap_pyfunction!(param_units, m)?)?;
     m.add_function(wrap_pyfunction!(regressor, m)?)?;

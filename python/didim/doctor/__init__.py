@@ -131,6 +131,18 @@ class Diagnosis:
 
         return json.dumps(self.to_dict(), indent=2)
 
+    @property
+    def final_result(self) -> IdentificationResult:
+        """The final model as a result: ``didim.simulate(rec, d.final_result)`` simulates it, ``.save("m.json")``
+        keeps it for ``didim simulate RECORD m.json``. Its ``force_error`` is the full-rate closed-loop force error
+        on the training samples (``fit["train_force_after"]``)."""
+        st = self.final_state
+        return IdentificationResult(
+            model=st.model, method="doctor (DIDIM refit)", params=dict(st.params), std={}, rel_std_pct={},
+            relative_error=float("nan"), iterations=len(self.rounds), simulations=0, elapsed_s=self.elapsed_s,
+            frozen=dict(st.frozen), structure=st.structure(), force_error=self.fit["train_force_after"],
+            notes=[f"the doctor's final model: {', '.join(f.effect for f in self.findings) or 'the base model'}"])
+
     def to_html(self) -> str:
         from ..report import diagnosis_html
 

@@ -36,6 +36,13 @@ class State:
     def all_params(self) -> Dict[str, float]:
         return {**self.frozen, **self.params}
 
+    def structure(self):
+        """The :class:`didim.Model` of this state."""
+        from ..model import Model
+
+        return Model(self.model, offset=self.offset, terms=self.terms, delay=self.delay,
+                     backlash_gap=self.backlash_gap, force_lag=self.force_lag)
+
     def coulomb(self) -> float:
         """The Coulomb friction on the motor side (Fc or Fc1)."""
         return self.params.get("Fc", self.params.get("Fc1", 1.0))
