@@ -66,3 +66,22 @@ def test_the_doctor_names_it_on_an_independent_record(truthbench):
     f = named[0]
     assert f.params["period"] == pytest.approx(entry["params"]["Fcq_p"], rel=0.05)
     assert f.params["relative_amplitude"] == pytest.approx(entry["params"]["Fcq_a"], rel=0.2)
+
+
+@pytest.mark.parametrize("method", ["idim-ls", "didim", "oe-nm", "oe-lm"])
+def test_every_method_identifies_it_given_as_a_model_and_its_result_reproduces_its_error(record, method):
+    """The term as part of a didim.Model, through identify with every method: the amplitudes within a few percent of
+    the truth (0.5 N noise; IDIM-LS differentiates noisy positions) and the result simulates its own force error."""
+    m = didim.Model("rigid", terms=tuple(TERMS))
+    kw = dict(apM=90.0) if method != "idim-ls" else dict(coulomb_eps=didim.DEFAULT_COULOMB_EPS)
+    if method == "oe-nm":
+        kw.update(initial={**TRUTH, "M": 90.0, "Fv": 180.0, "Fc": 18.0, "Aq_sin": 4.0, "Aq_cos": -1.0}, max_iter=600)
+        del kw["apM"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        r = didim.identify(record, m, method, **kw)
+    assert r.structure == m, method
+    amp, amp_true = np.hypot(r.params["Aq_sin"], r.params["Aq_cos"]), np.hypot(TRUTH["Aq_sin"], TRUTH["Aq_cos"])
+    assert amp == pytest.approx(amp_true, rel=0.05), (method, r.params)
+    assert r.params["Fc"] == pytest.approx(TRUTH["Fc"], rel=0.05), (method, r.params)
+    assert didim.simulate(record, r).relative_error(record) == pytest.approx(r.force_error, rel=1e-9)

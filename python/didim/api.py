@@ -167,6 +167,8 @@ def identify(
         else:
             pre = didim_rigid(recording, m0, offset=offset, progress=progress, **sim_kw)
             initial = pseudo_regular_initial(pre.params)
+        # extra terms start at 0, like the frictions of eq. (22)
+        initial = {**{t.name: 0.0 for t in options.get("terms", ())}, **initial}
     solver = oe_nm if method == "oe-nm" else oe_lm
     if method == "oe-nm" and model == "rigid" and any(v == 0 for v in initial.values()):
         # Nelder-Mead scales by the initial values: zero frictions start from a small fraction of the force scale

@@ -80,7 +80,7 @@ def _stack_rows(rows: List[tuple], dec: Decimation):
 
 
 def _idim_system(rec: Recording, model: str, offset: bool, lowpass_hz: float, lowpass_order: int, padding: str,
-                 border: int, dec: Decimation, coulomb_eps: float, zoh_align: bool):
+                 border: int, dec: Decimation, coulomb_eps: float, zoh_align: bool, terms: Sequence = ()):
     """The decimated IDIM-LS system (Y, W) of a record (both rows of eq. (4) for the flexible model)."""
     if model == "flexible" and rec.ql is None:
         raise DataError("IDIM-LS of the flexible model needs the load position ql (a second encoder); use method='didim'")
@@ -90,7 +90,8 @@ def _idim_system(rec: Recording, model: str, offset: bool, lowpass_hz: float, lo
     q = np.array([lowpass(x, lowpass_hz, rec.fs, order=lowpass_order, padding=padding) for x in positions])
     qd = diffcent(q, rec.dt)
     qdd = diffcent(qd, rec.dt)
-    w = _core.regressor(model, q, qd, qdd, coulomb_eps=coulomb_eps, offset=offset)
+    w = _core.regressor(model, q, qd, qdd, coulomb_eps=coulomb_eps, offset=offset,
+                        terms=[t.spec() for t in terms] or None)
     force = rec.force
     if zoh_align:
         force = np.concatenate([force[:1], 0.5 * (force[1:] + force[:-1])])
@@ -104,9 +105,10 @@ def idim_cross_test(rec: Recording, result: IdentificationResult) -> float:
     """Relative error ‖Y − Wχ̂‖/‖Y‖ of an IDIM-LS result on another record, built with the same recipe."""
     o = result.options
     dec = result.options.get("_decimation") or Decimation.matlab(10)
+    terms = result.structure.terms if result.structure is not None else ()
     y, w = _idim_system(rec, result.model, "OF" in result.params, o["lowpass_hz"], o["lowpass_order"], o["padding"],
-                        o["border"], dec, o["coulomb_eps"], o["zoh_align"])
-    chi = np.array([result.params[n] for n in param_names(result.model, "OF" in result.params)])
+                        o["border"], dec, o["coulomb_eps"], o["zoh_align"], terms)
+    chi = np.array([result.params[n] for n in param_names(result.model, "OF" in result.params, terms)])
     return float(np.linalg.norm(y - w @ chi) / np.linalg.norm(y))
 
 
@@ -123,6 +125,7 @@ def idim_ls(
     sigma: str = "paper",
     coulomb_eps: float = 0.0,
     zoh_align: bool = False,
+    terms: Sequence = (),
 ) -> IdentificationResult:
     """IDIM-LS: the inverse dynamic model on measured positions, eqs. (10)-(15).
 
@@ -138,17 +141,20 @@ def idim_ls(
     over [k−1, k) and [k, k+1), (τ[k−1] + τ[k])/2, instead of τ[k]: a drive's command is held over the following
     period, so τ[k] leads the central-difference states by half a sample, which biases viscous friction and the
     flexible parameters once the excitation reaches tens of Hz. Off by default (the benchmark's recipe).
+
+    ``terms`` (:class:`didim.Term`) add columns to W, built by the core's basis functions on the filtered states.
     """
     t0 = time.perf_counter()
     _checks.options(lowpass_hz=lowpass_hz, lowpass_order=lowpass_order, border=border, coulomb_eps=coulomb_eps,
                     zoh_align=zoh_align)
     _checks.one_of("sigma", sigma, ("paper", "sample_std"))
-    names = param_names(model, offset)
+    names = param_names(model, offset, terms)
     dec = decimation or Decimation.matlab(10)
     _checks.decimation_matches(dec, rec.fs)
     _checks.record_long_enough(dec, rec.n - min(border, rec.n - 1), rec.dt, len(names), 2 if model == "flexible" else 1,
                                "IDIM-LS")
-    y, wd = _idim_system(rec, model, offset, lowpass_hz, lowpass_order, padding, border, dec, coulomb_eps, zoh_align)
+    y, wd = _idim_system(rec, model, offset, lowpass_hz, lowpass_order, padding, border, dec, coulomb_eps, zoh_align,
+                         terms)
     sol = _solve(wd, y, names, sigma)
     p = dict(zip(names, map(float, sol["params"])))
     return IdentificationResult(
@@ -163,7 +169,7 @@ def idim_ls(
         elapsed_s=time.perf_counter() - t0,
         options=dict(lowpass_hz=lowpass_hz, lowpass_order=lowpass_order, padding=padding, border=border,
                      decimation=dec.describe(), _decimation=dec, sigma=sigma, coulomb_eps=coulomb_eps, zoh_align=zoh_align,
-                     condition_number=float(sol["condition_number"])),
+                     terms=[t.spec() for t in terms], condition_number=float(sol["condition_number"])),
         covariance=sol["covariance"],
     )
 

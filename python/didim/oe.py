@@ -54,10 +54,15 @@ def oe_nm(
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
+    terms: Sequence[Term] = (),
+    backlash_gap: Optional[float] = None,
+    delay: int = 0,
+    force_lag: float = 0.0,
 ) -> IdentificationResult:
     """Nelder-Mead (scipy's) on all parameters with J_τ = ‖τ_ddm − τ‖² or J_q = ‖q1_ddm − q1‖² (eq. (32)) on
     decimated signals. Variables are scaled by their initial values (all nonzero with eq. (33)), so ``xatol`` is
-    relative; ``fatol`` is relative to the initial criterion."""
+    relative; ``fatol`` is relative to the initial criterion. ``terms``, ``backlash_gap``, ``delay`` and ``force_lag``
+    extend the model as for :func:`didim.simulate` (a derivative-free method needs nothing more)."""
     from scipy.optimize import minimize
 
     _check_criterion(criterion)
@@ -66,7 +71,7 @@ def oe_nm(
     initial = _checks.physical(initial, "initial")
     t0 = time.perf_counter()
     offset = "OF" in initial
-    names, x0, offset = params_vector(model, initial, offset)
+    names, x0, offset = params_vector(model, initial, offset, terms)
     scale = np.where(x0 != 0, np.abs(x0), 1.0)
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(names), 1, "oe-nm")
@@ -77,7 +82,7 @@ def oe_nm(
     history: List[Iteration] = []
 
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
-                 tol=sim_tol)
+                 tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
     output = "force" if criterion == "force" else "position"
     penalty = 1e3 * ny**2
 
@@ -116,7 +121,8 @@ def oe_nm(
         elapsed_s=time.perf_counter() - t0, converged=bool(res.success), message="" if res.success else str(res.message),
         initial=dict(initial), history=history,
         options=dict(criterion=criterion, decimation=dec.describe(), xatol=xatol, fatol=fatol, integrator=integrator,
-                     coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol),
+                     coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol, terms=[t.spec() for t in terms],
+                     backlash_gap=backlash_gap, delay=delay, force_lag=force_lag),
     )
 
 
