@@ -299,6 +299,14 @@ impl<const N: usize> Plant<N> {
         h * (amax(gv.as_slice()) + h * amax(gq.as_slice())) >= 1.0
     }
 
+    /// The input accelerations `b = M⁻¹ u` of the motor force `tau` (N).
+    #[inline(always)]
+    pub fn input(&self, tau: f64) -> V<N> {
+        let mut b = V::<N>::zeros();
+        b[0] = tau * self.inv_mass[0];
+        b
+    }
+
     /// Accelerations of the full direct model for the input accelerations `b` (= M⁻¹ u).
     #[inline(always)]
     pub fn accel(&self, q: &V<N>, v: &V<N>, b: &V<N>, g: &V<N>) -> V<N> {
@@ -511,13 +519,6 @@ impl<const N: usize> Exponential<N> {
             implicit: self.plant.implicit.get(),
         }
     }
-
-    #[inline(always)]
-    fn input(&self, tau: f64) -> V<N> {
-        let mut b = V::<N>::zeros();
-        b[0] = tau * self.plant.inv_mass[0];
-        b
-    }
 }
 
 impl<const N: usize> Stepper<N> for Exponential<N> {
@@ -537,7 +538,7 @@ impl<const N: usize> Stepper<N> for Exponential<N> {
     /// at the state itself.
     #[inline(always)]
     fn accel(&self, q: &V<N>, v: &V<N>, tau: f64) -> V<N> {
-        self.plant.accel(q, v, &self.input(tau), &self.g)
+        self.plant.accel(q, v, &self.plant.input(tau), &self.g)
     }
 
     #[inline(always)]
@@ -548,7 +549,7 @@ impl<const N: usize> Stepper<N> for Exponential<N> {
         tau: f64,
         tangent: &mut T,
     ) -> Result<()> {
-        let b = self.input(tau);
+        let b = self.plant.input(tau);
         self.plant.advance(0, q, v, &mut self.g, &b, &mut |plant, step| {
             tangent.step(plant, step)
         })

@@ -55,9 +55,8 @@ impl<'a, const N: usize> Stepper<N> for Rk4<'a, N> {
 
     #[inline(always)]
     fn accel(&self, q: &V<N>, v: &V<N>, tau: f64) -> V<N> {
-        let mut b = V::<N>::zeros();
-        b[0] = tau * self.plant.inv_mass[0];
-        self.plant.accel(q, v, &b, &self.plant.g(q, v))
+        self.plant
+            .accel(q, v, &self.plant.input(tau), &self.plant.g(q, v))
     }
 
     #[inline(always)]
@@ -69,15 +68,18 @@ impl<'a, const N: usize> Stepper<N> for Rk4<'a, N> {
         tangent: &mut T,
     ) -> Result<()> {
         let h = self.h;
+        let b = self.plant.input(tau); // held over the period
         for _ in 0..self.substeps {
+            let plant = &self.plant;
+            let accel = |q: &V<N>, v: &V<N>| plant.accel(q, v, &b, &plant.g(q, v));
             let (q1, v1) = (*q, *v);
-            let a1 = self.accel(&q1, &v1, tau);
+            let a1 = accel(&q1, &v1);
             let (q2, v2) = (q1 + v1 * (0.5 * h), v1 + a1 * (0.5 * h));
-            let a2 = self.accel(&q2, &v2, tau);
+            let a2 = accel(&q2, &v2);
             let (q3, v3) = (q1 + v2 * (0.5 * h), v1 + a2 * (0.5 * h));
-            let a3 = self.accel(&q3, &v3, tau);
+            let a3 = accel(&q3, &v3);
             let (q4, v4) = (q1 + v3 * h, v1 + a3 * h);
-            let a4 = self.accel(&q4, &v4, tau);
+            let a4 = accel(&q4, &v4);
             let step = Substep {
                 stages: [(q1, v1, a1), (q2, v2, a2), (q3, v3, a3), (q4, v4, a4)],
                 h,
