@@ -6,6 +6,7 @@ bare ``ValueError``/``TypeError`` from deep inside numpy or the core.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import math
 import numbers
@@ -88,6 +89,13 @@ def one_of(name: str, value, choices: Sequence[str]) -> str:
     return value
 
 
+@functools.lru_cache(maxsize=None)
+def _keyword_only(f: Callable) -> tuple:
+    """The keyword-only parameters of ``f`` (read once per function: ``inspect.signature`` costs tens of µs, and the
+    simulator checks its options on every call)."""
+    return tuple(k for k, p in inspect.signature(f).parameters.items() if p.kind == p.KEYWORD_ONLY)
+
+
 def known_options(funcs: Sequence[Callable], options: Mapping, where: str, skip: Iterable[str] = (),
                   also: Sequence[str] = ()) -> None:
     """Refuses keyword options that none of ``funcs`` takes (the functions an entry point forwards its options to),
@@ -97,8 +105,8 @@ def known_options(funcs: Sequence[Callable], options: Mapping, where: str, skip:
     skip = set(skip)
     accepted = list(also)
     for f in funcs:
-        for k, p in inspect.signature(f).parameters.items():
-            if p.kind == p.KEYWORD_ONLY and k not in skip and k not in accepted:
+        for k in _keyword_only(f):
+            if k not in skip and k not in accepted:
                 accepted.append(k)
     unknown = [k for k in options if k not in accepted]
     if unknown:

@@ -66,10 +66,16 @@ def wald_added(r: np.ndarray, x: np.ndarray, a: Optional[np.ndarray] = None) -> 
     if a is None:
         a = ar_fit(r)
     rw, xw = prewhiten(a, r, x)
+    return wald_whitened(rw, xw)
+
+
+def wald_whitened(rw: np.ndarray, xw: np.ndarray) -> WaldTest:
+    """:func:`wald_added` on a residual and columns already prewhitened alike (prewhitening is linear and per column,
+    so the columns of many tests can be prewhitened in one call and tested one group at a time)."""
     scale = np.linalg.norm(xw, axis=0)
     keep = scale > 1e-12 * max(float(np.max(scale)) if scale.size else 0.0, 1e-300)
     if not np.any(keep):
-        return WaldTest(np.zeros(x.shape[1]), np.zeros((x.shape[1],) * 2), 0.0, x.shape[1], 1.0, 0.0)
+        return WaldTest(np.zeros(xw.shape[1]), np.zeros((xw.shape[1],) * 2), 0.0, xw.shape[1], 1.0, 0.0)
     xs = xw[:, keep] / scale[keep]
     beta_s, *_ = np.linalg.lstsq(xs, rw, rcond=None)
     e = rw - xs @ beta_s
@@ -84,9 +90,9 @@ def wald_added(r: np.ndarray, x: np.ndarray, a: Optional[np.ndarray] = None) -> 
         stat = float(beta_s @ np.linalg.solve(cov_s, beta_s))
     except np.linalg.LinAlgError:
         stat = float(beta_s @ np.linalg.pinv(cov_s) @ beta_s)
-    beta = np.zeros(x.shape[1])
+    beta = np.zeros(xw.shape[1])
     beta[keep] = beta_s / scale[keep]
-    cov = np.zeros((x.shape[1], x.shape[1]))
+    cov = np.zeros((xw.shape[1], xw.shape[1]))
     cov[np.ix_(keep, keep)] = cov_s / np.outer(scale[keep], scale[keep])
     explained = 1.0 - float(e @ e) / float(rw @ rw) if rw @ rw > 0 else 0.0
     from scipy import stats as sst
@@ -133,4 +139,4 @@ def orthogonalize(x: np.ndarray, w: np.ndarray) -> np.ndarray:
     return x - q @ (q.T @ x)
 
 
-__all__ = ["ar_fit", "prewhiten", "wald_added", "WaldTest", "holm", "diebold_mariano", "orthogonalize"]
+__all__ = ["ar_fit", "prewhiten", "wald_added", "wald_whitened", "WaldTest", "holm", "diebold_mariano", "orthogonalize"]

@@ -127,9 +127,8 @@ fn finite<const N: usize>(q: &V<N>, v: &V<N>) -> bool {
 /// sign of zero is kept.
 #[inline(always)]
 pub(super) fn round_to(x: f64, step: f64) -> f64 {
-    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
     let y = x / step;
-    if y.abs() >= 4_503_599_627_370_496.0 {
+    if y.abs() >= TWO_52 {
         return y.round() * step; // beyond 2^52 every double is an integer already
     }
     let mut r = (y + MAGIC) - MAGIC;
@@ -137,6 +136,45 @@ pub(super) fn round_to(x: f64, step: f64) -> f64 {
         r = y + 0.5 * y.signum();
     }
     r.copysign(y) * step
+}
+
+const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+const TWO_52: f64 = 4_503_599_627_370_496.0;
+
+/// The encoder: [`round_to`] its resolution, with the division (whose latency lies on the
+/// loop's critical path, sample after sample) replaced by a product with the inverse. The
+/// product is within 2 ulps of the quotient, so both round to the same multiple unless the
+/// quotient is that close to a tie (or beyond 2⁵²): there the division decides. Bit for
+/// bit the result of [`round_to`].
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Quantizer {
+    step: f64,
+    inv: f64,
+}
+
+impl Quantizer {
+    /// `step` (m): the resolution, 0 for none.
+    pub fn new(step: f64) -> Self {
+        Self {
+            step,
+            inv: if step > 0.0 { 1.0 / step } else { 0.0 },
+        }
+    }
+
+    #[inline(always)]
+    pub fn apply(&self, x: f64) -> f64 {
+        if self.step <= 0.0 {
+            return x;
+        }
+        let y = x * self.inv;
+        let r = (y + MAGIC) - MAGIC;
+        let margin = 8.0 * f64::EPSILON * y.abs();
+        if y.abs() < 0.25 * TWO_52 && ((r - y).abs() - 0.5).abs() > margin {
+            r.copysign(y) * self.step
+        } else {
+            round_to(x, self.step)
+        }
+    }
 }
 
 /// A first-order lag `T ḟ = τ − f` between the held command `τ` and the applied force `f`
@@ -189,13 +227,8 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
         (a.min(x), b.max(x))
     });
     let bound = 10.0 * (hi - lo) + 1.0;
-    let quantize = |x: f64| {
-        if opts.quantization > 0.0 {
-            round_to(x, opts.quantization)
-        } else {
-            x
-        }
-    };
+    let encoder = Quantizer::new(opts.quantization);
+    let quantize = |x: f64| encoder.apply(x);
 
     let mut q = V::<N>::repeat(qr[0]);
     let mut v = V::<N>::zeros();
@@ -280,7 +313,30 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
 
 #[cfg(test)]
 mod tests {
-    use super::round_to;
+    use super::{round_to, Quantizer};
+
+    #[test]
+    fn the_quantizer_is_round_to_bit_for_bit_near_ties_too() {
+        for &step in &[5e-8, 1.0, 0.1, 3e-3, 1e-9, 7.3e-6] {
+            let qz = Quantizer::new(step);
+            for i in -20_000i64..20_000 {
+                // exact ties, their neighbours one ulp away, and generic values
+                let k = i as f64 * 37.0;
+                for x in [
+                    (k + 0.5) * step,
+                    f64::from_bits(((k + 0.5) * step).to_bits() + 1),
+                    f64::from_bits(((k + 0.5) * step).to_bits().saturating_sub(1)),
+                    k * step + 0.123 * step * (i as f64).sin(),
+                ] {
+                    assert_eq!(qz.apply(x).to_bits(), round_to(x, step).to_bits(), "{x} {step}");
+                }
+            }
+            for x in [0.0, -0.0, 1e300, -1e300, 4.6e15 * step, f64::MIN_POSITIVE] {
+                assert_eq!(qz.apply(x).to_bits(), round_to(x, step).to_bits(), "{x} {step}");
+            }
+        }
+        assert_eq!(Quantizer::new(0.0).apply(0.123), 0.123);
+    }
 
     #[test]
     fn round_to_matches_f64_round_including_ties() {

@@ -48,6 +48,8 @@ const MAX_NEWTON: usize = 8;
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Level<const N: usize> {
     pub h: f64,
+    /// `1 / h`.
+    pub inv_h: f64,
     /// `atol / (h T)`: the change of `g` (an acceleration) over the step that moves the
     /// velocity by about the tolerance over a sample period (see [`Plant::try_step`]).
     pub g_scale: f64,
@@ -202,6 +204,7 @@ impl<const N: usize> Plant<N> {
             |r0: usize, c: usize, scale: f64| Mat::<N>::from_fn(|i, j| scale * x[(r0 + i, c0 + c + j)]);
         Level {
             h,
+            inv_h: 1.0 / h,
             g_scale: f64::NAN,
             eqq: block(0, 0, 1.0),
             eqv: block(0, N, 1.0),
@@ -436,7 +439,7 @@ impl<const N: usize> Plant<N> {
             };
             hook(self, &accepted)?;
             self.last_dg.set(step.g1 - *g);
-            self.last_inv_h.set(1.0 / self.level(l).h);
+            self.last_inv_h.set(self.level(l).inv_h);
             *q = step.q1;
             *v = step.v1;
             *g = step.g1;
