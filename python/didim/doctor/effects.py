@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -16,7 +16,7 @@ from ..identification import fit_flexible_mode, flexible_from_mode
 from ..result import IdentificationResult
 from ..signal import diffcent
 from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign
-from .fit import Data, State, motor_columns, refit
+from .fit import Data, State, motor_columns, motor_columns_many, refit
 
 
 @dataclass
@@ -30,7 +30,7 @@ class Candidate:
     grid: int
     test: Any = None
     p_adj: float = 1.0
-    rebuild: Optional[Callable[[float], np.ndarray]] = None  # columns for another hyper-parameter value
+    rebuild: Optional[Callable[[Sequence[float]], List[np.ndarray]]] = None  # columns for other hyper-parameter values
     step: float = 1.0  # ratio between neighbouring grid values
 
 
@@ -46,7 +46,9 @@ class Effect:
     ``confusable`` the effects it shares regressors with → the experiment that separates them, ``view`` where the
     residual shows it (velocity, position, spectrum, time), ``tried_with`` an effect that looks so much like this
     one on a rigid model that it is tried too whenever this one is (a whole-sample delay and a mode near the top of
-    the analysed band: each one's test takes most of the other's residual)."""
+    the analysed band: each one's test takes most of the other's residual), ``baseline(state, data, progress)`` the
+    model without the effect refitted by the optimiser ``adopt`` uses, when that is not DIDIM: the effect is judged
+    against it (None: against the current model)."""
 
     name: str
     physics: str
@@ -57,6 +59,7 @@ class Effect:
     physics_of: Optional[Callable[[Dict[str, float], State], str]] = None
     confusable: Dict[str, str] = field(default_factory=dict)
     tried_with: Optional[str] = None
+    baseline: Optional[Callable[[State, Data, Any], Optional[State]]] = None
 
     def describe(self, params: Dict[str, float], state: State) -> str:
         return self.physics_of(params, state) if self.physics_of else self.physics
@@ -126,11 +129,11 @@ def _stribeck_candidates(state: State, sim: SimResult, data: Data) -> List[Candi
     vmax = float(np.max(np.abs(sim.qd[0])))
     grid = np.geomspace(max(2e-4, vmax / 500), max(vmax / 3, 3e-4), 10)
 
-    def make(vs):
-        return motor_columns(state, sim, [Term("Fs", "stribeck", vs)])
+    def make(speeds):
+        return motor_columns_many(state, sim, [[Term("Fs", "stribeck", vs)] for vs in speeds])
 
-    return [Candidate("stribeck", make(vs), {"vs": float(vs)}, len(grid), rebuild=make, step=float(grid[1] / grid[0]))
-            for vs in grid]
+    return [Candidate("stribeck", x, {"vs": float(vs)}, len(grid), rebuild=make, step=float(grid[1] / grid[0]))
+            for vs, x in zip(grid, make(grid))]
 
 
 def _stribeck_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
@@ -185,11 +188,11 @@ def _periodic(name: str, names: Tuple[str, str], kinds: Tuple[str, str], share: 
         if grid is None:
             return []
 
-        def make(P):
-            return motor_columns(state, sim, terms(P))
+        def make(periods):
+            return motor_columns_many(state, sim, [terms(P) for P in periods])
 
-        return [Candidate(name, make(P), {"period": float(P)}, len(grid), rebuild=make, step=float(grid[1] / grid[0]))
-                for P in grid]
+        return [Candidate(name, x, {"period": float(P)}, len(grid), rebuild=make, step=float(grid[1] / grid[0]))
+                for P, x in zip(grid, make(grid))]
 
     def adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
         P = c.hyper["period"]
@@ -296,9 +299,16 @@ def _load_friction_candidates(state: State, sim: SimResult, data: Data) -> List[
     return [Candidate("load_friction", np.column_stack([v12, coulomb_sign(v12)]), {}, 1)]
 
 
-def _load_friction_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+def _load_friction_lm(data: Data, st: State, init: Dict[str, float]) -> IdentificationResult:
+    """Levenberg-Marquardt with exact sensitivities on the training samples: load friction is where the two frictions
+    trade against the mode's damping, which DIDIM's load row does not separate."""
     from ..oe import oe_lm
 
+    return oe_lm(data.train_record(), st.model, init, frozen=st.frozen, cutoff_hz=data.dec.cutoff_hz or 60.0,
+                 terms=st.terms, backlash_gap=st.backlash_gap, delay=st.delay)
+
+
+def _load_friction_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
     st = replace(state, frozen={k: v for k, v in state.frozen.items() if k not in ("Fv2", "Fc2")})
     init = {**st.params, "Fv2": max(float(c.test.beta[0]), 1.0), "Fc2": max(float(c.test.beta[1]), 0.1)}
     init["Fv1"] = max(init["Fv1"] - init["Fv2"], 1.0)
@@ -306,10 +316,22 @@ def _load_friction_adopt(c: Candidate, state: State, data: Data, progress) -> Ad
     if st.force_lag:  # the exact sensitivities do not cover a force lag: DIDIM refits the model with it
         st, r = refit(data, st, init, progress)
         return st, r, {"Fv2": st.params["Fv2"], "Fc2": st.params["Fc2"]}, _std(r, ("Fv2", "Fc2"))
-    r = oe_lm(data.rec, st.model, init, frozen=st.frozen, cutoff_hz=data.dec.cutoff_hz or 60.0, terms=st.terms,
-              backlash_gap=st.backlash_gap, delay=st.delay)
+    r = _load_friction_lm(data, st, init)
     st = replace(st, params=dict(r.params))
+    negative = {k: st.params[k] for k in ("Fv1", "Fc1", "Fv2", "Fc2") if st.params.get(k, 0.0) < 0}
+    if negative:
+        raise SimulationError("the load friction fit is not physical (" + ", ".join(
+            f"{k} = {v:.3g}" for k, v in negative.items()) + " < 0): friction opposes the motion on both sides")
     return st, r, {"Fv2": st.params["Fv2"], "Fc2": st.params["Fc2"]}, _std(r, ("Fv2", "Fc2"))
+
+
+def _load_friction_baseline(state: State, data: Data, progress) -> Optional[State]:
+    """The model without load friction refitted by the optimiser that adopts it, from the same start: the effect is
+    judged against that, so that the optimiser's own gain on M1, M2, K12 is not credited to it (None: the adoption
+    refits by DIDIM, like the current model)."""
+    if state.force_lag:
+        return None
+    return replace(state, params=dict(_load_friction_lm(data, state, dict(state.params)).params))
 
 
 def _damping_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
@@ -389,7 +411,7 @@ REGISTRY: Dict[str, Effect] = _registry(
            tried_with="delay"),
     Effect("load_friction", "Part of the friction acts on the load side of the coupling, so it reaches the motor "
            "through the spring, delayed and filtered by the flexible mode.", "velocity",
-           _load_friction_candidates, _load_friction_adopt,
+           _load_friction_candidates, _load_friction_adopt, baseline=_load_friction_baseline,
            confusable={"coupling_damping": "move at several constant speeds (load friction acts at every speed, "
                        "coupling damping only while the coupling deflects) or add a load encoder"}),
     Effect("coupling_damping", "The coupling dissipates energy as it deflects (a damper in parallel with the spring: "

@@ -4,7 +4,7 @@ refit every effect uses."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -88,6 +88,16 @@ class Data:
         yv = simulate(self.validate, state.all_params(), state.model, **state.sim_kwargs()).force
         return rel(y, ys), rel(self.validate.force, yv)
 
+    def train_record(self) -> Recording:
+        """The training samples as a record of their own (the whole record when a separate one validates): for fits
+        that take a whole record, so that they never see the held-out samples (the closed loop is causal, so its
+        simulation on the first samples is the first samples of the whole one)."""
+        if self.validate is not None:
+            return self.rec
+        n, rec = self.n_train, self.rec
+        cut = {k: (None if getattr(rec, k) is None else getattr(rec, k)[:n]) for k in ("qr", "force", "qm", "ql", "u_ext")}
+        return replace(rec, **cut)
+
     def rel(self, r: np.ndarray, train: bool) -> float:
         y = self.y[: self.m_train] if train else self.yv
         return float(np.linalg.norm(r) / np.linalg.norm(y))
@@ -108,9 +118,18 @@ def refit(data: Data, state: State, init: Dict[str, float], progress) -> Tuple[S
 
 def motor_columns(state: State, sim: SimResult, extra: Sequence[Term]) -> np.ndarray:
     """Columns (n × k) of the motor-row regressor of ``extra`` terms on the simulated states, from the core."""
+    return motor_columns_many(state, sim, [extra])[0]
+
+
+def motor_columns_many(state: State, sim: SimResult, groups: Sequence[Sequence[Term]]) -> List[np.ndarray]:
+    """:func:`motor_columns` of each group of extra terms (the variants of a grid), from one core call: the columns
+    of every group are computed together, each exactly as alone (a term's column depends on that term only)."""
+    extra = [Term(f"{t.name}_{i}", t.kind, t.hyper, t.dof) for i, g in enumerate(groups) for t in g]
     w = _core.regressor(state.model, sim.q, sim.qd, sim.qdd, offset=state.offset,
                         terms=[t.spec() for t in (*state.terms, *extra)], backlash_gap=state.backlash_gap)
-    return w[0][:, -len(extra):]
+    cols = w[0][:, w.shape[2] - len(extra):]
+    ends = np.cumsum([len(g) for g in groups])
+    return [cols[:, e - len(g):e] for g, e in zip(groups, ends)]
 
 
 def base_columns(state: State, sim: SimResult) -> np.ndarray:
