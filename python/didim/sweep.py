@@ -20,12 +20,13 @@ import multiprocessing
 import os
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ._errors import DataError, DidimError
+from ._errors import DataError, DidimError, DidimWarning
 
 #: Simulated EMPS-like records with a known truth (see :mod:`didim.scenarios`): the truth, the model that generated
 #: it, and the reference trajectory.
@@ -99,7 +100,10 @@ def run_point(point: Mapping[str, Any]) -> Dict[str, Any]:
         out["truth"] = truth
         model = p.pop("model", SCENARIOS.get(rec_args[0] or "", {}).get("model", "rigid"))
         method = p.pop("method", "didim")
-        r = identify(rec, model, method, **p)
+        with warnings.catch_warnings(record=True) as caught:  # a worker's warnings go back with its result
+            warnings.simplefilter("always", DidimWarning)
+            r = identify(rec, model, method, **p)
+        out["warnings"] = [str(w.message) for w in caught if issubclass(w.category, DidimWarning)]
     except DidimError as e:
         out.update(converged=False, error=f"{type(e).__name__}: {e}", elapsed_s=time.perf_counter() - t0)
         return out
@@ -295,8 +299,20 @@ def sweep(points: Sequence[Mapping[str, Any]], *, task: Callable[[Mapping[str, A
     finally:
         if owned:
             ex.shutdown(wait=True)
+    _warn_once(results)
     return SweepResult(points=points, results=results, elapsed_s=time.perf_counter() - t0, workers=workers,
                        agree_rtol=agree_rtol)
+
+
+def _warn_once(results: Sequence[Optional[Dict[str, Any]]]) -> None:
+    """Issues the warnings the runs returned (a worker process's own would print in Python's raw format, past the
+    command line's one-line handler), each distinct message once, with the number of runs that gave it."""
+    counts: Dict[str, int] = {}
+    for r in results:
+        for w in (r or {}).get("warnings", ()):
+            counts[w] = counts.get(w, 0) + 1
+    for w, k in counts.items():
+        warnings.warn(w + (f" ({k} runs)" if k > 1 else ""), DidimWarning, stacklevel=3)
 
 
 def _median(xs):
@@ -419,11 +435,14 @@ class SweepResult:
                 continue
             lines.append(f"by {key}: " + ", ".join(f"{v:g}: {a}/{m}" if isinstance(v, (int, float)) else f"{v}: {a}/{m}"
                                                     for v, m, c, a in self.rates_by(key, step)))
-        lines.append(f"{'parameter':<10}{'truth':>12}{'consensus':>12}{'spread':>11}{'mean σ':>11}{'spread/σ':>9}"
-                     f"{'rms z':>7}")
-        for s in self.spread(step):
-            lines.append(f"{s['name']:<10}{s['truth']:>12.5g}{s['consensus']:>12.5g}{s['spread']:>11.3g}"
-                         f"{s['sigma']:>11.3g}{s['ratio']:>9.2f}{s['z_rms']:>7.2f}")
+        rows = self.spread(step)
+        known = any(math.isfinite(s["truth"]) for s in rows)  # a real record has no truth: no columns of NaN
+        lines.append(f"{'parameter':<10}" + (f"{'truth':>12}" if known else "") + f"{'consensus':>12}{'spread':>11}"
+                     f"{'mean σ':>11}{'spread/σ':>9}" + (f"{'rms z':>7}" if known else ""))
+        for s in rows:
+            lines.append(f"{s['name']:<10}" + (f"{s['truth']:>12.5g}" if known else "") + f"{s['consensus']:>12.5g}"
+                         f"{s['spread']:>11.3g}{s['sigma']:>11.3g}{s['ratio']:>9.2f}"
+                         + (f"{s['z_rms']:>7.2f}" if known else ""))
         for why, count in sorted(reasons.items(), key=lambda kv: -kv[1])[:3]:
             lines.append(f"failed ({count} run{'s' if count > 1 else ''}): {why}")
         return "\n".join(lines)
