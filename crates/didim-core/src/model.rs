@@ -69,7 +69,9 @@ pub const DEFAULT_COULOMB_EPS: f64 = 1e-4;
 pub fn coulomb_sign(v: f64, eps: f64) -> f64 {
     if eps > 0.0 {
         let d = v * v + eps * eps;
-        if d.is_normal() {
+        // `d.is_normal()` for d ≥ 0 (as d is, or NaN), tested in the floating-point unit: the bit test moved d to
+        // an integer register on the simulator's critical path
+        if (f64::MIN_POSITIVE..f64::INFINITY).contains(&d) {
             v / d.sqrt()
         } else if v.is_infinite() {
             v.signum()
@@ -108,7 +110,9 @@ pub fn coulomb_sign_derivative(v: f64, eps: f64) -> f64 {
 pub fn coulomb_sign_and_derivative(v: f64, eps: f64) -> (f64, f64) {
     if eps > 0.0 {
         let d = v * v + eps * eps;
-        if d.is_normal() {
+        // `d.is_normal()` for d ≥ 0 (as d is, or NaN), tested in the floating-point unit: the bit test moved d to
+        // an integer register on the simulator's critical path
+        if (f64::MIN_POSITIVE..f64::INFINITY).contains(&d) {
             let inv = 1.0 / d.sqrt();
             let s = v * inv;
             (s, (eps * inv) * (eps * inv) * inv)
@@ -669,15 +673,15 @@ impl<const N: usize> Model<N> {
     /// Layout: `[dof][parameter][sample]`, i.e. for each dof a column-major
     /// `(n × p)` block whose columns are the `φ_j` over time, ready for
     /// parallel decimation column by column.
-    pub fn regressor(&self, q: &[Vec<f64>], qd: &[Vec<f64>], qdd: &[Vec<f64>]) -> Result<Vec<f64>> {
-        let n = check_series::<N>(q, qd, qdd)?;
+    pub fn regressor<R: AsRef<[f64]>>(&self, q: &[R], qd: &[R], qdd: &[R]) -> Result<Vec<f64>> {
+        let n = check_series::<N, R>(q, qd, qdd)?;
         let p = self.n_params();
         let mut w = vec![0.0; N * p * n];
         let mut row = vec![0.0; N * p];
         for k in 0..n {
-            let qk = SVector::<f64, N>::from_fn(|d, _| q[d][k]);
-            let qdk = SVector::<f64, N>::from_fn(|d, _| qd[d][k]);
-            let qddk = SVector::<f64, N>::from_fn(|d, _| qdd[d][k]);
+            let qk = SVector::<f64, N>::from_fn(|d, _| q[d].as_ref()[k]);
+            let qdk = SVector::<f64, N>::from_fn(|d, _| qd[d].as_ref()[k]);
+            let qddk = SVector::<f64, N>::from_fn(|d, _| qdd[d].as_ref()[k]);
             self.regressor_into(&qk, &qdk, &qddk, &mut row);
             for d in 0..N {
                 for j in 0..p {
@@ -689,7 +693,7 @@ impl<const N: usize> Model<N> {
     }
 }
 
-fn check_series<const N: usize>(q: &[Vec<f64>], qd: &[Vec<f64>], qdd: &[Vec<f64>]) -> Result<usize> {
+fn check_series<const N: usize, R: AsRef<[f64]>>(q: &[R], qd: &[R], qdd: &[R]) -> Result<usize> {
     if q.len() != N || qd.len() != N || qdd.len() != N {
         return Err(invalid!(
             "expected position, velocity and acceleration series for {N} dof(s), got {}, {} and {}",
@@ -698,9 +702,10 @@ fn check_series<const N: usize>(q: &[Vec<f64>], qd: &[Vec<f64>], qdd: &[Vec<f64>
             qdd.len()
         ));
     }
-    let n = q[0].len();
+    let n = q[0].as_ref().len();
     for (what, s) in [("position", q), ("velocity", qd), ("acceleration", qdd)] {
         for (d, x) in s.iter().enumerate() {
+            let x = x.as_ref();
             if x.len() != n {
                 return Err(invalid!(
                     "{what} series of dof {d} has {} samples, expected {n}",

@@ -140,7 +140,9 @@ impl<const N: usize> Problem<'_, N> {
             ));
         }
         let out = self.simulate(chi)?;
-        let w = self.model.regressor(&out.q, &out.qd, &out.qdd)?;
+        let w = self
+            .model
+            .regressor(&out.q.rows(), &out.qd.rows(), &out.qdd.rows())?;
         let col = |d: usize, j: usize| &w[(d * p + j) * n..(d * p + j + 1) * n];
         let frozen: Vec<usize> = (0..p).filter(|j| !free.contains(j)).collect();
         let targets: Vec<Vec<f64>> = (0..N)

@@ -129,11 +129,74 @@ pub struct SimOutput {
     /// Commanded motor force per sample (N), as the drive would log it.
     pub force: Vec<f64>,
     /// Positions `q[d][k]` (m): dof 0 the motor `q1`, dof 1 the load `q12`.
-    pub q: Vec<Vec<f64>>,
+    pub q: Signals,
     /// Velocities (m/s), same layout.
-    pub qd: Vec<Vec<f64>>,
+    pub qd: Signals,
     /// Accelerations (m/s²), same layout.
-    pub qdd: Vec<Vec<f64>>,
+    pub qdd: Signals,
+}
+
+/// One signal per degree of freedom, `n` samples each, held row after row in one buffer:
+/// `s[d]` is the slice of dof `d` (so `s[d][k]` reads like a `Vec<Vec<f64>>`), and the
+/// buffer goes to numpy as an `(ndof, n)` array without a copy.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Signals {
+    data: Vec<f64>,
+    n: usize,
+}
+
+impl Signals {
+    /// `rows` signals of `n` zeros (`what` names them in an allocation error).
+    pub fn zeros(rows: usize, n: usize, what: &str) -> Result<Self> {
+        let len = rows
+            .checked_mul(n)
+            .ok_or_else(|| invalid!("{what}: {rows} × {n} samples overflow"))?;
+        Ok(Self {
+            data: crate::error::filled(len, 0.0, what)?,
+            n,
+        })
+    }
+
+    /// The number of signals (degrees of freedom).
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.data.len().checked_div(self.n).unwrap_or(0)
+    }
+
+    /// Whether there is no signal.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The signals, one slice each.
+    pub fn iter(&self) -> impl Iterator<Item = &[f64]> {
+        self.data.chunks_exact(self.n.max(1))
+    }
+
+    /// The signals as slices, e.g. for [`Model::regressor`].
+    pub fn rows(&self) -> Vec<&[f64]> {
+        self.iter().collect()
+    }
+
+    /// The buffer, signal after signal.
+    pub fn into_flat(self) -> Vec<f64> {
+        self.data
+    }
+}
+
+impl std::ops::Index<usize> for Signals {
+    type Output = [f64];
+    #[inline]
+    fn index(&self, d: usize) -> &[f64] {
+        &self.data[d * self.n..(d + 1) * self.n]
+    }
+}
+
+impl std::ops::IndexMut<usize> for Signals {
+    #[inline]
+    fn index_mut(&mut self, d: usize) -> &mut [f64] {
+        &mut self.data[d * self.n..(d + 1) * self.n]
+    }
 }
 
 /// Simulates `model` with parameters `chi` under `controller` tracking `qr`.
@@ -220,6 +283,20 @@ pub fn simulate_with_stats<const N: usize>(
     Ok((finite_outputs(out, model, chi, opts)?, stats))
 }
 
+/// Whether every value of `x` is finite: `0·x` is `±0` for a finite `x` and NaN otherwise,
+/// summed in eight independent lanes (no early exit, so the compiler vectorises it).
+fn all_finite(x: &[f64]) -> bool {
+    let mut acc = [0.0f64; 8];
+    let chunks = x.chunks_exact(8);
+    let tail = chunks.remainder().iter().map(|v| v * 0.0).sum::<f64>();
+    for c in chunks {
+        for (a, v) in acc.iter_mut().zip(c) {
+            *a += v * 0.0;
+        }
+    }
+    acc.iter().sum::<f64>() + tail == 0.0
+}
+
 /// The output, or an error when a logged value is not finite. The positions and velocities are checked as they are
 /// integrated, but a command or an acceleration that overflows at the last sample (or a command held back by the
 /// delay) never reaches them: absurd gains (`gtau·vsat` beyond f64) or masses (1e-308 kg).
@@ -229,7 +306,14 @@ fn finite_outputs<const N: usize>(
     chi: &[f64],
     opts: &SimOptions,
 ) -> Result<SimOutput> {
-    let first = |x: &[f64]| x.iter().position(|v| !v.is_finite());
+    // a vectorised pass first (0·x is NaN exactly where x is not finite); the sample is searched only on failure
+    let first = |x: &[f64]| {
+        if all_finite(x) {
+            None
+        } else {
+            x.iter().position(|v| !v.is_finite())
+        }
+    };
     let mut bad: Option<(usize, &str)> = first(&out.force).map(|k| (k, "commanded force"));
     for (what, rows) in [
         ("position", &out.q),

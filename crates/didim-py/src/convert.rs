@@ -35,17 +35,6 @@ pub fn columns2(a: &PyReadonlyArray2<'_, f64>) -> (Vec<f64>, usize, usize) {
     (out, n, p)
 }
 
-/// Equal-length rows -> a 2-D numpy array (rows, n).
-pub fn rows_to_array<'py>(py: Python<'py>, rows: Vec<Vec<f64>>) -> PyResult<Bound<'py, PyAny>> {
-    let r = rows.len();
-    let n = rows.first().map_or(0, |x| x.len());
-    let mut flat: Vec<f64> = Vec::with_capacity(r * n);
-    for row in &rows {
-        flat.extend_from_slice(row);
-    }
-    Ok(PyArray1::from_vec(py, flat).reshape([r, n])?.into_any())
-}
-
 /// A column-major (n, p) buffer -> a 2-D numpy array (n, p).
 pub fn colmajor_to_array<'py>(
     py: Python<'py>,

@@ -180,9 +180,11 @@ impl Problem {
 fn sim_dict<'py>(py: Python<'py>, out: SimOutput) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("force", out.force.into_pyarray(py))?;
-    d.set_item("q", rows_to_array(py, out.q)?)?;
-    d.set_item("qd", rows_to_array(py, out.qd)?)?;
-    d.set_item("qdd", rows_to_array(py, out.qdd)?)?;
+    for (key, s) in [("q", out.q), ("qd", out.qd), ("qdd", out.qdd)] {
+        let (rows, n) = (s.len(), s.iter().next().map_or(0, <[f64]>::len));
+        d.set_item(key, PyArray1::from_vec(py, s.into_flat()).reshape([rows, n])?)?;
+        // no copy
+    }
     Ok(d)
 }
 

@@ -4,7 +4,7 @@
 //! integrates the plant over the period. A [`Tangent`] rides along: nothing for a plain
 //! simulation, the forward sensitivities for `simulate_sensitivity`.
 
-use super::{describe, SimOptions, SimOutput};
+use super::{describe, Signals, SimOptions, SimOutput};
 use crate::controller::{Controller, FilterState, TransferFunction, MAX_TAPS};
 use crate::error::{filled, Error, Result};
 use crate::model::Model;
@@ -241,12 +241,11 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
     let mut applied: Option<f64> = None; // the lagged force at the start of the period
 
     let m = if states { n } else { 0 };
-    let signals = |what| (0..N).map(|_| filled(m, 0.0, what)).collect::<Result<Vec<_>>>();
     let mut out = SimOutput {
         force: filled(n, 0.0, "the simulated force")?,
-        q: signals("the simulated positions")?,
-        qd: signals("the simulated velocities")?,
-        qdd: signals("the simulated accelerations")?,
+        q: Signals::zeros(N, m, "the simulated positions")?,
+        qd: Signals::zeros(N, m, "the simulated velocities")?,
+        qdd: Signals::zeros(N, m, "the simulated accelerations")?,
     };
 
     for k in 0..n {
@@ -274,9 +273,10 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
             // outputs reproduces the applied force to rounding
             let a = stepper.accel(&q, &v, tau);
             for d in 0..N {
-                out.q[d][k] = q[d];
-                out.qd[d][k] = v[d];
-                out.qdd[d][k] = a[d];
+                let at = d * m + k; // dof d's row, sample k (the layout of Signals)
+                out.q.data[at] = q[d];
+                out.qd.data[at] = v[d];
+                out.qdd.data[at] = a[d];
             }
         }
         tangent.record(k);

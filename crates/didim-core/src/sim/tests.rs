@@ -165,7 +165,9 @@ fn simulated_states_reproduce_the_force_through_the_idm() {
     };
     let out = simulate(&model, &chi, &Controller::EMPS, &qr, None, &opts).unwrap();
     let n = qr.len();
-    let w = model.regressor(&out.q, &out.qd, &out.qdd).unwrap();
+    let w = model
+        .regressor(&out.q.rows(), &out.qd.rows(), &out.qdd.rows())
+        .unwrap();
     let p = chi.len();
     for k in (0..n).step_by(37) {
         let row0: f64 = (0..p).map(|j| w[j * n + k] * chi[j]).sum();
@@ -176,7 +178,9 @@ fn simulated_states_reproduce_the_force_through_the_idm() {
     // with a delay, the applied force is the command of `delay` samples earlier
     let opts = SimOptions { delay: 3, ..opts };
     let out = simulate(&model, &chi, &Controller::EMPS, &qr, None, &opts).unwrap();
-    let w = model.regressor(&out.q, &out.qd, &out.qdd).unwrap();
+    let w = model
+        .regressor(&out.q.rows(), &out.qd.rows(), &out.qdd.rows())
+        .unwrap();
     for k in (3..n).step_by(41) {
         let row0: f64 = (0..p).map(|j| w[j * n + k] * chi[j]).sum();
         assert!((row0 - out.force[k - 3]).abs() < 1e-8 * (1.0 + out.force[k].abs()));
@@ -564,4 +568,21 @@ fn sensitivities_of_the_doctor_terms_match_finite_differences() {
         0,
         Integrator::Rk4,
     );
+}
+
+#[test]
+fn all_finite_finds_every_non_finite_value_at_every_position() {
+    use super::all_finite;
+    for n in [0usize, 1, 7, 8, 9, 17, 100] {
+        let x: Vec<f64> = (0..n).map(|i| (i as f64 - 3.5) * 1e300).collect();
+        assert!(all_finite(&x), "{n}");
+        for k in 0..n {
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+                let mut y = x.clone();
+                y[k] = bad;
+                assert!(!all_finite(&y), "{n} {k} {bad}");
+            }
+        }
+    }
+    assert!(all_finite(&[-0.0, f64::MAX, -f64::MAX, f64::MIN_POSITIVE]));
 }
