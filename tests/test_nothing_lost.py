@@ -174,3 +174,22 @@ def test_the_cli_checks_the_figure_format_before_the_work(tmp_path, emps_path):
     p = _cli("identify", str(emps_path), "--plot", str(tmp_path / "fit.docx"))
     assert p.returncode == 2 and "cannot write a figure as .docx" in p.stderr and ".png" in p.stderr
     assert "identification" not in p.stdout and listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("unnamed", [True, False])
+def test_the_unnamed_file_and_both_fallbacks_write_the_same_file(tmp_path, monkeypatch, unnamed):
+    # Linux writes into an O_TMPFILE file that has no name until it is complete (a SIGKILL then leaves nothing);
+    # where the link is refused, or there is no O_TMPFILE, a named temporary file does the same job
+    if unnamed:
+        def refuse(fd, name):
+            raise OSError(18, "Invalid cross-device link")
+        monkeypatch.setattr(_io, "_link_fd", refuse)
+    else:
+        monkeypatch.setattr(_io, "_unnamed_file", lambda folder: None)
+    target = tmp_path / "out.json"
+    target.write_text("old")
+    os.chmod(target, 0o640)
+    _io.write_text(target, '{"new": true}\n')
+    assert target.read_text() == '{"new": true}\n'
+    assert oct(os.stat(target).st_mode & 0o777) == oct(0o640)
+    assert sorted(os.listdir(tmp_path)) == ["out.json"]

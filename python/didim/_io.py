@@ -174,6 +174,37 @@ def atomic_path(path) -> Iterator[str]:
         raise DataError(f"cannot write {shown}: it is a {kind}; choose a file name")
     folder = os.path.dirname(target)
     base, ext = os.path.splitext(os.path.basename(target))
+    unnamed = _unnamed_file(folder)
+    if unnamed is not None:
+        # Linux: the content goes to a file with no name (O_TMPFILE), which the kernel frees if the process dies,
+        # even by SIGKILL; it gets a name only once complete and flushed, for the two system calls that link and
+        # rename it (instead of for the whole write and fsync)
+        fd, tmp = unnamed
+        named = None
+        try:
+            yield tmp
+            os.fsync(fd)
+            os.fchmod(fd, _mode_for(target))
+            named = os.path.join(folder, f".{base}.{os.urandom(6).hex()}.tmp{ext}")
+            try:
+                _link_fd(fd, named)
+            except OSError:  # a file system or a policy that refuses the link: a named copy, as without O_TMPFILE
+                with open(tmp, "rb") as src, open(named, "xb") as dst:
+                    shutil.copyfileobj(src, dst)
+                    dst.flush()
+                    os.fsync(dst.fileno())
+                os.chmod(named, _mode_for(target))
+            os.replace(named, target)
+            named = None
+            _fsync_folder(folder)
+        finally:
+            os.close(fd)
+            if named is not None:
+                try:
+                    os.unlink(named)
+                except FileNotFoundError:
+                    pass
+        return
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=f".tmp{ext}", dir=folder)
     except OSError as e:
@@ -183,11 +214,7 @@ def atomic_path(path) -> Iterator[str]:
         yield tmp
         with open(tmp, "rb+") as f:
             os.fsync(f.fileno())
-        try:
-            mode = os.stat(target).st_mode & 0o7777
-        except FileNotFoundError:
-            mode = 0o666 & ~_umask()
-        os.chmod(tmp, mode)
+        os.chmod(tmp, _mode_for(target))
         os.replace(tmp, target)
         _fsync_folder(folder)
     except BaseException:
@@ -196,6 +223,42 @@ def atomic_path(path) -> Iterator[str]:
         except FileNotFoundError:
             pass
         raise
+
+
+def _mode_for(target: str) -> int:
+    """The permissions of the file that replaces ``target``: the old file's, or the default ones for a new file."""
+    try:
+        return os.stat(target).st_mode & 0o7777
+    except FileNotFoundError:
+        return 0o666 & ~_umask()
+
+
+def _link_fd(fd: int, name: str) -> None:
+    """Gives the unnamed file ``fd`` the name ``name``: linkat of /proc/self/fd/N with AT_SYMLINK_FOLLOW (the
+    unprivileged way; a directory fd makes os.link call linkat with that flag rather than link, which would try to
+    link the /proc symlink itself)."""
+    proc = os.open("/proc", os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    try:
+        os.link(f"self/fd/{fd}", name, src_dir_fd=proc, follow_symlinks=True)
+    finally:
+        os.close(proc)
+
+
+def _unnamed_file(folder: str):
+    """An unnamed file in ``folder`` (O_TMPFILE) and a path that reopens it (/proc/self/fd), or None where the
+    system or the file system has none (the caller then writes a named temporary file)."""
+    flag = getattr(os, "O_TMPFILE", None)
+    if flag is None or not os.path.isdir("/proc/self/fd"):
+        return None
+    try:
+        fd = os.open(folder or ".", flag | os.O_RDWR, 0o600)
+    except OSError:
+        return None
+    path = f"/proc/self/fd/{fd}"
+    if not os.path.exists(path):
+        os.close(fd)
+        return None
+    return fd, path
 
 
 def _fsync_folder(folder: str) -> None:
