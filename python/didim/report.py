@@ -124,7 +124,12 @@ def diagnosis_html(diag) -> str:
                      "position) shows significant structure.</p>")
     for i, x in enumerate(diag.findings, 1):
         view = _view(x.effect, x.where)
-        parts.append(f"<h2>{i}. {e(x.effect)}</h2><p class='phys'>{e(x.physics)}</p><p>{e(x.evidence)}</p>")
+        if x.words:  # in an engineer's words first, the statistics folded away
+            body = (f"<p><b>{e(x.words)}</b>" + (f"; {e(x.held_out())}" if x.held_out() else "") + "</p>"
+                    f"<details><summary>statistics</summary><p>{e(x.evidence)}</p></details>")
+        else:
+            body = f"<p>{e(x.evidence)}</p>"
+        parts.append(f"<h2>{i}. {e(x.effect)}</h2><p class='phys'>{e(x.physics)}</p>{body}")
         if x.params:
             parts.append("<table><tr><th>parameter</th><th>value</th><th>σ</th></tr>" + "".join(
                 f"<tr><td>{e(k)}</td><td>{v:.5g}</td><td>{x.std.get(k, float('nan')):.3g}</td></tr>" for k, v in x.params.items())

@@ -78,12 +78,24 @@ class Finding:
     fit: Dict[str, float] = field(default_factory=dict)
     where: Dict[str, Any] = field(default_factory=dict)
     accepted: bool = True
+    words: str = ""  # the fitted effect in an engineer's words, with units
 
     def to_dict(self) -> Dict[str, Any]:
         return _clean({
             "effect": self.effect, "params": self.params, "std": self.std, "statistic": self.statistic,
             "evidence": self.evidence, "physics": self.physics, "fit": self.fit, "where": self.where,
+            "words": self.words,
         })
+
+    def held_out(self) -> str:
+        f = self.fit
+        if "valid_force_before" in f and "valid_force_after" in f:
+            return f"held-out force error {100 * f['valid_force_before']:.2f} % -> {100 * f['valid_force_after']:.2f} %"
+        if "valid_before" in f and "valid_after" in f:
+            return (f"held-out force error (decimated) {100 * f['valid_before']:.2f} % -> "
+                    f"{100 * f['valid_after']:.2f} %")
+        return ""
+
 
 
 @dataclass
@@ -149,25 +161,32 @@ class Diagnosis:
         return diagnosis_html(self)
 
     def summary(self) -> str:
+        """What the doctor found, in an engineer's words first (quantities with units, forward and backward apart,
+        the held-out force error each finding brought), then the statistics in a details section."""
         lines = [f"doctor: {self.recording}, base model {self.model}"]
         f = self.fit
         lines.append(f"closed-loop force error: training {100 * f['train_force_before']:.2f} % -> "
                      f"{100 * f['train_force_after']:.2f} %, validation ({self.options['validation']}) "
                      f"{100 * f['valid_force_before']:.2f} % -> {100 * f['valid_force_after']:.2f} %")
-        lines.append(f"  on the force decimated at {self.options['cutoff_hz']:g} Hz (where the effects are tested): "
-                     f"training {100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, validation "
-                     f"{100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %")
         if not self.findings:
             lines.append("nothing significant is missing from the model")
         for x in self.findings:
-            ps = ", ".join(f"{k} = {v:.4g}" for k, v in x.params.items())
             label = {PHYSICS["friction_shape"]: " (the friction law's shape through zero speed)",
                      PHYSICS["stribeck_deficit"]: " (a low-speed friction deficit)"}.get(x.physics, "")
-            lines.append(f"- {x.effect}{label}: {ps + '; ' if ps else ''}{x.evidence}")
-        for x in self.rejected:
-            lines.append(f"  (not confirmed on held-out data: {x.effect}: {x.evidence})")
+            text = x.words or x.evidence
+            gain = x.held_out()
+            lines.append(f"- {x.effect}{label}: {text}" + (f"; {gain}" if gain and x.words else ""))
+        if self.rejected:
+            lines.append("not confirmed on held-out data: " + "; ".join(
+                f"{x.effect} ({x.held_out() or x.evidence})" for x in self.rejected))
         for a in self.ambiguities:
-            lines.append(f"  cannot tell apart {' / '.join(a['effects'])}: {a['experiment']}")
+            lines.append(f"cannot tell apart {' / '.join(a['effects'])}: {a['experiment']}")
+        lines.append(f"details (the tests work on the force decimated at {self.options['cutoff_hz']:g} Hz: training "
+                     f"{100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, validation "
+                     f"{100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %):")
+        for x in self.findings + self.rejected:
+            ps = ", ".join(f"{k} = {v:.4g}" for k, v in x.params.items())
+            lines.append(f"  {x.effect}: {ps + '; ' if ps else ''}{x.evidence}")
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -351,6 +370,7 @@ class _Search:
         self.rounds: List[Dict[str, Any]] = []
         self.done: List[str] = []
         self.history: List[Fitted] = []
+        self.force_now: Tuple[float, float] = (math.nan, math.nan)  # full-rate training, validation force errors
 
     def rank(self, cur: Fitted) -> Tuple[List[Candidate], np.ndarray]:
         """Every effect not tried on this model, at its best hyper-parameter, by adjusted p-value."""
@@ -409,7 +429,8 @@ class _Search:
             evidence += (f"; below the practical threshold: an effect must lower the held-out force error by at "
                          f"least {100 * MIN_HELDOUT_GAIN:.0f} % of itself")
         f = Finding(c.effect, params, std, stat, evidence, effect.describe(params, st_new), fit,
-                    where={"hyper": c.hyper}, accepted=p_dm < self.alpha and practical)
+                    where={"hyper": c.hyper}, accepted=p_dm < self.alpha and practical,
+                    words=effect.in_words(params, st_new))
         if not f.accepted:
             self.rejected.append(f)
             self.say(f"rejected {c.effect}: {evidence}")
@@ -432,7 +453,8 @@ class _Search:
     def accept(self, f: Finding, new: Fitted) -> Fitted:
         """Adds the finding; the candidates rejected on the old model get another chance on the new one; an earlier
         finding the new one makes redundant (no longer improving the held-out fit) is taken out again."""
-        f.fit["train_force_after"], f.fit["valid_force_after"] = self.data.force_errors(new[0])
+        f.fit["train_force_before"], f.fit["valid_force_before"] = self.force_now
+        f.fit["train_force_after"], f.fit["valid_force_after"] = self.force_now = self.data.force_errors(new[0])
         self.findings.append(f)
         self.done = [x.effect for x in self.findings]
         self.history.append(new)
@@ -455,6 +477,7 @@ class _Search:
                 self.findings.remove(old)
                 self.rejected.append(old)
                 cur = dropped
+                self.force_now = self.data.force_errors(cur[0])
                 self.say(f"removed {old.effect}: no longer improves the held-out fit")
         return cur
 
@@ -489,7 +512,7 @@ def doctor(
     cur: Fitted = (state, *data.errors(state))
     search.history.append(cur)
     fit0 = {"train_before": data.rel(cur[1], True), "valid_before": data.rel(cur[2], False)}
-    fit0["train_force_before"], fit0["valid_force_before"] = data.force_errors(state)
+    fit0["train_force_before"], fit0["valid_force_before"] = search.force_now = data.force_errors(state)
     locate_before = _locate(data, cur[1], cur[3])
 
     for _ in range(max_findings):

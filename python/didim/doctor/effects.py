@@ -40,7 +40,8 @@ Adopted = Tuple[State, IdentificationResult, Dict[str, float], Dict[str, float]]
 
 @dataclass(frozen=True)
 class Effect:
-    """One effect: ``candidates(state, sim, data)`` lists its regressor variants ([] where it does not apply to the
+    """One effect (``words(params, state)``: the fitted effect in an engineer's words, see :meth:`in_words`):
+    ``candidates(state, sim, data)`` lists its regressor variants ([] where it does not apply to the
     state), ``adopt(candidate, state, data, progress)`` refits the model with it, ``remove(state)`` takes it out
     again (None: cannot be), ``physics_of(params, state)`` the sentence for a fitted effect (default ``physics``),
     ``confusable`` the effects it shares regressors with → the experiment that separates them, ``view`` where the
@@ -60,6 +61,17 @@ class Effect:
     confusable: Dict[str, str] = field(default_factory=dict)
     tried_with: Optional[str] = None
     baseline: Optional[Callable[[State, Data, Any], Optional[State]]] = None
+    words: Optional[Callable[[Dict[str, float], State], str]] = None
+
+    def in_words(self, params: Dict[str, float], state: State) -> str:
+        """The fitted effect as an engineer reads it: quantities with their units, forward and backward spelled
+        out (``params`` as the finding reports them, ``state`` the model it was fitted in)."""
+        if self.words is not None:
+            try:
+                return self.words(params, state)
+            except (KeyError, ZeroDivisionError, ValueError):
+                pass
+        return ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
 
     def describe(self, params: Dict[str, float], state: State) -> str:
         return self.physics_of(params, state) if self.physics_of else self.physics
@@ -366,11 +378,65 @@ def _backlash_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted
     return st, r, {"gap": g}, {}
 
 
+# ---------------------------------------------------------------------------------------------------- in words
+
+
+def _g(x: float) -> str:
+    return f"{x:.4g}"
+
+
+def _asym_words(p: Dict[str, float], st: State) -> str:
+    q = st.params
+    fv, fc = q.get("Fv", q.get("Fv1")), q.get("Fc", q.get("Fc1"))
+    return (f"viscous friction {_g(fv + p['dFv'])} N/(m/s) forward, {_g(fv - p['dFv'])} N/(m/s) backward; "
+            f"Coulomb friction {_g(fc + p['dFc'])} N forward, {_g(fc - p['dFc'])} N backward")
+
+
+def _stribeck_words(p: Dict[str, float], st: State) -> str:
+    more = "less" if p["Fs"] * st.coulomb() < 0 else "more"
+    return f"{_g(abs(p['Fs']))} N {more} friction near rest, fading above about {_g(1e3 * p['vs'])} mm/s"
+
+
+def _delay_words(p: Dict[str, float], st: State) -> str:
+    if "force_lag_s" in p:
+        return (f"the force follows the command with a first-order lag of {_g(1e3 * p['force_lag_s'])} ms (a current "
+                f"loop of about {_g(p['bandwidth_hz'])} Hz bandwidth)")
+    return f"the force acts {p['delay_samples']:.0f} sample(s) ({_g(1e3 * p['delay_s'])} ms) after it is commanded"
+
+
+def _ripple_words(p: Dict[str, float], st: State) -> str:
+    out = f"{_g(p['amplitude'])} N amplitude, period {_g(1e3 * p['period'])} mm along the stroke"
+    if "relative_amplitude" in p:
+        out = (f"the Coulomb friction varies by ±{_g(p['amplitude'])} N ({_g(100 * p['relative_amplitude'])} % of it), "
+               f"period {_g(1e3 * p['period'])} mm along the stroke")
+    return out
+
+
+def _flex_words(p: Dict[str, float], st: State) -> str:
+    return (f"a mode at {_g(p['f_n_flex'])} Hz: motor side {_g(p['M1'])} kg, load side {_g(p['M2'])} kg, stiffness "
+            f"{_g(p['K12'])} N/m (λ = {p['lambda']:.3f})")
+
+
+_WORDS = {
+    "offset": lambda p, st: f"a constant force of {_g(p['OF'])} N",
+    "asymmetric_friction": _asym_words,
+    "stribeck": _stribeck_words,
+    "position_ripple": _ripple_words,
+    "position_dependent_coulomb": _ripple_words,
+    "delay": _delay_words,
+    "flexibility": _flex_words,
+    "load_friction": lambda p, st: (f"load-side friction: viscous {_g(p['Fv2'])} N/(m/s), Coulomb {_g(p['Fc2'])} N "
+                                    f"(motor side: {_g(st.params['Fv1'])} N/(m/s), {_g(st.params['Fc1'])} N)"),
+    "coupling_damping": lambda p, st: f"a damper of {_g(p['C12'])} N/(m/s) in parallel with the coupling",
+    "backlash": lambda p, st: f"a dead zone of {_g(1e6 * p['gap'])} µm in the coupling",
+}
+
+
 # ---------------------------------------------------------------------------------------------------- registry
 
 
 def _registry(*effects: Effect) -> Dict[str, Effect]:
-    return {e.name: e for e in effects}
+    return {e.name: replace(e, words=_WORDS.get(e.name)) for e in effects}
 
 
 _asym = _with_terms("asymmetric_friction", ("dFv", "abs_viscous"), ("dFc", "abs_coulomb"))
