@@ -13,7 +13,10 @@ def _view(effect: str, where: Dict[str, Any], default: Any = "time") -> Any:
     from .doctor.effects import REGISTRY
 
     e = REGISTRY.get(effect)
-    return e.view if e is not None else where.get("view", default)
+    if e is not None:
+        return e.view
+    view = where.get("view", default)  # "position, moving forward": the position figure shows both directions
+    return "position" if isinstance(view, str) and view.startswith("position") else view
 
 
 def _png(fig) -> str:
