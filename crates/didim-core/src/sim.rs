@@ -412,7 +412,8 @@ fn validate_signals(qr: &[f64], u_ext: Option<&[f64]>) -> Result<usize> {
     if n == 0 {
         return Err(invalid!("the reference position qr is empty"));
     }
-    if let Some(k) = qr.iter().position(|v| !v.is_finite()) {
+    if !all_finite(qr) {
+        let k = qr.iter().position(|v| !v.is_finite()).unwrap_or(0);
         return Err(invalid!("reference position qr is not finite at sample {k}"));
     }
     if let Some(u) = u_ext {
@@ -422,7 +423,8 @@ fn validate_signals(qr: &[f64], u_ext: Option<&[f64]>) -> Result<usize> {
                 u.len()
             ));
         }
-        if let Some(k) = u.iter().position(|v| !v.is_finite()) {
+        if !all_finite(u) {
+            let k = u.iter().position(|v| !v.is_finite()).unwrap_or(0);
             return Err(invalid!("external input is not finite at sample {k}"));
         }
     }
