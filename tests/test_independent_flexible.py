@@ -49,3 +49,18 @@ def test_three_step_didim_sees_a_10_kg_payload_on_an_independent_plant(plant):
     qr = plant.reference("moving")
     m2 = [didim.identify(plant.recording(qr, p, seed=7), "flexible", "didim").params["M2"] for p in (t, heavy)]
     assert abs((m2[1] - m2[0]) - 10.0) < 1.5, m2
+
+
+def test_a_mass_split_sliding_in_step_3_is_named_in_the_message():
+    from types import SimpleNamespace
+
+    from didim.identification import _mass_split_drift
+
+    def run(m2s):
+        hist = [SimpleNamespace(params={"M2": m, "K12": 1e6 * m / 30.0}) for m in m2s]
+        return _mass_split_drift(SimpleNamespace(history=hist, params={"M2": m2s[0]}))
+
+    slide = run([30.0 - 0.3 * k for k in range(30)])  # the ratio (the mode) holds, the split drifts by 15 %
+    assert "sliding together" in slide and "lowest output error" in slide
+    assert run([30.0 + 0.01 * (-1) ** k for k in range(30)]) == ""  # wandering in place is no drift
+    assert run([30.0] * 3) == ""  # too few iterations to tell

@@ -945,6 +945,21 @@ def _step2(rec: Recording, r1: IdentificationResult, variant: str, *, lambda0: f
                      f"{100 * js:.2f} % against {100 * paper_r.output_error:.2f} % with all friction on the motor)"]
 
 
+def _mass_split_drift(r: IdentificationResult) -> str:
+    """Says so when step 3's second half of iterations slid M2 and K12 together (by over 5 %, the same way): the load
+    row keeps their ratio, the mode, and nothing on the record pins the split of the mass ('' otherwise)."""
+    h = [it.params for it in r.history if "M2" in it.params and "K12" in it.params]
+    if len(h) < 6:
+        return ""
+    a, b = h[len(h) // 2], h[-1]
+    dm, dk = b["M2"] / a["M2"] - 1, b["K12"] / a["K12"] - 1
+    if abs(dm) < 0.05 or dm * dk <= 0:
+        return ""
+    return (f"M2 and K12 were still sliding together ({a['M2']:.4g} → {b['M2']:.4g} kg, {a['K12']:.4g} → "
+            f"{b['K12']:.4g} N/m over the last {len(h) - len(h) // 2 - 1} iterations: the mode holds, the mass split drifts); the "
+            f"result is the iterate with the lowest output error (M2 = {r.params.get('M2', float('nan')):.4g} kg)")
+
+
 def _cannot_support(why: str, rec: Recording) -> str:
     fix = ("superimpose a small chirp (e.g. 2-40 Hz, tens of µm) on a slow constant-speed move, so the load moves "
            "in one direction while the mode is excited, or add a load encoder (ql) and use method='idim-ls'")
@@ -1042,6 +1057,9 @@ def didim_flexible(
     if not r3.converged:
         if "step 2's" not in r3.message:
             r3.message += f" (step 2's output error was {100 * r2.output_error:.2f} %)"
+        slide = _mass_split_drift(r3)
+        if slide:
+            r3.message += "; " + slide
         if chosen == "paper":
             r3.message += (". The paper's model puts all friction on the motor; when the load's Coulomb friction "
                            "governs the mode (a chirp played with the axis at rest) it cannot reproduce it: use "
