@@ -172,3 +172,22 @@ def test_unnamed_stays_silent_on_coloured_noise():
         data, sim, v, q, noise = _unnamed_setup(seed)
         alarms += _unnamed(data, noise, sim, np.zeros((len(q), 0)), 0.01) is not None
     assert alarms <= 1  # 4 views at a family-wise 1 %: about 0.1 expected in 10
+
+
+def test_validating_on_the_training_record_is_refused():
+    rec = didim.scenarios.make_recording(dict(M=95.0, Fv=200.0, Fc=20.0), "rigid", force_noise=0.5, seed=1)
+    same = didim.Recording(dt=rec.dt, qr=rec.qr.copy(), force=rec.force.copy(), qm=rec.qm, controller=rec.controller,
+                           name="a copy under another name")
+    with pytest.raises(didim.DataError, match="validation record is the training record"):
+        didim.doctor(rec, "rigid", validate=same)
+
+
+def test_the_summary_gives_the_final_model_in_words_with_units(emps_path, emps_pulses_path):
+    d = didim.doctor(didim.load_mat(emps_path), "rigid", validate=didim.load_mat(emps_pulses_path))
+    f = next(x for x in d.findings if x.effect == "asymmetric_friction")
+    p = d.final_state.params  # refitted after the later findings: the words give these values, not the first fit's
+    fwd, bwd = p["Fv"] + p["dFv"], p["Fv"] - p["dFv"]
+    assert f"viscous friction {fwd:.4g} N/(m/s) forward, {bwd:.4g} N/(m/s) backward" in f.words
+    assert f"Coulomb friction {p['Fc'] + p['dFc']:.4g} N forward" in f.words
+    assert f.words in d.summary() and "details" in d.summary() and "dFv = " in d.summary()
+    assert " N/(m/s)," in d.summary().split("details")[1]  # the details carry units too

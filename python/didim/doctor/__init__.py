@@ -39,7 +39,7 @@ from ..result import IdentificationResult
 from ..signal import Decimation
 from ..simulation import SimResult, param_names
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
-from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect,
+from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNITS, UNNAMED, Candidate, Effect, final_values,
                       separating_experiment)
 from .fit import Data, State, base_columns, refit
 
@@ -161,8 +161,9 @@ class Diagnosis:
         return diagnosis_html(self)
 
     def summary(self) -> str:
-        """What the doctor found, in an engineer's words first (quantities with units, forward and backward apart,
-        the held-out force error each finding brought), then the statistics in a details section."""
+        """What the doctor found, in an engineer's words first (the final model's quantities with units, forward and
+        backward apart, the held-out force error each finding brought), then the statistics in a details section
+        (the parameters as each effect was accepted)."""
         lines = [f"doctor: {self.recording}, base model {self.model}"]
         f = self.fit
         lines.append(f"closed-loop force error: training {100 * f['train_force_before']:.2f} % -> "
@@ -180,12 +181,13 @@ class Diagnosis:
             lines.append("not confirmed on held-out data: " + "; ".join(
                 f"{x.effect} ({x.held_out() or x.evidence})" for x in self.rejected))
         for a in self.ambiguities:
-            lines.append(f"cannot tell apart {' / '.join(a['effects'])}: {a['experiment']}")
+            lines.append(f"this record cannot tell apart {' / '.join(a['effects'])}; the experiment that would: "
+                         f"{a['experiment']}")
         lines.append(f"details (the tests work on the force decimated at {self.options['cutoff_hz']:g} Hz: training "
                      f"{100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, validation "
                      f"{100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %):")
         for x in self.findings + self.rejected:
-            ps = ", ".join(f"{k} = {v:.4g}" for k, v in x.params.items())
+            ps = ", ".join(f"{k} = {v:.4g}{(' ' + UNITS[k]) if UNITS.get(k) else ''}" for k, v in x.params.items())
             lines.append(f"  {x.effect}: {ps + '; ' if ps else ''}{x.evidence}")
         return "\n".join(lines)
 
@@ -358,6 +360,11 @@ def _check_arguments(recording, model, validate, apM, alpha, max_findings, cutof
     if progress is not None and not callable(progress):
         raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
     _checks.excitation(recording.qr, recording.u_ext, param_names(model, False))
+    if validate is not None and validate.n == recording.n and np.array_equal(validate.force, recording.force) \
+            and np.array_equal(validate.qr, recording.qr):
+        raise DataError("the validation record is the training record (the same force and reference): its errors would "
+                        "not be held out; give another run of the axis, or leave validate out to hold out the last "
+                        f"{100 * holdout:.0f} % of the record")
     return apM, alpha, max_findings
 
 
@@ -550,6 +557,8 @@ def doctor(
             break
 
     state, rt, rv, sim = cur
+    for f in search.findings:  # in words with the final model's values (later refits move them)
+        f.words = REGISTRY[f.effect].in_words(final_values(f.effect, f.params, state), state)
     un = _unnamed(data, rt, sim, data.train_columns(base_columns(state, sim)), alpha)
     if un is not None:
         search.findings.append(un)

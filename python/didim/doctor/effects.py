@@ -380,6 +380,27 @@ def _backlash_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted
 
 # ---------------------------------------------------------------------------------------------------- in words
 
+#: Units of the quantities a finding reports (its ``params``).
+UNITS = {"OF": "N", "dFv": "N/(m/s)", "dFc": "N", "Fs": "N", "vs": "m/s", "amplitude": "N", "period": "m",
+         "Ar_sin": "N", "Ar_cos": "N", "Aq_sin": "N", "Aq_cos": "N", "force_lag_s": "s", "bandwidth_hz": "Hz",
+         "delay_samples": "samples", "delay_s": "s", "f_n_flex": "Hz", "M1": "kg", "M2": "kg", "K12": "N/m",
+         "Fv2": "N/(m/s)", "Fc2": "N", "C12": "N/(m/s)", "gap": "m"}
+
+
+def final_values(effect: str, params: Dict[str, float], state: State) -> Dict[str, float]:
+    """A finding's ``params`` with the values of ``state`` (the final model, refitted after later findings): its own
+    parameters, and the quantities derived from them."""
+    p = {k: state.params.get(k, v) for k, v in params.items()}
+    for s_, c_ in (("Ar_sin", "Ar_cos"), ("Aq_sin", "Aq_cos")):
+        if s_ in p and c_ in p:
+            p["amplitude"] = math.hypot(p[s_], p[c_])
+            if "relative_amplitude" in p and state.coulomb():
+                p["relative_amplitude"] = p["amplitude"] / abs(state.coulomb())
+    if {"M1", "M2", "K12"} <= set(p):
+        p["f_n_flex"] = math.sqrt(p["K12"] / p["M2"]) / (2 * math.pi)
+        p["lambda"] = p["M1"] / (p["M1"] + p["M2"])
+    return p
+
 
 def _g(x: float) -> str:
     return f"{x:.4g}"
