@@ -443,6 +443,11 @@ class SweepResult:
             lines.append(f"{s['name']:<10}" + (f"{s['truth']:>12.5g}" if known else "") + f"{s['consensus']:>12.5g}"
                          f"{s['spread']:>11.3g}{s['sigma']:>11.3g}{s['ratio']:>9.2f}"
                          + (f"{s['z_rms']:>7.2f}" if known else ""))
+        if rows:
+            lines.append("  (over the runs that reached the consensus: spread = sample std of the estimates, mean σ = "
+                         "their mean predicted σ, spread/σ near 1 or below: σ is honest"
+                         + ("; rms z = RMS of (estimate − truth)/σ, near 1 when unbiased, large when the model "
+                            "cannot hold the truth (e.g. a rigid model of a flexible axis)" if known else "") + ")")
         for why, count in sorted(reasons.items(), key=lambda kv: -kv[1])[:3]:
             lines.append(f"failed ({count} run{'s' if count > 1 else ''}): {why}")
         return "\n".join(lines)
