@@ -388,6 +388,8 @@ def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
     def quiet_unraisable(u):  # a KeyboardInterrupt raised inside a finaliser (GC, weakref callback) is only reported
         if u.exc_type is not None and issubclass(u.exc_type, KeyboardInterrupt):
             return  # ... by Python: ``received`` keeps it, and the end of main acts on it
+        if received:  # after an interrupt: the finaliser of an object it cut short in its construction (e.g. an
+            return  # import interrupted half-way, seen with pyparsing under matplotlib): noise, not a fault
         unraisable(u)
 
     sys.unraisablehook = quiet_unraisable
@@ -414,7 +416,8 @@ def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
             print("didim: interrupted; outputs left as they were", file=sys.stderr)
             return 130
         finally:
-            sys.unraisablehook = unraisable
+            if not (_last and received):  # an interrupted command exits next: its teardown stays quiet too
+                sys.unraisablehook = unraisable
             if previous is not None:
                 import signal
 
