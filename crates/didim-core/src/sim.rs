@@ -297,6 +297,16 @@ fn all_finite(x: &[f64]) -> bool {
     acc.iter().sum::<f64>() + tail == 0.0
 }
 
+/// The first sample of `x` that is not finite: a vectorised pass decides ([`all_finite`]), the
+/// scan only locates a failure.
+fn first_non_finite(x: &[f64]) -> Option<usize> {
+    if all_finite(x) {
+        None
+    } else {
+        x.iter().position(|v| !v.is_finite())
+    }
+}
+
 /// The output, or an error when a logged value is not finite. The positions and velocities are checked as they are
 /// integrated, but a command or an acceleration that overflows at the last sample (or a command held back by the
 /// delay) never reaches them: absurd gains (`gtau·vsat` beyond f64) or masses (1e-308 kg).
@@ -306,22 +316,14 @@ fn finite_outputs<const N: usize>(
     chi: &[f64],
     opts: &SimOptions,
 ) -> Result<SimOutput> {
-    // a vectorised pass first (0·x is NaN exactly where x is not finite); the sample is searched only on failure
-    let first = |x: &[f64]| {
-        if all_finite(x) {
-            None
-        } else {
-            x.iter().position(|v| !v.is_finite())
-        }
-    };
-    let mut bad: Option<(usize, &str)> = first(&out.force).map(|k| (k, "commanded force"));
+    let mut bad: Option<(usize, &str)> = first_non_finite(&out.force).map(|k| (k, "commanded force"));
     for (what, rows) in [
         ("position", &out.q),
         ("velocity", &out.qd),
         ("acceleration", &out.qdd),
     ] {
         for r in rows.iter() {
-            if let Some(k) = first(r) {
+            if let Some(k) = first_non_finite(r) {
                 if bad.is_none_or(|(b, _)| k < b) {
                     bad = Some((k, what));
                 }
@@ -412,8 +414,7 @@ fn validate_signals(qr: &[f64], u_ext: Option<&[f64]>) -> Result<usize> {
     if n == 0 {
         return Err(invalid!("the reference position qr is empty"));
     }
-    if !all_finite(qr) {
-        let k = qr.iter().position(|v| !v.is_finite()).unwrap_or(0);
+    if let Some(k) = first_non_finite(qr) {
         return Err(invalid!("reference position qr is not finite at sample {k}"));
     }
     if let Some(u) = u_ext {
@@ -423,8 +424,7 @@ fn validate_signals(qr: &[f64], u_ext: Option<&[f64]>) -> Result<usize> {
                 u.len()
             ));
         }
-        if !all_finite(u) {
-            let k = u.iter().position(|v| !v.is_finite()).unwrap_or(0);
+        if let Some(k) = first_non_finite(u) {
             return Err(invalid!("external input is not finite at sample {k}"));
         }
     }
