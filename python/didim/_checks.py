@@ -58,7 +58,9 @@ def real(name: str, value, unit: str = "", *, lo: Optional[float] = None, lo_ope
          hi: Optional[float] = None, hi_open: bool = True, hint: str = "") -> float:
     """A finite real option, optionally bounded (open bounds by default)."""
     u = f" {unit}" if unit else ""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.floating, np.integer)):
+    if type(value) is float:  # the common case, without the abstract-class checks (a few µs per simulation)
+        pass
+    elif isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.floating, np.integer)):
         raise DataError(f"{name} must be a real number{u}, got {value!r}{hint}")
     v = float(value)
     bad = not math.isfinite(v)

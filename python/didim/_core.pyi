@@ -8,6 +8,8 @@ from typing_extensions import final
 
 DEFAULT_COULOMB_EPS: float
 DEFAULT_TOL: float
+#: "avx2+fma" or "baseline": the build of the closed loop this processor runs (same results, different speed).
+SIMULATOR_BUILD: str
 TERM_KINDS: List[str]
 
 _F64 = npt.NDArray[np.float64]
@@ -17,6 +19,7 @@ __all__ = [
     "DEFAULT_TOL",
     "Decimation",
     "Problem",
+    "SIMULATOR_BUILD",
     "TERM_KINDS",
     "butter",
     "cheby1",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import warnings
@@ -152,10 +153,17 @@ class Recording:
         """Number of samples."""
         return int(self.qr.shape[0])
 
-    @property
+    @functools.cached_property
     def t(self) -> np.ndarray:
-        """Time of each sample (s), from 0."""
-        return np.arange(self.n) * self.dt
+        """Time of each sample (s), from 0 (read-only; computed once, as the recording cannot change)."""
+        t = np.arange(self.n) * self.dt
+        t.setflags(write=False)
+        return t
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.pop("t", None)  # the cached time vector: rebuilt on demand, not shipped to worker processes
+        return state
 
     @property
     def fs(self) -> float:

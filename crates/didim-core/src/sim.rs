@@ -199,6 +199,18 @@ impl std::ops::IndexMut<usize> for Signals {
     }
 }
 
+/// Which build of the closed loop this processor runs: `"avx2+fma"` (x86-64 processors
+/// that have both, unless the environment variable `DIDIM_BASELINE_SIMD` is set) or
+/// `"baseline"`. Both compute the same operations in the same order: the results are
+/// the same, only the time differs.
+pub fn simulator_build() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    if driver::wide_simd() {
+        return "avx2+fma";
+    }
+    "baseline"
+}
+
 /// Simulates `model` with parameters `chi` under `controller` tracking `qr`.
 ///
 /// `u_ext`, when given, is a known external force (N) added to the command at

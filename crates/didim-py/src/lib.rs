@@ -586,6 +586,7 @@ fn default_factor(fs_hz: Real, cutoff_hz: Real) -> usize {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_COULOMB_EPS", DEFAULT_COULOMB_EPS)?;
     m.add("DEFAULT_TOL", sim::DEFAULT_TOL)?;
+    m.add("SIMULATOR_BUILD", sim::simulator_build())?;
     m.add("TERM_KINDS", model::TERM_KINDS.to_vec())?;
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
     m.add_function(wrap_pyfunction!(param_units, m)?)?;

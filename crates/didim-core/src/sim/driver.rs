@@ -210,8 +210,69 @@ impl ForceLag {
 /// the signals and options) integrated by `stepper`; `states`: record the positions,
 /// velocities and accelerations too (else only the force). Returns the stepper for its
 /// statistics.
+///
+/// The loop is compiled twice: for the baseline x86-64 (SSE2) and, chosen at run time when
+/// the processor has them, with AVX2 and FMA enabled (three-operand instructions, wider
+/// registers: about 8 % less time on the quantized EMPS record). Neither contracts a
+/// multiply and an add into a fused one (Rust does not without `mul_add`), so both
+/// compute the same IEEE operations in the same order and give the same results.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+    states: bool,
+    stepper: S,
+    tangent: &mut T,
+) -> Result<(SimOutput, S)> {
+    #[cfg(target_arch = "x86_64")]
+    if wide_simd() {
+        // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
+        return unsafe { run_avx2(model, chi, controller, qr, u_ext, opts, states, stepper, tangent) };
+    }
+    run_loop(model, chi, controller, qr, u_ext, opts, states, stepper, tangent)
+}
+
+/// Whether [`run`] uses its AVX2 and FMA build: the processor has both, and the
+/// environment variable `DIDIM_BASELINE_SIMD` is not set (to compare the two builds).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn wide_simd() -> bool {
+    static WIDE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *WIDE.get_or_init(|| {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+            && std::env::var_os("DIDIM_BASELINE_SIMD").is_none()
+    })
+}
+
+/// [`run_loop`] compiled with AVX2 and FMA (the steppers' `#[inline(always)]` steps are
+/// compiled into it).
+///
+/// # Safety
+/// The processor must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn run_avx2<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
+    model: &Model<N>,
+    chi: &[f64],
+    controller: &Controller,
+    qr: &[f64],
+    u_ext: Option<&[f64]>,
+    opts: &SimOptions,
+    states: bool,
+    stepper: S,
+    tangent: &mut T,
+) -> Result<(SimOutput, S)> {
+    run_loop(model, chi, controller, qr, u_ext, opts, states, stepper, tangent)
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn run_loop<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
     model: &Model<N>,
     chi: &[f64],
     controller: &Controller,

@@ -340,10 +340,10 @@ impl<const N: usize> Plant<N> {
     pub fn try_step(&self, l: usize, q: &V<N>, v: &V<N>, gn: &V<N>, b: &V<N>) -> Step<N> {
         let lv = self.level(l);
         let h = lv.h;
+        let c = h * self.last_inv_h.get();
         let f = b + self.a0 + gn;
         let qp = lv.eqq * q + lv.eqv * v + lv.p1q * f;
         let vp = lv.evq * q + lv.evv * v + lv.p1v * f;
-        let c = h * self.last_inv_h.get();
         let pred = self.last_dg.get() * c;
         let q1 = qp + lv.p2q * pred;
         let v1 = vp + lv.p2v * pred;
@@ -379,10 +379,70 @@ impl<const N: usize> Plant<N> {
     }
 
     /// The Newton solve and the midpoint test of [`Plant::try_step`], from the fixed-point
-    /// iterate `dw = g(x(Δg_pred)) − g_n`.
-    #[inline(never)]
+    /// iterate `dw = g(x(Δg_pred)) − g_n`: out of line (the quick path stays compact), in
+    /// the build the closed loop runs in (see [`super::driver::run`]).
+    #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn implicit_step(
+        &self,
+        l: usize,
+        q: &V<N>,
+        v: &V<N>,
+        gn: &V<N>,
+        f: V<N>,
+        qp: V<N>,
+        vp: V<N>,
+        dw: V<N>,
+        scale: f64,
+    ) -> Step<N> {
+        #[cfg(target_arch = "x86_64")]
+        if super::driver::wide_simd() {
+            // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
+            return unsafe { self.implicit_avx2(l, q, v, gn, f, qp, vp, dw, scale) };
+        }
+        self.implicit_base(l, q, v, gn, f, qp, vp, dw, scale)
+    }
+
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    fn implicit_base(
+        &self,
+        l: usize,
+        q: &V<N>,
+        v: &V<N>,
+        gn: &V<N>,
+        f: V<N>,
+        qp: V<N>,
+        vp: V<N>,
+        dw: V<N>,
+        scale: f64,
+    ) -> Step<N> {
+        self.implicit_body(l, q, v, gn, f, qp, vp, dw, scale)
+    }
+
+    /// # Safety
+    /// The processor must support AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn implicit_avx2(
+        &self,
+        l: usize,
+        q: &V<N>,
+        v: &V<N>,
+        gn: &V<N>,
+        f: V<N>,
+        qp: V<N>,
+        vp: V<N>,
+        dw: V<N>,
+        scale: f64,
+    ) -> Step<N> {
+        self.implicit_body(l, q, v, gn, f, qp, vp, dw, scale)
+    }
+
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn implicit_body(
         &self,
         l: usize,
         q: &V<N>,
@@ -470,8 +530,56 @@ impl<const N: usize> Plant<N> {
         self.subdivide(l, q, v, g, b, hook)
     }
 
-    #[inline(never)]
+    /// A rejected step's two halves: out of line, in the build the closed loop runs in.
+    #[inline(always)]
     fn subdivide<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
+        &mut self,
+        l: usize,
+        q: &mut V<N>,
+        v: &mut V<N>,
+        g: &mut V<N>,
+        b: &V<N>,
+        hook: &mut H,
+    ) -> Result<()> {
+        #[cfg(target_arch = "x86_64")]
+        if super::driver::wide_simd() {
+            // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
+            return unsafe { self.subdivide_avx2(l, q, v, g, b, hook) };
+        }
+        self.subdivide_base(l, q, v, g, b, hook)
+    }
+
+    #[inline(never)]
+    fn subdivide_base<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
+        &mut self,
+        l: usize,
+        q: &mut V<N>,
+        v: &mut V<N>,
+        g: &mut V<N>,
+        b: &V<N>,
+        hook: &mut H,
+    ) -> Result<()> {
+        self.subdivide_body(l, q, v, g, b, hook)
+    }
+
+    /// # Safety
+    /// The processor must support AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn subdivide_avx2<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
+        &mut self,
+        l: usize,
+        q: &mut V<N>,
+        v: &mut V<N>,
+        g: &mut V<N>,
+        b: &V<N>,
+        hook: &mut H,
+    ) -> Result<()> {
+        self.subdivide_body(l, q, v, g, b, hook)
+    }
+
+    #[inline(always)]
+    fn subdivide_body<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
         &mut self,
         l: usize,
         q: &mut V<N>,
