@@ -33,7 +33,7 @@ __all__ = [
     "sosfiltfilt",
 ]
 
-_Terms = Optional[Sequence[Tuple[str, str, float, str]]]
+_Terms = Optional[Sequence[Tuple[str, str, float, str, float]]]
 
 def param_names(model: str, offset: bool = False, terms: _Terms = None) -> List[str]: ...
 def param_units(model: str, offset: bool = False, terms: _Terms = None,

@@ -40,8 +40,8 @@ class Model:
         if not isinstance(self.kind, str) or not isinstance(self.terms, (tuple, list)):
             raise DataError(f"a model needs a kind (text) and a list of terms, got {self.kind!r}, {self.terms!r}")
         for t in self.terms:
-            if not isinstance(t, (Term, tuple, list)) or (not isinstance(t, Term) and len(t) not in (2, 3, 4)):
-                raise DataError(f"a model term is a didim.Term or a (name, kind, hyper[, dof]) tuple, got {t!r}")
+            if not isinstance(t, (Term, tuple, list)) or (not isinstance(t, Term) and len(t) not in (2, 3, 4, 5)):
+                raise DataError(f"a model term is a didim.Term or a (name, kind, hyper[, dof[, width]]) tuple, got {t!r}")
         object.__setattr__(self, "terms", tuple(t if isinstance(t, Term) else Term(*t) for t in self.terms))
         if self.backlash_gap is not None:
             object.__setattr__(self, "backlash_gap", _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0))
@@ -95,8 +95,9 @@ class Model:
         if unknown:
             raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
         raw = d.get("terms") or []
-        if not isinstance(raw, list) or not all(isinstance(t, list) and len(t) in (3, 4) for t in raw):
-            raise DataError("model terms must be a list of [name, kind, hyper, dof] lists (dof 'motor' by default)")
+        if not isinstance(raw, list) or not all(isinstance(t, list) and len(t) in (3, 4, 5) for t in raw):
+            raise DataError("model terms must be a list of [name, kind, hyper, dof, width] lists (dof 'motor' and "
+                            "width 0 by default)")
         terms = tuple(Term(*t) for t in raw)
         offset = d.get("offset", False)
         if not isinstance(offset, bool):

@@ -48,17 +48,23 @@ class Term:
     - ``ripple_sin``/``ripple_cos``: sin/cos(2π q/P) with ``hyper`` = P (m);
     - ``coulomb_ripple_sin``/``coulomb_ripple_cos``: sign(q̇)·sin/cos(2π q/P), ``hyper`` = P (m): Coulomb friction
       that varies along the stroke, always against the motion;
+    - ``coulomb_spline_fwd``/``coulomb_spline_bwd``: B((q − c)/w)·s(1 ± s)/2 with s = sign(q̇) (1 or 0 forward, 0 or
+      −1 backward, smooth through rest), ``hyper`` = c the knot (m), ``width`` = w the knot spacing (m), B the cubic B-spline (B-splines w
+      apart sum to 1): a friction profile along the stroke for each direction, each parameter the friction added near
+      its knot (N);
     - ``damper`` (flexible model): coupling damping in parallel with K12, q̇1 − q̇12 on the motor row and its opposite
       on the load row (N/(m/s)).
 
     ``dof``: the degree of freedom whose state the term reads and whose row it acts on, "motor" (default) or "load"
     (flexible model: e.g. a Stribeck friction of the load, read on q̇12); a ``damper`` always couples the two.
+    ``width``: the knot spacing of a spline term (m); 0 for the other kinds.
     """
 
     name: str
     kind: str
     hyper: float = 0.0
     dof: str = "motor"
+    width: float = 0.0
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
@@ -66,13 +72,20 @@ class Term:
         if not isinstance(self.kind, str) or self.kind not in TERM_KINDS:
             raise DataError(f"unknown term kind {self.kind!r}: use one of {', '.join(TERM_KINDS)}")
         object.__setattr__(self, "hyper", _checks.real(f"term {self.name}'s hyper-parameter", self.hyper))
+        spline = self.kind.startswith("coulomb_spline")
+        object.__setattr__(self, "width", _checks.real(
+            f"term {self.name}'s width", self.width, "m", lo=0.0, lo_open=spline,
+            hint=" (the knot spacing of a spline term, > 0 m)" if spline else " (only spline terms have a width: 0)"))
+        if self.width and not spline:
+            raise DataError(f"term {self.name}: only spline terms have a width (knot spacing); leave it 0 for a "
+                            f"{self.kind} term")
         _checks.one_of(f"term {self.name}'s dof", self.dof, TERM_DOFS)
         if self.kind == "damper" and self.dof != "motor":
             raise DataError(f"term {self.name}: a damper couples the motor and the load; leave its dof out")
 
     def spec(self) -> tuple:
-        """(name, kind, hyper, dof), as the core and a saved model take it."""
-        return (self.name, self.kind, float(self.hyper), self.dof)
+        """(name, kind, hyper, dof, width), as the core and a saved model take it."""
+        return (self.name, self.kind, float(self.hyper), self.dof, float(self.width))
 
 
 def _specs(terms) -> Optional[list]:

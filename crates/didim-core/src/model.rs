@@ -39,6 +39,8 @@ pub const TERM_KINDS: &[&str] = &[
     "ripple_cos",
     "coulomb_ripple_sin",
     "coulomb_ripple_cos",
+    "coulomb_spline_fwd",
+    "coulomb_spline_bwd",
     "damper",
 ];
 
@@ -105,6 +107,21 @@ pub fn coulomb_sign_derivative(v: f64, eps: f64) -> f64 {
     }
 }
 
+/// The uniform cubic B-spline `B(u)` (support `|u| < 2`, `B(0) = 2/3`, the splines at the
+/// integers summing to 1) and its derivative `B'(u)`.
+#[inline]
+pub fn cubic_bspline(u: f64) -> (f64, f64) {
+    let a = u.abs();
+    if a < 1.0 {
+        (2.0 / 3.0 - a * a + 0.5 * a * a * a, u * (1.5 * a - 2.0))
+    } else if a < 2.0 {
+        let r = 2.0 - a;
+        (r * r * r / 6.0, -0.5 * r * r * u.signum())
+    } else {
+        (0.0, 0.0)
+    }
+}
+
 /// [`coulomb_sign`] and [`coulomb_sign_derivative`] at once (one square root).
 #[inline(always)]
 pub fn coulomb_sign_and_derivative(v: f64, eps: f64) -> (f64, f64) {
@@ -157,6 +174,15 @@ pub enum Basis {
     /// stroke, `Fc + A sin(2π q/P + φ)`, always against the motion (a preload or lubrication
     /// that changes along a screw, a worn zone of a guide).
     CoulombRipple { dof: usize, period: f64, phase: f64 },
+    /// Coulomb friction that varies along the stroke in one direction of motion (N): `φ =
+    /// B((q − center)/width)·σ(q̇)`, `B` the uniform cubic B-spline (support `±2 width`, `B(0) =
+    /// 2/3`; B-splines `width` apart sum to 1), `σ = s(1 + s)/2` for the forward direction and
+    /// `s(1 − s)/2` for the backward one, `s = coulomb_sign(q̇)`: 1 and 0 moving forward, 0 and
+    /// −1 moving backward, summing to `s`, smooth through rest. A set of them is a smooth friction
+    /// profile along the stroke for each direction, each parameter the friction added near
+    /// its knot (a tight or worn zone of a guide, a preload that changes along a screw, seen
+    /// differently going forward and backward).
+    CoulombSpline { dof: usize, center: f64, width: f64, forward: bool },
     /// Damper in parallel with the spring between dofs `a` and `b` (N/(m/s)):
     /// `φ_a = q̇_a − q̇_b`, `φ_b = q̇_b − q̇_a` (coupling damping of a flexible joint).
     Damper { a: usize, b: usize },
@@ -196,7 +222,8 @@ impl Basis {
             | Basis::AbsCoulomb { dof }
             | Basis::Stribeck { dof, .. }
             | Basis::Ripple { dof, .. }
-            | Basis::CoulombRipple { dof, .. } => (dof, None),
+            | Basis::CoulombRipple { dof, .. }
+            | Basis::CoulombSpline { dof, .. } => (dof, None),
             Basis::Spring { a, b } | Basis::Damper { a, b } | Basis::Backlash { a, b, .. } => (a, Some(b)),
         }
     }
@@ -214,6 +241,12 @@ impl Basis {
                     "a position ripple needs a finite period > 0 m and a finite phase, got {period} and {phase}"
                 ))
             }
+            Basis::CoulombSpline { center, width, .. } if !(center.is_finite() && width.is_finite() && width > 0.0) => {
+                Err(invalid!(
+                    "a friction spline needs a finite knot position (hyper, m) and a finite knot spacing width > 0 m, \
+                     got {center} and {width}"
+                ))
+            }
             Basis::Backlash { gap, .. } if !(gap.is_finite() && gap >= 0.0) => {
                 Err(invalid!("the backlash gap must be finite and >= 0 m, got {gap}"))
             }
@@ -222,9 +255,10 @@ impl Basis {
     }
 
     /// The basis function of an extra model term named by its kind (the names of
-    /// [`TERM_KINDS`]), its hyper-parameter (a Stribeck speed in m/s, a period in m; unused
+    /// [`TERM_KINDS`]), its hyper-parameter (a Stribeck speed in m/s, a period in m, a spline
+    /// knot's position in m; unused otherwise), its width (a spline's knot spacing in m; unused
     /// otherwise) and the dof it acts on (a `damper` always couples the motor and the load).
-    pub fn from_kind(kind: &str, hyper: f64, dof: usize) -> Result<Basis> {
+    pub fn from_kind(kind: &str, hyper: f64, width: f64, dof: usize) -> Result<Basis> {
         use std::f64::consts::FRAC_PI_2;
         Ok(match kind {
             "offset" => Basis::Offset { dof },
@@ -247,6 +281,12 @@ impl Basis {
                     0.0
                 },
             },
+            "coulomb_spline_fwd" | "coulomb_spline_bwd" => Basis::CoulombSpline {
+                dof,
+                center: hyper,
+                width,
+                forward: kind == "coulomb_spline_fwd",
+            },
             "damper" => Basis::Damper { a: MOTOR, b: LOAD },
             other => {
                 return Err(invalid!(
@@ -268,7 +308,8 @@ impl Basis {
             | Basis::AbsCoulomb { .. }
             | Basis::Stribeck { .. }
             | Basis::Ripple { .. }
-            | Basis::CoulombRipple { .. } => "N",
+            | Basis::CoulombRipple { .. }
+            | Basis::CoulombSpline { .. } => "N",
         }
     }
 
@@ -326,6 +367,21 @@ impl Basis {
                 let (sn, cs) = (w * x + phase).sin_cos();
                 let (s, ds) = coulomb_sign_and_derivative(xd, eps);
                 (s * sn, s * w * cs, ds * sn)
+            }
+            Basis::CoulombSpline {
+                center,
+                width,
+                forward,
+                ..
+            } => {
+                let (b, db) = cubic_bspline((x - center) / width);
+                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                // the forward or backward part of the sign, s(1 ± s)/2: 1 or 0 (−1 or 0) away from rest, the two
+                // summing to s, and as smooth as s (max(s, 0) would kink the dynamics at every reversal)
+                let side = if forward { 1.0 } else { -1.0 };
+                let sigma = 0.5 * s * (1.0 + side * s);
+                let dsigma = 0.5 * ds * (1.0 + 2.0 * side * s);
+                (b * sigma, db / width * sigma, b * dsigma)
             }
             Basis::Backlash { gap, .. } => {
                 // slope 1 outside the gap, 0 inside
@@ -765,7 +821,7 @@ mod tests {
     #[test]
     fn every_term_kind_builds_its_basis_and_knows_its_unit() {
         for kind in TERM_KINDS {
-            let b = Basis::from_kind(kind, 0.01, LOAD).unwrap();
+            let b = Basis::from_kind(kind, 0.01, 0.02, LOAD).unwrap();
             let unit = b.unit();
             assert!(["N", "N/(m/s)"].contains(&unit), "{kind}: {unit}");
             // a load term acts on the load row only; the damper couples both
@@ -776,10 +832,51 @@ mod tests {
                 assert_eq!((a, other), (LOAD, None), "{kind}");
             }
         }
-        let e = Basis::from_kind("stribek", 0.01, MOTOR).unwrap_err();
+        let e = Basis::from_kind("stribek", 0.01, 0.0, MOTOR).unwrap_err();
         assert!(e.to_string().contains("unknown term kind \"stribek\""), "{e}");
         assert_eq!(Basis::Inertia { dof: 0 }.unit(), "kg");
         assert_eq!(Basis::Spring { a: 0, b: 1 }.unit(), "N/m");
+    }
+
+    #[test]
+    fn cubic_bsplines_sum_to_one_and_friction_splines_split_the_sign_by_direction() {
+        for i in 0..200 {
+            let u = -3.0 + 0.0317 * i as f64;
+            // the B-splines at the integers are a partition of unity, and B' is the slope of B
+            let total: f64 = (-5..=5).map(|k| cubic_bspline(u - k as f64).0).sum();
+            assert!((total - 1.0).abs() < 1e-14, "{u}: {total}");
+            let h = 1e-6;
+            let fd = (cubic_bspline(u + h).0 - cubic_bspline(u - h).0) / (2.0 * h);
+            assert!((fd - cubic_bspline(u).1).abs() < 1e-8, "{u}: {fd}");
+        }
+        assert!((cubic_bspline(0.0).0 - 2.0 / 3.0).abs() < 1e-15);
+        let eps = 1e-4;
+        let (fwd, bwd) = (
+            Basis::from_kind("coulomb_spline_fwd", 0.05, 0.03, MOTOR).unwrap(),
+            Basis::from_kind("coulomb_spline_bwd", 0.05, 0.03, MOTOR).unwrap(),
+        );
+        for (x, v) in [(0.05, 0.02), (0.071, -0.013), (0.02, 3e-5), (0.11, -2e-4), (0.2, 0.1)] {
+            let (pf, xf, vf) = fwd.local(x, v, eps);
+            let (pb, xb, vb) = bwd.local(x, v, eps);
+            // forward and backward together are the whole Coulomb sign times the spline
+            let whole = cubic_bspline((x - 0.05) / 0.03).0 * coulomb_sign(v, eps);
+            assert!((pf + pb - whole).abs() < 1e-15);
+            // each acts in its own direction; the other one only within the smoothing of the sign
+            let (s, bx) = (coulomb_sign(v, eps), cubic_bspline((x - 0.05) / 0.03).0);
+            let (own, other) = if v > 0.0 { (pf, pb) } else { (-pb, pf) };
+            assert!((own - bx * s.abs()).abs() <= bx * (1.0 - s.abs()) + 1e-15);
+            assert!(other.abs() <= 0.5 * bx * (1.0 - s.abs()) + 1e-15);
+            // partial derivatives against central differences
+            let (hx, hv) = (1e-7, 1e-9);
+            for (b, px, pv) in [(fwd, xf, vf), (bwd, xb, vb)] {
+                let fx = (b.local(x + hx, v, eps).0 - b.local(x - hx, v, eps).0) / (2.0 * hx);
+                let fv = (b.local(x, v + hv, eps).0 - b.local(x, v - hv, eps).0) / (2.0 * hv);
+                assert!((fx - px).abs() < 1e-6 * (1.0 + px.abs()), "{x} {v}: {fx} vs {px}");
+                assert!((fv - pv).abs() < 1e-4 * (1.0 + pv.abs()), "{x} {v}: {fv} vs {pv}");
+            }
+        }
+        let e = Basis::from_kind("coulomb_spline_fwd", 0.05, 0.0, MOTOR).unwrap().check().unwrap_err();
+        assert!(e.to_string().contains("knot spacing width > 0"), "{e}");
     }
 
     #[test]

@@ -149,10 +149,10 @@ enum AnyModel {
     Flexible(Model<2>),
 }
 
-/// Extra terms of a model: (name, kind, hyper-parameter, dof "motor" or "load").
-pub(crate) type Terms = Vec<(String, String, f64, String)>;
+/// Extra terms of a model: (name, kind, hyper-parameter, dof "motor" or "load", width).
+pub(crate) type Terms = Vec<(String, String, f64, String, f64)>;
 
-fn extra_basis(kind: &str, hyper: f64, dof: &str) -> Result<Basis, Error> {
+fn extra_basis(kind: &str, hyper: f64, width: f64, dof: &str) -> Result<Basis, Error> {
     let dof = match dof {
         "motor" => model::MOTOR,
         "load" => model::LOAD,
@@ -162,19 +162,19 @@ fn extra_basis(kind: &str, hyper: f64, dof: &str) -> Result<Basis, Error> {
             )))
         }
     };
-    Basis::from_kind(kind, hyper, dof)
+    Basis::from_kind(kind, hyper, width, dof)
 }
 
 fn make_model(
     kind: &str,
     offset: bool,
     coulomb_eps: f64,
-    terms: &[(String, String, f64, String)],
+    terms: &[(String, String, f64, String, f64)],
     backlash_gap: Option<f64>,
 ) -> Result<AnyModel, Error> {
     let extra = terms
         .iter()
-        .map(|(n, k, h, d)| Ok((n.clone(), extra_basis(k, *h, d)?)))
+        .map(|(n, k, h, d, w)| Ok((n.clone(), extra_basis(k, *h, *w, d)?)))
         .collect::<Result<Vec<_>, Error>>()?;
     match kind {
         "rigid" => {

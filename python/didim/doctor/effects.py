@@ -220,6 +220,100 @@ def _periodic(name: str, names: Tuple[str, str], kinds: Tuple[str, str], share: 
     return candidates, adopt, _remove_terms(names)
 
 
+#: Friction profiles along the stroke tried beside the periodic law: cubic B-splines per direction of motion, the stroke
+#: cut into this many intervals (knots one interval apart, from one interval before the stroke to one after it, so that
+#: the splines sum to 1 all along it).
+SPLINE_INTERVALS = (2, 3, 5, 8)
+
+
+def _spline_terms(lo: float, w: float, intervals: int) -> List[Term]:
+    """The friction splines of a profile with knots ``lo + j·w``, j = −1 … intervals + 1, forward and backward; the
+    last knot of each direction is left out: the splines sum to 1, which the Coulomb friction already is."""
+    return [Term(f"Fc{d[0]}{j + 1}", f"coulomb_spline_{d}", lo + j * w, width=w)
+            for d in ("fwd", "bwd") for j in range(-1, intervals + 1)]
+
+
+def _spline_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    """Profiles per direction, once the model has direction-dependent Coulomb friction: a profile per direction also
+    spans (nearly) a constant per direction, so offered first it takes the simpler effect's credit and its many
+    parameters generalise worse (on the EMPS: 4.67 % held-out error against 4.55 % without any profile)."""
+    if any(t.kind.startswith("coulomb_spline") for t in state.terms) or not any(
+            t.kind == "abs_coulomb" for t in state.terms):
+        return []
+    q = sim.q[0][: data.n_train]
+    lo, stroke = float(np.min(q)), float(np.ptp(q))
+    if not stroke > 0:
+        return []
+    groups = [_spline_terms(lo, stroke / m, m) for m in SPLINE_INTERVALS]
+    return [Candidate("position_dependent_coulomb", x, {"intervals": float(m), "origin": lo, "spacing": stroke / m},
+                      len(SPLINE_INTERVALS))
+            for m, x in zip(SPLINE_INTERVALS, motor_columns_many(state, sim, groups))]
+
+
+def spline_profile(state: State, n: int = 201) -> Optional[Dict[str, np.ndarray]]:
+    """The friction profile of the state's spline terms along the knots' span: positions (m) and the friction added
+    forward and backward (N, each as a force against the motion), or None without spline terms."""
+    splines = [t for t in state.terms if t.kind.startswith("coulomb_spline")]
+    if not splines:
+        return None
+    w = splines[0].width
+    knots = sorted({t.hyper for t in splines})
+    x = np.linspace(knots[0] + w, knots[-1], n)  # where the splines sum to 1: the stroke
+    out = {"q": x}
+    for d in ("fwd", "bwd"):
+        u = (x[:, None] - np.array([t.hyper for t in splines if t.kind.endswith(d)])[None, :]) / w
+        a = np.abs(u)
+        b = np.where(a < 1, 2 / 3 - a**2 + a**3 / 2, np.where(a < 2, (2 - a) ** 3 / 6, 0.0))
+        coef = np.array([state.params[t.name] for t in splines if t.kind.endswith(d)])
+        out[d] = b @ coef
+    return out
+
+
+#: A finer profile is kept only when it lowers the training output error by more than this share of it.
+SPLINE_PARSIMONY = 0.01
+
+
+def _spline_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    """Refits the model with the profile at every spacing of :data:`SPLINE_INTERVALS` (the test's choice starts from
+    its estimates, the others from 0) and keeps the coarsest whose training output error is within
+    :data:`SPLINE_PARSIMONY` of the best: the test ranks spacings on the base model's residual, where a coarse profile
+    can look best while a finer one follows a narrow zone the closed loop needs (no held-out data is used)."""
+    lo, stroke = c.hyper["origin"], c.hyper["spacing"] * c.hyper["intervals"]
+    fits = []
+    for m in SPLINE_INTERVALS:
+        terms = _spline_terms(lo, stroke / m, m)
+        init = ({t.name: float(b) for t, b in zip(terms, c.test.beta)} if m == int(c.hyper["intervals"])
+                else {t.name: 0.0 for t in terms})
+        try:
+            st, r = refit(data, replace(state, terms=state.terms + tuple(terms)), init, progress)
+        except DidimError:
+            continue
+        if r.converged:
+            fits.append((m, st, r, terms))
+    if not fits:
+        raise SimulationError("the friction profile refit did not converge at any spacing")
+    best = min(r.output_error for _, _, r, _ in fits)
+    m, st, r, terms = next(f for f in fits if f[2].output_error <= (1 + SPLINE_PARSIMONY) * best)
+    return st, r, _spline_summary(st), _std(r, [t.name for t in terms])
+
+
+def _spline_summary(st: State) -> Dict[str, float]:
+    """The profiles in numbers: the mean Coulomb level along the stroke per direction (with the model's Coulomb and
+    direction-dependent Coulomb friction: a profile per direction carries a level of its own), its spread, and its
+    largest departure from the mean and where."""
+    prof = spline_profile(st)
+    out: Dict[str, float] = {"spacing": next(t.width for t in st.terms if t.kind.startswith("coulomb_spline"))}
+    fc, dfc = st.coulomb(), st.params.get("dFc", 0.0)
+    for d, name, level in (("fwd", "forward", fc + dfc), ("bwd", "backward", fc - dfc)):
+        f = prof[d]  # friction added against the motion, N
+        out[f"level_{name}"] = float(level + np.mean(f))
+        out[f"spread_{name}"] = float(np.ptp(f))
+        k = int(np.argmax(np.abs(f - np.mean(f))))
+        out[f"peak_{name}"] = float(f[k] - np.mean(f))
+        out[f"peak_{name}_at"] = float(prof["q"][k])
+    return out
+
+
 # ---------------------------------------------------------------------------------------------------- delay
 
 
@@ -384,7 +478,10 @@ def _backlash_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted
 UNITS = {"OF": "N", "dFv": "N/(m/s)", "dFc": "N", "Fs": "N", "vs": "m/s", "amplitude": "N", "period": "m",
          "Ar_sin": "N", "Ar_cos": "N", "Aq_sin": "N", "Aq_cos": "N", "force_lag_s": "s", "bandwidth_hz": "Hz",
          "delay_samples": "samples", "delay_s": "s", "f_n_flex": "Hz", "M1": "kg", "M2": "kg", "K12": "N/m",
-         "Fv2": "N/(m/s)", "Fc2": "N", "C12": "N/(m/s)", "gap": "m"}
+         "Fv2": "N/(m/s)", "Fc2": "N", "C12": "N/(m/s)", "gap": "m", "spacing": "m", "spread_forward": "N",
+         "spread_backward": "N", "peak_forward": "N", "peak_backward": "N", "peak_forward_at": "m",
+         "level_forward": "N", "level_backward": "N",
+         "peak_backward_at": "m"}
 
 
 def final_values(effect: str, params: Dict[str, float], state: State) -> Dict[str, float]:
@@ -433,6 +530,19 @@ def _ripple_words(p: Dict[str, float], st: State) -> str:
     return out
 
 
+def _pdc_words(p: Dict[str, float], st: State) -> str:
+    if "spacing" not in p or spline_profile(st) is None:
+        return _ripple_words(p, st)
+    q = _spline_summary(st)  # the final model's profile
+
+    def side(name):
+        return (f"{_g(q[f'level_{name}'])} N on average moving {name}, varying by {_g(q[f'spread_{name}'])} N "
+                f"(most at {_g(1e3 * q[f'peak_{name}_at'])} mm: {q[f'peak_{name}']:+.3g} N)")
+
+    return (f"Coulomb friction along the stroke: {side('forward')}; {side('backward')} (a profile per direction, "
+            f"splines {_g(1e3 * q['spacing'])} mm apart)")
+
+
 def _flex_words(p: Dict[str, float], st: State) -> str:
     return (f"a mode at {_g(p['f_n_flex'])} Hz: motor side {_g(p['M1'])} kg, load side {_g(p['M2'])} kg, stiffness "
             f"{_g(p['K12'])} N/m (λ = {p['lambda']:.3f})")
@@ -443,7 +553,7 @@ _WORDS = {
     "asymmetric_friction": _asym_words,
     "stribeck": _stribeck_words,
     "position_ripple": _ripple_words,
-    "position_dependent_coulomb": _ripple_words,
+    "position_dependent_coulomb": _pdc_words,
     "delay": _delay_words,
     "flexibility": _flex_words,
     "load_friction": lambda p, st: (f"load-side friction: viscous {_g(p['Fv2'])} N/(m/s), Coulomb {_g(p['Fc2'])} N "
@@ -462,8 +572,26 @@ def _registry(*effects: Effect) -> Dict[str, Effect]:
 
 _asym = _with_terms("asymmetric_friction", ("dFv", "abs_viscous"), ("dFc", "abs_coulomb"))
 _ripple = _periodic("position_ripple", ("Ar_sin", "Ar_cos"), ("ripple_sin", "ripple_cos"), 3.0, relative=False)
-_pdc = _periodic("position_dependent_coulomb", ("Aq_sin", "Aq_cos"), ("coulomb_ripple_sin", "coulomb_ripple_cos"), 2.0,
-                 relative=True)
+_pdc_periodic = _periodic("position_dependent_coulomb", ("Aq_sin", "Aq_cos"),
+                          ("coulomb_ripple_sin", "coulomb_ripple_cos"), 2.0, relative=True)
+
+
+def _pdc_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    """A periodic law (the same in both directions) over the period grid, or a smooth profile per direction."""
+    return _pdc_periodic[0](state, sim, data) + _spline_candidates(state, sim, data)
+
+
+def _pdc_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    return (_spline_adopt if "intervals" in c.hyper else _pdc_periodic[1])(c, state, data, progress)
+
+
+def _pdc_remove(state: State) -> State:
+    st = _pdc_periodic[2](state)
+    names = tuple(t.name for t in st.terms if t.kind.startswith("coulomb_spline"))
+    return _remove_terms(names)(st) if names else st
+
+
+_pdc = (_pdc_candidates, _pdc_adopt, _pdc_remove)
 
 #: Every effect the doctor can name, in the order candidates are listed.
 REGISTRY: Dict[str, Effect] = _registry(

@@ -124,7 +124,7 @@ def motor_columns(state: State, sim: SimResult, extra: Sequence[Term]) -> np.nda
 def motor_columns_many(state: State, sim: SimResult, groups: Sequence[Sequence[Term]]) -> List[np.ndarray]:
     """:func:`motor_columns` of each group of extra terms (the variants of a grid), from one core call: the columns
     of every group are computed together, each exactly as alone (a term's column depends on that term only)."""
-    extra = [Term(f"{t.name}_{i}", t.kind, t.hyper, t.dof) for i, g in enumerate(groups) for t in g]
+    extra = [Term(f"{t.name}_{i}", t.kind, t.hyper, t.dof, t.width) for i, g in enumerate(groups) for t in g]
     w = _core.regressor(state.model, sim.q, sim.qd, sim.qdd, offset=state.offset,
                         terms=[t.spec() for t in (*state.terms, *extra)], backlash_gap=state.backlash_gap)
     cols = w[0][:, w.shape[2] - len(extra):]
