@@ -182,7 +182,12 @@ pub enum Basis {
     /// profile along the stroke for each direction, each parameter the friction added near
     /// its knot (a tight or worn zone of a guide, a preload that changes along a screw, seen
     /// differently going forward and backward).
-    CoulombSpline { dof: usize, center: f64, width: f64, forward: bool },
+    CoulombSpline {
+        dof: usize,
+        center: f64,
+        width: f64,
+        forward: bool,
+    },
     /// Damper in parallel with the spring between dofs `a` and `b` (N/(m/s)):
     /// `φ_a = q̇_a − q̇_b`, `φ_b = q̇_b − q̇_a` (coupling damping of a flexible joint).
     Damper { a: usize, b: usize },
@@ -855,7 +860,13 @@ mod tests {
             Basis::from_kind("coulomb_spline_fwd", 0.05, 0.03, MOTOR).unwrap(),
             Basis::from_kind("coulomb_spline_bwd", 0.05, 0.03, MOTOR).unwrap(),
         );
-        for (x, v) in [(0.05, 0.02), (0.071, -0.013), (0.02, 3e-5), (0.11, -2e-4), (0.2, 0.1)] {
+        for (x, v) in [
+            (0.05, 0.02),
+            (0.071, -0.013),
+            (0.02, 3e-5),
+            (0.11, -2e-4),
+            (0.2, 0.1),
+        ] {
             let (pf, xf, vf) = fwd.local(x, v, eps);
             let (pb, xb, vb) = bwd.local(x, v, eps);
             // forward and backward together are the whole Coulomb sign times the spline
@@ -875,7 +886,10 @@ mod tests {
                 assert!((fv - pv).abs() < 1e-4 * (1.0 + pv.abs()), "{x} {v}: {fv} vs {pv}");
             }
         }
-        let e = Basis::from_kind("coulomb_spline_fwd", 0.05, 0.0, MOTOR).unwrap().check().unwrap_err();
+        let e = Basis::from_kind("coulomb_spline_fwd", 0.05, 0.0, MOTOR)
+            .unwrap()
+            .check()
+            .unwrap_err();
         assert!(e.to_string().contains("knot spacing width > 0"), "{e}");
     }
 
