@@ -285,7 +285,8 @@ def didim_iterate(
     (``|dec sign(q̇)| < COULOMB_SATURATED``): there the fit depends on the shape of the friction law near zero speed,
     which no smooth law gets right (real friction sticks; another simulator smooths otherwise), and those few samples
     bias Fv and Fc by several percent. The closed loop is still simulated through them. ``"auto"`` (default) excludes
-    them for the rigid model (the only model it applies to) when at least ``MIN_MOVING_SHARE`` of the samples remain;
+    them for the rigid model (the only model it applies to) when at least ``MIN_MOVING_SHARE`` of the samples remain,
+    and keeps them for a model with friction-profile terms (``coulomb_spline_*``, which live where the axis reverses);
     ``"keep"`` is the paper's regression on every sample.
     """
     t0 = time.perf_counter()
@@ -313,7 +314,12 @@ def didim_iterate(
     if reversals == "exclude" and model != "rigid":
         raise DataError("reversals='exclude' is for the rigid model (the flexible regression has a load row per "
                         "sample whose friction reverses on its own); use 'keep' or 'auto'")
-    exclude = reversals != "keep" and model == "rigid" and _coulomb_column(free) is not None
+    # a friction profile along the stroke lives where the axis reverses (its knots near the ends of the stroke): "auto"
+    # keeps the reversals then, else those splines lose most of their samples, and the samples left out change with
+    # each iterate's simulated velocity (DIDIM alternated between two points on the EMPS)
+    profile = any(t.kind.startswith("coulomb_spline") for t in terms)
+    exclude = (reversals == "exclude" or (reversals == "auto" and not profile)) and model == "rigid" and (
+        _coulomb_column(free) is not None)
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, tol=sim_tol,
                  terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
@@ -445,6 +451,9 @@ def didim_iterate(
             converged, message = False, f"the simulation of the final estimate failed ({e})"
     if not converged and best[2] is not None:
         final_out, chi, sol = best[0], best[1], best[2]
+        # the best iterate's regression estimated the next iterate: its σ stand for the returned χ, its %σ must too
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sol = {**sol, "rel_std_pct": 100 * np.asarray(sol["std"], dtype=float) / np.abs(chi[fi])}
     elif not converged and sol is None:
         raise (type(stop) if stop is not None else SimulationError)(f"DIDIM could not start: {message}")
     if exclude and sol is not None and sol.get("rows_kept") is not None:

@@ -178,8 +178,10 @@ class Diagnosis:
             gain = x.held_out()
             lines.append(f"- {x.effect}{label}: {text}" + (f"; {gain}" if gain and x.words else ""))
         if self.rejected:
+            # an effect tried on several models appears once, with its last try (every try is in the details)
+            last = {x.effect: x for x in self.rejected}
             lines.append("not confirmed on held-out data: " + "; ".join(
-                f"{x.effect} ({x.held_out() or x.evidence})" for x in self.rejected))
+                f"{x.effect} ({x.held_out() or x.evidence})" for x in last.values()))
         for a in self.ambiguities:
             lines.append(f"this record cannot tell apart {' / '.join(a['effects'])}; the experiment that would: "
                          f"{a['experiment']}")
