@@ -211,11 +211,7 @@ impl ForceLag {
 /// velocities and accelerations too (else only the force). Returns the stepper for its
 /// statistics.
 ///
-/// The loop is compiled twice: for the baseline x86-64 (SSE2) and, chosen at run time when
-/// the processor has them, with AVX2 and FMA enabled (three-operand instructions, wider
-/// registers: about 8 % less time on the quantized EMPS record). Neither contracts a
-/// multiply and an add into a fused one (Rust does not without `mul_add`), so both
-/// compute the same IEEE operations in the same order and give the same results.
+/// The loop is compiled twice (see [`simd`]): for the baseline x86-64 and with AVX2 and FMA.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
     model: &Model<N>,
@@ -228,15 +224,127 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
     stepper: S,
     tangent: &mut T,
 ) -> Result<(SimOutput, S)> {
+    simd(
+        #[inline(always)]
+        move || {
+            let mut stepper = stepper;
+            let n = qr.len();
+            let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+            let bound = 10.0 * (hi - lo) + 1.0;
+            let encoder = Quantizer::new(opts.quantization);
+            let quantize = |x: f64| encoder.apply(x);
+
+            let mut q = V::<N>::repeat(qr[0]);
+            let mut v = V::<N>::zeros();
+            stepper.start(&q, &v);
+            tangent.start(stepper.ctx(), &q, &v);
+            let law = controller.law(opts.dt)?;
+            let mut ctl = law.rest_state(qr[0], quantize(q[0]));
+            let mut pending = vec![0.0; opts.delay]; // ring buffer of delayed commands
+            let lag = ForceLag::new(opts.force_lag, opts.dt);
+            let mut applied: Option<f64> = None; // the lagged force at the start of the period
+
+            let m = if states { n } else { 0 };
+            let mut out = SimOutput {
+                force: filled(n, 0.0, "the simulated force")?,
+                q: Signals::zeros(N, m, "the simulated positions")?,
+                qd: Signals::zeros(N, m, "the simulated velocities")?,
+                qdd: Signals::zeros(N, m, "the simulated accelerations")?,
+            };
+
+            for k in 0..n {
+                if k % crate::interrupt::EVERY == 0 {
+                    crate::interrupt::check()?;
+                }
+                let (tau_cmd, active) =
+                    law.step(&mut ctl, qr[k], quantize(q[0]), u_ext.map_or(0.0, |u| u[k]));
+                let tau = if opts.delay == 0 {
+                    tau_cmd
+                } else {
+                    std::mem::replace(&mut pending[k % opts.delay], tau_cmd)
+                };
+                let tau = match lag {
+                    None => tau,
+                    Some(lag) => {
+                        let (mean, end) = lag.period(*applied.get_or_insert(tau), tau);
+                        applied = Some(end);
+                        mean
+                    }
+                };
+                tangent.command(k, &law, active, tau);
+                out.force[k] = tau_cmd;
+                if states {
+                    // the direct model's acceleration at the recorded state: the IDM of the
+                    // outputs reproduces the applied force to rounding
+                    let a = stepper.accel(&q, &v, tau);
+                    for d in 0..N {
+                        let at = d * m + k; // dof d's row, sample k (the layout of Signals)
+                        out.q.data[at] = q[d];
+                        out.qd.data[at] = v[d];
+                        out.qdd.data[at] = a[d];
+                    }
+                }
+                tangent.record(k);
+                if k + 1 == n {
+                    break;
+                }
+                stepper.advance(&mut q, &mut v, tau, tangent)?;
+
+                let err = (q[0] - qr[k + 1]).abs();
+                if !(finite(&q, &v) && err <= bound) {
+                    return Err(Error::Simulation(format!(
+                    "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
+                     (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller \
+                     gains{}{}",
+                    k + 1,
+                    (k + 1) as f64 * opts.dt,
+                    err,
+                    bound,
+                    describe(model, chi),
+                    if opts.force_lag > 0.0 {
+                        format!(
+                            ", and the force lag of {} s (a current loop's is a fraction of a millisecond)",
+                            opts.force_lag
+                        )
+                    } else {
+                        String::new()
+                    },
+                    S::DIVERGENCE_HINT,
+                )));
+                }
+            }
+            Ok((out, stepper))
+        },
+    )
+}
+
+/// Runs `f` compiled for the processor: with AVX2 and FMA enabled where it has both
+/// ([`wide_simd`]), else for the baseline x86-64 (SSE2). `f` is inlined into each build
+/// with whatever `#[inline(always)]` code it calls (the closed loop, the steppers' steps,
+/// the controller): three-operand instructions and wider registers, about 4 % of a
+/// simulation on the quantized EMPS record. Rust never fuses a multiply and an add by
+/// itself (only `mul_add` does), so both builds compute the same IEEE operations in the
+/// same order and give the same results. Out of line: the callers' fast paths stay compact.
+#[inline(never)]
+pub(crate) fn simd<R>(f: impl FnOnce() -> R) -> R {
+    /// # Safety
+    /// The processor must support AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn wide<R>(f: impl FnOnce() -> R) -> R {
+        f()
+    }
     #[cfg(target_arch = "x86_64")]
     if wide_simd() {
         // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
-        return unsafe { run_avx2(model, chi, controller, qr, u_ext, opts, states, stepper, tangent) };
+        return unsafe { wide(f) };
     }
-    run_loop(model, chi, controller, qr, u_ext, opts, states, stepper, tangent)
+    f()
 }
 
-/// Whether [`run`] uses its AVX2 and FMA build: the processor has both, and the
+/// Whether [`simd`] runs the AVX2 and FMA build: the processor has both, and the
 /// environment variable `DIDIM_BASELINE_SIMD` is not set (to compare the two builds).
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn wide_simd() -> bool {
@@ -246,130 +354,6 @@ pub(crate) fn wide_simd() -> bool {
             && std::arch::is_x86_feature_detected!("fma")
             && std::env::var_os("DIDIM_BASELINE_SIMD").is_none()
     })
-}
-
-/// [`run_loop`] compiled with AVX2 and FMA (the steppers' `#[inline(always)]` steps are
-/// compiled into it).
-///
-/// # Safety
-/// The processor must support AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn run_avx2<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
-    model: &Model<N>,
-    chi: &[f64],
-    controller: &Controller,
-    qr: &[f64],
-    u_ext: Option<&[f64]>,
-    opts: &SimOptions,
-    states: bool,
-    stepper: S,
-    tangent: &mut T,
-) -> Result<(SimOutput, S)> {
-    run_loop(model, chi, controller, qr, u_ext, opts, states, stepper, tangent)
-}
-
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn run_loop<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
-    model: &Model<N>,
-    chi: &[f64],
-    controller: &Controller,
-    qr: &[f64],
-    u_ext: Option<&[f64]>,
-    opts: &SimOptions,
-    states: bool,
-    mut stepper: S,
-    tangent: &mut T,
-) -> Result<(SimOutput, S)> {
-    let n = qr.len();
-    let (lo, hi) = qr.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-        (a.min(x), b.max(x))
-    });
-    let bound = 10.0 * (hi - lo) + 1.0;
-    let encoder = Quantizer::new(opts.quantization);
-    let quantize = |x: f64| encoder.apply(x);
-
-    let mut q = V::<N>::repeat(qr[0]);
-    let mut v = V::<N>::zeros();
-    stepper.start(&q, &v);
-    tangent.start(stepper.ctx(), &q, &v);
-    let law = controller.law(opts.dt)?;
-    let mut ctl = law.rest_state(qr[0], quantize(q[0]));
-    let mut pending = vec![0.0; opts.delay]; // ring buffer of delayed commands
-    let lag = ForceLag::new(opts.force_lag, opts.dt);
-    let mut applied: Option<f64> = None; // the lagged force at the start of the period
-
-    let m = if states { n } else { 0 };
-    let mut out = SimOutput {
-        force: filled(n, 0.0, "the simulated force")?,
-        q: Signals::zeros(N, m, "the simulated positions")?,
-        qd: Signals::zeros(N, m, "the simulated velocities")?,
-        qdd: Signals::zeros(N, m, "the simulated accelerations")?,
-    };
-
-    for k in 0..n {
-        if k % crate::interrupt::EVERY == 0 {
-            crate::interrupt::check()?;
-        }
-        let (tau_cmd, active) = law.step(&mut ctl, qr[k], quantize(q[0]), u_ext.map_or(0.0, |u| u[k]));
-        let tau = if opts.delay == 0 {
-            tau_cmd
-        } else {
-            std::mem::replace(&mut pending[k % opts.delay], tau_cmd)
-        };
-        let tau = match lag {
-            None => tau,
-            Some(lag) => {
-                let (mean, end) = lag.period(*applied.get_or_insert(tau), tau);
-                applied = Some(end);
-                mean
-            }
-        };
-        tangent.command(k, &law, active, tau);
-        out.force[k] = tau_cmd;
-        if states {
-            // the direct model's acceleration at the recorded state: the IDM of the
-            // outputs reproduces the applied force to rounding
-            let a = stepper.accel(&q, &v, tau);
-            for d in 0..N {
-                let at = d * m + k; // dof d's row, sample k (the layout of Signals)
-                out.q.data[at] = q[d];
-                out.qd.data[at] = v[d];
-                out.qdd.data[at] = a[d];
-            }
-        }
-        tangent.record(k);
-        if k + 1 == n {
-            break;
-        }
-        stepper.advance(&mut q, &mut v, tau, tangent)?;
-
-        let err = (q[0] - qr[k + 1]).abs();
-        if !(finite(&q, &v) && err <= bound) {
-            return Err(Error::Simulation(format!(
-                "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
-                 (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller \
-                 gains{}{}",
-                k + 1,
-                (k + 1) as f64 * opts.dt,
-                err,
-                bound,
-                describe(model, chi),
-                if opts.force_lag > 0.0 {
-                    format!(
-                        ", and the force lag of {} s (a current loop's is a fraction of a millisecond)",
-                        opts.force_lag
-                    )
-                } else {
-                    String::new()
-                },
-                S::DIVERGENCE_HINT,
-            )));
-        }
-    }
-    Ok((out, stepper))
 }
 
 #[cfg(test)]

@@ -380,7 +380,10 @@ impl<const N: usize> Plant<N> {
 
     /// The Newton solve and the midpoint test of [`Plant::try_step`], from the fixed-point
     /// iterate `dw = g(x(Δg_pred)) − g_n`: out of line (the quick path stays compact), in
-    /// the build the closed loop runs in (see [`super::driver::run`]).
+    /// the build the closed loop runs in (see [`super::driver::simd`]). Called from inside
+    /// the loop's AVX2 build, it calls its AVX2 twin directly: going through `simd` (a
+    /// baseline function) would cost a call and two AVX/SSE transitions per solve (3 % of a
+    /// simulation, measured), hence the pair of wrappers here and in `subdivide`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn implicit_step(
