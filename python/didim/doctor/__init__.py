@@ -52,6 +52,9 @@ MIN_HELDOUT_GAIN = 0.05
 #: the size of the differences between any smooth friction law and real friction, which a low-noise record makes
 #: detectable but no engineer would model.
 MIN_UNNAMED_SHARE = 0.01
+#: An earlier finding's hyper-parameter chosen again on a changed model (``Effect.retune``) replaces it only when the
+#: training output error falls by more than this share of it.
+RETUNE_GAIN = 1e-3
 #: The names of the effects the doctor can report (see :data:`didim.doctor.effects.REGISTRY`), and ``unnamed``.
 EFFECTS = tuple(REGISTRY) + ("unnamed",)
 #: The sentence of physics of each effect, and of the variants a fitted Stribeck term can turn out to be.
@@ -507,6 +510,24 @@ class _Search:
                 cur = dropped
                 self.force_now = self.data.force_errors(cur[0])
                 self.say(f"removed {old.effect}: no longer improves the held-out fit")
+        for old in [x for x in self.findings[:-1] if REGISTRY[x.effect].retune is not None]:
+            effect = REGISTRY[old.effect]
+            try:
+                got = effect.retune(cur[0], self.data, self.progress)
+            except DidimError:
+                continue
+            if got is None:
+                continue
+            st, _, params, std = got
+            again = (st, *self.data.errors(st))
+            if self.data.rel(again[1], True) < (1 - RETUNE_GAIN) * self.data.rel(cur[1], True):  # training only
+                old.evidence += (f"; chosen again once {f.effect} was modelled: " + ", ".join(
+                    f"{k} {old.params.get(k, math.nan):.4g} -> {v:.4g}" for k, v in params.items()))
+                old.params, old.std = params, std
+                old.physics, old.words = effect.describe(params, st), effect.in_words(params, st)
+                cur = again
+                self.force_now = self.data.force_errors(st)
+                self.say(f"{old.effect} chosen again: {old.words}")
         return cur
 
 

@@ -3,6 +3,7 @@ refit every effect uses."""
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
@@ -114,6 +115,26 @@ def refit(data: Data, state: State, init: Dict[str, float], progress) -> Tuple[S
     r = didim_iterate(data.rec, state.model, free_init, frozen=state.frozen, decimation=data.dec, tol=1e-4,
                       max_iter=30, fit_samples=data.n_train, reversals="keep", **state.sim_kwargs())
     return replace(state, params=dict(r.params)), r
+
+
+def refit_each(data: Data, jobs: Sequence[Tuple[State, Dict[str, float]]], progress) -> List[Any]:
+    """:func:`refit` of independent (state, init) pairs on the cores of the machine (the core releases the interpreter
+    while it simulates): ``(state, result)`` for each, or the :class:`DidimError` it raised, in the order given."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .._errors import DidimError
+
+    def one(job):
+        try:
+            return refit(data, job[0], job[1], progress)
+        except DidimError as e:
+            return e
+
+    workers = max(1, min(len(jobs), os.cpu_count() or 1))
+    if workers == 1:
+        return [one(j) for j in jobs]
+    with ThreadPoolExecutor(workers) as pool:
+        return list(pool.map(one, jobs))
 
 
 def motor_columns(state: State, sim: SimResult, extra: Sequence[Term]) -> np.ndarray:
