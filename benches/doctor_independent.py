@@ -176,7 +176,7 @@ def main(argv=None) -> int:
     from didim._io import write_text
 
     write_text(os.path.join(here, "..", "docs", "doctor_independent.md"), "\n".join(lines) + "\n")
-    print("\n".join(lines[7:11]))
+    print("\n".join(lines[4:8]))
     return 0
 
 

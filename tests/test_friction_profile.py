@@ -203,3 +203,13 @@ def test_identify_with_profile_terms_converges_on_the_emps_with_the_default_opti
     for k in ("M", "Fv", "Fc"):
         assert r.params[k] == pytest.approx(base.params[k], rel=0.05), k
     assert r.force_error <= base.force_error * 1.01
+
+
+def test_a_full_set_of_knots_is_refused_with_what_to_leave_out(emps):
+    """Every knot of both directions beside Fc: the splines of a direction sum to its side of the sign, so the
+    regressor is rank-deficient; the error says which knot to leave out, not only to excite the axis more."""
+    terms = [didim.Term("dFc", "abs_coulomb")] + _splines(lo=0.0, hi=0.24, intervals=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        with pytest.raises(didim.IdentifiabilityError, match="leave one knot of each direction out"):
+            didim.identify(emps, didim.Model("rigid", terms=terms), "didim")

@@ -44,8 +44,40 @@ def _say(progress: Progress, msg: str) -> None:
         progress(msg)
 
 
-def _solve(w: np.ndarray, y: np.ndarray, names: Sequence[str], sigma: str = "paper") -> dict:
-    """QR least squares; raises IdentifiabilityError naming dependent columns."""
+#: What a rank deficiency involving friction-profile terms usually means.
+SPLINE_HINT = ("; friction-profile splines of one direction sum to that direction's part of the Coulomb sign wherever "
+               "they cover the stroke, which the Coulomb friction already is: leave one knot of each direction out")
+
+
+def _spline_hint(terms) -> str:
+    return SPLINE_HINT if any(t.kind.startswith("coulomb_spline") for t in terms or ()) else ""
+
+
+def _check_spline_cover(rec: Recording, terms, free: Sequence[str]) -> None:
+    """Refuses friction-profile splines that sum to 1 over the whole recorded stroke in one direction beside a free
+    Coulomb friction: that direction's splines then equal its side of the Coulomb sign, the regressor is singular or
+    nearly (positions just outside the knots' span leave a sliver), and the fit returns huge opposite values."""
+    coulomb = [n for n in ("Fc", "Fc1") if n in free]
+    if not coulomb:
+        return
+    q = np.asarray(rec.qm, dtype=float)
+    for side in ("fwd", "bwd"):
+        spl = [t for t in terms or () if t.kind == f"coulomb_spline_{side}"]
+        if not spl:
+            continue
+        total = np.zeros_like(q)
+        for t in spl:
+            a = np.abs((q - t.hyper) / t.width)
+            total += np.where(a < 1, 2 / 3 - a**2 + a**3 / 2, np.where(a < 2, (2 - a) ** 3 / 6, 0.0))
+        if np.min(total) > 0.999:
+            raise IdentifiabilityError(
+                f"the {'forward' if side == 'fwd' else 'backward'} friction splines ({', '.join(t.name for t in spl)}) "
+                f"cover the whole recorded stroke and sum to 1 there, so they equal that direction's part of the "
+                f"Coulomb sign, which {coulomb[0]} already is" + SPLINE_HINT)
+
+
+def _solve(w: np.ndarray, y: np.ndarray, names: Sequence[str], sigma: str = "paper", hint: str = "") -> dict:
+    """QR least squares; raises IdentifiabilityError naming dependent columns (``hint``: what else to say)."""
     sol = _core.lstsq(np.ascontiguousarray(w), np.ascontiguousarray(y), sigma=sigma)
     if sol["rank"] < len(names):
         deps, which = [], []
@@ -59,7 +91,7 @@ def _solve(w: np.ndarray, y: np.ndarray, names: Sequence[str], sigma: str = "pap
         raise IdentifiabilityError(
             f"the regressor has rank {sol['rank']} < {len(names)}: {'; '.join(deps)}. {', '.join(which)} cannot be "
             "identified separately on this record: excite the axis more (other speeds, both directions, accelerations) "
-            "or fix some of them"
+            "or fix some of them" + hint
         )
     return sol
 
@@ -149,13 +181,14 @@ def idim_ls(
                     zoh_align=zoh_align)
     _checks.one_of("sigma", sigma, ("paper", "sample_std"))
     names = param_names(model, offset, terms)
+    _check_spline_cover(rec, terms, names)
     dec = decimation or Decimation.matlab(10)
     _checks.decimation_matches(dec, rec.fs)
     _checks.record_long_enough(dec, rec.n - min(border, rec.n - 1), rec.dt, len(names), 2 if model == "flexible" else 1,
                                "IDIM-LS")
     y, wd = _idim_system(rec, model, offset, lowpass_hz, lowpass_order, padding, border, dec, coulomb_eps, zoh_align,
                          terms)
-    sol = _solve(wd, y, names, sigma)
+    sol = _solve(wd, y, names, sigma, hint=_spline_hint(terms))
     p = dict(zip(names, map(float, sol["params"])))
     return IdentificationResult(
         model=model,
@@ -301,6 +334,7 @@ def didim_iterate(
     if unknown:
         raise DataError(f"unknown parameter(s) {', '.join(unknown)} for the {model} model ({', '.join(names)})")
     free = [n for n in names if n not in frozen]
+    _check_spline_cover(rec, terms, free)
     missing = [n for n in free if n not in initial]
     if missing:
         raise DataError(f"initial values missing for {', '.join(missing)}")
@@ -388,7 +422,9 @@ def didim_iterate(
         backtracks = 0
         try:
             rows = _moving_rows(w_all, free) if exclude else None
-            sol = _solve(w_all, y_all, free) if rows is None else _solve(w_all[rows], y_all[rows], free)
+            hint = _spline_hint(terms)
+            sol = (_solve(w_all, y_all, free, hint=hint) if rows is None
+                   else _solve(w_all[rows], y_all[rows], free, hint=hint))
             sol["rows_kept"] = None if rows is None else (int(np.count_nonzero(rows)), len(rows))
         except IdentifiabilityError as e:
             message = f"iteration {len(history) + 1}: {e}"

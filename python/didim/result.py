@@ -230,17 +230,17 @@ class IdentificationResult:
         head = f"{self.method} identification of the {self.model} model"
         lines = [head, "=" * len(head)]
         est = f"χ{k}" if k > 0 else "χ̂"  # the paper's χᵏ after k iterations (none: a result not iterated)
-        lines.append(f"{'parameter':<18}{'χ0':>12}{est:>14}{'σ':>12}{'%σ':>8}")
+        lines.append(f"{'parameter':<18}{'χ0':>12}{est:>14}{'σ':>12}{'%σ':>9}")
         for name, v in self.params.items():
             unit = self.units.get(name, "")
             label = f"{name} ({unit})" if unit else name
             x0 = self.initial.get(name, float("nan"))
             lines.append(
                 f"{label:<18}{_fmt(x0):>12}{_fmt(v):>14}{_fmt(self.std.get(name, float('nan'))):>12}"
-                f"{_pct(self.rel_std_pct.get(name, float('nan'))):>8}"
+                f" {_pct(self.rel_std_pct.get(name, float('nan'))):>8}"
             )
         for name, v in self.frozen.items():
-            lines.append(f"{name + ' (frozen)':<18}{'':>12}{_fmt(v):>14}{'-':>12}{'-':>8}")
+            lines.append(f"{name + ' (frozen)':<18}{'':>12}{_fmt(v):>14}{'-':>12}{'-':>9}")
         if math.isfinite(self.force_error):
             lines.append(f"closed-loop force error (simulated vs measured, all samples) = {100 * self.force_error:.2f} %")
         if math.isfinite(self.relative_error) and not self.method.startswith("oe-"):  # OE methods fit no regression

@@ -188,7 +188,8 @@ class Diagnosis:
         for a in self.ambiguities:
             lines.append(f"this record cannot tell apart {' / '.join(a['effects'])}; the experiment that would: "
                          f"{a['experiment']}")
-        lines.append(f"details (the tests work on the force decimated at {self.options['cutoff_hz']:g} Hz: training "
+        lines.append(f"details (each effect's values when it was accepted; the tests work on the force decimated at "
+                     f"{self.options['cutoff_hz']:g} Hz: training "
                      f"{100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, validation "
                      f"{100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %):")
         for x in self.findings + self.rejected:
