@@ -1,10 +1,11 @@
 """Coulomb friction that varies along the stroke differently in each direction, as cubic B-spline terms per direction
 (the core's `CoulombSpline` basis, `coulomb_spline_fwd`/`_bwd`): the regressor, the sensitivities, identification by
-DIDIM, and the doctor naming it on records from a plant written here, independent of didim's simulator (plain RK4,
-a rational Coulomb law, a Gaussian and a tanh-shaped friction profile that no B-spline reproduces exactly, force noise
-inside the loop, a 5e-8 m encoder)."""
+DIDIM, and the doctor naming it on records from the plant of `benches/doctor_independent.py`, independent of didim's
+simulator (plain RK4, a rational Coulomb law, a Gaussian and a tanh-shaped friction profile that no B-spline reproduces
+exactly, force noise inside the loop, a 5e-8 m encoder)."""
 
-import math
+import importlib.util
+import pathlib
 import warnings
 
 import numpy as np
@@ -16,59 +17,26 @@ from didim.doctor.effects import spline_profile
 from didim.identification import didim_iterate
 from didim.oe import check_sensitivities
 
-KP, KV, GTAU, VSAT = 160.18, 243.45, 35.15065188248547, 10.0
-QUANT = 5e-8
-EPS = 2e-5  # the rational Coulomb law v/(|v| + EPS) of the independent plant (didim: v/sqrt(v² + eps²))
-M, FV, FC_FWD, FC_BWD = 95.0, 200.0, 21.0, 18.0
+BENCH = pathlib.Path(__file__).resolve().parents[1] / "benches" / "doctor_independent.py"
+_spec = importlib.util.spec_from_file_location("doctor_independent", BENCH)
+plant = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(plant)  # the independent plant; its "position_dependent_coulomb" has the profiles below
+QUANT = plant.QUANT
+M, FV = plant.M, plant.FV
 
 
 def friction_forward(q):
-    """Coulomb level moving forward (N): a tight zone, 5 N more around 70 mm."""
-    return FC_FWD + 5.0 * np.exp(-(((q - 0.07) / 0.025) ** 2))
+    """Coulomb level moving forward (N): a tight zone, 5 N more around 70 mm (the plant's law)."""
+    return 21.0 + 5.0 * np.exp(-(((q - 0.07) / 0.025) ** 2))
 
 
 def friction_backward(q):
-    """Coulomb level moving backward (N): 4 N less beyond about 160 mm."""
-    return FC_BWD - 2.0 * (1 + np.tanh((q - 0.16) / 0.02))
-
-
-def independent_rigid(qr, *, seed: int, noise: float = 0.5, dt: float = 1e-3, substeps: int = 5):
-    """The EMPS cascade on a rigid axis with the profiles above: returns (force, qm) as the drive logs them."""
-    n = len(qr)
-    rng = np.random.default_rng(seed)
-    a = math.exp(-2 * math.pi * 50.0 * dt)  # force noise low-passed at 50 Hz inside the loop
-    white = rng.standard_normal(n) * noise * math.sqrt(1 - a * a)
-    x = float(qr[0])
-    v = 0.0
-    qm1 = qm2 = round(x / QUANT) * QUANT
-    force, qm_log = np.empty(n), np.empty(n)
-    h = dt / substeps
-    dist = 0.0
-
-    def acc(tau, x, v):
-        s = v / (abs(v) + EPS)
-        level = float(friction_forward(x)) if v > 0 else float(friction_backward(x))
-        return (tau - FV * v - level * s) / M
-
-    for k in range(n):
-        qm = round(x / QUANT) * QUANT
-        vir = max(-VSAT, min(VSAT, KV * (KP * (qr[k] - qm) - (qm - qm2) / (2 * dt))))
-        qm2, qm1 = qm1, qm
-        force[k], qm_log[k] = GTAU * vir, qm
-        dist = a * dist + white[k]
-        tau = GTAU * vir + dist
-        for _ in range(substeps):
-            k1 = acc(tau, x, v)
-            k2 = acc(tau, x + 0.5 * h * v, v + 0.5 * h * k1)
-            k3 = acc(tau, x + 0.5 * h * (v + 0.5 * h * k1), v + 0.5 * h * k2)
-            k4 = acc(tau, x + h * (v + 0.5 * h * k2), v + h * k3)
-            x += h * (v + h / 6 * (k1 + k2 + k3))
-            v += h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return force, qm_log
+    """Coulomb level moving backward (N): 4 N less beyond about 160 mm (the plant's law)."""
+    return 18.0 - 2.0 * (1 + np.tanh((q - 0.16) / 0.02))
 
 
 def record(qr, seed, name):
-    force, qm = independent_rigid(qr, seed=seed)
+    force, qm = plant.simulate(qr, "position_dependent_coulomb", seed=seed)
     return didim.Recording(dt=1e-3, qr=qr, force=force, qm=qm, controller=didim.EmpsCascade(),
                            position_resolution=QUANT, name=name)
 
