@@ -181,3 +181,13 @@ def test_a_full_set_of_knots_is_refused_with_what_to_leave_out(emps):
         warnings.simplefilter("ignore", didim.DidimWarning)
         with pytest.raises(didim.IdentifiabilityError, match="leave one knot of each direction out"):
             didim.identify(emps, didim.Model("rigid", terms=terms), "didim")
+
+
+def test_terms_say_what_is_wrong_with_their_width():
+    with pytest.raises(didim.DataError, match="needs its knot spacing: give width="):
+        didim.Term("a", "coulomb_spline_fwd", 0.1)
+    with pytest.raises(didim.DataError, match="must be a finite number > 0 m"):
+        didim.Term("a", "coulomb_spline_bwd", 0.1, width=-0.02)
+    with pytest.raises(didim.DataError, match="only spline terms have a width"):
+        didim.Term("a", "stribeck", 0.01, width=0.05)
+    assert didim.Term("a", "coulomb_spline_fwd", 0.1, width=0.05).spec() == ("a", "coulomb_spline_fwd", 0.1, "motor", 0.05)

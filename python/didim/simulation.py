@@ -73,6 +73,9 @@ class Term:
             raise DataError(f"unknown term kind {self.kind!r}: use one of {', '.join(TERM_KINDS)}")
         object.__setattr__(self, "hyper", _checks.real(f"term {self.name}'s hyper-parameter", self.hyper))
         spline = self.kind.startswith("coulomb_spline")
+        if spline and isinstance(self.width, (int, float)) and not isinstance(self.width, bool) and self.width == 0:
+            raise DataError(f"term {self.name}: a {self.kind} term needs its knot spacing: give width= (m, > 0), e.g. "
+                            f"didim.Term({self.name!r}, {self.kind!r}, {self.hyper!r}, width=0.05)")
         object.__setattr__(self, "width", _checks.real(
             f"term {self.name}'s width", self.width, "m", lo=0.0, lo_open=spline,
             hint=" (the knot spacing of a spline term, > 0 m)" if spline else " (only spline terms have a width: 0)"))
