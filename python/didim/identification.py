@@ -30,7 +30,7 @@ from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, 
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation, diffcent, force_lag_mean, lowpass
-from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, param_names, params_vector, problem
+from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, cubic_bspline, param_names, params_vector, problem
 
 Progress = Optional[Callable[[str], None]]
 
@@ -65,10 +65,7 @@ def _check_spline_cover(rec: Recording, terms, free: Sequence[str]) -> None:
         spl = [t for t in terms or () if t.kind == f"coulomb_spline_{side}"]
         if not spl:
             continue
-        total = np.zeros_like(q)
-        for t in spl:
-            a = np.abs((q - t.hyper) / t.width)
-            total += np.where(a < 1, 2 / 3 - a**2 + a**3 / 2, np.where(a < 2, (2 - a) ** 3 / 6, 0.0))
+        total = sum(cubic_bspline((q - t.hyper) / t.width) for t in spl)
         if np.min(total) > 0.999:
             raise IdentifiabilityError(
                 f"the {'forward' if side == 'fwd' else 'backward'} friction splines ({', '.join(t.name for t in spl)}) "
@@ -335,6 +332,7 @@ def didim_iterate(
         raise DataError(f"unknown parameter(s) {', '.join(unknown)} for the {model} model ({', '.join(names)})")
     free = [n for n in names if n not in frozen]
     _check_spline_cover(rec, terms, free)
+    hint = _spline_hint(terms)  # what a rank deficiency also says
     missing = [n for n in free if n not in initial]
     if missing:
         raise DataError(f"initial values missing for {', '.join(missing)}")
@@ -422,7 +420,6 @@ def didim_iterate(
         backtracks = 0
         try:
             rows = _moving_rows(w_all, free) if exclude else None
-            hint = _spline_hint(terms)
             sol = (_solve(w_all, y_all, free, hint=hint) if rows is None
                    else _solve(w_all[rows], y_all[rows], free, hint=hint))
             sol["rows_kept"] = None if rows is None else (int(np.count_nonzero(rows)), len(rows))

@@ -114,6 +114,13 @@ def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
     return np.sign(v)
 
 
+def cubic_bspline(u) -> np.ndarray:
+    """The uniform cubic B-spline of the friction-profile terms (``coulomb_spline_*``), the core's function: support
+    ``|u| < 2``, ``B(0) = 2/3``, the B-splines at the integers summing to 1."""
+    a = np.abs(np.asarray(u, dtype=float))
+    return np.where(a < 1, 2 / 3 - a * a + 0.5 * a * a * a, np.where(a < 2, (2 - a) ** 3 / 6, 0.0))
+
+
 def _check_model(model: str) -> None:
     if model not in MODELS:
         raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)}")

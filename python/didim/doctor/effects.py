@@ -15,7 +15,7 @@ from .._errors import DidimError, SimulationError
 from ..identification import fit_flexible_mode, flexible_from_mode
 from ..result import IdentificationResult
 from ..signal import diffcent
-from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign, simulate
+from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign, cubic_bspline, simulate
 from .fit import Data, State, motor_columns, motor_columns_many, refit, refit_each
 
 
@@ -155,12 +155,20 @@ def _stribeck_candidates(state: State, sim: SimResult, data: Data) -> List[Candi
             for vs, x in zip(grid, make(grid))]
 
 
+def _with_stribeck(state: State, vs: float) -> State:
+    """``state`` with a Stribeck term ``Fs`` of speed ``vs`` (m/s)."""
+    return replace(state, terms=state.terms + (Term("Fs", "stribeck", vs),))
+
+
+def _stribeck_adopted(st: State, r: IdentificationResult, vs: float) -> Adopted:
+    return st, r, {"Fs": st.params["Fs"], "vs": vs}, _std(r, ["Fs"])
+
+
 def _stribeck_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
     vs = c.hyper["vs"]
     best = None
     speeds = [vs * f for f in (0.7, 1.0, 1.4)]  # refine the Stribeck speed around the grid optimum
-    jobs = [(replace(state, terms=state.terms + (Term("Fs", "stribeck", v),)), {"Fs": float(c.test.beta[0])})
-            for v in speeds]
+    jobs = [(_with_stribeck(state, v), {"Fs": float(c.test.beta[0])}) for v in speeds]
     for v, got in zip(speeds, refit_each(data, jobs, progress)):
         if isinstance(got, DidimError):
             continue
@@ -169,8 +177,7 @@ def _stribeck_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted
             best = (st, r, v)
     if best is None:
         raise SimulationError("the Stribeck refit failed")
-    st, r, vs = best
-    return st, r, {"Fs": st.params["Fs"], "vs": vs}, _std(r, ["Fs"])
+    return _stribeck_adopted(*best)
 
 
 def _stribeck_retune(state: State, data: Data, progress) -> Optional[Adopted]:
@@ -189,8 +196,7 @@ def _stribeck_retune(state: State, data: Data, progress) -> Optional[Adopted]:
     def fit(vs) -> bool:
         nonlocal best
         try:
-            st, r = refit(data, replace(without, terms=without.terms + (Term("Fs", "stribeck", vs),)), {"Fs": fs},
-                          progress)
+            st, r = refit(data, _with_stribeck(without, vs), {"Fs": fs}, progress)
         except DidimError:
             return False
         if r.converged and (best is None or r.output_error < best[1].output_error):
@@ -206,8 +212,7 @@ def _stribeck_retune(state: State, data: Data, progress) -> Optional[Adopted]:
             vs = best[2] * factor
             while lo <= vs <= hi and fit(vs):
                 vs *= factor
-    st, r, vs = best
-    return st, r, {"Fs": st.params["Fs"], "vs": vs}, _std(r, ["Fs"])
+    return _stribeck_adopted(*best)
 
 
 def _stribeck_physics(params: Dict[str, float], state: State) -> str:
@@ -306,9 +311,7 @@ def spline_profile(state: State, n: int = 201) -> Optional[Dict[str, np.ndarray]
     x = np.linspace(knots[0] + w, knots[-1], n)  # where the splines sum to 1: the stroke
     out = {"q": x}
     for d in ("fwd", "bwd"):
-        u = (x[:, None] - np.array([t.hyper for t in splines if t.kind.endswith(d)])[None, :]) / w
-        a = np.abs(u)
-        b = np.where(a < 1, 2 / 3 - a**2 + a**3 / 2, np.where(a < 2, (2 - a) ** 3 / 6, 0.0))
+        b = cubic_bspline((x[:, None] - np.array([t.hyper for t in splines if t.kind.endswith(d)])[None, :]) / w)
         coef = np.array([state.params[t.name] for t in splines if t.kind.endswith(d)])
         out[d] = b @ coef
     return out
