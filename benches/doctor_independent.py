@@ -53,8 +53,9 @@ def friction_law(effect: str) -> Callable[[float, float], float]:
 
 
 def simulate(qr: np.ndarray, effect: Optional[str], *, seed: int, noise: float = 0.5, dt: float = 1e-3,
-             substeps: int = 5):
-    """The closed loop with ``effect`` concealed (None: nothing): returns (force, qm) as the drive logs them."""
+             substeps: int = 5, ripple_shift: float = 0.0):
+    """The closed loop with ``effect`` concealed (None: nothing): returns (force, qm) as the drive logs them.
+    ``ripple_shift`` (m) moves the ripple along the recorded position (a record homed at another motor angle)."""
     n = len(qr)
     rng = np.random.default_rng(seed)
     a = math.exp(-2 * math.pi * 50.0 * dt)
@@ -63,7 +64,7 @@ def simulate(qr: np.ndarray, effect: Optional[str], *, seed: int, noise: float =
     offset = 3.0 if effect == "offset" else 0.0
 
     def ripple(q):
-        return 2.0 * math.sin(2 * math.pi * q / 0.02) if effect == "position_ripple" else 0.0
+        return 2.0 * math.sin(2 * math.pi * (q + ripple_shift) / 0.02) if effect == "position_ripple" else 0.0
 
     x, v = float(qr[0]), 0.0
     qm1 = qm2 = round(x / QUANT) * QUANT
@@ -94,15 +95,17 @@ def simulate(qr: np.ndarray, effect: Optional[str], *, seed: int, noise: float =
     return force, qm_log
 
 
-def records(effect: Optional[str], seed: int):
-    """(training, validation) recordings of the plant with ``effect`` concealed."""
+def records(effect: Optional[str], seed: int, valid_ripple_shift: float = 0.0):
+    """(training, validation) recordings of the plant with ``effect`` concealed; ``valid_ripple_shift`` (m) moves the
+    ripple of the validation record along the position."""
     import didim
     from didim import scenarios as sc
 
     out = []
-    for qr, s, part in ((sc.emps_like(n=20000), seed, "training"),
-                        (sc.trapezoid(stroke=0.24, speeds=(0.06, 0.1, 0.03)), seed + 1000, "validation")):
-        force, qm = simulate(qr, effect, seed=s)
+    for qr, s, part, shift in ((sc.emps_like(n=20000), seed, "training", 0.0),
+                               (sc.trapezoid(stroke=0.24, speeds=(0.06, 0.1, 0.03)), seed + 1000, "validation",
+                                valid_ripple_shift)):
+        force, qm = simulate(qr, effect, seed=s, ripple_shift=shift)
         out.append(didim.Recording(dt=1e-3, qr=qr, force=force, qm=qm, controller=didim.EmpsCascade(),
                                    position_resolution=QUANT, name=f"independent {effect or 'null'} ({part})"))
     return tuple(out)

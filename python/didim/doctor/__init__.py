@@ -37,9 +37,9 @@ from ..identification import a_priori_mass
 from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
-from ..simulation import SimResult, param_names
+from ..simulation import SimResult, param_names, simulate
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
-from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNITS, UNNAMED, Candidate, Effect, final_values,
+from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNITS, UNNAMED, Candidate, Effect, _g, final_values,
                       separating_experiment)
 from .fit import Data, State, base_columns, refit
 
@@ -82,12 +82,13 @@ class Finding:
     where: Dict[str, Any] = field(default_factory=dict)
     accepted: bool = True
     words: str = ""  # the fitted effect in an engineer's words, with units
+    note: str = ""  # for a candidate not confirmed: what the held-out residual shows of it
 
     def to_dict(self) -> Dict[str, Any]:
         return _clean({
             "effect": self.effect, "params": self.params, "std": self.std, "statistic": self.statistic,
             "evidence": self.evidence, "physics": self.physics, "fit": self.fit, "where": self.where,
-            "words": self.words,
+            "words": self.words, "note": self.note,
         })
 
     def held_out(self) -> str:
@@ -172,6 +173,8 @@ class Diagnosis:
         lines.append(f"closed-loop force error: training {100 * f['train_force_before']:.2f} % -> "
                      f"{100 * f['train_force_after']:.2f} %, validation ({self.options['validation']}) "
                      f"{100 * f['valid_force_before']:.2f} % -> {100 * f['valid_force_after']:.2f} %")
+        for st in self.locate.get("start", []):
+            lines.append("start: " + _start_words(st))
         if not self.findings:
             lines.append("nothing significant is missing from the model")
         for x in self.findings:
@@ -184,7 +187,7 @@ class Diagnosis:
             # an effect tried on several models appears once, with its last try (every try is in the details)
             last = {x.effect: x for x in self.rejected}
             lines.append("not confirmed on held-out data: " + "; ".join(
-                f"{x.effect} ({x.held_out() or x.evidence})" for x in last.values()))
+                f"{x.effect} ({x.held_out() or x.evidence}{'; ' + x.note if x.note else ''})" for x in last.values()))
         for a in self.ambiguities:
             lines.append(f"this record cannot tell apart {' / '.join(a['effects'])}; the experiment that would: "
                          f"{a['experiment']}")
@@ -283,6 +286,45 @@ def _locate(data: Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:
     f, pxx = welch(r, fs=fs, nperseg=min(1024, len(r)))
     out["spectrum"] = {"f": f.tolist(), "psd": pxx.tolist()}
     return out
+
+
+#: :func:`_start`: a record starts away from the simulated initial state when the measured position at its first
+#: sample is further from the simulated one (the simulation starts at rest on the reference) than this many times the
+#: gap it shows later (90th percentile); the start lasts until the gap stays within that bound for
+#: ``START_WINDOW_S``; it is reported when it holds at least ``START_SHARE`` of the residual energy.
+START_GAP_FACTOR = 5.0
+START_WINDOW_S = 0.05
+START_SHARE = 0.1
+
+
+def _start(rec: Recording, state: State) -> Optional[Dict[str, Any]]:
+    """Where a record starts in motion or off the reference (the log began after the closed loop did), the first
+    samples of the closed-loop simulation, which starts at rest on the reference, differ from it whatever the model:
+    how long, how much of the residual energy that is, and the force error without those samples."""
+    sim = simulate(rec, state.all_params(), state.model, **state.sim_kwargs())
+    gap = np.abs(sim.q[0] - rec.qm)
+    bound = START_GAP_FACTOR * float(np.percentile(gap, 90))
+    if not gap[0] > bound:
+        return None
+    w = max(1, int(round(START_WINDOW_S / rec.dt)))
+    over = np.flatnonzero(gap > bound)
+    ends = [i + 1 for i in over if not np.any(gap[i + 1:i + 1 + w] > bound)]
+    k = ends[0] if ends else rec.n
+    r = rec.force - sim.force
+    energy = float(r @ r)
+    share = float(r[:k] @ r[:k]) / energy if energy > 0 else 0.0
+    if share < START_SHARE or k >= rec.n // 2:
+        return None
+    return {"record": rec.name or "recording", "initial_gap_m": float(gap[0]), "samples": int(k),
+            "seconds": float(k * rec.dt), "residual_share": share,
+            "force_error_after_start": float(np.linalg.norm(r[k:]) / np.linalg.norm(rec.force[k:]))}
+
+
+def _start_words(s: Dict[str, Any]) -> str:
+    return (f"{s['record']} begins with the axis {_g(1e6 * s['initial_gap_m'])} µm from where the simulation starts "
+            f"(at rest on the reference: the closed loop was already running when the log began); its first "
+            f"{_g(1e3 * s['seconds'])} ms hold {100 * s['residual_share']:.0f} % of its residual energy, which comes "
+            f"from that start, not from the model; after them the force error is {100 * s['force_error_after_start']:.2f} %")
 
 
 def _unnamed(data: Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: float) -> Optional[Finding]:
@@ -464,6 +506,11 @@ class _Search:
                     where={"hyper": c.hyper}, accepted=p_dm < self.alpha and practical,
                     words=effect.in_words(params, st_new))
         if not f.accepted:
+            if effect.held_out_note is not None:
+                try:
+                    f.note = effect.held_out_note(c, state, self.data, rt, rv)
+                except (DidimError, np.linalg.LinAlgError):
+                    f.note = ""
             self.rejected.append(f)
             self.say(f"rejected {c.effect}: {evidence}")
             return f, None
@@ -591,7 +638,8 @@ def doctor(
         fit={**fit0, "train_after": data.rel(rt, True), "valid_after": data.rel(rv, False),
              **dict(zip(("train_force_after", "valid_force_after"), data.force_errors(state)))}, base=base,
         final_params=state.all_params(), final_state=state, ambiguities=search.ambiguities, rounds=search.rounds,
-        locate={"before": locate_before, "after": _locate(data, rt, sim)},
+        locate={"before": locate_before, "after": _locate(data, rt, sim),
+                "start": [x for x in (_start(r, state) for r in (recording, validate) if r is not None) if x]},
         options=dict(alpha=alpha, max_findings=max_findings, cutoff_hz=cutoff_hz, holdout=None if validate else holdout,
                      validation=(validate.name or "validation recording") if validate else
                      f"last {int(100 * holdout)} % of the record"),

@@ -16,6 +16,7 @@ from ..identification import fit_flexible_mode, flexible_from_mode
 from ..result import IdentificationResult
 from ..signal import diffcent
 from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign, cubic_bspline, simulate
+from ..stats import orthogonalize
 from .fit import Data, State, motor_columns, motor_columns_many, refit, refit_each
 
 
@@ -50,7 +51,9 @@ class Effect:
     the analysed band: each one's test takes most of the other's residual), ``baseline(state, data, progress)`` the
     model without the effect refitted by the optimiser ``adopt`` uses, when that is not DIDIM: the effect is judged
     against it (None: against the current model); ``retune(state, data, progress)`` chooses the effect's
-    hyper-parameter again on a model that has changed since it was adopted (None: nothing to choose)."""
+    hyper-parameter again on a model that has changed since it was adopted (None: nothing to choose);
+    ``held_out_note(candidate, state, data, r_train, r_held_out)`` says, for a candidate the held-out data did not
+    confirm, what the held-out residual of ``state`` (the model without it) shows of it (None: nothing to say)."""
 
     name: str
     physics: str
@@ -64,6 +67,7 @@ class Effect:
     baseline: Optional[Callable[[State, Data, Any], Optional[State]]] = None
     words: Optional[Callable[[Dict[str, float], State], str]] = None
     retune: Optional[Callable[[State, Data, Any], Optional[Adopted]]] = None
+    held_out_note: Optional[Callable[[Candidate, State, Data, np.ndarray, np.ndarray], str]] = None
 
     def in_words(self, params: Dict[str, float], state: State) -> str:
         """The fitted effect as an engineer reads it: quantities with their units, forward and backward spelled
@@ -228,12 +232,14 @@ def _stribeck_physics(params: Dict[str, float], state: State) -> str:
 
 
 def _period_grid(v: np.ndarray, q: np.ndarray, data: Data, share: float) -> Optional[np.ndarray]:
-    """80 periods (m), geometric, from what the decimated record resolves at the typical speed to 1/``share`` of the
-    stroke; None when the record cannot show a period."""
+    """80 periods (m), geometric, from the shortest the decimated record resolves (4 decimated samples per period) on
+    a quarter of its motion, at its slower speeds, to 1/``share`` of the stroke; None when the record cannot show a
+    period. (At the median speed instead, the EMPS motor's cogging, one period per revolution, 2.5 mm, fell below the
+    grid: at 83 mm/s it is 33 Hz, but a quarter of the record moves at 42 mm/s, where it is 17 Hz.)"""
     stroke = float(np.ptp(q))
     moving = np.abs(v) > 0.05 * np.max(np.abs(v))
-    vtyp = float(np.median(np.abs(v[moving]))) if moving.any() else 0.0
-    pmin = max(4 * vtyp * data.rec.dt * data.dec.factor, 2e-4)
+    vslow = float(np.percentile(np.abs(v[moving]), 25)) if moving.any() else 0.0
+    pmin = max(4 * vslow * data.rec.dt * data.dec.factor, 2e-4)
     pmax = stroke / share if stroke > 0 else 0.0
     return np.geomspace(pmin, pmax, 80) if pmax > pmin else None
 
@@ -268,6 +274,55 @@ def _periodic(name: str, names: Tuple[str, str], kinds: Tuple[str, str], share: 
         return st, r, {**out, **{k: st.params[k] for k in names}}, _std(r, names)
 
     return candidates, adopt, _remove_terms(names)
+
+
+def _periodic_note(kinds: Tuple[str, str]):
+    """``held_out_note`` of a periodic effect: the same sine and cosine regressed on the training and on the held-out
+    residual of the model without it. A period the held-out record shows as strongly, but shifted along the stroke,
+    is a force locked to something the recorded position does not fix from one record to the next (the motor's
+    angle: cogging, when the records' position zeros are not at the same motor angle); a period it does not show at
+    all was the training record's."""
+
+    def note(c: Candidate, state: State, data: Data, rt: np.ndarray, rv: np.ndarray) -> str:
+        P = c.hyper.get("period")
+        if P is None:
+            return ""
+        from .fit import base_columns
+
+        fits = []
+        for (sim, rows), r in zip(data.views(state), (rt, rv)):
+            x = data.decimated_columns(motor_columns(state, sim, [Term("s", kinds[0], P), Term("c", kinds[1], P)]),
+                                       rows)
+            x = orthogonalize(x, data.decimated_columns(base_columns(state, sim), rows))
+            beta, *_ = np.linalg.lstsq(x, r, rcond=None)
+            e = r - x @ beta
+            rho = float(np.corrcoef(e[:-1], e[1:])[0, 1]) if len(e) > 3 else 0.0
+            inflate = (1 + rho) / max(1 - rho, 1e-3)  # AR(1) correction of the OLS variance
+            cov = float(e @ e) / max(len(e) - 2, 1) * inflate * np.linalg.pinv(x.T @ x)
+            amp = math.hypot(*beta)
+            se = math.sqrt(max(float(beta @ cov @ beta), 0.0)) / amp if amp > 0 else math.inf
+            fits.append((amp, se, math.atan2(beta[1], beta[0])))
+        (at, _, pt), (av, sv, pv) = fits
+        if not (av > PERIOD_NOTE_Z * sv):
+            return (f"the held-out residual does not show the period {_g(1e3 * P)} mm (amplitude {_g(av)} ± "
+                    f"{_g(sv)} N against {_g(at)} N in training): it was the training record's")
+        dphi = math.remainder(pv - pt, 2 * math.pi)
+        if av >= 0.5 * at and abs(dphi) >= math.radians(PERIOD_NOTE_SHIFT_DEG):
+            return (f"the held-out residual shows the same period ({_g(1e3 * P)} mm, amplitude {_g(av)} N against "
+                    f"{_g(at)} N in training) shifted by {_g(1e3 * abs(dphi) / (2 * math.pi) * P)} mm "
+                    f"({abs(math.degrees(dphi)):.0f}°) along the stroke: the force follows something the recorded "
+                    "position does not fix from one record to the next, such as the motor's angle (cogging, when the "
+                    "records' position zeros are not at the same motor angle); a model in the recorded position cannot "
+                    "carry it over, a motor-angle signal (commutation angle) would")
+        return ""
+
+    return note
+
+
+#: :func:`_periodic_note`: the held-out amplitude must stand this many standard errors above zero for the period to
+#: count as present there, and its phase must have moved by at least this many degrees to count as shifted.
+PERIOD_NOTE_Z = 3.0
+PERIOD_NOTE_SHIFT_DEG = 45.0
 
 
 #: Friction profiles along the stroke tried beside the periodic law: cubic B-splines per direction of motion, the stroke
@@ -656,12 +711,13 @@ REGISTRY: Dict[str, Effect] = _registry(
            retune=_stribeck_retune),
     Effect("position_ripple", "A force periodic in position: motor cogging, ball-screw lead error or "
            "position-dependent friction, with the period found in the spatial spectrum of the residual.", "position",
-           _ripple[0], _ripple[1], _ripple[2],
+           _ripple[0], _ripple[1], _ripple[2], held_out_note=_periodic_note(("ripple_sin", "ripple_cos")),
            confusable={"position_dependent_coulomb": "move over the same positions in both directions: a ripple keeps "
                        "its sign, position-dependent friction flips it with the direction"}),
     Effect("position_dependent_coulomb", "The Coulomb friction level varies along the stroke, always against the "
            "motion (a preload or lubrication that changes along the screw, a worn or tight zone of a guide): the force "
-           "flips sign with the direction, unlike a position ripple.", "position", _pdc[0], _pdc[1], _pdc[2]),
+           "flips sign with the direction, unlike a position ripple.", "position", _pdc[0], _pdc[1], _pdc[2],
+           held_out_note=_periodic_note(("coulomb_ripple_sin", "coulomb_ripple_cos"))),
     Effect("delay", "The force is applied later than commanded: a current loop's lag (a first-order lag below a "
            "sample period) or a communication or computation delay (whole samples).", "spectrum", _delay_candidates,
            _delay_adopt, lambda state: replace(state, delay=0, force_lag=0.0),

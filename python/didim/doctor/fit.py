@@ -89,6 +89,20 @@ class Data:
         yv = simulate(self.validate, state.all_params(), state.model, **state.sim_kwargs()).force
         return rel(y, ys), rel(self.validate.force, yv)
 
+    def views(self, state: State) -> List[Tuple[SimResult, slice]]:
+        """The simulations of ``state`` behind the training and the held-out residual, each with the decimated rows
+        that residual covers (the held-out rows are the tail of the training record's simulation when no separate
+        record validates)."""
+        sim = simulate(self.rec, state.all_params(), state.model, **state.sim_kwargs())
+        if self.validate is None:
+            return [(sim, slice(None, self.m_train)), (sim, slice(self.m_train, None))]
+        simv = simulate(self.validate, state.all_params(), state.model, **state.sim_kwargs())
+        return [(sim, slice(None, self.m_train)), (simv, slice(None, None))]
+
+    def decimated_columns(self, columns: np.ndarray, rows: slice) -> np.ndarray:
+        """Full-rate regressor columns (n × k) of any record of this rate, decimated, on ``rows``."""
+        return self.dec.apply(np.zeros(len(columns)), columns)[1][rows]
+
     def train_record(self) -> Recording:
         """The training samples as a record of their own (the whole record when a separate one validates): for fits
         that take a whole record, so that they never see the held-out samples (the closed loop is causal, so its
@@ -105,7 +119,7 @@ class Data:
 
     def train_columns(self, columns: np.ndarray) -> np.ndarray:
         """Full-rate regressor columns (n × k), decimated, on the training rows."""
-        return self.dec.apply(np.zeros(self.rec.n), columns)[1][: self.m_train]
+        return self.decimated_columns(columns, slice(None, self.m_train))
 
 
 def refit(data: Data, state: State, init: Dict[str, float], progress) -> Tuple[State, IdentificationResult]:
