@@ -15,8 +15,12 @@ def test_load_mat_reads_the_emps_layout(emps):
     assert np.sqrt(np.mean(emps.force**2)) == pytest.approx(54.1, abs=0.05)  # README of the data: force RMS 54.1 N
 
 
-def test_load_mat_converts_the_pulses_to_newtons(emps_pulses):
-    np.testing.assert_allclose(np.unique(emps_pulses.u_ext), [0.0, 5 * 35.15065188248547], rtol=1e-12)
+def test_load_mat_converts_the_pulses_to_newtons(emps_pulses, emps_pulses_path):
+    # with the gain they enter the logged command with (1.0138, see tests/test_pulses_gain.py), or 1 when asked
+    g = didim.load_mat(emps_pulses_path, pulses_gain=1.0).u_ext_gain()[0]
+    np.testing.assert_allclose(np.unique(emps_pulses.u_ext), [0.0, g * 5 * 35.15065188248547], rtol=1e-12)
+    raw = didim.load_mat(emps_pulses_path, pulses_gain=1.0)
+    np.testing.assert_allclose(np.unique(raw.u_ext), [0.0, 5 * 35.15065188248547], rtol=1e-12)
     assert np.flatnonzero(emps_pulses.u_ext)[0] == 344  # first rising edge (data README)
 
 

@@ -30,7 +30,8 @@ from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, 
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation, diffcent, force_lag_mean, lowpass
-from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, cubic_bspline, param_names, params_vector, problem
+from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, cubic_bspline, param_names, params_vector, problem,
+                         settling_samples)
 
 Progress = Optional[Callable[[str], None]]
 
@@ -290,6 +291,7 @@ def didim_iterate(
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
     reversals: str = "auto",
+    start: str = "auto",
 ) -> IdentificationResult:
     """DIDIM iterations, eqs. (16)-(21): simulate the closed loop with χᵏ, build the IDM regressor of the simulated
     (noise-free) states, decimate Y and W in parallel, solve by QR for χᵏ⁺¹; stop when
@@ -318,10 +320,19 @@ def didim_iterate(
     them for the rigid model (the only model it applies to) when at least ``MIN_MOVING_SHARE`` of the samples remain,
     and keeps them for a model with friction-profile terms (``coulomb_spline_*``, which live where the axis reverses);
     ``"keep"`` is the paper's regression on every sample.
+
+    ``start`` (not in the paper): the simulation starts at rest on the reference; a log that began while the axis
+    moved, or away from the reference, starts elsewhere, and the simulation takes some samples to join it
+    (:func:`didim.simulation.settling_samples`, on the simulation with χ⁰). Over those samples the simulated states
+    answer a start the axis never had, and the regression on them biases the fit (a log cut at 83 mm/s: M 80 kg
+    instead of 95). ``"auto"`` (default) leaves the decimated rows they reach (1 % of their weight or more) out of
+    the regression; ``"keep"`` keeps every row. A record that starts where the simulation does is fitted alike.
     """
     t0 = time.perf_counter()
     if reversals not in ("auto", "exclude", "keep"):
         raise DataError(f"reversals must be 'auto', 'exclude' or 'keep', got {reversals!r}")
+    if start not in ("auto", "keep"):
+        raise DataError(f"start must be 'auto' or 'keep', got {start!r}")
     _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps,
                     divergence_factor=divergence_factor, cutoff_hz=cutoff_hz)
     initial = _checks.physical(initial, "initial")
@@ -356,6 +367,7 @@ def didim_iterate(
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, tol=sim_tol,
                  terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
     m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
+    start_row = _start_row(rec, pb, chi, dec) if start == "auto" else 0  # the first decimated row regressed
     yd_motor = dec(rec.force)[:m_fit]
     ny = float(np.linalg.norm(yd_motor))
     _checks.measured_signal("force", ny, f"{method} ({model})")
@@ -420,6 +432,10 @@ def didim_iterate(
         backtracks = 0
         try:
             rows = _moving_rows(w_all, free) if exclude else None
+            if start_row:
+                m_rows = len(force_dec)
+                settled = np.tile(np.arange(m_rows) >= start_row, len(y_all) // m_rows)
+                rows = settled if rows is None else rows & settled
             sol = (_solve(w_all, y_all, free, hint=hint) if rows is None
                    else _solve(w_all[rows], y_all[rows], free, hint=hint))
             sol["rows_kept"] = None if rows is None else (int(np.count_nonzero(rows)), len(rows))
@@ -489,6 +505,10 @@ def didim_iterate(
             sol = {**sol, "rel_std_pct": 100 * np.asarray(sol["std"], dtype=float) / np.abs(chi[fi])}
     elif not converged and sol is None:
         raise (type(stop) if stop is not None else SimulationError)(f"DIDIM could not start: {message}")
+    if start_row:
+        notes.append(f"the record begins away from the simulation's start (at rest on the reference): its first "
+                     f"{start_row} decimated samples, before the simulation joins it, are left out of the regression; "
+                     "start='keep' uses them, as the paper does")
     if exclude and sol is not None and sol.get("rows_kept") is not None:
         kept, total = sol["rows_kept"]
         notes.append(f"regression on {kept} of {total} decimated samples: the {total - kept} around velocity reversals "
@@ -514,7 +534,7 @@ def didim_iterate(
         options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset,
                      terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, force_lag=force_lag,
                      integrator=integrator,
-                     sim_tol=sim_tol, reversals="exclude" if exclude else "keep"),
+                     sim_tol=sim_tol, reversals="exclude" if exclude else "keep", start_rows_left_out=start_row),
         covariance=sol["covariance"],
         notes=notes,
     )
@@ -543,6 +563,33 @@ def _moving_rows(w: np.ndarray, free: Sequence[str]) -> Optional[np.ndarray]:
     if np.count_nonzero(keep) < MIN_MOVING_SHARE * len(keep) or np.count_nonzero(keep) < 4 * w.shape[1]:
         return None
     return keep
+
+
+#: ``start="auto"``: a decimated row is left out of the regression when the samples before the simulation has
+#: joined the record weigh this much of it (the decimated indicator of those samples).
+START_LEAK = 0.01
+
+
+def settled_row(rec: Recording, q_sim: np.ndarray, dec: Decimation) -> int:
+    """The first decimated row past the start of a record that began away from the simulated initial state (0 when it
+    began where the simulation does): the samples before the simulation (motor position ``q_sim``) has joined the
+    record (:func:`didim.simulation.settling_samples`) weigh less than ``START_LEAK`` in it and every later row."""
+    k = settling_samples(rec.qm, q_sim, rec.dt, rec.position_resolution)
+    if k == 0:
+        return 0
+    ind = np.zeros(rec.n)
+    ind[:k] = 1.0
+    heavy = np.flatnonzero(np.abs(dec(ind)) >= START_LEAK)
+    return int(heavy[-1]) + 1 if heavy.size else 0
+
+
+def _start_row(rec: Recording, pb, chi: np.ndarray, dec: Decimation) -> int:
+    """:func:`settled_row` on the simulation with χ (0 when it fails: the iterations report that)."""
+    try:
+        q = pb.simulate(chi)["q"][0]
+    except DidimError:
+        return 0
+    return settled_row(rec, q, dec)
 
 
 def _vector(params: Dict[str, float], names: Sequence[str]) -> np.ndarray:
@@ -1027,6 +1074,7 @@ def didim_flexible(
     sim_tol: float = DEFAULT_TOL,
     grid_start: bool = True,
     reversals: str = "auto",
+    start: str = "auto",
 ) -> IdentificationResult:
     """The three-step procedure of section V: rigid DIDIM (step 1), Nelder-Mead on (λ, f_n_flex) (step 2, started on
     eq. (28)'s grid), DIDIM on the flexible model initialised by eqs. (29)-(30) (step 3).
@@ -1049,7 +1097,7 @@ def didim_flexible(
     common = dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, sim_tol=sim_tol)
     _say(progress, "step 1: rigid DIDIM")
     r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress,
-                     reversals=reversals, **common)
+                     reversals=reversals, start=start, **common)
     if not r1.converged:
         # nothing sensible to start steps 2 and 3 from: hand back step 1, flagged, with its history
         r1.message = (f"step 1 (rigid DIDIM) did not converge, so steps 2 and 3 were not run and this is step 1's rigid "
@@ -1084,7 +1132,7 @@ def didim_flexible(
     if offset:
         init["OF"] = 0.0
     r3 = didim_iterate(rec, "flexible", init, frozen=frozen, offset=offset, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter,
-               progress=progress, **common)
+               progress=progress, start=start, **common)
     r3.steps = {"rigid": r1, "mode": r2}
     r3.notes = notes + r3.notes
     if r3.converged and r3.output_error > STEP3_DRIFT_FACTOR * r2.output_error:

@@ -6,8 +6,8 @@ import functools
 import math
 import os
 import warnings
-from dataclasses import dataclass
-from typing import List, Optional
+from dataclasses import dataclass, replace
+from typing import List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -181,6 +181,35 @@ class Recording:
         The two samples before the start take the first position."""
         return self.controller.transfer_function(self.dt).command(self.qr, self.qm, self.u_ext)
 
+    def u_ext_gain(self) -> Tuple[float, float]:
+        """The gain with which the known external input ``u_ext`` enters the logged force, and its standard error: the
+        least-squares slope of the force minus the controller's command from the logged reference and motor position
+        (without ``u_ext``) on ``u_ext`` (with a constant, for a controller state the log began with), on the samples
+        the command does not saturate. 1 when ``u_ext`` is what the drive applied; (nan, nan) without ``u_ext`` or
+        when it is zero. On DATA_EMPS_PULSES, with ``gtau·pulses_N``: 1.0138 ± 4e-5 (the pulses enter ``vir`` 1.4 %
+        larger than ``pulses_N``)."""
+        nan = (math.nan, math.nan)
+        if self.u_ext is None:
+            return nan
+        with np.errstate(all="ignore"):
+            c0 = self.controller.transfer_function(self.dt).command(self.qr, self.qm, None)
+            y, x = (self.force - c0)[2:], self.u_ext[2:]
+            ok = np.isfinite(y) & np.isfinite(x)
+            limit = self.force_limit
+            if math.isfinite(limit) and limit > 0:
+                ok &= np.abs(self.force[2:]) < (1 - SATURATION_RTOL) * limit
+            x, y = x[ok], y[ok]
+            if len(x) < 3:
+                return nan
+            xc, yc = x - x.mean(), y - y.mean()
+            sxx = float(xc @ xc)
+            if not sxx > 0 or not math.isfinite(sxx):
+                return nan
+            g = float(xc @ yc) / sxx
+            e = yc - g * xc
+            se = math.sqrt(float(e @ e) / max(len(x) - 2, 1) / sxx)
+        return (g, se) if math.isfinite(g) else nan
+
     def diagnose(self) -> List[str]:
         """Things in the record that look wrong but need not be, each as a sentence with the evidence and what to
         check: a command that saturates for long stretches (the loop is open there), and a force whose scale does not
@@ -240,6 +269,14 @@ class Recording:
                             f"the force does not have the scale the controller implies: {evidence}; check that it is in N "
                             "on the load side and that the controller and its gains are the axis's"
                         )
+        g, se = self.u_ext_gain()
+        if math.isfinite(g) and abs(g - 1) > U_EXT_GAIN_RTOL and abs(g - 1) > 5 * se:
+            out.append(
+                f"the external input u_ext enters the logged force with gain {g:.5g} ± {se:.2g}, not 1 (least squares of "
+                "the force minus the controller's command from qr and qm on u_ext): the simulation applies u_ext as "
+                f"given, so scale it by {g:.5g} if the log is right (load_mat does so for the EMPS pulses), or check its "
+                "units and the controller"
+            )
         return out
 
     def __repr__(self) -> str:
@@ -252,6 +289,11 @@ class Recording:
         )
 
 
+#: :meth:`Recording.diagnose` reports a gain of ``u_ext`` in the logged force further than this from 1 (and 5 σ).
+U_EXT_GAIN_RTOL = 0.005
+#: :func:`load_mat` takes the pulses' gain from the log only within this distance of 1: further, the log and the
+#: pulses disagree on more than a calibration, and the record is loaded with gain 1 (``diagnose`` then says so).
+PULSES_GAIN_RANGE = 0.2
 #: Relative margin below the saturation at which a sample counts as saturated (:meth:`Recording.diagnose`).
 SATURATION_RTOL = 0.01
 #: Relative margin above the saturation beyond which the force is reported as exceeding it.
@@ -332,7 +374,8 @@ def _scalar(d: dict, key: str, path: str) -> float:
 
 
 def load_mat(
-    path, *, position_resolution: Optional[float] = None, name: Optional[str] = None, dt: Optional[float] = None
+    path, *, position_resolution: Optional[float] = None, name: Optional[str] = None, dt: Optional[float] = None,
+    pulses_gain: Union[float, str] = "log",
 ) -> Recording:
     """Loads a record in the EMPS benchmark layout (MATLAB v4/v5/v7 ``.mat``; not v7.3, which is HDF5).
 
@@ -342,6 +385,14 @@ def load_mat(
     force ``gtau·pulses_N``), optional ``ql``, the load position of an axis with a second encoder, and optional
     ``vsat`` (V, 10 by default, the EMPS drive's limit). ``dt`` (s), when given, is the sample period the caller
     expects: a file whose time step differs is refused.
+
+    ``pulses_gain``: the pulses enter ``vir`` with a gain of their own (DATA_EMPS_PULSES: ``vir`` = the controller's
+    output + 1.0138·``pulses_N``, to 0.005 V RMS), and the axis gets ``gtau·vir``: the known external force is
+    ``pulses_gain·gtau·pulses_N``. ``"log"`` (default) takes the gain from the log (:meth:`Recording.u_ext_gain`;
+    kept at 1 when the log cannot tell it from 1 (within 5 σ), or when it is more than 20 % from 1, which
+    ``diagnose`` then reports); a number sets it (1: the
+    benchmark's ``pulses_N`` as it is). With the gain of the log, the benchmark's published model simulates
+    DATA_EMPS_PULSES to 6.03 % instead of 6.14 %.
 
     Raises :class:`DataError` naming the file and the problem: missing, unreadable or truncated file, not a MAT
     file, missing variable, wrong shape or type, time not increasing or not uniform, a period other than ``dt``.
@@ -424,7 +475,7 @@ def load_mat(
         force = gtau * _signal(f"{path}: vir", vec("vir"), n)
         u_ext = gtau * _signal(f"{path}: pulses_N", vec("pulses_N"), n) if "pulses_N" in d else None
         ql = _signal(f"{path}: ql", vec("ql"), n) if "ql" in d else None
-        return Recording(
+        rec = Recording(
             dt=step,
             qr=_signal(f"{path}: qg", vec("qg"), n),
             force=force,
@@ -435,6 +486,18 @@ def load_mat(
             position_resolution=position_resolution,
             name=name if name is not None else os.path.splitext(os.path.basename(path))[0],
         )
+        if u_ext is None:
+            return rec
+        if isinstance(pulses_gain, str):
+            if pulses_gain != "log":
+                raise DataError(f"pulses_gain must be 'log' or a number, got {pulses_gain!r}")
+            g, se = rec.u_ext_gain()  # 1 where the log cannot tell it from 1
+            gain = g if math.isfinite(g) and 5 * se < abs(g - 1) <= PULSES_GAIN_RANGE else 1.0
+        else:
+            gain = _number("pulses_gain", pulses_gain, "a ratio")
+            if not (math.isfinite(gain) and gain > 0):
+                raise DataError(f"pulses_gain must be a finite number > 0 (or 'log'), got {pulses_gain!r}")
+        return rec if gain == 1.0 else replace(rec, u_ext=gain * u_ext)
     except DataError as e:
         msg = str(e)
         raise DataError(msg if msg.startswith(path) else f"{path}: {msg}") from None

@@ -114,6 +114,38 @@ def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
     return np.sign(v)
 
 
+#: :func:`settling_samples`: a record starts away from the simulated initial state when its measured position at the
+#: first sample is further from the simulated one than this many times the gap between the two later (90th
+#: percentile); the start lasts until the gap stays within that bound for ``SETTLE_WINDOW_S``.
+SETTLE_GAP_FACTOR = 5.0
+SETTLE_WINDOW_S = 0.05
+
+
+def settling_samples(qm: np.ndarray, q_sim: np.ndarray, dt: float, resolution: Optional[float] = None) -> int:
+    """How many first samples the closed-loop simulation (which starts at rest on the reference) takes to join a
+    record that began elsewhere (a log started while the axis moved, or away from the reference): 0 when the record
+    starts where the simulation does, or when the two never settle together within the first half of the record.
+    ``qm`` the measured and ``q_sim`` the simulated motor position (m); ``resolution`` the encoder's step (m): a gap
+    within two steps is a start on the reference whatever the later gap."""
+    gap = np.abs(np.asarray(q_sim, float) - np.asarray(qm, float))
+    n = len(gap)
+    if n < 4 or not np.all(np.isfinite(gap)):
+        return 0
+    bound = max(SETTLE_GAP_FACTOR * float(np.percentile(gap, 90)), 2.0 * float(resolution or 0.0))
+    if not gap[0] > bound:
+        return 0
+    w = max(1, int(round(SETTLE_WINDOW_S / dt)))
+    over = gap > bound
+    # the first sample after which the gap stays within the bound for a whole window
+    run = np.convolve(over.astype(np.int64), np.ones(w, np.int64), "full")[w - 1:n + w - 1]  # over[i:i+w] counts
+    for i in np.flatnonzero(over):
+        if i + 1 >= n // 2:
+            break
+        if run[i + 1] == 0:
+            return int(i + 1)
+    return 0
+
+
 def cubic_bspline(u) -> np.ndarray:
     """The uniform cubic B-spline of the friction-profile terms (``coulomb_spline_*``), the core's function: support
     ``|u| < 2``, ``B(0) = 2/3``, the B-splines at the integers summing to 1."""
@@ -491,5 +523,5 @@ def simulate_batch(
                        qd=out.get("qd"), qdd=out.get("qdd"), errors=list(out["errors"]))
 
 
-__all__ = ["simulate", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
+__all__ = ["simulate", "settling_samples", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
            "params_vector", "coulomb_sign", "MODELS", "INTEGRATORS", "DEFAULT_COULOMB_EPS", "DEFAULT_TOL"]

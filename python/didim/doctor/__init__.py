@@ -37,7 +37,7 @@ from ..identification import a_priori_mass
 from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
-from ..simulation import SimResult, param_names, simulate
+from ..simulation import SimResult, param_names, settling_samples, simulate
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNITS, UNNAMED, Candidate, Effect, _g, final_values,
                       separating_experiment)
@@ -253,9 +253,9 @@ def _score(groups: List[List[Candidate]], r: np.ndarray, wb: np.ndarray, data: D
 def _locate(data: Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:
     """Residual along time, frequency, velocity and position (each direction apart), with 95 % bands; and a
     test of remaining structure per view (the ``unnamed`` check)."""
-    dec, m = data.dec, data.m_train
-    v = dec(sim.qd[0])[:m]
-    q = dec(sim.q[0])[:m]
+    dec, rows = data.dec, data.train_rows
+    v = dec(sim.qd[0])[rows]
+    q = dec(sim.q[0])[rows]
     fs = data.rec.fs / dec.factor
     rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if len(r) > 3 else 0.0
     n_eff_factor = max((1 - rho) / (1 + rho), 1e-3)
@@ -279,8 +279,8 @@ def _locate(data: Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:
     }
     qe = np.linspace(float(q.min()), float(q.max()) + 1e-12, 13)
     out["position"] = {"forward": binned(q, moving & (v > 0), qe), "backward": binned(q, moving & (v < 0), qe)}
-    t = np.arange(len(r)) / fs
-    out["time"] = binned(t, np.ones(len(r), bool), np.linspace(0, t[-1] + 1e-9, 21))
+    t = (data.t0 + np.arange(len(r))) / fs
+    out["time"] = binned(t, np.ones(len(r), bool), np.linspace(t[0], t[-1] + 1e-9, 21))
     from scipy.signal import welch
 
     f, pxx = welch(r, fs=fs, nperseg=min(1024, len(r)))
@@ -288,12 +288,7 @@ def _locate(data: Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:
     return out
 
 
-#: :func:`_start`: a record starts away from the simulated initial state when the measured position at its first
-#: sample is further from the simulated one (the simulation starts at rest on the reference) than this many times the
-#: gap it shows later (90th percentile); the start lasts until the gap stays within that bound for
-#: ``START_WINDOW_S``; it is reported when it holds at least ``START_SHARE`` of the residual energy.
-START_GAP_FACTOR = 5.0
-START_WINDOW_S = 0.05
+#: :func:`_start`: the start is reported when it holds at least this share of the record's residual energy.
 START_SHARE = 0.1
 
 
@@ -302,20 +297,15 @@ def _start(rec: Recording, state: State) -> Optional[Dict[str, Any]]:
     samples of the closed-loop simulation, which starts at rest on the reference, differ from it whatever the model:
     how long, how much of the residual energy that is, and the force error without those samples."""
     sim = simulate(rec, state.all_params(), state.model, **state.sim_kwargs())
-    gap = np.abs(sim.q[0] - rec.qm)
-    bound = START_GAP_FACTOR * float(np.percentile(gap, 90))
-    if not gap[0] > bound:
+    k = settling_samples(rec.qm, sim.q[0], rec.dt, rec.position_resolution)
+    if k == 0:
         return None
-    w = max(1, int(round(START_WINDOW_S / rec.dt)))
-    over = np.flatnonzero(gap > bound)
-    ends = [i + 1 for i in over if not np.any(gap[i + 1:i + 1 + w] > bound)]
-    k = ends[0] if ends else rec.n
     r = rec.force - sim.force
     energy = float(r @ r)
     share = float(r[:k] @ r[:k]) / energy if energy > 0 else 0.0
-    if share < START_SHARE or k >= rec.n // 2:
+    if share < START_SHARE:
         return None
-    return {"record": rec.name or "recording", "initial_gap_m": float(gap[0]), "samples": int(k),
+    return {"record": rec.name or "recording", "initial_gap_m": float(abs(sim.q[0][0] - rec.qm[0])), "samples": int(k),
             "seconds": float(k * rec.dt), "residual_share": share,
             "force_error_after_start": float(np.linalg.norm(r[k:]) / np.linalg.norm(rec.force[k:]))}
 
@@ -336,15 +326,17 @@ def _unnamed(data: Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: f
     means (the innovations under the alternative): an AR fitted on the residual itself takes smooth structure for
     noise and whitens most of it away (97 % of a 6 N position-dependent friction). The time view keeps the AR of the
     residual itself: slow drifts of coloured noise are structure in time, which that AR should take."""
-    dec, m = data.dec, data.m_train
-    v = dec(sim.qd[0])[:m]
-    q = dec(sim.q[0])[:m]
+    dec, rows = data.dec, data.train_rows
+    v = dec(sim.qd[0])[rows]
+    q = dec(sim.q[0])[rows]
     n = len(r)
     fs = data.rec.fs / dec.factor
     views = {}
     every = np.ones(n, bool)
     t_idx = np.minimum((np.arange(n) * 10) // n, 9)
-    views["time"] = (t_idx, every, [f"{k * n / 10 / fs:.2f}-{(k + 1) * n / 10 / fs:.2f} s" for k in range(10)])
+    t0 = data.t0 / fs
+    views["time"] = (t_idx, every, [f"{t0 + k * n / 10 / fs:.2f}-{t0 + (k + 1) * n / 10 / fs:.2f} s"
+                                    for k in range(10)])
     vmax = float(np.max(np.abs(v))) or 1.0
     ve = np.linspace(-vmax, vmax, 11)
     views["velocity"] = (np.clip(np.digitize(v, ve) - 1, 0, 9), every,
@@ -377,7 +369,7 @@ def _unnamed(data: Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: f
     test, idx, labels = tests[name]
     means = np.array([np.mean(r[idx == k]) if np.any(idx == k) else 0.0 for k in range(10)])
     worst = int(np.argmax(np.abs(means)))
-    force_rms = float(np.sqrt(np.mean(data.y[:m] ** 2)))
+    force_rms = float(np.sqrt(np.mean(data.y[rows] ** 2)))
     if abs(means[worst]) < MIN_UNNAMED_SHARE * force_rms:
         return None  # detectable, but too small to matter (see MIN_UNNAMED_SHARE)
     return Finding(
@@ -449,7 +441,7 @@ class _Search:
     def rank(self, cur: Fitted) -> Tuple[List[Candidate], np.ndarray]:
         """Every effect not tried on this model, at its best hyper-parameter, by adjusted p-value."""
         state, rt, _, sim = cur
-        wb = orthogonalize(self.data.train_columns(base_columns(state, sim)), np.zeros((self.data.m_train, 0)))
+        wb = orthogonalize(self.data.train_columns(base_columns(state, sim)), np.zeros((len(rt), 0)))
         groups = [e.candidates(state, sim, self.data) for name, e in REGISTRY.items() if name not in self.done]
         ranked = _score([g for g in groups if g], rt, wb, self.data, ar_fit(rt))
         self.rounds.append({"round": len(self.rounds) + 1, "candidates": [
@@ -606,6 +598,7 @@ def doctor(
     search = _Search(data, alpha, progress)
     search.say(f"base fit: DIDIM {model}")
     state, base = _base_fit(data, model, apM, progress)
+    data.settle(state)
     cur: Fitted = (state, *data.errors(state))
     search.history.append(cur)
     fit0 = {"train_before": data.rel(cur[1], True), "valid_before": data.rel(cur[2], False)}
