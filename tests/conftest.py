@@ -3,6 +3,23 @@ import pathlib
 
 import pytest
 
+_BENCHES = pathlib.Path(__file__).resolve().parents[1] / "benches"
+_bench_modules = {}
+
+
+def bench_module(name: str):
+    """The script ``benches/<name>.py`` as a module, loaded once: the independent plants the tests share with the
+    benchmarks (e.g. ``doctor_independent``, a rigid axis simulated apart from didim's simulator)."""
+    if name not in _bench_modules:
+        import importlib.util
+
+        spec = importlib.util.spec_from_file_location(name, _BENCHES / f"{name}.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        _bench_modules[name] = mod
+    return _bench_modules[name]
+
+
 #: The EMPS records live outside the package, in the shared data folder next to the checkout.
 EMPS_DIR = pathlib.Path(os.environ.get("DIDIM_EMPS_DIR", pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "emps"))
 

@@ -4,8 +4,6 @@ DIDIM, and the doctor naming it on records from the plant of `benches/doctor_ind
 simulator (plain RK4, a rational Coulomb law, a Gaussian and a tanh-shaped friction profile that no B-spline reproduces
 exactly, force noise inside the loop, a 5e-8 m encoder)."""
 
-import importlib.util
-import pathlib
 import warnings
 
 import numpy as np
@@ -17,10 +15,9 @@ from didim.doctor.effects import spline_profile
 from didim.identification import didim_iterate
 from didim.oe import check_sensitivities
 
-BENCH = pathlib.Path(__file__).resolve().parents[1] / "benches" / "doctor_independent.py"
-_spec = importlib.util.spec_from_file_location("doctor_independent", BENCH)
-plant = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(plant)  # the independent plant; its "position_dependent_coulomb" has the profiles below
+from conftest import bench_module
+
+plant = bench_module("doctor_independent")  # the independent plant; its "position_dependent_coulomb" has the profiles below
 QUANT = plant.QUANT
 M, FV = plant.M, plant.FV
 

@@ -4,8 +4,6 @@ is the fit of the same axis logged from rest; with `start="keep"` (the paper's r
 Records from the independent plant of `benches/doctor_independent.py` (plain RK4, rational Coulomb law, in-loop
 noise), so that the simulator that fits is not the one that made the data."""
 
-import importlib.util
-import pathlib
 import warnings
 
 import numpy as np
@@ -14,15 +12,12 @@ import pytest
 import didim
 from didim.simulation import settling_samples
 
-BENCH = pathlib.Path(__file__).resolve().parents[1] / "benches" / "doctor_independent.py"
+from conftest import bench_module
 
 
 @pytest.fixture(scope="module")
 def plant():
-    spec = importlib.util.spec_from_file_location("doctor_independent", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return bench_module("doctor_independent")
 
 
 def _late(rec, i0, name="late log"):
@@ -46,11 +41,16 @@ def test_settling_samples_on_known_gaps():
     assert settling_samples(q + 1e-4, q, dt) == 0  # never joins: nothing to leave out
 
 
+def _cut_while_moving(rec):
+    """The first sample of ``rec`` 200 ms into the move that follows its first 3 s (83 mm/s, 0.54 mm behind the
+    reference on the independent plant's training record)."""
+    moving = np.flatnonzero(np.abs(np.diff(rec.qr)) > 1e-5)  # above 10 mm/s
+    return int(moving[moving > 3000][0]) + 200
+
+
 def test_a_log_cut_while_moving_fits_as_the_whole_log(plant):
     train, _ = plant.records(None, 1)
-    moving = np.flatnonzero(np.abs(np.diff(train.qr)) > 1e-5)
-    i0 = int(moving[moving > 3000][0]) + 200  # 83 mm/s, 0.54 mm behind the reference
-    late = _late(train, i0)
+    late = _late(train, _cut_while_moving(train))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", didim.DidimWarning)
         whole = didim.identify(train, "rigid")
@@ -67,3 +67,32 @@ def test_start_option_is_checked(plant):
     train, _ = plant.records(None, 1)
     with pytest.raises(didim.DataError, match="start must be 'auto' or 'keep'"):
         didim.identify(train, "rigid", start="later")
+
+
+def test_a_log_that_begins_in_motion_is_reported(plant):
+    """The training log begins while the axis moves at 83 mm/s (its first 3.2 s cut off): the simulation starts at
+    rest on the reference, the recorded axis a tracking error (0.54 mm) away, so the first samples differ whatever the
+    model. The doctor reports that start: the gap, how long it lasts, its share of the residual and the error without
+    it; the record that begins at rest gets no such line. Its fits and tests leave the start out, so it names on the
+    cut log what it names on the whole one: nothing but the friction law's shape (the plant's Coulomb law is not
+    didim's)."""
+    train, valid = plant.records(None, 1)
+    i0 = _cut_while_moving(train)
+    cut = _late(train, i0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        d = didim.doctor(cut, "rigid", valid)
+        d0 = didim.doctor(train, "rigid", valid)
+    starts = d.locate["start"]
+    assert [s["record"] for s in starts] == ["late log"], starts
+    s = starts[0]
+    assert abs(s["initial_gap_m"] - abs(train.qr[i0] - train.qm[i0])) < 2 * train.position_resolution + 1e-9, s
+    assert 0.005 < s["seconds"] < 0.5 and s["residual_share"] >= 0.1, s
+    assert s["force_error_after_start"] < d.fit["train_force_after"], s
+    assert "late log begins with the axis" in d.summary()
+    assert d0.locate["start"] == [] and "begins with the axis" not in d0.summary()
+    from didim.doctor import PHYSICS
+
+    named = [f.effect for f in d.findings if f.physics != PHYSICS["friction_shape"]]
+    assert named == [], d.summary()
+    assert abs(d.final_params["M"] / plant.M - 1) < 0.01, d.final_params
