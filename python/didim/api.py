@@ -200,25 +200,35 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
     """Sets the headline measure: the closed-loop force error of the result's full model on all samples, the same
     number ``didim.simulate(recording, r).relative_error(recording)`` gives (one simulation)."""
     from ._errors import DidimError
-    from .simulation import simulate
+    from .simulation import settling_samples, simulate
 
+    judged = r.force_error  # the error the sanity checks below judge: after a record's start, when it has one
     if r.structure is not None:
         try:
-            r.force_error = simulate(recording, r).relative_error(recording)
+            sim = simulate(recording, r)
+            r.force_error = judged = sim.relative_error(recording)
+            k = settling_samples(recording.qm, sim.q[0], recording.dt, recording.position_resolution)
+            if k:
+                f, e = recording.force[k:], recording.force[k:] - sim.force[k:]
+                judged = float(np.linalg.norm(e) / np.linalg.norm(f)) if np.linalg.norm(f) > 0 else judged
+                r.notes.append(f"the record begins away from the simulation's start (at rest on the reference; the "
+                               f"log began while the loop ran): closed-loop force error {100 * r.force_error:.2f} % on "
+                               f"all samples, {100 * judged:.2f} % after the first {1e3 * k * recording.dt:.0f} ms, "
+                               "where the simulation joins the record")
         except DidimError:
-            r.force_error = float("nan")
+            r.force_error = judged = float("nan")
     # one sanity check for every method: a model whose simulated force misses the measured one by more than the force
     # itself explains nothing, whatever the method's own convergence test said
-    if r.converged and not (r.force_error <= ABSURD_FORCE_ERROR):
+    if r.converged and not (judged <= ABSURD_FORCE_ERROR):
         r.converged = False
-        what = (f"its closed-loop force error is {100 * r.force_error:.0f} % (more than "
+        what = (f"its closed-loop force error is {100 * judged:.0f} % (more than "
                 f"{100 * ABSURD_FORCE_ERROR:.0f} % means worse than predicting no force at all)"
                 if np.isfinite(r.force_error) else "its model cannot be simulated in closed loop (the loop diverges or "
                 "the parameters are not physical)")
         r.message = (f"the result explains nothing: {what}; check the units, the controller and the initial values "
                      "(apM)") + (f"; the method said: {r.message}" if r.message else "")
-    elif r.converged and r.force_error > POOR_FORCE_ERROR:
-        why = (f"the model explains little of the force: its closed-loop force error is {100 * r.force_error:.0f} %; "
+    elif r.converged and judged > POOR_FORCE_ERROR:
+        why = (f"the model explains little of the force: its closed-loop force error is {100 * judged:.0f} %; "
                "check that the controller is the one that ran the axis, the force's units and the record")
         r.notes.append(why)
         warnings.warn(f"{recording.name or 'record'}: {why}", DidimWarning, stacklevel=3)

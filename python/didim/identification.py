@@ -31,7 +31,7 @@ from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation, diffcent, force_lag_mean, lowpass
 from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, cubic_bspline, param_names, params_vector, problem,
-                         settling_samples)
+                         settling_samples, simulate)
 
 Progress = Optional[Callable[[str], None]]
 
@@ -326,7 +326,8 @@ def didim_iterate(
     (:func:`didim.simulation.settling_samples`, on the simulation with χ⁰). Over those samples the simulated states
     answer a start the axis never had, and the regression on them biases the fit (a log cut at 83 mm/s: M 80 kg
     instead of 95). ``"auto"`` (default) leaves the decimated rows they reach (1 % of their weight or more) out of
-    the regression; ``"keep"`` keeps every row. A record that starts where the simulation does is fitted alike.
+    the regression and from the output errors the iterations compare; ``"keep"`` keeps every row. A record that
+    starts where the simulation does is fitted alike.
     """
     t0 = time.perf_counter()
     if reversals not in ("auto", "exclude", "keep"):
@@ -369,7 +370,7 @@ def didim_iterate(
     m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
     start_row = _start_row(rec, pb, chi, dec) if start == "auto" else 0  # the first decimated row regressed
     yd_motor = dec(rec.force)[:m_fit]
-    ny = float(np.linalg.norm(yd_motor))
+    ny = float(np.linalg.norm(yd_motor[start_row:]))  # the output errors leave the start out too
     _checks.measured_signal("force", ny, f"{method} ({model})")
     y_motor = rec.force
     if delay:  # the states answer the force applied, which is the command `delay` samples earlier
@@ -414,7 +415,7 @@ def didim_iterate(
             stop = e
             break
         n_sim += 1
-        out_err = float(np.linalg.norm(yd_motor - force_dec)) / ny
+        out_err = float(np.linalg.norm((yd_motor - force_dec)[start_row:])) / ny
         if history and np.array_equal(chi, _vector(history[-1].params, names)):
             history[-1].output_error = out_err
         if out_err > divergence_factor * best[0]:
@@ -484,9 +485,9 @@ def didim_iterate(
     if converged:
         try:
             if m_fit is None:
-                final_out = math.sqrt(pb.squared_error(chi, yd_motor, dec.core)) / ny
+                final_out = math.sqrt(pb.squared_error(chi, yd_motor, dec.core, skip=start_row)) / ny
             else:
-                final_out = float(np.linalg.norm(yd_motor - dec(pb.simulate(chi)["force"])[:m_fit])) / ny
+                final_out = float(np.linalg.norm((yd_motor - dec(pb.simulate(chi)["force"])[:m_fit])[start_row:])) / ny
             n_sim += 1
             history[-1].output_error = final_out
             if final_out > divergence_factor * best[0]:
@@ -706,9 +707,14 @@ class _ModeCriterion:
         self._rigid_limit: Optional[float] = None
         self.dec = dec
         self.yd = dec(rec.force)
-        self.ny = float(np.linalg.norm(self.yd))
-        _checks.measured_signal("force", self.ny, "step 2")
         tol = sim_kw.get("tol", DEFAULT_TOL)
+        # a log that began away from the simulation's start: its first rows are left out, as in step 1 (start="auto";
+        # the step-1 model's simulation says where the start ends)
+        self.skip = 0
+        if rigid.options.get("start_rows_left_out"):
+            self.skip = settled_row(rec, simulate(rec, rigid).q[0], dec)
+        self.ny = float(np.linalg.norm(self.yd[self.skip:]))
+        _checks.measured_signal("force", self.ny, "step 2")
         self.pb = problem(rec, "flexible", offset=self.offset, **dict(sim_kw, tol=max(MODE_SIM_TOL, tol)))
         coarse = dict(sim_kw, tol=max(GRID_SIM_TOL, tol))
         self.pb_grid = problem(rec, "flexible", offset=self.offset, **coarse)
@@ -737,7 +743,8 @@ class _ModeCriterion:
             pts = np.array([params_vector("flexible", self.params(*x), self.offset)[1] for x in xs[ok]])
             if tally is not None:
                 tally[0] += len(pts)
-            vals, _ = (self.pb_grid if coarse else self.pb).squared_error_batch(pts, self.yd, self.dec.core)
+            vals, _ = (self.pb_grid if coarse else self.pb).squared_error_batch(pts, self.yd, self.dec.core,
+                                                                               skip=self.skip)
             out[ok] = np.where(np.isfinite(vals), np.sqrt(np.abs(vals)) / self.ny, self.bad)
         return out
 

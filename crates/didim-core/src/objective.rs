@@ -70,13 +70,16 @@ impl<const N: usize> Problem<'_, N> {
         chis.par_iter().map(|chi| self.simulate(chi)).collect()
     }
 
-    /// `‖measured_dec − dec(simulated output)‖²`, the criterion of eq. (32) on decimated signals.
+    /// `‖measured_dec − dec(simulated output)‖²`, the criterion of eq. (32) on decimated signals,
+    /// summed over the decimated rows from `skip` on (the rows before it are a record's start that
+    /// the simulation, at rest on the reference, has not joined yet; 0 for every row).
     pub fn squared_error(
         &self,
         chi: &[f64],
         output: Output,
         measured_dec: &[f64],
         dec: &Decimation,
+        skip: usize,
     ) -> Result<f64> {
         let sim = match output {
             Output::Force => dec.apply(&simulate_force(
@@ -99,6 +102,7 @@ impl<const N: usize> Problem<'_, N> {
         Ok(measured_dec
             .iter()
             .zip(&sim)
+            .skip(skip)
             .map(|(a, b)| (a - b) * (a - b))
             .sum())
     }
@@ -110,9 +114,10 @@ impl<const N: usize> Problem<'_, N> {
         output: Output,
         measured_dec: &[f64],
         dec: &Decimation,
+        skip: usize,
     ) -> Vec<Result<f64>> {
         chis.par_iter()
-            .map(|chi| self.squared_error(chi, output, measured_dec, dec))
+            .map(|chi| self.squared_error(chi, output, measured_dec, dec, skip))
             .collect()
     }
 
@@ -284,13 +289,13 @@ mod tests {
         }
         let dec = Decimation::butterworth(4, 60.0, 1000.0, 6, FilterForm::Sos).unwrap();
         let meas = dec.apply(&batch[0].as_ref().unwrap().force).unwrap();
-        let costs = pb.squared_error_batch(&chis, Output::Force, &meas, &dec);
+        let costs = pb.squared_error_batch(&chis, Output::Force, &meas, &dec, 0);
         assert_eq!(*costs[0].as_ref().unwrap(), 0.0);
         assert!(costs[1..].iter().all(|c| *c.as_ref().unwrap() > 0.0));
         // a failing member does not spoil the others
         let mut bad = chis.clone();
         bad[2][0] = -1.0;
-        let (vals, errs) = split_errors(pb.squared_error_batch(&bad, Output::Force, &meas, &dec));
+        let (vals, errs) = split_errors(pb.squared_error_batch(&bad, Output::Force, &meas, &dec, 0));
         assert!(errs[2].is_some() && vals[2].is_none());
         assert_eq!(vals[3], Some(*costs[3].as_ref().unwrap()));
     }

@@ -359,8 +359,9 @@ impl Problem {
         Ok(d)
     }
 
-    /// ‖measured_dec − decimator(simulated output)‖² (output "force" or "position").
-    #[pyo3(signature = (params, measured_dec, decimator, *, output="force"))]
+    /// ‖measured_dec − decimator(simulated output)‖² (output "force" or "position") over the
+    /// decimated rows from `skip` on.
+    #[pyo3(signature = (params, measured_dec, decimator, *, output="force", skip=Whole::new(0)))]
     fn squared_error(
         &self,
         py: Python<'_>,
@@ -368,19 +369,21 @@ impl Problem {
         measured_dec: PyReadonlyArray1<'_, f64>,
         decimator: &Decimation,
         output: &str,
+        skip: Whole,
     ) -> PyResult<f64> {
         let chi = slice1(&params);
         let meas = slice1(&measured_dec);
         let (chi, meas): (&[f64], &[f64]) = (&chi, &meas);
         run(py, || {
             let out = parse_output(output)?;
-            with_problem!(self, pb => pb.squared_error(chi, out, meas, &decimator.inner))
+            let skip = skip.get("skip")?;
+            with_problem!(self, pb => pb.squared_error(chi, out, meas, &decimator.inner, skip))
         })
     }
 
     /// squared_error of the rows of params (m, p) in parallel: (costs (m,), errors), NaN cost where
     /// the simulation failed.
-    #[pyo3(signature = (params, measured_dec, decimator, *, output="force"))]
+    #[pyo3(signature = (params, measured_dec, decimator, *, output="force", skip=Whole::new(0)))]
     fn squared_error_batch<'py>(
         &self,
         py: Python<'py>,
@@ -388,13 +391,17 @@ impl Problem {
         measured_dec: PyReadonlyArray1<'py, f64>,
         decimator: &Decimation,
         output: &str,
+        skip: Whole,
     ) -> PyResult<Costs<'py>> {
         let chis = rows2(&params);
         let meas = slice1(&measured_dec);
         let meas: &[f64] = &meas;
         let results = run(py, || {
             let out = parse_output(output)?;
-            interrupted(with_problem!(self, pb => pb.squared_error_batch(&chis, out, meas, &decimator.inner)))
+            let skip = skip.get("skip")?;
+            interrupted(
+                with_problem!(self, pb => pb.squared_error_batch(&chis, out, meas, &decimator.inner, skip)),
+            )
         })?;
         let (vals, errs) = split_errors(results);
         let costs: Vec<f64> = vals.into_iter().map(|v| v.unwrap_or(f64::NAN)).collect();
