@@ -211,10 +211,7 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
             if k:
                 f, e = recording.force[k:], recording.force[k:] - sim.force[k:]
                 judged = float(np.linalg.norm(e) / np.linalg.norm(f)) if np.linalg.norm(f) > 0 else judged
-                r.notes.append(f"the record begins away from the simulation's start (at rest on the reference; the "
-                               f"log began while the loop ran): closed-loop force error {100 * r.force_error:.2f} % on "
-                               f"all samples, {100 * judged:.2f} % after the first {1e3 * k * recording.dt:.0f} ms, "
-                               "where the simulation joins the record")
+                r.start_s, r.force_error_after_start = k * recording.dt, judged
         except DidimError:
             r.force_error = judged = float("nan")
     # one sanity check for every method: a model whose simulated force misses the measured one by more than the force

@@ -383,6 +383,8 @@ def didim_iterate(
     best = (math.inf, chi.copy(), None, None)  # (output error, χ, solution, history index)
     n_sim, backtracks, converged, message = 0, 0, False, ""
     rho_prev = None
+    masks: List[np.ndarray] = []  # the rows kept by the reversal exclusion in the last two iterations
+    frozen_rows: Optional[np.ndarray] = None  # set when the iterates alternated between two masks
     sol = None
     stop: Optional[DidimError] = None  # the error that stopped the iterations, re-raised if there is no iterate
     last_rise = ""
@@ -433,6 +435,21 @@ def didim_iterate(
         backtracks = 0
         try:
             rows = _moving_rows(w_all, free) if exclude else None
+            if rows is not None:
+                if frozen_rows is not None:
+                    rows = rows & frozen_rows
+                elif (len(masks) == 2 and len(history) >= 3 and masks[1].shape == rows.shape
+                      and np.array_equal(masks[0], rows) and not np.array_equal(masks[1], rows)
+                      and np.allclose(chi, _vector(history[-3].params, names), rtol=1e-9, atol=0)):
+                    # the rows left out follow each iterate's simulated velocity; a row whose decimated Coulomb
+                    # regressor sits at the threshold can make DIDIM alternate between two points, each leaving out
+                    # the row the other keeps (rigid with offset on DATA_EMPS_PULSES): both are left out from here on
+                    frozen_rows = rows & masks[1]
+                    rows = frozen_rows
+                    notes.append(f"iteration {len(history) + 1}: the iterates alternated between two points, each "
+                                 "leaving out samples around reversals that the other kept; both sets are left out "
+                                 "from here on")
+                masks = (masks + [rows])[-2:]
             if start_row:
                 m_rows = len(force_dec)
                 settled = np.tile(np.arange(m_rows) >= start_row, len(y_all) // m_rows)
@@ -507,9 +524,10 @@ def didim_iterate(
     elif not converged and sol is None:
         raise (type(stop) if stop is not None else SimulationError)(f"DIDIM could not start: {message}")
     if start_row:
-        notes.append(f"the record begins away from the simulation's start (at rest on the reference): its first "
-                     f"{start_row} decimated samples, before the simulation joins it, are left out of the regression; "
-                     "start='keep' uses them, as the paper does")
+        notes.append(f"the record begins away from the simulation's start (at rest on the reference): the first "
+                     f"{start_row} decimated samples ({1e3 * start_row * dec.factor * rec.dt:.0f} ms: the samples before "
+                     "the simulation joins the record, and the decimation filter's reach) are left out of the "
+                     "regression; start='keep' uses them, as the paper does")
     if exclude and sol is not None and sol.get("rows_kept") is not None:
         kept, total = sol["rows_kept"]
         notes.append(f"regression on {kept} of {total} decimated samples: the {total - kept} around velocity reversals "

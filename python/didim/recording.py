@@ -388,11 +388,11 @@ def load_mat(
 
     ``pulses_gain``: the pulses enter ``vir`` with a gain of their own (DATA_EMPS_PULSES: ``vir`` = the controller's
     output + 1.0138·``pulses_N``, to 0.005 V RMS), and the axis gets ``gtau·vir``: the known external force is
-    ``pulses_gain·gtau·pulses_N``. ``"log"`` (default) takes the gain from the log (:meth:`Recording.u_ext_gain`;
-    kept at 1 when the log cannot tell it from 1 (within 5 σ), or when it is more than 20 % from 1, which
-    ``diagnose`` then reports); a number sets it (1: the
-    benchmark's ``pulses_N`` as it is). With the gain of the log, the benchmark's published model simulates
-    DATA_EMPS_PULSES to 6.03 % instead of 6.14 %.
+    ``pulses_gain·gtau·pulses_N``. ``"log"`` (default) takes the gain from the log (:meth:`Recording.u_ext_gain`),
+    kept at 1 when the log cannot tell it from 1 (within 5 σ) or when it is more than 20 % from 1 (which
+    ``diagnose`` then reports); a number sets it (1: the benchmark's ``pulses_N`` as it is). Ignored for a file
+    without ``pulses_N``. With the gain of the log, the benchmark's published model simulates DATA_EMPS_PULSES to
+    6.03 % instead of 6.14 %.
 
     Raises :class:`DataError` naming the file and the problem: missing, unreadable or truncated file, not a MAT
     file, missing variable, wrong shape or type, time not increasing or not uniform, a period other than ``dt``.

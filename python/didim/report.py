@@ -8,6 +8,9 @@ import html
 import io
 from typing import Any, Dict
 
+import numpy as np
+
+
 def _view(effect: str, where: Dict[str, Any], default: Any = "time") -> Any:
     """The residual view where an effect shows (its registry entry's), else where the finding says it lives."""
     from .doctor.effects import REGISTRY
@@ -103,6 +106,10 @@ def fit_figure(diag):
     return fig
 
 
+def _sigma(x) -> str:
+    return "–" if x is None or not np.isfinite(x) else f"{x:.3g}"
+
+
 def diagnosis_html(diag) -> str:
     e = html.escape
     f = diag.fit
@@ -116,11 +123,19 @@ def diagnosis_html(diag) -> str:
         f"<p>Base model: <b>{e(diag.model)}</b>. Validation: {e(str(diag.options.get('validation')))}. "
         f"Tests at level α = {diag.options['alpha']} (Holm-corrected across candidates, held-out confirmation by "
         f"Diebold–Mariano). Run time {diag.elapsed_s:.1f} s.</p>",
-        "<table><tr><th>relative force error</th><th>before</th><th>after</th></tr>",
-        f"<tr><td>training</td><td>{100 * f['train_before']:.2f} %</td><td>{100 * f['train_after']:.2f} %</td></tr>",
-        f"<tr><td>validation</td><td>{100 * f['valid_before']:.2f} %</td><td>{100 * f['valid_after']:.2f} %</td></tr></table>",
-        f"<img src='data:image/png;base64,{_png(fit_figure(diag))}'>",
+        "<table><tr><th>closed-loop force error</th><th>before</th><th>after</th>"
+        "<th>before (decimated, tests)</th><th>after (decimated, tests)</th></tr>",
+        f"<tr><td>training</td><td>{100 * f['train_force_before']:.2f} %</td><td>{100 * f['train_force_after']:.2f} %</td>"
+        f"<td>{100 * f['train_before']:.2f} %</td><td>{100 * f['train_after']:.2f} %</td></tr>",
+        f"<tr><td>validation</td><td>{100 * f['valid_force_before']:.2f} %</td><td>{100 * f['valid_force_after']:.2f} %</td>"
+        f"<td>{100 * f['valid_before']:.2f} %</td><td>{100 * f['valid_after']:.2f} %</td></tr></table>",
+        "<p>Full rate: ‖τ − τ_sim‖/‖τ‖ on every sample (the benchmark's measure); decimated: the force the tests work "
+        "on, without a record's start (below).</p>",
     ]
+    from .doctor import start_words
+
+    parts += [f"<p><b>Start.</b> {e(start_words(st))}</p>" for st in diag.locate.get("start", [])]
+    parts.append(f"<img src='data:image/png;base64,{_png(fit_figure(diag))}'>")
     if not diag.findings:
         parts.append("<h2>Nothing significant is missing</h2><p>The residual's structure is within what noise explains: "
                      "no candidate effect passes the corrected tests, and no view of the residual (time, speed, "
@@ -135,7 +150,7 @@ def diagnosis_html(diag) -> str:
         parts.append(f"<h2>{i}. {e(x.effect)}</h2><p class='phys'>{e(x.physics)}</p>{body}")
         if x.params:
             parts.append("<table><tr><th>parameter</th><th>value</th><th>σ</th></tr>" + "".join(
-                f"<tr><td>{e(k)}</td><td>{v:.5g}</td><td>{x.std.get(k, float('nan')):.3g}</td></tr>" for k, v in x.params.items())
+                f"<tr><td>{e(k)}</td><td>{v:.5g}</td><td>{_sigma(x.std.get(k))}</td></tr>" for k, v in x.params.items())
                 + "</table>")
         parts.append(f"<img src='data:image/png;base64,{_png(figure(diag, view))}'>")
     if diag.ambiguities:
@@ -144,12 +159,18 @@ def diagnosis_html(diag) -> str:
             for a in diag.ambiguities) + "</ul>")
     if diag.rejected:
         parts.append("<h2 class='rej'>Candidates not kept</h2><ul class='rej'>" + "".join(
-            f"<li>{e(x.effect)}: {e(x.evidence)}</li>" for x in diag.rejected) + "</ul>")
+            f"<li>{e(x.effect)}: {e(x.evidence)}" + (f"<br><b>{e(x.note)}</b>" if x.note else "") + "</li>"
+            for x in diag.rejected) + "</ul>")
     parts.append("<h2>Parameters</h2><table><tr><th>parameter</th><th>base fit</th><th>final</th></tr>")
     names = list(dict.fromkeys(list(diag.base.params) + list(diag.final_params)))
     for n in names:
         b, a = diag.base.params.get(n), diag.final_params.get(n)
         parts.append(f"<tr><td>{e(n)}</td><td>{'' if b is None else f'{b:.5g}'}</td><td>{'' if a is None else f'{a:.5g}'}</td></tr>")
+    st = diag.final_state
+    for label, value in (("delay (samples)", st.delay or None), ("force lag (s)", st.force_lag or None),
+                         ("backlash gap (m)", st.backlash_gap)):
+        if value is not None:
+            parts.append(f"<tr><td>{e(label)}</td><td></td><td>{value:.5g}</td></tr>")
     parts.append("</table><h2>Candidate ranking per round</h2>")
     for r in diag.rounds:
         parts.append(f"<h3>round {r['round']}</h3><table><tr><th>effect</th><th>hyper-parameter</th><th>Wald</th><th>dof</th>"

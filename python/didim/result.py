@@ -75,6 +75,10 @@ class IdentificationResult:
     structure: Optional[Any] = None
     #: Closed-loop simulated force error on all samples, ‖τ − τ_sim‖/‖τ‖ (the headline measure; NaN until computed).
     force_error: float = float("nan")
+    #: For a record that began away from the simulation's start (at rest on the reference): how long (s) the
+    #: simulation takes to join it, and the force error after that (0 and NaN for a record that starts there).
+    start_s: float = 0.0
+    force_error_after_start: float = float("nan")
 
     def __post_init__(self):
         if self.structure is None:
@@ -126,6 +130,8 @@ class IdentificationResult:
             "units": self.units,
             "structure": self.structure.to_dict() if self.structure is not None else None,
             "force_error": self.force_error,
+            "start_s": self.start_s,
+            "force_error_after_start": self.force_error_after_start,
         }
         return jsonable(d)
 
@@ -204,7 +210,9 @@ class IdentificationResult:
                 initial=floats(d.get("initial"), "initial"), output_error=num(d.get("output_error"), "output_error"),
                 history=history, frozen=frozen, options=dict(typed(d.get("options"), dict, "options", {})),
                 steps={str(k): cls.from_dict(v) for k, v in steps.items()},
-                notes=notes, structure=structure, force_error=num(d.get("force_error"), "force_error"))
+                notes=notes, structure=structure, force_error=num(d.get("force_error"), "force_error"),
+                start_s=num(d.get("start_s"), "start_s", 0.0),
+                force_error_after_start=num(d.get("force_error_after_start"), "force_error_after_start"))
         return r
 
     def to_json(self, **kw) -> str:
@@ -242,7 +250,10 @@ class IdentificationResult:
         for name, v in self.frozen.items():
             lines.append(f"{name + ' (frozen)':<18}{'':>12}{_fmt(v):>14}{'-':>12}{'-':>9}")
         if math.isfinite(self.force_error):
-            lines.append(f"closed-loop force error (simulated vs measured, all samples) = {100 * self.force_error:.2f} %")
+            lines.append(f"closed-loop force error (simulated vs measured, all samples) = {100 * self.force_error:.2f} %"
+                         + (f"; {100 * self.force_error_after_start:.2f} % after the first {1e3 * self.start_s:.0f} ms, "
+                            "where the simulation (started at rest on the reference) joins a record that began "
+                            "elsewhere" if self.start_s > 0 and math.isfinite(self.force_error_after_start) else ""))
         if math.isfinite(self.relative_error) and not self.method.startswith("oe-"):  # OE methods fit no regression
             lines.append(f"regression error ‖Y − Wχ‖/‖Y‖ (decimated) = {100 * self.relative_error:.2f} %")
         if math.isfinite(self.output_error):

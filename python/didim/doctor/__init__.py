@@ -170,11 +170,14 @@ class Diagnosis:
         (the parameters as each effect was accepted)."""
         lines = [f"doctor: {self.recording}, base model {self.model}"]
         f = self.fit
+        starts = self.locate.get("start", [])
         lines.append(f"closed-loop force error: training {100 * f['train_force_before']:.2f} % -> "
                      f"{100 * f['train_force_after']:.2f} %, validation ({self.options['validation']}) "
-                     f"{100 * f['valid_force_before']:.2f} % -> {100 * f['valid_force_after']:.2f} %")
+                     f"{100 * f['valid_force_before']:.2f} % -> {100 * f['valid_force_after']:.2f} %"
+                     + (" (after the start: " + ", ".join(f"{x['record']} {100 * x['force_error_after_start']:.2f} %"
+                                                        for x in starts) + ")" if starts else ""))
         for st in self.locate.get("start", []):
-            lines.append("start: " + _start_words(st))
+            lines.append("start: " + start_words(st))
         if not self.findings:
             lines.append("nothing significant is missing from the model")
         for x in self.findings:
@@ -183,9 +186,11 @@ class Diagnosis:
             text = x.words or x.evidence
             gain = x.held_out()
             lines.append(f"- {x.effect}{label}: {text}" + (f"; {gain}" if gain and x.words else ""))
-        if self.rejected:
-            # an effect tried on several models appears once, with its last try (every try is in the details)
-            last = {x.effect: x for x in self.rejected}
+        accepted = {x.effect for x in self.findings}
+        if any(x.effect not in accepted for x in self.rejected):
+            # an effect tried on several models appears once, with its last try, and not when a later try was
+            # accepted (every try is in the details)
+            last = {x.effect: x for x in self.rejected if x.effect not in accepted}
             lines.append("not confirmed on held-out data: " + "; ".join(
                 f"{x.effect} ({x.held_out() or x.evidence}{'; ' + x.note if x.note else ''})" for x in last.values()))
         for a in self.ambiguities:
@@ -310,7 +315,8 @@ def _start(rec: Recording, state: State) -> Optional[Dict[str, Any]]:
             "force_error_after_start": float(np.linalg.norm(r[k:]) / np.linalg.norm(rec.force[k:]))}
 
 
-def _start_words(s: Dict[str, Any]) -> str:
+def start_words(s: Dict[str, Any]) -> str:
+    """A record's start (:func:`_start`) in words."""
     return (f"{s['record']} begins with the axis {_g(1e6 * s['initial_gap_m'])} µm from where the simulation starts "
             f"(at rest on the reference: the closed loop was already running when the log began); its first "
             f"{_g(1e3 * s['seconds'])} ms hold {100 * s['residual_share']:.0f} % of its residual energy, which comes "
@@ -642,4 +648,4 @@ def doctor(
     return diag
 
 
-__all__ = ["doctor", "Diagnosis", "Finding", "EFFECTS", "PHYSICS", "REGISTRY", "Effect"]
+__all__ = ["doctor", "Diagnosis", "Finding", "EFFECTS", "PHYSICS", "REGISTRY", "Effect", "start_words"]
