@@ -73,3 +73,21 @@ def test_the_force_lag_is_refused_where_it_has_no_sensitivities(short_emps):
         didim.identify(short_emps, didim.Model("rigid", force_lag=3e-4), "oe-lm", apM=80.0)
     with pytest.raises(didim.DataError, match="force_lag must be a finite number >= 0 s"):
         didim.simulate(short_emps, dict(M=95.0, Fv=200.0, Fc=20.0), force_lag=-1e-3)
+
+
+@pytest.mark.parametrize("lag", [2e-4, 1e-3, 5e-2])
+def test_force_lag_mean_is_the_mean_of_the_exact_lag_over_each_period(lag):
+    """`force_lag_mean` (what DIDIM regresses when the model has a lag) against the lag's exact solution under held
+    commands, integrated over each period: f(t) = τ + (f₀ − τ)·e^(−t/T), its mean T/dt·(1 − e^(−dt/T))·(f₀ − τ) + τ."""
+    from scipy.integrate import quad
+
+    from didim.signal import force_lag_mean
+
+    dt = 1e-3
+    tau = np.random.default_rng(1).standard_normal(200) * 50
+    f0, expected = tau[0], np.empty_like(tau)
+    for k, t in enumerate(tau):
+        expected[k] = quad(lambda s: t + (f0 - t) * np.exp(-s / lag), 0, dt, epsabs=0, epsrel=1e-10)[0] / dt
+        f0 = t + (f0 - t) * np.exp(-dt / lag)
+    # the quadrature's relative 1e-10 on forces of up to 200 N: 2e-8 N
+    np.testing.assert_allclose(force_lag_mean(tau, lag, dt), expected, rtol=0, atol=2e-8)

@@ -145,14 +145,14 @@ def force_lag_mean(force: np.ndarray, lag: float, dt: float) -> np.ndarray:
     force = np.asarray(force, dtype=float)
     if lag <= 0 or len(force) == 0:
         return force
+    from scipy.signal import lfilter
+
     decay = math.exp(-dt / lag)
     share = lag / dt * (1.0 - decay)
-    out = np.empty_like(force)
-    f = force[0]
-    for k, tau in enumerate(force):
-        out[k] = tau + (f - tau) * share
-        f = tau + (f - tau) * decay
-    return out
+    # the lag's force at the start of each period: f₀ = τ₀, f(k+1) = decay·f(k) + (1 − decay)·τ(k)
+    g, _ = lfilter([1.0 - decay], [1.0, -decay], force, zi=[decay * force[0]])
+    f = np.concatenate([force[:1], g[:-1]])
+    return force + (f - force) * share
 
 
 __all__ = ["lowpass", "diffcent", "default_factor", "Decimation", "PADDINGS", "force_lag_mean"]

@@ -24,6 +24,7 @@ Layout: :mod:`.effects` holds one :class:`~didim.doctor.effects.Effect` per effe
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Tuple
@@ -229,30 +230,39 @@ def _better(c: Candidate, top: Optional[Candidate]) -> bool:
 
 def _score(groups: List[List[Candidate]], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> List[Candidate]:
     """Best variant of each candidate, scored; Holm-adjusted p-values set in place."""
-    best: List[Candidate] = []
-    for variants in groups:
-        _test_all(variants, r, wb, data, a)
-        top = None
-        for c in variants:
-            if _better(c, top):
-                top = c
-        if top is not None and top.rebuild is not None:
-            # refine the hyper-parameter between the grid neighbours of the best value
-            (key, h0), = top.hyper.items()
-            fine = h0 * np.geomspace(1 / top.step, top.step, 21)
-            refined = [Candidate(top.effect, x, {key: float(h)}, top.grid, rebuild=top.rebuild, step=top.step)
-                       for h, x in zip(fine, top.rebuild(fine))]
-            _test_all(refined, r, wb, data, a)
-            for c in refined:
-                if c.test.explained > top.test.explained:
-                    top = c
-            top.grid = len(variants) + len(fine)
-        if top is not None:
-            best.append(top)
+    best = [c for c in (_best_of(variants, r, wb, data, a) for variants in groups) if c is not None]
+    return _holm_ranked(best)
+
+
+def _holm_ranked(best: List[Candidate]) -> List[Candidate]:
+    """Sets the Holm-adjusted p-values (with each candidate's grid as a Bonferroni factor) and ranks."""
     raw = [min(1.0, c.test.p_value * c.grid) for c in best]
     for c, p in zip(best, holm(raw) if raw else []):
         c.p_adj = float(p)
     return sorted(best, key=lambda c: (c.p_adj, -c.test.explained))
+
+
+def _best_of(variants: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> Optional[Candidate]:
+    """The best variant of one effect's candidates, its hyper-parameter refined between grid neighbours."""
+    if not variants:
+        return None
+    _test_all(variants, r, wb, data, a)
+    top = None
+    for c in variants:
+        if _better(c, top):
+            top = c
+    if top is not None and top.rebuild is not None:
+        # refine the hyper-parameter between the grid neighbours of the best value
+        (key, h0), = top.hyper.items()
+        fine = h0 * np.geomspace(1 / top.step, top.step, 21)
+        refined = [Candidate(top.effect, x, {key: float(h)}, top.grid, rebuild=top.rebuild, step=top.step)
+                   for h, x in zip(fine, top.rebuild(fine))]
+        _test_all(refined, r, wb, data, a)
+        for c in refined:
+            if c.test.explained > top.test.explained:
+                top = c
+        top.grid = len(variants) + len(fine)
+    return top
 
 
 def _locate(data: Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:
@@ -448,8 +458,16 @@ class _Search:
         """Every effect not tried on this model, at its best hyper-parameter, by adjusted p-value."""
         state, rt, _, sim = cur
         wb = orthogonalize(self.data.train_columns(base_columns(state, sim)), np.zeros((len(rt), 0)))
-        groups = [e.candidates(state, sim, self.data) for name, e in REGISTRY.items() if name not in self.done]
-        ranked = _score([g for g in groups if g], rt, wb, self.data, ar_fit(rt))
+        a = ar_fit(rt)
+        effects = [e for name, e in REGISTRY.items() if name not in self.done]
+
+        def best(e: Effect) -> Optional[Candidate]:  # the core and numpy's large operations release the interpreter
+            return _best_of(e.candidates(state, sim, self.data), rt, wb, self.data, a)
+
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max(1, min(2, os.cpu_count() or 1))) as pool:
+            ranked = _holm_ranked([c for c in pool.map(best, effects) if c is not None])
         self.rounds.append({"round": len(self.rounds) + 1, "candidates": [
             {"effect": c.effect, "hyper": c.hyper, "wald": c.test.statistic, "dof": c.test.dof, "p_value": c.test.p_value,
              "p_adjusted": c.p_adj, "explained_pct": 100 * c.test.explained} for c in ranked]})
