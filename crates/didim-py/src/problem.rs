@@ -362,6 +362,7 @@ impl Problem {
     /// ‖measured_dec − decimator(simulated output)‖² (output "force" or "position") over the
     /// decimated rows from `skip` on.
     #[pyo3(signature = (params, measured_dec, decimator, *, output="force", skip=Whole::new(0)))]
+    #[pyo3(text_signature = "(self, /, params, measured_dec, decimator, *, output='force', skip=0)")]
     fn squared_error(
         &self,
         py: Python<'_>,
@@ -384,6 +385,7 @@ impl Problem {
     /// squared_error of the rows of params (m, p) in parallel: (costs (m,), errors), NaN cost where
     /// the simulation failed.
     #[pyo3(signature = (params, measured_dec, decimator, *, output="force", skip=Whole::new(0)))]
+    #[pyo3(text_signature = "(self, /, params, measured_dec, decimator, *, output='force', skip=0)")]
     fn squared_error_batch<'py>(
         &self,
         py: Python<'py>,
