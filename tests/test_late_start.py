@@ -125,3 +125,31 @@ def test_three_step_didim_on_a_flexible_log_cut_while_moving(truthbench):
     assert "after the first" in auto.summary()
     again = didim.IdentificationResult.from_dict(auto.to_dict())
     assert again.start_s == auto.start_s and again.force_error_after_start == auto.force_error_after_start
+
+
+def test_no_flexible_base_fit_is_said_and_exits_1(truthbench, tmp_path):
+    """The truthbench's moving-chirp flexible record cut 12 s in (inside the chirp, at −13 mm/s): rigid DIDIM, step 1,
+    does not converge there, so there is no flexible base to diagnose. The doctor says so (BaseFitError, exit code 1
+    from the command line, as for a fit that did not converge) instead of failing on the rigid step's parameter
+    names as bad input (exit code 2)."""
+    import scipy.io
+
+    from didim.cli import main
+    from didim.doctor import BaseFitError
+
+    load, _ = truthbench
+    rec = load("flexible/paperlike_moving_chirp")
+    cut = _late(rec, 12000, name="cut12")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        assert not didim.identify(cut, "flexible").converged
+        with pytest.raises(BaseFitError, match="no flexible base fit on cut12: step 1"):
+            didim.doctor(cut, "flexible")
+    c = cut.controller
+    path = tmp_path / "cut12.mat"
+    scipy.io.savemat(path, {"t": (np.arange(cut.n) * cut.dt)[:, None], "qm": cut.qm[:, None], "qg": cut.qr[:, None],
+                            "vir": (cut.force / c.gtau)[:, None], "gtau": c.gtau, "kp": c.kp, "kv": c.kv,
+                            "vsat": c.vsat})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        assert main(["doctor", str(path), "--model", "flexible", "--quiet"]) == 1

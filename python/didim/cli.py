@@ -178,7 +178,13 @@ def cmd_doctor(args) -> int:
     _check_outputs([args.file, args.validate, args.controller], [args.json, args.html, args.result])
     rec = _load(args, args.file)
     val = _load(args, args.validate) if args.validate else None
-    d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet))
+    from .doctor import BaseFitError
+
+    try:
+        d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet))
+    except BaseFitError as e:  # not bad input: the record does not support the base model (like a fit not converged)
+        print(f"didim: doctor: {_one_line(str(e))}", file=sys.stderr)
+        return 1
     print(d.summary())
     if args.json:
         write_text(args.json, d.to_json() + "\n")

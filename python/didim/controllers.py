@@ -214,8 +214,10 @@ class TransferFunction:
 
     def transfer_function(self, dt: float) -> "TransferFunction":
         if not math.isclose(dt, self.dt, rel_tol=1e-9):
-            raise DataError(f"the controller is designed for a sample period of {self.dt:g} s but the record's is {dt:g} s: "
-                            "give the coefficients for the record's sample period")
+            ms = " (is the record's time column in milliseconds read as seconds?)" if math.isclose(
+                dt / self.dt, 1000.0, rel_tol=1e-6) else ""
+            raise DataError(f"the controller is designed for a sample period of {self.dt:g} s but the record's is {dt:g} s"
+                            f"{ms}: give the coefficients for the record's sample period")
         return self
 
     def describe(self) -> str:

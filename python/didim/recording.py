@@ -267,7 +267,8 @@ class Recording:
                     elif not (1 / SCALE_FACTOR_WARN < ratio < SCALE_FACTOR_WARN):
                         out.append(
                             f"the force does not have the scale the controller implies: {evidence}; check that it is in N "
-                            "on the load side and that the controller and its gains are the axis's"
+                            "on the load side and that the controller and its gains are the axis's (a force logged in "
+                            f"other units, volts or amperes, takes force_scale = {1 / ratio:.4g}; CLI: --force-scale)"
                         )
         g, se = self.u_ext_gain()
         if math.isfinite(g) and abs(g - 1) > U_EXT_GAIN_RTOL and abs(g - 1) > 5 * se:

@@ -139,7 +139,7 @@ class Diagnosis:
             "ambiguities": self.ambiguities,
             "rounds": self.rounds,
             "locate": {k: v for k, v in self.locate.items() if not k.startswith("_")},
-            "options": self.options,
+            "options": {k: v for k, v in self.options.items() if not k.startswith("_")},
             "elapsed_s": self.elapsed_s,
         })
 
@@ -172,11 +172,12 @@ class Diagnosis:
         lines = [f"doctor: {self.recording}, base model {self.model}"]
         f = self.fit
         starts = self.locate.get("start", [])
+        after = {x["record"]: f" ({100 * x['force_error_after_start']:.2f} % after its start)" for x in starts}
+        valid_name = self.options.get("_valid_record")
         lines.append(f"closed-loop force error: training {100 * f['train_force_before']:.2f} % -> "
-                     f"{100 * f['train_force_after']:.2f} %, validation ({self.options['validation']}) "
-                     f"{100 * f['valid_force_before']:.2f} % -> {100 * f['valid_force_after']:.2f} %"
-                     + (" (after the start: " + ", ".join(f"{x['record']} {100 * x['force_error_after_start']:.2f} %"
-                                                        for x in starts) + ")" if starts else ""))
+                     f"{100 * f['train_force_after']:.2f} %{after.get(self.recording, '')}, validation "
+                     f"({self.options['validation']}) {100 * f['valid_force_before']:.2f} % -> "
+                     f"{100 * f['valid_force_after']:.2f} %{after.get(valid_name, '') if valid_name else ''}")
         for st in self.locate.get("start", []):
             lines.append("start: " + start_words(st))
         if not self.findings:
@@ -197,6 +198,8 @@ class Diagnosis:
         for a in self.ambiguities:
             lines.append(f"this record cannot tell apart {' / '.join(a['effects'])}; the experiment that would: "
                          f"{a['experiment']}")
+        if not self.findings and not self.rejected:
+            return "\n".join(lines)
         lines.append(f"details (each effect's values when it was accepted; the tests work on the force decimated at "
                      f"{self.options['cutoff_hz']:g} Hz: training "
                      f"{100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, validation "
@@ -433,7 +436,18 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress) -> Tuple[S
     from ..identification import didim_flexible
 
     fl = didim_flexible(data.rec, m0, variant="paper", reversals="keep")
+    if fl.model != "flexible":
+        # step 1 (rigid) failed, so there are no flexible parameters to start from (a step 3 that drifted for want of
+        # load friction is a start: the doctor refits it and names what is missing)
+        raise BaseFitError(f"no flexible base fit on {data.rec.name or 'the record'}: {fl.message or 'it did not converge'}"
+                           "; the doctor needs a converged base model (try model='rigid', or a record that shows the "
+                           "flexible mode: see didim.identify(record, 'flexible'))")
     return refit(data, State("flexible", dict(fl.params), dict(fl.frozen)), {}, progress)
+
+
+class BaseFitError(DidimError):
+    """The doctor's base model could not be fitted (it did not converge or is not physical): there is nothing to
+    diagnose on top of it. The message says why and what to try."""
 
 
 #: The model, its decimated training and validation residuals and its training simulation.
@@ -658,6 +672,7 @@ def doctor(
         locate={"before": locate_before, "after": _locate(data, rt, sim),
                 "start": [x for x in (_start(r, state) for r in (recording, validate) if r is not None) if x]},
         options=dict(alpha=alpha, max_findings=max_findings, cutoff_hz=cutoff_hz, holdout=None if validate else holdout,
+                     _valid_record=(validate.name or "validation recording") if validate is not None else None,
                      validation=(validate.name or "validation recording") if validate else
                      f"last {int(100 * holdout)} % of the record"),
         elapsed_s=time.perf_counter() - t0,
@@ -666,4 +681,4 @@ def doctor(
     return diag
 
 
-__all__ = ["doctor", "Diagnosis", "Finding", "EFFECTS", "PHYSICS", "REGISTRY", "Effect", "start_words"]
+__all__ = ["doctor", "Diagnosis", "Finding", "EFFECTS", "PHYSICS", "REGISTRY", "Effect", "start_words", "BaseFitError"]

@@ -607,8 +607,11 @@ def _g(x: float) -> str:
 def _asym_words(p: Dict[str, float], st: State) -> str:
     q = st.params
     fv, fc = q.get("Fv", q.get("Fv1")), q.get("Fc", q.get("Fc1"))
-    return (f"viscous friction {_g(fv + p['dFv'])} N/(m/s) forward, {_g(fv - p['dFv'])} N/(m/s) backward; "
-            f"Coulomb friction {_g(fc + p['dFc'])} N forward, {_g(fc - p['dFc'])} N backward")
+    viscous = f"viscous friction {_g(fv + p['dFv'])} N/(m/s) forward, {_g(fv - p['dFv'])} N/(m/s) backward"
+    if any(t.kind.startswith("coulomb_spline") for t in st.terms):
+        # the profile along the stroke carries part of each direction's Coulomb level: Fc ± dFc alone is not it
+        return viscous + "; Coulomb friction per direction: see its profile along the stroke"
+    return viscous + f"; Coulomb friction {_g(fc + p['dFc'])} N forward, {_g(fc - p['dFc'])} N backward"
 
 
 def _stribeck_words(p: Dict[str, float], st: State) -> str:
