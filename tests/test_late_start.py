@@ -153,3 +153,22 @@ def test_no_flexible_base_fit_is_said_and_exits_1(truthbench, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", didim.DidimWarning)
         assert main(["doctor", str(path), "--model", "flexible", "--quiet"]) == 1
+
+
+def test_output_error_methods_leave_the_start_out_too(truthbench):
+    """OE-LM on the moving-chirp flexible record cut 1 s in (120 mm/s): with the start left out of its criterion it
+    finds what it finds on the whole record (M1, M2, K12 within 0.5 %); with every row (start="keep") it fits the
+    start too and the friction split breaks (the walkthrough saw Fv1 = −360 N/(m/s))."""
+    load, _ = truthbench
+    rec = load("flexible/paperlike_moving_chirp")
+    cut = _late(rec, 1000)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        whole = didim.identify(rec, "flexible", "oe-lm")
+        auto = didim.identify(cut, "flexible", "oe-lm")
+        keep = didim.identify(cut, "flexible", "oe-lm", start="keep")
+    for k in ("M1", "M2", "K12"):
+        assert abs(auto.params[k] / whole.params[k] - 1) < 0.005, (k, auto.params, whole.params)
+    assert auto.options["start_rows_left_out"] > 0 and any("left out of the criterion" in n for n in auto.notes)
+    assert keep.options["start_rows_left_out"] == 0
+    assert max(abs(keep.params[k] / whole.params[k] - 1) for k in ("Fv1", "Fv2")) > 0.3, keep.params

@@ -149,8 +149,11 @@ def _csv(path: str):
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data": said below, as a DataError
             data = np.loadtxt(path, delimiter=delim, skiprows=1, ndmin=2, encoding="utf-8-sig")
     except ValueError as e:
-        raise DataError(f"{path}: not a numeric CSV table under its header ({e}); every row must hold "
-                        f"{len(names)} numbers") from None
+        msg = str(e).rstrip(". ")
+        empty = ("an empty field is a missing value: fill it or cut the record (pandas writes NaN as an empty field "
+                 "unless to_csv(na_rep='nan')); " if "string ''" in msg else "")
+        raise DataError(f"{path}: not a numeric CSV table under its header ({msg}; numpy counts rows from 0 under the "
+                        f"header and columns from 1); {empty}every row must hold {len(names)} numbers") from None
     if data.size == 0:
         raise DataError(f"{path}: the header names its columns ({', '.join(names)}) but no row of samples follows")
     if data.shape[1] != len(names):

@@ -58,11 +58,14 @@ def oe_nm(
     backlash_gap: Optional[float] = None,
     delay: int = 0,
     force_lag: float = 0.0,
+    start: str = "auto",
 ) -> IdentificationResult:
     """Nelder-Mead (scipy's) on all parameters with J_τ = ‖τ_ddm − τ‖² or J_q = ‖q1_ddm − q1‖² (eq. (32)) on
     decimated signals. Variables are scaled by their initial values (all nonzero with eq. (33)), so ``xatol`` is
     relative; ``fatol`` is relative to the initial criterion. ``terms``, ``backlash_gap``, ``delay`` and ``force_lag``
-    extend the model as for :func:`didim.simulate` (a derivative-free method needs nothing more)."""
+    extend the model as for :func:`didim.simulate` (a derivative-free method needs nothing more). ``start``: as for
+    DIDIM (:func:`didim.identification.didim_iterate`), the decimated rows of a record's start that the simulation
+    has not joined yet are left out of the criterion ("auto") or kept ("keep")."""
     from scipy.optimize import minimize
 
     _check_criterion(criterion)
@@ -76,26 +79,27 @@ def oe_nm(
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(names), 1, "oe-nm")
     yd = dec(_measured(rec, criterion))
-    ny = float(np.linalg.norm(yd))
-    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-nm")
     count = {"sim": 0}
     history: List[Iteration] = []
 
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
                  tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
+    skip = _start_row(rec, pb, x0, dec, start)
+    ny = float(np.linalg.norm(yd[skip:]))
+    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-nm")
     output = "force" if criterion == "force" else "position"
     penalty = 1e3 * ny**2
 
     def cost(z):
         count["sim"] += 1
         try:
-            return pb.squared_error(np.asarray(z, dtype=float) * scale, yd, dec.core, output=output)
+            return pb.squared_error(np.asarray(z, dtype=float) * scale, yd, dec.core, output=output, skip=skip)
         except (SimulationError, DataError):
             return penalty
 
     def cost_batch(zs):
         count["sim"] += len(zs)
-        vals, _ = pb.squared_error_batch(np.ascontiguousarray(zs * scale), yd, dec.core, output=output)
+        vals, _ = pb.squared_error_batch(np.ascontiguousarray(zs * scale), yd, dec.core, output=output, skip=skip)
         return np.where(np.isfinite(vals), vals, penalty)
 
     def callback(zk):
@@ -122,8 +126,25 @@ def oe_nm(
         initial=dict(initial), history=history,
         options=dict(criterion=criterion, decimation=dec.describe(), xatol=xatol, fatol=fatol, integrator=integrator,
                      coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol, terms=[t.spec() for t in terms],
-                     backlash_gap=backlash_gap, delay=delay, force_lag=force_lag),
+                     backlash_gap=backlash_gap, delay=delay, force_lag=force_lag, start_rows_left_out=skip),
+        notes=_start_notes(skip, dec, rec),
     )
+
+
+def _start_row(rec: Recording, pb, chi: np.ndarray, dec: Decimation, start: str) -> int:
+    """The first decimated row of the criterion: past a record's start for ``start="auto"`` (see
+    :func:`didim.identification.settled_row`), 0 for ``"keep"``."""
+    from .identification import _start_row as row
+
+    if start not in ("auto", "keep"):
+        raise DataError(f"start must be 'auto' or 'keep', got {start!r}")
+    return row(rec, pb, chi, dec) if start == "auto" else 0
+
+
+def _start_notes(skip: int, dec: Decimation, rec: Recording) -> List[str]:
+    return [f"the record begins away from the simulation's start (at rest on the reference): the first {skip} decimated "
+            f"samples ({1e3 * skip * dec.factor * rec.dt:.0f} ms) are left out of the criterion; start='keep' uses "
+            "them"] if skip else []
 
 
 def oe_lm(
@@ -144,12 +165,13 @@ def oe_lm(
     terms: Sequence[Term] = (),
     backlash_gap: Optional[float] = None,
     delay: int = 0,
+    start: str = "auto",
 ) -> IdentificationResult:
     """Closed-loop output error by Levenberg-Marquardt with the exact Jacobian of the decimated simulated output
     (motor force, or motor position), from the forward sensitivity equations of the closed loop (controller
     included). Covariance: σ̂²(JᵀJ)⁻¹ at the solution, σ̂² = ‖r‖²/(m − p), from the same QR solver as DIDIM.
     ``terms``, ``backlash_gap`` and ``delay`` extend the model as for :func:`didim.simulate`; their sensitivities
-    are exact too."""
+    are exact too. ``start`` as for :func:`oe_nm`."""
     _check_criterion(criterion)
     _checks.options(cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
     initial = _checks.physical(initial, "initial")
@@ -162,19 +184,21 @@ def oe_lm(
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 1, "oe-lm")
     measured = _measured(rec, criterion)
-    ny = float(np.linalg.norm(dec(measured)))
-    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-lm")
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
                  tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay)
+    skip = _start_row(rec, pb, chi, dec, start)
+    ny = float(np.linalg.norm(dec(measured)[skip:]))
+    _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-lm")
     output = "force" if criterion == "force" else "position"
     n_sim = 0
 
     def evaluate(x):
         # one call: simulation with forward sensitivities, residual measured − simulated and ∂(simulated)/∂χ,
-        # decimated alike
+        # decimated alike (past a record's start)
         nonlocal n_sim
         n_sim += 1
-        return pb.linearize(x, measured, free, dec.core, output=output)
+        r, jac = pb.linearize(x, measured, free, dec.core, output=output)
+        return r[skip:], jac[skip:]
 
     try:
         r, jac = evaluate(chi)
@@ -259,8 +283,9 @@ def oe_lm(
         converged=converged, message=message, initial=dict(initial), frozen=frozen, history=history,
         options=dict(criterion=criterion, decimation=dec.describe(), tol=tol, integrator=integrator,
                      coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol, terms=[t.spec() for t in terms],
-                     backlash_gap=backlash_gap, delay=delay, condition_number=float(sol["condition_number"])),
-        covariance=sol["covariance"],
+                     backlash_gap=backlash_gap, delay=delay, condition_number=float(sol["condition_number"]),
+                     start_rows_left_out=skip),
+        covariance=sol["covariance"], notes=_start_notes(skip, dec, rec),
     )
 
 
