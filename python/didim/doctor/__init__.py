@@ -206,7 +206,8 @@ class Diagnosis:
                      f"{100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %):")
         for x in self.findings + self.rejected:
             ps = ", ".join(f"{k} = {v:.4g}{(' ' + UNITS[k]) if UNITS.get(k) else ''}" for k, v in x.params.items())
-            lines.append(f"  {x.effect}: {ps + '; ' if ps else ''}{x.evidence}")
+            rnd = f" (round {x.where['round']})" if "round" in x.where else ""
+            lines.append(f"  {x.effect}{rnd}: {ps + '; ' if ps else ''}{x.evidence}")
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -528,12 +529,16 @@ class _Search:
                     f"{c.test.statistic:.1f} on {c.test.dof} dof, adjusted p = {c.p_adj:.2g}); held-out error "
                     f"{100 * fit['valid_before']:.2f} % -> {100 * fit['valid_after']:.2f} % (Diebold-Mariano p = {p_dm:.2g})"
                     + same_optimiser)
+        if c.p_adj >= self.alpha:  # tried with its look-alike (Effect.tried_with), not on its own training test
+            partners = [e.name for e in REGISTRY.values() if e.tried_with == c.effect]
+            evidence += (f"; not significant on the training record itself: tried as the look-alike of "
+                         f"{' / '.join(partners) or 'another effect'}, judged on the held-out data alone")
         practical = fit["valid_after"] < (1 - MIN_HELDOUT_GAIN) * fit["valid_before"]
         if p_dm < self.alpha and not practical:
             evidence += (f"; below the practical threshold: an effect must lower the held-out force error by at "
                          f"least {100 * MIN_HELDOUT_GAIN:.0f} % of itself")
         f = Finding(c.effect, params, std, stat, evidence, effect.describe(params, st_new), fit,
-                    where={"hyper": c.hyper}, accepted=p_dm < self.alpha and practical,
+                    where={"hyper": c.hyper, "round": len(self.rounds)}, accepted=p_dm < self.alpha and practical,
                     words=effect.in_words(params, st_new))
         if not f.accepted:
             if effect.held_out_note is not None:
