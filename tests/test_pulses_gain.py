@@ -76,3 +76,24 @@ def test_emps_pulses_gain_and_the_published_model(emps_pulses_path):
            for r in (raw, rec)]
     # 6.14 % with the pulses as pulses_N says, 6.03 % with the log's gain (a 1.4 % larger 176 N square wave)
     assert abs(err[0] - 0.0614) < 5e-4 and abs(err[1] - 0.0603) < 5e-4 and err[1] < err[0], err
+
+
+def test_the_command_line_and_load_record_take_the_pulses_gain(emps_pulses_path, tmp_path, capsys):
+    from didim.cli import main
+
+    raw = didim.load_record(emps_pulses_path, pulses_gain=1.0)
+    assert np.array_equal(raw.u_ext, didim.load_mat(emps_pulses_path, pulses_gain=1.0).u_ext)
+    assert np.array_equal(didim.load_record(emps_pulses_path).u_ext, didim.load_mat(emps_pulses_path).u_ext)
+    result = tmp_path / "published.json"
+    didim.IdentificationResult(model="rigid", method="given", params={"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935,
+                                                                      "OF": -3.1648},
+                               std={}, rel_std_pct={}, relative_error=float("nan"), iterations=0, simulations=0,
+                               elapsed_s=0.0, options={"offset": True}).save(result)
+    errors = []
+    for extra in ([], ["--pulses-gain", "1"]):
+        assert main(["simulate", str(emps_pulses_path), str(result), *extra]) == 0
+        out = capsys.readouterr().out
+        errors.append(out)
+    assert "6.03 %" in errors[0] and "6.14 %" in errors[1], errors
+    assert main(["simulate", str(emps_pulses_path), str(result), "--pulses-gain", "x"]) == 2
+    assert "--pulses-gain takes 'log' or a number" in capsys.readouterr().err

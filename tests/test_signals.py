@@ -86,9 +86,12 @@ def test_killed_at_random_moments_a_command_leaves_previous_outputs_intact(tmp_p
                            for k, v in d.items() if not k.startswith("__")})
     js, html = tmp_path / "d.json", tmp_path / "d.html"
     cmd = CLI + ["doctor", str(rec), "--json", str(js), "--html", str(html)]
-    t0 = time.perf_counter()
-    subprocess.run(cmd, cwd=tmp_path, capture_output=True, check=True, timeout=300)
-    length = time.perf_counter() - t0
+    lengths = []
+    for _ in range(2):  # the shorter of two whole runs: the first may pay for cold caches, and moments spread over
+        t0 = time.perf_counter()  # a run much longer than the later ones would mostly land after they finished
+        subprocess.run(cmd, cwd=tmp_path, capture_output=True, check=True, timeout=300)
+        lengths.append(time.perf_counter() - t0)
+    length = min(lengths)
     js.write_text('{"previous": true}\n')
     html.write_text("<p>previous</p>\n")
     rng = random.Random(13)

@@ -25,8 +25,19 @@ def _load(args, path: str):
     controller = load_controller(args.controller) if getattr(args, "controller", None) else None
     if controller is None and not path.lower().endswith(".mat") and beside(path) and not getattr(args, "quiet", False):
         print(f"  … controller from {beside(path)}", file=sys.stderr, flush=True)
+    gain = getattr(args, "pulses_gain", "log")
     return load_record(path, controller=controller, columns=parse_columns(getattr(args, "columns", None)),
-                       force_scale=getattr(args, "force_scale", 1.0))
+                       force_scale=getattr(args, "force_scale", 1.0),
+                       pulses_gain=gain if gain == "log" else _number_arg("--pulses-gain", gain))
+
+
+def _number_arg(flag: str, text: str) -> float:
+    from ._errors import DataError
+
+    try:
+        return float(text)
+    except ValueError:
+        raise DataError(f"{flag} takes 'log' or a number, got {text!r}") from None
 
 
 def _record_options(p) -> None:
@@ -38,6 +49,9 @@ def _record_options(p) -> None:
                    "(didim's names: t, qr, force, qm, ql, u_ext)")
     p.add_argument("--force-scale", type=float, default=1.0, metavar="N_PER_UNIT",
                    help="N per unit of the logged force (e.g. the drive gain for a force logged in V); default 1")
+    p.add_argument("--pulses-gain", default="log", metavar="GAIN",
+                   help="MAT files with pulses_N: the gain of the pulses in the logged command, 'log' (default: read "
+                        "from the log) or a number (1: pulses_N as it is)")
 
 
 def cmd_identify(args) -> int:

@@ -197,7 +197,8 @@ def _hdf5(path: str):
 
 def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike] = None,
                 columns: Optional[Mapping[str, str]] = None, force_scale: float = 1.0, dt: Optional[float] = None,
-                position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None) -> Recording:
+                position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None,
+                pulses_gain: Union[float, str] = "log") -> Recording:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
 
     CSV: a header line naming the columns, then one row of numbers per sample (comma, semicolon, tab or spaces).
@@ -208,7 +209,7 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     file is read if it exists. ``columns``: map from didim's names (t, qr, force, qm, ql, u_ext) to the file's.
     ``force_scale``: N per unit of the logged force. ``dt``: the expected period (s), checked against ``t``, or the
     period when the file has no time column. ``position_resolution``: the motor encoder's step (m), ``'auto'`` to
-    detect it from ``qm`` (positions on a grid), or None.
+    detect it from ``qm`` (positions on a grid), or None. ``pulses_gain``: MAT files, see :func:`didim.load_mat`.
     """
     from ._io import check_input
 
@@ -228,7 +229,7 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     label = name if name is not None else os.path.splitext(os.path.basename(p))[0]
     if ext == ".mat":
         res = None if position_resolution == "auto" else position_resolution
-        rec = load_mat(p, position_resolution=res, name=label, dt=dt)  # type: ignore[arg-type]
+        rec = load_mat(p, position_resolution=res, name=label, dt=dt, pulses_gain=pulses_gain)  # type: ignore[arg-type]
         if controller is not None:
             import dataclasses
 
