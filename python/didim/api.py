@@ -200,18 +200,17 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
     """Sets the headline measure: the closed-loop force error of the result's full model on all samples, the same
     number ``didim.simulate(recording, r).relative_error(recording)`` gives (one simulation)."""
     from ._errors import DidimError
-    from .simulation import settling_samples, simulate
+    from .simulation import simulate
 
     judged = r.force_error  # the error the sanity checks below judge: after a record's start, when it has one
     if r.structure is not None:
         try:
             sim = simulate(recording, r)
             r.force_error = judged = sim.relative_error(recording)
-            k = settling_samples(recording.qm, sim.q[0], recording.dt, recording.position_resolution)
-            if k:
-                f, e = recording.force[k:], recording.force[k:] - sim.force[k:]
-                judged = float(np.linalg.norm(e) / np.linalg.norm(f)) if np.linalg.norm(f) > 0 else judged
-                r.start_s, r.force_error_after_start = k * recording.dt, judged
+            k, after = sim.settled(recording)
+            if k and np.isfinite(after):
+                r.start_s, r.force_error_after_start = k * recording.dt, after
+                judged = after
         except DidimError:
             r.force_error = judged = float("nan")
     # one sanity check for every method: a model whose simulated force misses the measured one by more than the force

@@ -332,8 +332,6 @@ def didim_iterate(
     t0 = time.perf_counter()
     if reversals not in ("auto", "exclude", "keep"):
         raise DataError(f"reversals must be 'auto', 'exclude' or 'keep', got {reversals!r}")
-    if start not in ("auto", "keep"):
-        raise DataError(f"start must be 'auto' or 'keep', got {start!r}")
     _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps,
                     divergence_factor=divergence_factor, cutoff_hz=cutoff_hz)
     initial = _checks.physical(initial, "initial")
@@ -368,7 +366,7 @@ def didim_iterate(
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, tol=sim_tol,
                  terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
     m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
-    start_row = _start_row(rec, pb, chi, dec) if start == "auto" else 0  # the first decimated row regressed
+    start_row = start_row_of(rec, pb, chi, dec, start)  # the first decimated row regressed
     yd_motor = dec(rec.force)[:m_fit]
     ny = float(np.linalg.norm(yd_motor[start_row:]))  # the output errors leave the start out too
     _checks.measured_signal("force", ny, f"{method} ({model})")
@@ -602,8 +600,13 @@ def settled_row(rec: Recording, q_sim: np.ndarray, dec: Decimation) -> int:
     return int(heavy[-1]) + 1 if heavy.size else 0
 
 
-def _start_row(rec: Recording, pb, chi: np.ndarray, dec: Decimation) -> int:
-    """:func:`settled_row` on the simulation with χ (0 when it fails: the iterations report that)."""
+def start_row_of(rec: Recording, pb, chi: np.ndarray, dec: Decimation, start: str) -> int:
+    """The first decimated row a fit uses: for ``start="auto"`` :func:`settled_row` on the simulation with χ (0 when
+    it fails: the iterations report that), for ``"keep"`` 0."""
+    if start not in ("auto", "keep"):
+        raise DataError(f"start must be 'auto' or 'keep', got {start!r}")
+    if start == "keep":
+        return 0
     try:
         q = pb.simulate(chi)["q"][0]
     except DidimError:

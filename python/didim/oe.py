@@ -11,7 +11,7 @@ import numpy as np
 
 from . import _checks, _core
 from ._errors import DataError, DidimError, SimulationError
-from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_simplex, prefetch
+from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_simplex, prefetch, start_row_of
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation
@@ -84,7 +84,7 @@ def oe_nm(
 
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
                  tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
-    skip = _start_row(rec, pb, x0, dec, start)
+    skip = start_row_of(rec, pb, x0, dec, start)
     ny = float(np.linalg.norm(yd[skip:]))
     _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-nm")
     output = "force" if criterion == "force" else "position"
@@ -129,16 +129,6 @@ def oe_nm(
                      backlash_gap=backlash_gap, delay=delay, force_lag=force_lag, start_rows_left_out=skip),
         notes=_start_notes(skip, dec, rec),
     )
-
-
-def _start_row(rec: Recording, pb, chi: np.ndarray, dec: Decimation, start: str) -> int:
-    """The first decimated row of the criterion: past a record's start for ``start="auto"`` (see
-    :func:`didim.identification.settled_row`), 0 for ``"keep"``."""
-    from .identification import _start_row as row
-
-    if start not in ("auto", "keep"):
-        raise DataError(f"start must be 'auto' or 'keep', got {start!r}")
-    return row(rec, pb, chi, dec) if start == "auto" else 0
 
 
 def _start_notes(skip: int, dec: Decimation, rec: Recording) -> List[str]:
@@ -186,7 +176,7 @@ def oe_lm(
     measured = _measured(rec, criterion)
     pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
                  tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay)
-    skip = _start_row(rec, pb, chi, dec, start)
+    skip = start_row_of(rec, pb, chi, dec, start)
     ny = float(np.linalg.norm(dec(measured)[skip:]))
     _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-lm")
     output = "force" if criterion == "force" else "position"

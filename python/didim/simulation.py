@@ -273,6 +273,18 @@ class SimResult:
             return float("nan")
         return float(np.linalg.norm(recording.force - self.force) / ref)
 
+    def settled(self, recording: Recording) -> Tuple[int, float]:
+        """For a record that began away from this simulation's start (:func:`settling_samples`): how many first samples
+        the simulation takes to join it, and the relative force error after them; (0, NaN) for a record that starts
+        where the simulation does."""
+        k = settling_samples(recording.qm, self.q[0], recording.dt, recording.position_resolution)
+        if k == 0:
+            return 0, float("nan")
+        ref = float(np.linalg.norm(recording.force[k:]))
+        if ref == 0 or not np.isfinite(ref):
+            return k, float("nan")
+        return k, float(np.linalg.norm(recording.force[k:] - self.force[k:]) / ref)
+
     def plot(self, recording: Optional[Recording] = None, ax=None):
         """Measured (when a recording is given) and simulated force with their difference, like Fig. 6 of the paper."""
         import matplotlib.pyplot as plt

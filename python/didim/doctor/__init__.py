@@ -38,7 +38,7 @@ from ..identification import a_priori_mass
 from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
-from ..simulation import SimResult, param_names, settling_samples, simulate
+from ..simulation import SimResult, param_names, simulate
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNITS, UNNAMED, Candidate, Effect, _g, final_values,
                       separating_experiment)
@@ -316,7 +316,7 @@ def _start(rec: Recording, state: State) -> Optional[Dict[str, Any]]:
     samples of the closed-loop simulation, which starts at rest on the reference, differ from it whatever the model:
     how long, how much of the residual energy that is, and the force error without those samples."""
     sim = simulate(rec, state.all_params(), state.model, **state.sim_kwargs())
-    k = settling_samples(rec.qm, sim.q[0], rec.dt, rec.position_resolution)
+    k, after = sim.settled(rec)
     if k == 0:
         return None
     r = rec.force - sim.force
@@ -326,7 +326,7 @@ def _start(rec: Recording, state: State) -> Optional[Dict[str, Any]]:
         return None
     return {"record": rec.name or "recording", "initial_gap_m": float(abs(sim.q[0][0] - rec.qm[0])), "samples": int(k),
             "seconds": float(k * rec.dt), "residual_share": share,
-            "force_error_after_start": float(np.linalg.norm(r[k:]) / np.linalg.norm(rec.force[k:]))}
+            "force_error_after_start": after}
 
 
 def start_words(s: Dict[str, Any]) -> str:
