@@ -72,10 +72,18 @@ def test_emps_pulses_gain_and_the_published_model(emps_pulses_path):
     assert abs(g - 1.0138) < 5e-4 and se < 1e-4, (g, se)  # the README's own fit: 1.014
     rec = didim.load_mat(emps_pulses_path)
     published = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "OF": -3.1648}
-    err = [float(np.linalg.norm(r.force - didim.simulate(r, published).force) / np.linalg.norm(r.force))
-           for r in (raw, rec)]
-    # 6.14 % with the pulses as pulses_N says, 6.03 % with the log's gain (a 1.4 % larger 176 N square wave)
+
+    def error(r):
+        return float(np.linalg.norm(r.force - didim.simulate(r, published).force) / np.linalg.norm(r.force))
+
+    # simulated from rest on the first reference sample, as the issue measured it: 6.14 % with the pulses as pulses_N
+    # says, 6.03 % with the log's gain (a 1.4 % larger 176 N square wave)
+    err = [error(dataclasses.replace(r, lead_in=None)) for r in (raw, rec)]
     assert abs(err[0] - 0.0614) < 5e-4 and abs(err[1] - 0.0603) < 5e-4 and err[1] < err[0], err
+    # the record's lead-in (the reference's 16 ms from rest before the log) removes the start's artefact, which held
+    # about a quarter of the published model's residual energy: its error drops below 5.3 % either way
+    lead = [error(r) for r in (raw, rec)]
+    assert all(x < 0.053 for x in lead) and lead[1] < lead[0], lead
 
 
 def test_the_command_line_and_load_record_take_the_pulses_gain(emps_pulses_path, tmp_path, capsys):
@@ -94,6 +102,9 @@ def test_the_command_line_and_load_record_take_the_pulses_gain(emps_pulses_path,
         assert main(["simulate", str(emps_pulses_path), str(result), *extra]) == 0
         out = capsys.readouterr().out
         errors.append(out)
-    assert "6.03 %" in errors[0] and "6.14 %" in errors[1], errors
+    published = didim.load_result(result).params
+    expect = [f"{100 * np.linalg.norm(r.force - didim.simulate(r, published).force) / np.linalg.norm(r.force):.2f} %"
+              for r in (didim.load_mat(emps_pulses_path), raw)]
+    assert expect[0] != expect[1] and expect[0] in errors[0] and expect[1] in errors[1], (expect, errors)
     assert main(["simulate", str(emps_pulses_path), str(result), "--pulses-gain", "x"]) == 2
     assert "--pulses-gain takes 'log' or a number" in capsys.readouterr().err

@@ -103,6 +103,7 @@ class Problem:
         tol: float = ...,
         terms: _Terms = None,
         backlash_gap: Optional[float] = None,
+        lead: int = 0,
     ) -> "Problem": ...
     @property
     def n_params(self) -> int: ...

@@ -58,6 +58,74 @@ def _signal(name: str, x, n: Optional[int] = None) -> np.ndarray:
 #: Sample periods didim accepts (s): a drive logs between 10 MHz and 0.1 Hz; outside, the time unit is wrong.
 DT_RANGE = (1e-7, 10.0)
 
+#: Samples at the head of the reference that a parabola is fitted to, to tell whether the log began in motion.
+LEAD_FIT_SAMPLES = 8
+#: The parabola must fit those samples within this share of the distance they cover (a smooth move, not a step or
+#: noise), or no lead-in is reconstructed.
+LEAD_FIT_RTOL = 0.02
+#: The fitted acceleration at the head is used back to rest when it has the velocity's sign and at least this share of
+#: the reference's typical acceleration; otherwise the reference's typical acceleration is (a log cut in a cruise).
+LEAD_ACCEL_SHARE = 0.1
+#: Percentile of the reference's acceleration magnitude taken as its typical acceleration (m/s²), over windows of
+#: :data:`LEAD_ACCEL_WINDOW_S`.
+LEAD_ACCEL_PERCENTILE = 99.0
+LEAD_ACCEL_WINDOW_S = 0.01
+#: The longest lead-in reconstructed (s); a longer one, or one longer than the record, is not guessed.
+LEAD_MAX_S = 2.0
+
+
+def reconstruct_lead_in(qr: np.ndarray, dt: float, qm: Optional[np.ndarray] = None) -> np.ndarray:
+    """The reference before the first sample of a log that begins in motion, back to the rest it left (m, oldest
+    first; empty when the reference begins at rest or its head is not a smooth move, or when the measured position
+    ``qm`` shows the axis did not come from there).
+
+    A parabola fitted to the first :data:`LEAD_FIT_SAMPLES` samples gives the reference's velocity ``v0`` and
+    acceleration ``a0`` there. When the reference was accelerating (``a0`` of the sign of ``v0``), it is extrapolated
+    back with ``a0`` to zero velocity, ``v0/a0`` earlier; otherwise (a log cut in a cruise or a deceleration) it is
+    ramped from rest with the reference's typical acceleration. The lead-in is kept only when the axis's first
+    measured position is nearer the rest it starts from than the first reference sample: an axis that sits on the
+    reference at the first sample (a simulation started there, or a reference that jumped) gets none. On the EMPS
+    records (13.5 mm/s and 0.84 m/s² at the first sample, the axis 0.1 mm behind) this gives 16 samples back to rest
+    at 0.000 mm, 7.7 µm from the first measured position: the logs begin 16 ms after the move did.
+    """
+    qr = np.asarray(qr, dtype=float)
+    n = qr.shape[0]
+    m = min(LEAD_FIT_SAMPLES, n)
+    empty = np.zeros(0)
+    if m < 4:
+        return empty
+    head = qr[:m] - qr[0]
+    span = float(np.max(np.abs(head)))
+    scale = max(1.0, float(np.max(np.abs(qr))))
+    if span <= 1e-12 * scale:
+        return empty  # at rest
+    k = np.arange(m, dtype=float)
+    basis = np.stack([k * k, k, np.ones(m)], axis=1)
+    c = np.linalg.lstsq(basis, head, rcond=None)[0]
+    if float(np.sqrt(np.mean((head - basis @ c) ** 2))) > LEAD_FIT_RTOL * span:
+        return empty  # a step or noise at the head: nothing smooth to extrapolate
+    v0, a0 = c[1] / dt, 2.0 * c[0] / dt**2
+    if v0 == 0.0:
+        return empty
+    s = max(1, int(round(LEAD_ACCEL_WINDOW_S / dt)))
+    acc = (qr[2 * s:] - 2.0 * qr[s:-s] + qr[:-2 * s]) / (s * dt) ** 2 if n > 2 * s else np.zeros(0)
+    a_typ = float(np.percentile(np.abs(acc), LEAD_ACCEL_PERCENTILE)) if acc.size else 0.0
+    if v0 * a0 > 0 and abs(a0) >= LEAD_ACCEL_SHARE * a_typ:
+        a = a0
+    elif a_typ > 0:
+        a = math.copysign(a_typ, v0)
+    else:
+        return empty
+    back = v0 / a  # s back to rest
+    lead = math.ceil(back / dt - 1e-9)
+    if lead < 1 or lead * dt > LEAD_MAX_S or lead > n:
+        return empty
+    tt = np.maximum(np.arange(-lead, 0) * dt, -back)
+    q = qr[0] + v0 * tt + 0.5 * a * tt**2
+    if qm is not None and not abs(qm[0] - q[0]) < abs(qm[0] - qr[0]):
+        return empty  # the axis was on the reference, not at the rest before it
+    return q
+
 
 @dataclass(frozen=True)
 class Recording:
@@ -74,6 +142,11 @@ class Recording:
         u_ext: known external force added to the command (N), e.g. the EMPS pulses, else None.
         position_resolution: resolution of the motor encoder (m), used to quantize the simulated measurement, or None.
         name: a label for reports.
+        lead_in: the reference before the first sample, for a log that begins in motion: ``"auto"`` (default)
+            reconstructs it back to rest when the reference begins moving (:func:`reconstruct_lead_in`), ``None``
+            for none (the simulation starts at rest on the first reference sample, as in the paper), or the samples
+            themselves (m, oldest first, at ``dt``, e.g. from a pre-trigger buffer). The simulation runs through it
+            from rest; nothing is compared there. :attr:`qr_lead` is the one in use.
     """
 
     dt: float
@@ -85,6 +158,7 @@ class Recording:
     u_ext: Optional[np.ndarray] = None
     position_resolution: Optional[float] = None
     name: str = ""
+    lead_in: Union[str, None, np.ndarray] = "auto"
 
     def __post_init__(self) -> None:
         dt = _number("sample period dt", self.dt, "s")
@@ -125,6 +199,17 @@ class Recording:
             object.__setattr__(self, "position_resolution", r)
         if not isinstance(self.name, str):
             raise DataError(f"name must be a string, got {type(self.name).__name__}")
+        lead = self.lead_in
+        if isinstance(lead, str):
+            if lead not in ("auto", "none"):
+                raise DataError(f"lead_in must be 'auto', None (or 'none') or the reference's samples before the "
+                                f"first one, got {lead!r}")
+        elif lead is not None:
+            lead = _signal("lead_in (the reference before the first sample)", lead)
+            if lead.shape[0] >= n:
+                raise DataError(f"lead_in has {lead.shape[0]} samples, not fewer than the record's {n}: give only "
+                                "the stretch before the log, from rest")
+            object.__setattr__(self, "lead_in", lead)
 
     @classmethod
     def from_time(cls, t, qr, force, qm, *, dt: Optional[float] = None, **kw) -> "Recording":
@@ -163,7 +248,22 @@ class Recording:
     def __getstate__(self):
         state = dict(self.__dict__)
         state.pop("t", None)  # the cached time vector: rebuilt on demand, not shipped to worker processes
+        state.pop("qr_lead", None)
         return state
+
+    @functools.cached_property
+    def qr_lead(self) -> np.ndarray:
+        """The reference before the first sample that the simulation runs through from rest (m, oldest first; empty
+        for none): :attr:`lead_in` resolved (read-only; computed once)."""
+        if isinstance(self.lead_in, np.ndarray):
+            lead = self.lead_in
+        elif self.lead_in == "auto":
+            lead = reconstruct_lead_in(self.qr, self.dt, self.qm)
+        else:
+            lead = np.zeros(0)
+        lead = np.ascontiguousarray(lead, dtype=float)
+        lead.setflags(write=False)
+        return lead
 
     @property
     def fs(self) -> float:

@@ -132,8 +132,9 @@ def diagnosis_html(diag) -> str:
         "<p>Full rate: ‖τ − τ_sim‖/‖τ‖ on every sample (the benchmark's measure); decimated: the force the tests work "
         "on, without a record's start (below).</p>",
     ]
-    from .doctor import start_words
+    from .doctor import lead_in_words, start_words
 
+    parts += [f"<p><b>Lead-in.</b> {e(lead_in_words(ld))}</p>" for ld in diag.locate.get("lead_in", [])]
     parts += [f"<p><b>Start.</b> {e(start_words(st))}</p>" for st in diag.locate.get("start", [])]
     parts.append(f"<img src='data:image/png;base64,{_png(fit_figure(diag))}'>")
     if not diag.findings:

@@ -343,9 +343,13 @@ def problem(recording: Recording, model: Union[str, "Model"] = "rigid", *, offse
     _check_model(model)
     _checks.known_options([sim_options, problem], sim_kw, "the simulator")
     opts = sim_options(recording, **sim_kw)
-    return _core.Problem(model, recording.qr, recording.dt, recording.controller.kind, list(recording.controller.gains),
-                         u_ext=recording.u_ext, offset=bool(offset), terms=_specs(terms), backlash_gap=backlash_gap,
-                         **opts)
+    qr, u_ext, lead = recording.qr, recording.u_ext, recording.qr_lead
+    if lead.size:  # a log that begins in motion: simulated from the rest before it, output from its first sample
+        qr = np.concatenate([lead, qr])
+        u_ext = None if u_ext is None else np.concatenate([np.zeros(lead.size), u_ext])
+    return _core.Problem(model, qr, recording.dt, recording.controller.kind, list(recording.controller.gains),
+                         u_ext=u_ext, offset=bool(offset), terms=_specs(terms), backlash_gap=backlash_gap,
+                         lead=int(lead.size), **opts)
 
 
 def simulate(

@@ -131,7 +131,7 @@ impl<const N: usize> Problem<'_, N> {
         free: &[usize],
         dec: &Decimation,
     ) -> Result<DidimSystem> {
-        let n = self.qr.len();
+        let n = self.opts.outputs(self.qr.len());
         if force.len() != n {
             return Err(invalid!(
                 "the measured force has {} samples but the reference has {n}",
@@ -203,7 +203,7 @@ impl<const N: usize> Problem<'_, N> {
         free: &[usize],
         dec: &Decimation,
     ) -> Result<Linearization> {
-        let n = self.qr.len();
+        let n = self.opts.outputs(self.qr.len());
         if measured.len() != n {
             return Err(invalid!(
                 "the measured output has {} samples but the reference has {n}",

@@ -68,6 +68,12 @@ pub struct SimOptions {
     /// Local error tolerance of the exponential integrator per step, as a fraction
     /// of the reference stroke (default [`DEFAULT_TOL`]).
     pub tol: f64,
+    /// Samples of lead-in at the head of the reference (and of the external input):
+    /// simulated, from rest on the reference's first value, but not output. A log that
+    /// begins in motion is simulated from the rest its reference left before the log
+    /// began (the caller reconstructs that stretch); the outputs, the sensitivities and
+    /// the criteria cover the samples from `lead` on. Default 0.
+    pub lead: usize,
 }
 
 impl SimOptions {
@@ -81,7 +87,13 @@ impl SimOptions {
             force_lag: 0.0,
             integrator: Integrator::Exponential,
             tol: DEFAULT_TOL,
+            lead: 0,
         }
+    }
+
+    /// The number of output samples of a reference of `n` samples (its lead-in left out).
+    pub fn outputs(&self, n: usize) -> usize {
+        n.saturating_sub(self.lead)
     }
 
     /// Checks the options (errors name the option and the accepted range).
@@ -182,6 +194,38 @@ impl Signals {
     pub fn into_flat(self) -> Vec<f64> {
         self.data
     }
+
+    /// Leaves out the first `k` samples of every signal (in place).
+    fn drop_front(&mut self, k: usize) {
+        if k == 0 || self.data.is_empty() {
+            return;
+        }
+        self.data = drop_front_rows(&self.data, self.n, k);
+        self.n -= k.min(self.n);
+    }
+}
+
+/// The rows of `n` samples of `data` without their first `k` samples.
+fn drop_front_rows(data: &[f64], n: usize, k: usize) -> Vec<f64> {
+    if n == 0 {
+        return Vec::new();
+    }
+    data.chunks_exact(n)
+        .flat_map(|row| row[k.min(n)..].iter().copied())
+        .collect()
+}
+
+impl SimOutput {
+    /// Leaves out the first `k` samples (a lead-in).
+    fn drop_front(mut self, k: usize) -> Self {
+        if k > 0 {
+            self.force.drain(..k.min(self.force.len()));
+            self.q.drop_front(k);
+            self.qd.drop_front(k);
+            self.qdd.drop_front(k);
+        }
+        self
+    }
 }
 
 impl std::ops::Index<usize> for Signals {
@@ -249,20 +293,21 @@ fn integrate<const N: usize>(
 ) -> Result<SimOutput> {
     check_inputs(model, chi, controller, qr, u_ext, opts)?;
     let nt = &mut NoTangent;
-    match opts.integrator {
+    let out = match opts.integrator {
         Integrator::Exponential => {
             let stepper = Exponential::new(model, chi, qr, opts)?;
             let (out, stepper) = driver::run(model, chi, controller, qr, u_ext, opts, states, stepper, nt)?;
             if let Some(s) = stats {
                 *s = stepper.stats();
             }
-            Ok(out)
+            out
         }
         Integrator::Rk4 => {
             let stepper = Rk4::new(model, chi, opts)?;
-            Ok(driver::run(model, chi, controller, qr, u_ext, opts, states, stepper, nt)?.0)
+            driver::run(model, chi, controller, qr, u_ext, opts, states, stepper, nt)?.0
         }
-    }
+    };
+    Ok(out.drop_front(opts.lead))
 }
 
 /// The commanded force of [`simulate`] alone: the states are integrated but not kept
@@ -399,10 +444,15 @@ pub fn simulate_sensitivity<const N: usize>(
         let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
         (sim, t.cmd.dforce, t.dq)
     };
+    let (sim, dforce, dq) = (
+        sim.drop_front(opts.lead),
+        drop_front_rows(&dforce, qr.len(), opts.lead),
+        drop_front_rows(&dq, qr.len(), opts.lead),
+    );
     let sim = finite_outputs(sim, model, chi, opts)?;
     // finite states can still have non-finite sensitivities (e.g. a Coulomb force of 1e308 N at rest, whose
     // derivative is 1e308/eps): an error, not NaN in the Jacobian
-    let n = qr.len();
+    let n = opts.outputs(qr.len());
     let first_bad = dforce
         .iter()
         .chain(&dq)
@@ -456,6 +506,12 @@ fn check_inputs<const N: usize>(
     controller.validate()?;
     opts.validate()?;
     let n = validate_signals(qr, u_ext)?;
+    if opts.lead >= n {
+        return Err(invalid!(
+            "a lead-in of {} samples leaves none of the reference's {n} samples to output",
+            opts.lead
+        ));
+    }
     if opts.delay >= n {
         return Err(invalid!(
             "actuation delay of {} samples is not shorter than the record ({n} samples): no command would ever act",

@@ -98,9 +98,10 @@ fn sim_options() -> impl Strategy<Value = SimOptions> {
         prop_oneof![Just(Integrator::Exponential), Just(Integrator::Rk4)],
         prop_oneof![4 => Just(DEFAULT_TOL), 1 => hostile()],
         prop_oneof![3 => Just(0.0), 1 => mostly(0.0, 2e-3)],
+        prop_oneof![4 => Just(0usize), 1 => 0usize..40, 1 => prop::sample::select(vec![usize::MAX, 1 << 40])],
     )
         .prop_map(
-            |(dt, substeps, quantization, delay, integrator, tol, force_lag)| SimOptions {
+            |(dt, substeps, quantization, delay, integrator, tol, force_lag, lead)| SimOptions {
                 dt,
                 substeps,
                 quantization,
@@ -108,6 +109,7 @@ fn sim_options() -> impl Strategy<Value = SimOptions> {
                 force_lag,
                 integrator,
                 tol,
+                lead,
             },
         )
 }
@@ -199,6 +201,8 @@ fn valid_case(n_params: usize, max_len: usize) -> impl Strategy<Value = SimCase>
                         Integrator::Rk4
                     },
                     tol: DEFAULT_TOL,
+                    // a lead-in shorter than every valid reference
+                    lead: delay % 3,
                 },
             )
         })

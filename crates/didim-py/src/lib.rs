@@ -288,6 +288,7 @@ fn sim_options(
     force_lag: f64,
     integrator: &str,
     tol: f64,
+    lead: usize,
 ) -> PyResult<sim::SimOptions> {
     let integrator = parse_integrator(integrator).map_err(|e| core_error(py, e))?;
     Ok(sim::SimOptions {
@@ -298,6 +299,7 @@ fn sim_options(
         force_lag,
         integrator,
         tol,
+        lead,
     })
 }
 

@@ -191,9 +191,9 @@ fn sim_dict<'py>(py: Python<'py>, out: SimOutput) -> PyResult<Bound<'py, PyDict>
 #[pymethods]
 impl Problem {
     #[new]
-    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), force_lag=Real(0.0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, integrator="exponential", tol=Real(sim::DEFAULT_TOL), terms=None, backlash_gap=None))]
+    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), force_lag=Real(0.0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, integrator="exponential", tol=Real(sim::DEFAULT_TOL), terms=None, backlash_gap=None, lead=Whole::new(0)))]
     #[pyo3(
-        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, force_lag=0.0, coulomb_eps=..., offset=False, integrator='exponential', tol=..., terms=None, backlash_gap=None)"
+        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, force_lag=0.0, coulomb_eps=..., offset=False, integrator='exponential', tol=..., terms=None, backlash_gap=None, lead=0)"
     )]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -214,6 +214,7 @@ impl Problem {
         tol: Real,
         terms: Option<Terms>,
         backlash_gap: Option<f64>,
+        lead: Whole,
     ) -> PyResult<Self> {
         let terms = terms.unwrap_or_default();
         let gains = reals(gains);
@@ -227,6 +228,7 @@ impl Problem {
             force_lag.0,
             integrator,
             tol.0,
+            whole(lead, "lead")?,
         )?;
         let coulomb_eps = coulomb_eps.0;
         let qr = slice1(&qr).into_owned();
@@ -259,10 +261,10 @@ impl Problem {
         self.ndof_()
     }
 
-    /// Number of samples of the reference.
+    /// Number of output samples (the reference's, its lead-in left out).
     #[getter]
     fn n(&self) -> usize {
-        self.qr.len()
+        self.opts.outputs(self.qr.len())
     }
 
     /// One simulation: dict of force (n,), q, qd, qdd (ndof, n).
@@ -287,7 +289,7 @@ impl Problem {
         let chi = slice1(&params);
         let chi: &[f64] = &chi;
         let out = run(py, || with_problem!(self, pb => pb.simulate_sensitivity(chi)))?;
-        let (p, n, ndof) = (chi.len(), self.qr.len(), self.ndof_());
+        let (p, n, ndof) = (chi.len(), self.opts.outputs(self.qr.len()), self.ndof_());
         let d = sim_dict(py, out.sim)?;
         d.set_item("dforce", PyArray1::from_vec(py, out.dforce).reshape([p, n])?)?;
         d.set_item("dq", PyArray1::from_vec(py, out.dq).reshape([ndof, p, n])?)?;
@@ -305,7 +307,7 @@ impl Problem {
         states: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let chis = rows2(&params);
-        let (n, ndof) = (self.qr.len(), self.ndof_());
+        let (n, ndof) = (self.opts.outputs(self.qr.len()), self.ndof_());
         let m = chis.len();
         // the core holds every set's signals, then they are copied into the arrays below: check that the whole
         // fits before starting (an allocation that fails halfway would abort the process)

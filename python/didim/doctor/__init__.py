@@ -178,6 +178,8 @@ class Diagnosis:
                      f"{100 * f['train_force_after']:.2f} %{after.get(self.recording, '')}, validation "
                      f"({self.options['validation']}) {100 * f['valid_force_before']:.2f} % -> "
                      f"{100 * f['valid_force_after']:.2f} %{after.get(valid_name, '') if valid_name else ''}")
+        for ld in self.locate.get("lead_in", []):
+            lines.append("lead-in: " + lead_in_words(ld))
         for st in self.locate.get("start", []):
             lines.append("start: " + start_words(st))
         if not self.findings:
@@ -326,15 +328,36 @@ def _start(rec: Recording, state: State) -> Optional[Dict[str, Any]]:
         return None
     return {"record": rec.name or "recording", "initial_gap_m": float(abs(sim.q[0][0] - rec.qm[0])), "samples": int(k),
             "seconds": float(k * rec.dt), "residual_share": share,
-            "force_error_after_start": after}
+            "force_error_after_start": after, "lead_in": bool(rec.qr_lead.size)}
 
 
 def start_words(s: Dict[str, Any]) -> str:
     """A record's start (:func:`_start`) in words."""
-    return (f"{s['record']} begins with the axis {_g(1e6 * s['initial_gap_m'])} µm from where the simulation starts "
-            f"(at rest on the reference: the closed loop was already running when the log began); its first "
-            f"{_g(1e3 * s['seconds'])} ms hold {100 * s['residual_share']:.0f} % of its residual energy, which comes "
-            f"from that start, not from the model; after them the force error is {100 * s['force_error_after_start']:.2f} %")
+    where = ("(after its lead-in: the simulation does not join the log at once)" if s.get("lead_in") else
+             "(at rest on the reference: the closed loop was already running when the log began)")
+    return (f"{s['record']} begins with the axis {_g(1e6 * s['initial_gap_m'])} µm from where the simulation is "
+            f"{where}; its first {_g(1e3 * s['seconds'])} ms hold {100 * s['residual_share']:.0f} % of its residual "
+            f"energy, which comes from that start, not from the model; after them the force error is "
+            f"{100 * s['force_error_after_start']:.2f} %")
+
+
+def _lead_in(rec: Recording) -> Optional[Dict[str, Any]]:
+    """A record's lead-in (:attr:`Recording.qr_lead`): the stretch before the log that the simulation runs through."""
+    lead = rec.qr_lead
+    if not lead.size:
+        return None
+    return {"record": rec.name or "recording", "samples": int(lead.size), "seconds": float(lead.size * rec.dt),
+            "speed_m_s": float((rec.qr[1] - rec.qr[0]) / rec.dt), "rest_m": float(lead[0]),
+            "first_m": float(rec.qr[0]), "reconstructed": isinstance(rec.lead_in, str)}
+
+
+def lead_in_words(s: Dict[str, Any]) -> str:
+    """A record's lead-in (:func:`_lead_in`) in words."""
+    how = ("reconstructed back to the rest it left (lead_in='auto'; None to start at the first sample)"
+           if s["reconstructed"] else "given with the record")
+    return (f"{s['record']} begins in motion (its reference at {_g(1e3 * s['speed_m_s'])} mm/s, at "
+            f"{_g(1e3 * s['first_m'])} mm): the simulation starts {_g(1e3 * s['seconds'])} ms earlier, at rest at "
+            f"{round(1e3 * s['rest_m'], 3) + 0.0:.3f} mm, on the reference {how}")
 
 
 def _unnamed(data: Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: float) -> Optional[Finding]:
@@ -675,7 +698,8 @@ def doctor(
              **dict(zip(("train_force_after", "valid_force_after"), data.force_errors(state)))}, base=base,
         final_params=state.all_params(), final_state=state, ambiguities=search.ambiguities, rounds=search.rounds,
         locate={"before": locate_before, "after": _locate(data, rt, sim),
-                "start": [x for x in (_start(r, state) for r in (recording, validate) if r is not None) if x]},
+                "start": [x for x in (_start(r, state) for r in (recording, validate) if r is not None) if x],
+                "lead_in": [x for x in (_lead_in(r) for r in (recording, validate) if r is not None) if x]},
         options=dict(alpha=alpha, max_findings=max_findings, cutoff_hz=cutoff_hz, holdout=None if validate else holdout,
                      _valid_record=(validate.name or "validation recording") if validate is not None else None,
                      validation=(validate.name or "validation recording") if validate else
@@ -686,4 +710,5 @@ def doctor(
     return diag
 
 
-__all__ = ["doctor", "Diagnosis", "Finding", "EFFECTS", "PHYSICS", "REGISTRY", "Effect", "start_words", "BaseFitError"]
+__all__ = ["doctor", "Diagnosis", "Finding", "EFFECTS", "PHYSICS", "REGISTRY", "Effect", "start_words", "lead_in_words",
+           "BaseFitError"]

@@ -295,11 +295,18 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
                 let err = (q[0] - qr[k + 1]).abs();
                 if !(finite(&q, &v) && err <= bound) {
                     return Err(Error::Simulation(format!(
-                    "closed-loop simulation diverged at sample {} (t = {:.6} s): motor tracking error {:.3e} m \
+                    "closed-loop simulation diverged at {}: motor tracking error {:.3e} m \
                      (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller \
                      gains{}{}",
-                    k + 1,
-                    (k + 1) as f64 * opts.dt,
+                    {
+                        // samples of the record from 0; a lead-in's are negative
+                        let j = (k + 1) as f64 - opts.lead as f64;
+                        format!(
+                            "sample {j} (t = {:.6} s{})",
+                            j * opts.dt,
+                            if j < 0.0 { ", in the lead-in before the record" } else { "" }
+                        )
+                    },
                     err,
                     bound,
                     describe(model, chi),

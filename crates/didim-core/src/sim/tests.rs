@@ -586,3 +586,55 @@ fn all_finite_finds_every_non_finite_value_at_every_position() {
     }
     assert!(all_finite(&[-0.0, f64::MAX, -f64::MAX, f64::MIN_POSITIVE]));
 }
+
+#[test]
+fn a_lead_in_is_simulated_but_not_output() {
+    // the outputs with a lead-in of L samples are the samples from L on of the same
+    // simulation without it: the same operations in the same order, so equal exactly
+    let dt = 1e-3;
+    let qr = trapezoid(1500, dt);
+    let u: Vec<f64> = (0..qr.len())
+        .map(|k| if k % 300 < 20 { 30.0 } else { 0.0 })
+        .collect();
+    let model = flexible(1e-4).unwrap();
+    let chi = [68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5];
+    for integrator in [Integrator::Exponential, Integrator::Rk4] {
+        let whole = SimOptions {
+            quantization: 5e-8,
+            delay: 2,
+            integrator,
+            ..SimOptions::new(dt)
+        };
+        let lead = 137;
+        let cut = SimOptions { lead, ..whole };
+        let a = simulate(&model, &chi, &Controller::EMPS, &qr, Some(&u), &whole).unwrap();
+        let b = simulate(&model, &chi, &Controller::EMPS, &qr, Some(&u), &cut).unwrap();
+        assert_eq!(b.force, a.force[lead..]);
+        for d in 0..2 {
+            assert_eq!(b.q[d], a.q[d][lead..]);
+            assert_eq!(b.qd[d], a.qd[d][lead..]);
+            assert_eq!(b.qdd[d], a.qdd[d][lead..]);
+        }
+        let sa = simulate_sensitivity(&model, &chi, &Controller::EMPS, &qr, Some(&u), &whole).unwrap();
+        let sb = simulate_sensitivity(&model, &chi, &Controller::EMPS, &qr, Some(&u), &cut).unwrap();
+        let (n, m) = (qr.len(), qr.len() - lead);
+        assert_eq!(sb.sim.force, b.force);
+        for j in 0..chi.len() {
+            assert_eq!(
+                sb.dforce[j * m..(j + 1) * m],
+                sa.dforce[j * n + lead..(j + 1) * n]
+            );
+            for d in 0..2 {
+                let (ib, ia) = ((d * chi.len() + j) * m, (d * chi.len() + j) * n);
+                assert_eq!(sb.dq[ib..ib + m], sa.dq[ia + lead..ia + n]);
+            }
+        }
+    }
+    // a lead-in that leaves nothing to output is an error naming it
+    let all = SimOptions {
+        lead: qr.len(),
+        ..SimOptions::new(dt)
+    };
+    let e = simulate(&model, &chi, &Controller::EMPS, &qr, None, &all).unwrap_err();
+    assert!(e.to_string().contains("lead-in of 1500 samples"), "{e}");
+}
