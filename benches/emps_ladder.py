@@ -19,6 +19,27 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 EMPS = os.environ.get("DIDIM_EMPS_DIR", os.path.join(HERE, "..", "..", "shared", "data", "emps"))
 
 
+def lead_words(d, train, valid, published, err) -> str:
+    """The records' lead-in in words, and the errors without it (the simulation at rest on the first reference
+    sample, as the issue measured the published model): the published model, this run's final model, and the doctor
+    run again without the lead-in."""
+    from dataclasses import replace
+
+    from didim.doctor import lead_in_words
+
+    st = d.final_state
+    t0, v0 = replace(train, lead_in=None), replace(valid, lead_in=None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        d0 = didim.doctor(t0, "rigid", v0)
+    words = " ".join(lead_in_words(x) + "." for x in d.locate.get("lead_in", []))
+    return (f"{words} Without the lead-in (`lead_in=None`: the simulation at rest on the first reference sample, "
+            f"as the issue measured the published model) the published model gives {err(v0, published):.2f} % on "
+            f"DATA_EMPS_PULSES, this run's final model {err(v0, st.all_params(), st):.2f} %, and the doctor run "
+            f"without the lead-in ends at {100 * d0.fit['valid_force_after']:.2f} % "
+            f"({', '.join(f.effect for f in d0.findings if f.effect != 'unnamed')}). ")
+
+
 def main() -> None:
     train = didim.load_mat(os.path.join(EMPS, "DATA_EMPS.mat"))
     valid = didim.load_mat(os.path.join(EMPS, "DATA_EMPS_PULSES.mat"))
@@ -68,6 +89,7 @@ def main() -> None:
               f"{raw.u_ext_gain()[0]:.5g} × gtau·pulses_N, which `load_mat` reads from the log; with them at gain 1, "
               "as `pulses_N` says, the final model gives "
               f"{err(raw, st.all_params(), st):.2f} % and the published one {err(raw, published):.2f} %. "
+              + lead_words(d, train, valid, published, err) +
               "Not confirmed on held-out data: "
               + (", ".join(f"{r.effect} ({100 * r.fit.get('valid_before', float('nan')):.2f} % -> "
                            f"{100 * r.fit.get('valid_after', float('nan')):.2f} % decimated)"

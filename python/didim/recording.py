@@ -63,30 +63,36 @@ LEAD_FIT_SAMPLES = 8
 #: The parabola must fit those samples within this share of the distance they cover (a smooth move, not a step or
 #: noise), or no lead-in is reconstructed.
 LEAD_FIT_RTOL = 0.02
-#: The fitted acceleration at the head is used back to rest when it has the velocity's sign and at least this share of
-#: the reference's typical acceleration; otherwise the reference's typical acceleration is (a log cut in a cruise).
+#: A lead-in is reconstructed when the fitted acceleration at the head has the velocity's sign and at least this share
+#: of the reference's typical acceleration (a log cut in the acceleration from rest).
 LEAD_ACCEL_SHARE = 0.1
 #: Percentile of the reference's acceleration magnitude taken as its typical acceleration (m/s²), over windows of
 #: :data:`LEAD_ACCEL_WINDOW_S`.
 LEAD_ACCEL_PERCENTILE = 99.0
 LEAD_ACCEL_WINDOW_S = 0.01
+#: The axis must lag the moving reference at the first sample by more than this many encoder steps for a lead-in.
+LEAD_LAG_STEPS = 2.0
 #: The longest lead-in reconstructed (s); a longer one, or one longer than the record, is not guessed.
 LEAD_MAX_S = 2.0
 
 
-def reconstruct_lead_in(qr: np.ndarray, dt: float, qm: Optional[np.ndarray] = None) -> np.ndarray:
+def reconstruct_lead_in(qr: np.ndarray, dt: float, qm: Optional[np.ndarray] = None,
+                        resolution: Optional[float] = None) -> np.ndarray:
     """The reference before the first sample of a log that begins in motion, back to the rest it left (m, oldest
     first; empty when the reference begins at rest or its head is not a smooth move, or when the measured position
     ``qm`` shows the axis did not come from there).
 
     A parabola fitted to the first :data:`LEAD_FIT_SAMPLES` samples gives the reference's velocity ``v0`` and
-    acceleration ``a0`` there. When the reference was accelerating (``a0`` of the sign of ``v0``), it is extrapolated
-    back with ``a0`` to zero velocity, ``v0/a0`` earlier; otherwise (a log cut in a cruise or a deceleration) it is
-    ramped from rest with the reference's typical acceleration. The lead-in is kept only when the axis's first
-    measured position is nearer the rest it starts from than the first reference sample: an axis that sits on the
-    reference at the first sample (a simulation started there, or a reference that jumped) gets none. On the EMPS
-    records (13.5 mm/s and 0.84 m/s² at the first sample, the axis 0.1 mm behind) this gives 16 samples back to rest
-    at 0.000 mm, 7.7 µm from the first measured position: the logs begin 16 ms after the move did.
+    acceleration ``a0`` there. When the reference was accelerating (``a0`` of the sign of ``v0`` and at least
+    :data:`LEAD_ACCEL_SHARE` of its typical acceleration), it is extrapolated back with ``a0`` to zero velocity,
+    ``v0/a0`` earlier. A log cut in a cruise or a deceleration gets none: how long the axis cruised, which sets its
+    state at the first sample, is not in the log (the fits then leave out the samples the simulation takes to join
+    it, see :func:`didim.simulation.settling_samples`). With the measured position ``qm``, the lead-in is
+    kept only when the axis lags the moving reference at the first sample by more than :data:`LEAD_LAG_STEPS`
+    encoder steps (``resolution``; without one, a millionth of the reference's stroke): the loop was running before
+    the log. An axis that sits on the reference at the first sample (a simulation started there, at rest) gets none.
+    On the EMPS records (13.5 mm/s and 0.84 m/s² at the first sample, the axis 0.1 mm behind) this gives 16 samples
+    back to rest at 0.000 mm, 7.7 µm from the first measured position: the logs begin 16 ms after the move did.
     """
     qr = np.asarray(qr, dtype=float)
     n = qr.shape[0]
@@ -110,20 +116,19 @@ def reconstruct_lead_in(qr: np.ndarray, dt: float, qm: Optional[np.ndarray] = No
     s = max(1, int(round(LEAD_ACCEL_WINDOW_S / dt)))
     acc = (qr[2 * s:] - 2.0 * qr[s:-s] + qr[:-2 * s]) / (s * dt) ** 2 if n > 2 * s else np.zeros(0)
     a_typ = float(np.percentile(np.abs(acc), LEAD_ACCEL_PERCENTILE)) if acc.size else 0.0
-    if v0 * a0 > 0 and abs(a0) >= LEAD_ACCEL_SHARE * a_typ:
-        a = a0
-    elif a_typ > 0:
-        a = math.copysign(a_typ, v0)
-    else:
-        return empty
+    if not (v0 * a0 > 0 and abs(a0) >= LEAD_ACCEL_SHARE * a_typ):
+        return empty  # a log cut in a cruise or a deceleration: its history is not in its head
+    a = a0
     back = v0 / a  # s back to rest
     lead = math.ceil(back / dt - 1e-9)
     if lead < 1 or lead * dt > LEAD_MAX_S or lead > n:
         return empty
     tt = np.maximum(np.arange(-lead, 0) * dt, -back)
     q = qr[0] + v0 * tt + 0.5 * a * tt**2
-    if qm is not None and not abs(qm[0] - q[0]) < abs(qm[0] - qr[0]):
-        return empty  # the axis was on the reference, not at the rest before it
+    if qm is not None:
+        step = resolution if resolution else 1e-6 * max(float(np.ptp(qr)), 1e-12)
+        if not math.copysign(1.0, v0) * (qr[0] - qm[0]) > LEAD_LAG_STEPS * step:
+            return empty  # the axis does not lag the reference: the loop starts with the log
     return q
 
 
@@ -258,7 +263,7 @@ class Recording:
         if isinstance(self.lead_in, np.ndarray):
             lead = self.lead_in
         elif self.lead_in == "auto":
-            lead = reconstruct_lead_in(self.qr, self.dt, self.qm)
+            lead = reconstruct_lead_in(self.qr, self.dt, self.qm, self.position_resolution)
         else:
             lead = np.zeros(0)
         lead = np.ascontiguousarray(lead, dtype=float)

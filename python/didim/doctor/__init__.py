@@ -347,7 +347,7 @@ def _lead_in(rec: Recording) -> Optional[Dict[str, Any]]:
     if not lead.size:
         return None
     return {"record": rec.name or "recording", "samples": int(lead.size), "seconds": float(lead.size * rec.dt),
-            "speed_m_s": float((rec.qr[1] - rec.qr[0]) / rec.dt), "rest_m": float(lead[0]),
+            "speed_m_s": float((rec.qr[1] - lead[-1]) / (2 * rec.dt)), "rest_m": float(lead[0]),
             "first_m": float(rec.qr[0]), "reconstructed": isinstance(rec.lead_in, str)}
 
 
