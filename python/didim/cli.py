@@ -28,7 +28,8 @@ def _load(args, path: str):
     gain = getattr(args, "pulses_gain", "log")
     return load_record(path, controller=controller, columns=parse_columns(getattr(args, "columns", None)),
                        force_scale=getattr(args, "force_scale", 1.0),
-                       pulses_gain=gain if gain == "log" else _number_arg("--pulses-gain", gain))
+                       pulses_gain=gain if gain == "log" else _number_arg("--pulses-gain", gain),
+                       lead_in=None if getattr(args, "lead_in", "auto") == "none" else "auto")
 
 
 def _number_arg(flag: str, text: str) -> float:
@@ -52,6 +53,10 @@ def _record_options(p) -> None:
     p.add_argument("--pulses-gain", default="log", metavar="GAIN",
                    help="MAT files with pulses_N: the gain of the pulses in the logged command, 'log' (default: read "
                         "from the log) or a number (1: pulses_N as it is)")
+    p.add_argument("--lead-in", choices=("auto", "none"), default="auto",
+                   help="a log that begins in the acceleration from rest, the axis lagging the reference: 'auto' "
+                        "(default) simulates from the rest its reference left, extrapolated back; 'none' from rest "
+                        "on the first reference sample, as the paper")
 
 
 def cmd_identify(args) -> int:

@@ -198,7 +198,7 @@ def _hdf5(path: str):
 def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike] = None,
                 columns: Optional[Mapping[str, str]] = None, force_scale: float = 1.0, dt: Optional[float] = None,
                 position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None,
-                pulses_gain: Union[float, str] = "log") -> Recording:
+                pulses_gain: Union[float, str] = "log", lead_in: Union[str, None, np.ndarray] = "auto") -> Recording:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
 
     CSV: a header line naming the columns, then one row of numbers per sample (comma, semicolon, tab or spaces).
@@ -210,7 +210,18 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     ``force_scale``: N per unit of the logged force. ``dt``: the expected period (s), checked against ``t``, or the
     period when the file has no time column. ``position_resolution``: the motor encoder's step (m), ``'auto'`` to
     detect it from ``qm`` (positions on a grid), or None. ``pulses_gain``: MAT files, see :func:`didim.load_mat`.
+    ``lead_in``: the reference before the first sample, see :class:`didim.Recording` (``"auto"``: reconstructed when
+    the log begins in the acceleration from rest; None: the simulation starts at rest on the first sample).
     """
+    rec = _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain)
+    if isinstance(lead_in, str) and lead_in == "auto":
+        return rec
+    import dataclasses
+
+    return dataclasses.replace(rec, lead_in=lead_in)
+
+
+def _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain) -> Recording:
     from ._io import check_input
 
     p = check_input(path, "record")
