@@ -123,6 +123,9 @@ def test_three_step_didim_on_a_flexible_log_cut_while_moving(truthbench):
     # the error after the start is reported beside the error on all samples, which the start dominates
     assert 0.1 < auto.start_s < 0.5 and auto.force_error_after_start < 0.1 < auto.force_error, auto
     assert "after the first" in auto.summary()
+    measured = [s for s in auto.steps.values() if s.structure is not None]  # each step measured as the result is
+    assert measured and all(s.start_s > 0 and s.force_error_after_start < s.force_error for s in measured), \
+        {k: (s.start_s, s.force_error) for k, s in auto.steps.items()}
     again = didim.IdentificationResult.from_dict(auto.to_dict())
     assert again.start_s == auto.start_s and again.force_error_after_start == auto.force_error_after_start
 

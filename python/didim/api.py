@@ -202,17 +202,25 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
     from ._errors import DidimError
     from .simulation import simulate
 
-    judged = r.force_error  # the error the sanity checks below judge: after a record's start, when it has one
-    if r.structure is not None:
+    def measure(x: IdentificationResult) -> float:
+        """Sets x's full-rate force error (and its start's, when it has one); returns the error after the start."""
+        if x.structure is None:
+            return x.force_error
         try:
-            sim = simulate(recording, r)
-            r.force_error = judged = sim.relative_error(recording)
-            k, after = sim.settled(recording)
-            if k and np.isfinite(after):
-                r.start_s, r.force_error_after_start = k * recording.dt, after
-                judged = after
+            sim = simulate(recording, x)
         except DidimError:
-            r.force_error = judged = float("nan")
+            x.force_error = float("nan")
+            return x.force_error
+        x.force_error = sim.relative_error(recording)
+        k, after = sim.settled(recording)
+        if k and np.isfinite(after):
+            x.start_s, x.force_error_after_start = k * recording.dt, after
+            return after
+        return x.force_error
+
+    for step in r.steps.values():  # each step of a multi-step method, measured as the result is
+        measure(step)
+    judged = measure(r)  # the error the sanity checks below judge: after a record's start, when it has one
     # one sanity check for every method: a model whose simulated force misses the measured one by more than the force
     # itself explains nothing, whatever the method's own convergence test said
     if r.converged and not (judged <= ABSURD_FORCE_ERROR):

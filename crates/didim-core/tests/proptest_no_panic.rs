@@ -260,7 +260,7 @@ proptest! {
         let chi = if offset { chi } else { chi[..chi.len().min(3)].to_vec() };
         if let Ok(m) = model::rigid(offset, eps) {
             match sim::simulate(&m, &chi, &c, &qr, u.as_deref(), &o) {
-                Ok(out) => check_sim(&out, 1, qr.len()),
+                Ok(out) => check_sim(&out, 1, o.outputs(qr.len())),
                 Err(e) => prop_assert!(is_documented(&e)),
             }
         }
@@ -270,14 +270,14 @@ proptest! {
     fn simulate_flexible_never_panics((chi, c, qr, u, o) in sim_case(7, 120)) {
         let m = model::flexible(1e-4).unwrap();
         match sim::simulate(&m, &chi, &c, &qr, u.as_deref(), &o) {
-            Ok(out) => check_sim(&out, 2, qr.len()),
+            Ok(out) => check_sim(&out, 2, o.outputs(qr.len())),
             Err(e) => prop_assert!(is_documented(&e)),
         }
     }
 
     #[test]
     fn simulate_sensitivity_never_panics(flexible in any::<bool>(), (chi, c, qr, u, o) in sim_case(7, 80)) {
-        let n = qr.len();
+        let n = o.outputs(qr.len());
         if flexible {
             let m = model::flexible(1e-4).unwrap();
             if let Ok(out) = sim::simulate_sensitivity(&m, &chi, &c, &qr, u.as_deref(), &o) {
