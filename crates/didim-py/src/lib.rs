@@ -25,7 +25,11 @@ use convert::*;
 /// thread answers signals, turning panics into errors. For the computations that take a
 /// while (simulations, filters, least squares); [`quick`] runs the others.
 fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> Result<T, Error> + Send) -> PyResult<T> {
-    didim_core::interrupt::reset();
+    if !pending() {
+        // a signal caught while another thread's call ran is still to be raised where it was caught: its stop
+        // stays in force until then
+        didim_core::interrupt::reset();
+    }
     // The core runs on a scoped thread while this (Python's) thread waits for it and, every
     // POLL, runs Python's signal handlers: Ctrl-C or SIGTERM stop the core at its next check.
     let out = py.detach(|| {
@@ -62,12 +66,12 @@ fn quick<T>(py: Python<'_>, f: impl FnOnce() -> Result<T, Error>) -> PyResult<T>
 /// The outcome of a core computation as Python sees it.
 fn finish<T>(py: Python<'_>, out: std::thread::Result<Result<T, Error>>) -> PyResult<T> {
     match out {
-        Ok(Ok(v)) => Ok(v),
-        Ok(Err(Error::Interrupted)) => Err(PENDING
-            .lock()
-            .ok()
-            .and_then(|mut p| p.take())
-            .unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err("interrupted"))),
+        // a signal caught while the computation ran to its end anyway: raised now, as Python would have
+        Ok(Ok(v)) => take_pending().map_or(Ok(v), Err),
+        Ok(Err(Error::Interrupted)) => {
+            Err(take_pending()
+                .unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err("interrupted")))
+        }
         Ok(Err(e)) => Err(core_error(py, e)),
         Err(panic) => {
             let what = panic
@@ -87,8 +91,26 @@ fn finish<T>(py: Python<'_>, out: std::thread::Result<Result<T, Error>>) -> PyRe
 }
 
 /// The exception a signal handler raised while the core was running (Ctrl-C's KeyboardInterrupt, the CLI's
-/// SIGTERM exception), re-raised when the core has stopped.
-static PENDING: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
+/// SIGTERM exception), with the thread whose call caught it (Python's main thread): re-raised there when its core
+/// has stopped. Another thread's call that the same stop ends raises a plain KeyboardInterrupt, so that the
+/// handler's own exception (e.g. the CLI's SIGTERM class, which sets the exit code) reaches the main thread.
+static PENDING: std::sync::Mutex<Option<(std::thread::ThreadId, PyErr)>> = std::sync::Mutex::new(None);
+
+/// Whether a signal's exception waits to be raised.
+fn pending() -> bool {
+    PENDING.lock().map(|p| p.is_some()).unwrap_or(false)
+}
+
+/// The signal's exception waiting for this thread, taken.
+fn take_pending() -> Option<PyErr> {
+    let me = std::thread::current().id();
+    let mut p = PENDING.lock().ok()?;
+    if p.as_ref().is_some_and(|(t, _)| *t == me) {
+        p.take().map(|(_, e)| e)
+    } else {
+        None
+    }
+}
 
 /// How often a waiting call runs Python's signal handlers.
 const POLL: std::time::Duration = std::time::Duration::from_millis(50);
@@ -100,7 +122,7 @@ fn signalled() -> bool {
         Ok(()) => false,
         Err(e) => {
             if let Ok(mut p) = PENDING.lock() {
-                p.get_or_insert(e);
+                p.get_or_insert((std::thread::current().id(), e));
             }
             true
         }
