@@ -321,8 +321,9 @@ def didim_iterate(
     and keeps them for a model with friction-profile terms (``coulomb_spline_*``, which live where the axis reverses);
     ``"keep"`` is the paper's regression on every sample.
 
-    ``start`` (not in the paper): the simulation starts at rest on the reference; a log that began while the axis
-    moved, or away from the reference, starts elsewhere, and the simulation takes some samples to join it
+    ``start`` (not in the paper): the simulation starts at rest on the reference (or on the record's lead-in,
+    :attr:`didim.Recording.lead_in`, for a log cut in the acceleration from rest); a log that began while the axis
+    moved otherwise, or away from the reference, starts elsewhere, and the simulation takes some samples to join it
     (:func:`didim.simulation.settling_samples`, on the simulation with χ⁰). Over those samples the simulated states
     answer a start the axis never had, and the regression on them biases the fit (a log cut at 83 mm/s: M 80 kg
     instead of 95). ``"auto"`` (default) leaves the decimated rows they reach (1 % of their weight or more) out of
@@ -522,7 +523,7 @@ def didim_iterate(
     elif not converged and sol is None:
         raise (type(stop) if stop is not None else SimulationError)(f"DIDIM could not start: {message}")
     if start_row:
-        notes.append(f"the record begins away from the simulation's start (at rest on the reference): the first "
+        notes.append(f"the record begins away from the simulation's start ({_start_words(rec)}): the first "
                      f"{start_row} decimated samples ({1e3 * start_row * dec.factor * rec.dt:.0f} ms: the samples before "
                      "the simulation joins the record, and the decimation filter's reach) are left out of the "
                      "regression; start='keep' uses them, as the paper does")
@@ -598,6 +599,13 @@ def settled_row(rec: Recording, q_sim: np.ndarray, dec: Decimation) -> int:
     ind[:k] = 1.0
     heavy = np.flatnonzero(np.abs(dec(ind)) >= START_LEAK)
     return int(heavy[-1]) + 1 if heavy.size else 0
+
+
+def _start_words(rec: Recording) -> str:
+    """Where the simulation starts, for notes: at rest on the reference, or at rest before the record's lead-in."""
+    if rec.qr_lead.size:
+        return f"at rest {1e3 * rec.qr_lead.size * rec.dt:.0f} ms before the record, through its lead-in"
+    return "at rest on the reference"
 
 
 def start_row_of(rec: Recording, pb, chi: np.ndarray, dec: Decimation, start: str) -> int:

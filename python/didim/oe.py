@@ -11,7 +11,8 @@ import numpy as np
 
 from . import _checks, _core
 from ._errors import DataError, DidimError, SimulationError
-from .identification import FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_simplex, prefetch, start_row_of
+from .identification import (FLEXIBLE_CUTOFF_HZ, Progress, _say, _start_words, nelder_mead_simplex, prefetch,
+                             start_row_of)
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation
@@ -132,7 +133,7 @@ def oe_nm(
 
 
 def _start_notes(skip: int, dec: Decimation, rec: Recording) -> List[str]:
-    return [f"the record begins away from the simulation's start (at rest on the reference): the first {skip} decimated "
+    return [f"the record begins away from the simulation's start ({_start_words(rec)}): the first {skip} decimated "
             f"samples ({1e3 * skip * dec.factor * rec.dt:.0f} ms) are left out of the criterion; start='keep' uses "
             "them"] if skip else []
 

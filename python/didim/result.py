@@ -252,8 +252,7 @@ class IdentificationResult:
         if math.isfinite(self.force_error):
             lines.append(f"closed-loop force error (simulated vs measured, all samples) = {100 * self.force_error:.2f} %"
                          + (f"; {100 * self.force_error_after_start:.2f} % after the first {1e3 * self.start_s:.0f} ms, "
-                            "where the simulation (started at rest on the reference) joins a record that began "
-                            "elsewhere" if self.start_s > 0 and math.isfinite(self.force_error_after_start) else ""))
+                            "where the simulation joins a record that began elsewhere than its start" if self.start_s > 0 and math.isfinite(self.force_error_after_start) else ""))
         if math.isfinite(self.relative_error) and not self.method.startswith("oe-"):  # OE methods fit no regression
             lines.append(f"regression error ‖Y − Wχ‖/‖Y‖ (decimated) = {100 * self.relative_error:.2f} %")
         if math.isfinite(self.output_error):

@@ -122,7 +122,8 @@ SETTLE_WINDOW_S = 0.05
 
 
 def settling_samples(qm: np.ndarray, q_sim: np.ndarray, dt: float, resolution: Optional[float] = None) -> int:
-    """How many first samples the closed-loop simulation (which starts at rest on the reference) takes to join a
+    """How many first samples the closed-loop simulation (which starts at rest on the reference, or before the
+    record's lead-in) takes to join a
     record that began elsewhere (a log started while the axis moved, or away from the reference): 0 when the record
     starts where the simulation does, or when the two never settle together within the first half of the record.
     ``qm`` the measured and ``q_sim`` the simulated motor position (m); ``resolution`` the encoder's step (m): a gap

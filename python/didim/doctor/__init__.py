@@ -315,7 +315,8 @@ START_SHARE = 0.1
 
 def _start(rec: Recording, state: State) -> Optional[Dict[str, Any]]:
     """Where a record starts in motion or off the reference (the log began after the closed loop did), the first
-    samples of the closed-loop simulation, which starts at rest on the reference, differ from it whatever the model:
+    samples of the closed-loop simulation, which starts at rest on the reference (or before the record's lead-in),
+    differ from it whatever the model:
     how long, how much of the residual energy that is, and the force error without those samples."""
     sim = simulate(rec, state.all_params(), state.model, **state.sim_kwargs())
     k, after = sim.settled(rec)
