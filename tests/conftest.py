@@ -79,3 +79,11 @@ def truthbench():
         return cache[key]
 
     return load, truth
+
+
+def cut_log(rec, i0: int, name: str = "cut log"):
+    """``rec`` from sample ``i0`` on, as a log that began there (the same controller and encoder)."""
+    import didim
+
+    return didim.Recording(dt=rec.dt, qr=rec.qr[i0:], force=rec.force[i0:], qm=rec.qm[i0:], controller=rec.controller,
+                           position_resolution=rec.position_resolution, name=name)

@@ -13,7 +13,7 @@ import pytest
 import didim
 from didim.simulation import settling_samples
 
-from conftest import bench_module
+from conftest import bench_module, cut_log
 
 
 @pytest.fixture(scope="module")
@@ -22,8 +22,7 @@ def plant():
 
 
 def _late(rec, i0, name="late log"):
-    return didim.Recording(dt=rec.dt, qr=rec.qr[i0:], force=rec.force[i0:], qm=rec.qm[i0:], controller=rec.controller,
-                           position_resolution=rec.position_resolution, name=name)
+    return cut_log(rec, i0, name)
 
 
 def test_settling_samples_on_known_gaps():

@@ -13,7 +13,7 @@ import pytest
 import didim
 from didim.recording import reconstruct_lead_in
 
-from conftest import bench_module
+from conftest import bench_module, cut_log
 
 PUBLISHED = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "OF": -3.1648}
 
@@ -24,8 +24,7 @@ def plant():
 
 
 def _cut(rec, i0, name="cut log"):
-    return didim.Recording(dt=rec.dt, qr=rec.qr[i0:], force=rec.force[i0:], qm=rec.qm[i0:], controller=rec.controller,
-                           position_resolution=rec.position_resolution, name=name)
+    return cut_log(rec, i0, name)
 
 
 def _start_of_move(rec):

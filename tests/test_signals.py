@@ -162,17 +162,22 @@ except KeyboardInterrupt:
 def test_ctrl_c_stops_a_long_core_call(mode):
     """Ctrl-C reaches a simulation running in the Rust core (alone or as a parallel batch): it stops at its next
     check with KeyboardInterrupt, instead of running to the end (minutes here)."""
-    p = subprocess.Popen([sys.executable, "-c", LONG_CALL, mode], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True)
+    out, err = _signalled_after_a_second(LONG_CALL, [mode], signal.SIGINT)
+    assert out.strip() == "interrupted", (out, err)
+
+
+def _signalled_after_a_second(code: str, args, sig):
+    """Runs ``code`` in a new interpreter, sends ``sig`` a second after it prints "start"; returns (stdout, stderr)
+    of the rest of its run, or fails when it does not stop within 30 s."""
+    p = subprocess.Popen([sys.executable, "-c", code, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert p.stdout.readline().strip() == "start"
     time.sleep(1.0)
-    p.send_signal(signal.SIGINT)
+    p.send_signal(sig)
     try:
-        out, err = p.communicate(timeout=30)
+        return p.communicate(timeout=30)
     except subprocess.TimeoutExpired:
         p.kill()
-        pytest.fail("the core call did not stop within 30 s of Ctrl-C")
-    assert out.strip() == "interrupted", (out, err)
+        pytest.fail(f"the core call did not stop within 30 s of signal {sig!r}")
 
 
 TWO_THREADS = """
@@ -218,16 +223,7 @@ def test_the_signal_handlers_exception_reaches_the_main_thread_when_two_threads_
     Before, whichever call ended first took the handler's exception, and the main thread could get the plain one:
     a SIGTERM then exited with Ctrl-C's code (seen once in the fault-injection test)."""
     for _ in range(3):
-        p = subprocess.Popen([sys.executable, "-c", TWO_THREADS], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             text=True)
-        assert p.stdout.readline().strip() == "start"
-        time.sleep(1.0)
-        p.send_signal(signal.SIGTERM)
-        try:
-            out, err = p.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            pytest.fail("the core calls did not stop within 30 s of SIGTERM")
+        out, err = _signalled_after_a_second(TWO_THREADS, [], signal.SIGTERM)
         assert out.strip() == "main Terminated other KeyboardInterrupt", (out, err)
 
 
