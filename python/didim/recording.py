@@ -151,7 +151,8 @@ class Recording:
             reconstructs it back to rest when the reference begins moving (:func:`reconstruct_lead_in`), ``None``
             for none (the simulation starts at rest on the first reference sample, as in the paper), or the samples
             themselves (m, oldest first, at ``dt``, e.g. from a pre-trigger buffer). The simulation runs through it
-            from rest; nothing is compared there. :attr:`qr_lead` is the one in use.
+            from rest, with ``u_ext`` held at its first value; nothing is compared there. :attr:`qr_lead` is the one
+            in use.
     """
 
     dt: float

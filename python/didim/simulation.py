@@ -347,7 +347,9 @@ def problem(recording: Recording, model: Union[str, "Model"] = "rigid", *, offse
     qr, u_ext, lead = recording.qr, recording.u_ext, recording.qr_lead
     if lead.size:  # a log that begins in motion: simulated from the rest before it, output from its first sample
         qr = np.concatenate([lead, qr])
-        u_ext = None if u_ext is None else np.concatenate([np.zeros(lead.size), u_ext])
+        # the known external input holds its first value through the lead-in (a bias stays on; pulses that begin
+        # with the log begin at zero)
+        u_ext = None if u_ext is None else np.concatenate([np.full(lead.size, u_ext[0]), u_ext])
     return _core.Problem(model, qr, recording.dt, recording.controller.kind, list(recording.controller.gains),
                          u_ext=u_ext, offset=bool(offset), terms=_specs(terms), backlash_gap=backlash_gap,
                          lead=int(lead.size), **opts)
