@@ -206,3 +206,24 @@ def test_a_pi_cascade_log_cut_in_its_acceleration_fits_as_the_whole_log(ms):
     for k in ("M", "Fv", "Fc"):
         assert abs(led.params[k] / whole.params[k] - 1) < 0.005, (k, led.params, whole.params)
     assert abs(led.force_error - whole.force_error) < 0.002, (led.force_error, whole.force_error)
+
+
+def test_a_lead_in_simulates_as_the_record_extended_by_it(plant):
+    """The simulation through a lead-in is the simulation of the record extended by it (the reference's lead-in, the
+    known external input held at its first value: here a 30 N bias), from its first sample on: the same operations,
+    so the same numbers."""
+    train, _ = plant.records(None, 1)
+    i0 = _start_of_move(train) + 16
+    cut = dataclasses.replace(_cut(train, i0), u_ext=np.full(train.n - i0, 30.0))
+    lead = cut.qr_lead
+    assert lead.size > 0
+    extended = dataclasses.replace(cut, qr=np.r_[lead, cut.qr], force=np.r_[np.zeros(lead.size), cut.force],
+                                   qm=np.r_[np.full(lead.size, cut.qm[0]), cut.qm],
+                                   u_ext=np.full(train.n - i0 + lead.size, 30.0), lead_in=None)
+    p = {"M": 95.0, "Fv": 200.0, "Fc": 20.0}
+    for model, params in (("rigid", p), ("flexible", {"M1": 60.0, "Fv1": 100.0, "Fc1": 10.0, "M2": 35.0, "Fv2": 100.0,
+                                                     "Fc2": 10.0, "K12": 8e5})):
+        a = didim.simulate(cut, params, model)
+        b = didim.simulate(extended, params, model)
+        np.testing.assert_array_equal(a.force, b.force[lead.size:])
+        np.testing.assert_array_equal(a.q, b.q[:, lead.size:])
