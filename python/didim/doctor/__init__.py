@@ -467,6 +467,13 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress) -> Tuple[S
         raise BaseFitError(f"no flexible base fit on {data.rec.name or 'the record'}: {fl.message or 'it did not converge'}"
                            "; the doctor needs a converged base model (try model='rigid', or a record that shows the "
                            "flexible mode: see didim.identify(record, 'flexible'))")
+    mode = fl.steps.get("mode")
+    if mode is not None and mode.options.get("degenerate"):
+        # step 2 found no flexible mode the record shows: a flexible base would be a rigid one with a mode the data
+        # cannot hold (on DATA_EMPS, 87 Hz above the 60 Hz band: its validation force error was 313 %)
+        raise BaseFitError(f"no flexible base fit on {data.rec.name or 'the record'}: {fl.message}; diagnose it with "
+                           "model='rigid' (command line: --model rigid), which names flexibility when the record "
+                           "shows it")
     return refit(data, State("flexible", dict(fl.params), dict(fl.frozen)), {}, progress)
 
 
