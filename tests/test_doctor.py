@@ -111,6 +111,9 @@ def test_doctor_cli_on_the_real_emps_records(emps_path, emps_pulses_path, tmp_pa
     pub = float(np.linalg.norm(valid.force - didim.simulate(valid, published).force) / np.linalg.norm(valid.force))
     assert d["fit"]["valid_force_after"] <= 0.045 and d["fit"]["valid_force_after"] < pub - 0.01, (d["fit"], pub)
     assert [x["samples"] for x in d["locate"]["lead_in"]] == [16, 16], d["locate"]["lead_in"]
+    html = page.read_text()
+    lead = html.index("<b>Lead-in.</b>")
+    assert html.count("<b>Lead-in.</b>") == 2 and "data:image/png" in html[lead:lead + 2000]  # its figure follows
 
 
 def test_no_flexible_base_on_a_record_that_does_not_show_the_mode(emps):

@@ -106,6 +106,59 @@ def fit_figure(diag):
     return fig
 
 
+#: The span (s) of a record's start that :func:`lead_in_figure` shows.
+START_SPAN_S = 0.15
+
+
+def lead_in_figure(diag):
+    """The first :data:`START_SPAN_S` of each record with a lead-in (None when none has one): the reference with its
+    lead-in before the first sample, the measured and the simulated motor position (mm); the measured force and the
+    final model's simulated force through the lead-in and from rest on the first sample (N)."""
+    import matplotlib.pyplot as plt
+    from dataclasses import replace
+
+    from .simulation import simulate
+
+    data = diag._context["data"]
+    recs = [r for r in (data.rec, data.validate) if r is not None and r.qr_lead.size]
+    if not recs:
+        return None
+    st = diag.final_state
+    fig, axes = plt.subplots(2, len(recs), figsize=(10, 5.5), squeeze=False, sharex="col")
+    for j, rec in enumerate(recs):
+        lead, k = rec.qr_lead, min(rec.n, max(3, int(round(START_SPAN_S / rec.dt))))
+        n_lead = lead.size
+        head = {"qr": rec.qr[:k], "force": rec.force[:k], "qm": rec.qm[:k], "ql": None,
+                "u_ext": None if rec.u_ext is None else rec.u_ext[:k]}
+        # the lead-in's own samples: the record extended by it, simulated from its start (as the lead-in is)
+        ext = replace(rec, qr=np.r_[lead, head["qr"]], force=np.r_[np.zeros(n_lead), head["force"]],
+                      qm=np.r_[np.full(n_lead, rec.qm[0]), head["qm"]], ql=None, lead_in=None,
+                      u_ext=None if rec.u_ext is None else np.r_[np.full(n_lead, rec.u_ext[0]), head["u_ext"]])
+        s_led = simulate(ext, st.all_params(), st.model, **st.sim_kwargs())
+        s_rest = simulate(replace(rec, **head, lead_in=None), st.all_params(), st.model, **st.sim_kwargs())
+        t = (np.arange(n_lead + k) - n_lead) * rec.dt * 1e3  # ms
+        ax = axes[0][j]
+        ax.plot(t[:n_lead + 1], 1e3 * ext.qr[:n_lead + 1], color="0.5", lw=1.2, ls="--", label="reference, lead-in")
+        ax.plot(t[n_lead:], 1e3 * head["qr"], color="k", lw=1.0, label="reference")
+        ax.plot(t[n_lead:], 1e3 * head["qm"], color="tab:red", lw=1.0, label="measured")
+        ax.plot(t, 1e3 * s_led.q[0], color="tab:blue", lw=1.0, label="simulated")
+        ax.set_ylabel("motor position (mm)")
+        ax.set_title(rec.name or "record", fontsize=10)
+        ax.legend(loc="upper left", fontsize=8)
+        ax = axes[1][j]
+        ax.plot(t[n_lead:], head["force"], color="tab:red", lw=1.0, label="measured")
+        ax.plot(t, s_led.force, color="tab:blue", lw=1.0, label="simulated through the lead-in")
+        ax.plot(t[n_lead:], s_rest.force, color="0.5", lw=1.0, ls="--", label="simulated from rest at 0 ms")
+        ax.set_xlabel("time from the record's first sample (ms)")
+        ax.set_ylabel("motor force (N)")
+        ax.legend(loc="upper right", fontsize=8)
+    for ax in axes.ravel():
+        ax.grid(True, alpha=0.3)
+        ax.axvline(0.0, color="k", lw=0.5)
+    fig.tight_layout()
+    return fig
+
+
 def _sigma(x) -> str:
     return "–" if x is None or not np.isfinite(x) else f"{x:.3g}"
 
@@ -135,6 +188,10 @@ def diagnosis_html(diag) -> str:
     from .doctor import lead_in_words, start_words
 
     parts += [f"<p><b>Lead-in.</b> {e(lead_in_words(ld))}</p>" for ld in diag.locate.get("lead_in", [])]
+    if diag.locate.get("lead_in"):
+        fig = lead_in_figure(diag)
+        if fig is not None:
+            parts.append(f"<img src='data:image/png;base64,{_png(fig)}'>")
     parts += [f"<p><b>Start.</b> {e(start_words(st))}</p>" for st in diag.locate.get("start", [])]
     parts.append(f"<img src='data:image/png;base64,{_png(fit_figure(diag))}'>")
     if not diag.findings:
