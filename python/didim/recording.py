@@ -94,7 +94,12 @@ def reconstruct_lead_in(qr: np.ndarray, dt: float, qm: Optional[np.ndarray] = No
     On the EMPS records (13.5 mm/s and 0.84 m/s² at the first sample, the axis 0.1 mm behind) this gives 16 samples
     back to rest at 0.000 mm, 7.7 µm from the first measured position: the logs begin 16 ms after the move did.
     """
-    qr = np.asarray(qr, dtype=float)
+    with np.errstate(all="ignore"):  # absurd magnitudes give no lead-in, not warnings
+        lead = _lead_in(np.asarray(qr, dtype=float), float(dt), qm, resolution)
+    return lead if np.all(np.isfinite(lead)) else np.zeros(0)
+
+
+def _lead_in(qr: np.ndarray, dt: float, qm: Optional[np.ndarray], resolution: Optional[float]) -> np.ndarray:
     n = qr.shape[0]
     m = min(LEAD_FIT_SAMPLES, n)
     empty = np.zeros(0)
@@ -392,6 +397,7 @@ class Recording:
             f"Recording({self.name or 'unnamed'}: {self.n} samples at {self.fs:g} Hz, {self.n * self.dt:g} s, "
             f"force RMS {np.sqrt(np.mean(self.force**2)):.4g} N, stroke {np.ptp(self.qr):.4g} m"
             + (f", with {', '.join(extra)}" if extra else "")
+            + (f", lead-in {1e3 * self.qr_lead.size * self.dt:g} ms" if self.qr_lead.size else "")
             + ")"
         )
 
