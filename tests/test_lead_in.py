@@ -227,3 +227,12 @@ def test_a_lead_in_simulates_as_the_record_extended_by_it(plant):
         b = didim.simulate(extended, params, model)
         np.testing.assert_array_equal(a.force, b.force[lead.size:])
         np.testing.assert_array_equal(a.q, b.q[:, lead.size:])
+
+
+def test_a_given_lead_in_must_join_the_reference(emps, emps_path):
+    """A buffer in another unit, or not the samples just before the record, is refused with what to give."""
+    with pytest.raises(didim.DataError, match=r"lead_in ends at 0.6 m but the reference's first sample is 0.000107822 m"):
+        dataclasses.replace(emps, lead_in=np.array([0.5, 0.6]))
+    ok = dataclasses.replace(emps, lead_in=emps.qr_lead.copy())  # the reconstructed one, given: accepted as it is
+    assert np.array_equal(ok.qr_lead, emps.qr_lead)
+    assert didim.load_mat(emps_path, lead_in=None).qr_lead.size == 0

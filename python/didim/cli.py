@@ -124,7 +124,7 @@ def cmd_simulate(args) -> int:
     st = result.structure
     print(f"{args.file}: closed-loop force error of {args.result} ({result.method}, {st.kind} model): {100 * err:.2f} %")
     if result.force_error == result.force_error:
-        print(f"  (on its own record: {100 * result.force_error:.2f} %)")
+        print(f"  (on its own record, as fitted: {100 * result.force_error:.2f} %)")
     if rec.qr_lead.size:
         print(f"  (simulated from rest {1e3 * rec.qr_lead.size * rec.dt:.0f} ms before the record, through the "
               "reference's reconstructed lead-in: the log begins in motion; --lead-in none starts at its first sample)")

@@ -174,10 +174,16 @@ class Diagnosis:
         starts = self.locate.get("start", [])
         after = {x["record"]: f" ({100 * x['force_error_after_start']:.2f} % after its start)" for x in starts}
         valid_name = self.options.get("_valid_record")
+        steps = [x.fit.get("valid_force_after") for x in self.findings if x.effect != "unnamed"]
+        last = steps[-1] if steps else None
+        retuned = (last is not None and math.isfinite(last)
+                   and f"{100 * last:.2f}" != f"{100 * f['valid_force_after']:.2f}")
         lines.append(f"closed-loop force error: training {100 * f['train_force_before']:.2f} % -> "
                      f"{100 * f['train_force_after']:.2f} %{after.get(self.recording, '')}, validation "
                      f"({self.options['validation']}) {100 * f['valid_force_before']:.2f} % -> "
-                     f"{100 * f['valid_force_after']:.2f} %{after.get(valid_name, '') if valid_name else ''}")
+                     f"{100 * f['valid_force_after']:.2f} %{after.get(valid_name, '') if valid_name else ''}"
+                     + (f" (the final model; the last finding below ended at {100 * last:.2f} %, before an earlier "
+                        "one's hyper-parameter was chosen again)" if retuned else ""))
         for ld in self.locate.get("lead_in", []):
             lines.append("lead-in: " + lead_in_words(ld))
         for st in self.locate.get("start", []):
@@ -354,8 +360,8 @@ def _lead_in(rec: Recording) -> Optional[Dict[str, Any]]:
 
 def lead_in_words(s: Dict[str, Any]) -> str:
     """A record's lead-in (:func:`_lead_in`) in words."""
-    how = ("reconstructed back to the rest it left (lead_in='auto'; None to start at the first sample)"
-           if s["reconstructed"] else "given with the record")
+    how = ("reconstructed back to the rest it left (to start at the first sample instead: lead_in=None, on the command "
+           "line --lead-in none)" if s["reconstructed"] else "given with the record")
     return (f"{s['record']} begins in motion (its reference at {_g(1e3 * s['speed_m_s'])} mm/s, at "
             f"{_g(1e3 * s['first_m'])} mm): the simulation starts {_g(1e3 * s['seconds'])} ms earlier, at rest at "
             f"{round(1e3 * s['rest_m'], 3) + 0.0:.3f} mm, on the reference {how}")
