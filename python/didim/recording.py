@@ -410,9 +410,11 @@ class Recording:
 
     def __repr__(self) -> str:
         extra = [k for k in ("ql", "u_ext") if getattr(self, k) is not None]
+        with np.errstate(over="ignore"):  # a force of 1e200 N has an RMS of inf here, not a warning
+            rms = float(np.sqrt(np.mean(self.force**2)))
         return (
             f"Recording({self.name or 'unnamed'}: {self.n} samples at {self.fs:g} Hz, {self.n * self.dt:g} s, "
-            f"force RMS {np.sqrt(np.mean(self.force**2)):.4g} N, stroke {np.ptp(self.qr):.4g} m"
+            f"force RMS {rms:.4g} N, stroke {np.ptp(self.qr):.4g} m"
             + (f", with {', '.join(extra)}" if extra else "")
             + (f", lead-in {1e3 * self.qr_lead.size * self.dt:g} ms" if self.qr_lead.size else "")
             + ")"
