@@ -363,6 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("result", help="a result saved as JSON (didim identify --json, result.save)")
     m.add_argument("--json", metavar="OUT", help="write the force error, the model and its parameters")
     m.add_argument("--plot", metavar="PNG", help="measured and simulated force and their difference")
+    m.add_argument("--quiet", action="store_true", help="no progress messages")
     m.set_defaults(func=cmd_simulate)
 
     d = sub.add_parser("demo", help="simulated flexible EMPS with known truth: IDIM-LS, three-step DIDIM, exact-sensitivity OE")

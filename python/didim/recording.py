@@ -236,7 +236,8 @@ class Recording:
             if lead.shape[0] >= n:
                 raise DataError(f"lead_in has {lead.shape[0]} samples, not fewer than the record's {n}: give only "
                                 "the stretch before the log, from rest")
-            _check_join(lead, qr)
+            if lead.size:
+                _check_join(lead, qr)
             object.__setattr__(self, "lead_in", lead)
 
     @classmethod
