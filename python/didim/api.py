@@ -221,9 +221,7 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
     for step in r.steps.values():  # each step of a multi-step method, measured as the result is
         measure(step)
     if recording.qr_lead.size and r.structure is not None:
-        r.notes.append(f"the record begins in motion: simulated from rest {1e3 * recording.qr_lead.size * recording.dt:.0f}"
-                       " ms before its first sample, through its reference's lead-in (to start at the first sample, as "
-                       "the paper: lead_in=None, on the command line --lead-in none)")
+        r.notes.append(recording.lead_in_note())
     judged = measure(r)  # the error the sanity checks below judge: after a record's start, when it has one
     # one sanity check for every method: a model whose simulated force misses the measured one by more than the force
     # itself explains nothing, whatever the method's own convergence test said

@@ -126,8 +126,7 @@ def cmd_simulate(args) -> int:
     if result.force_error == result.force_error:
         print(f"  (on its own record, as fitted: {100 * result.force_error:.2f} %)")
     if rec.qr_lead.size:
-        print(f"  (simulated from rest {1e3 * rec.qr_lead.size * rec.dt:.0f} ms before the record, through the "
-              "reference's reconstructed lead-in: the log begins in motion; --lead-in none starts at its first sample)")
+        print(f"  ({rec.lead_in_note()})")
     if args.json:
         write_text(args.json, json.dumps({"record": args.file, "result": args.result, "force_error": err,
                                           "lead_in_s": rec.qr_lead.size * rec.dt,

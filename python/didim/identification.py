@@ -522,11 +522,7 @@ def didim_iterate(
             sol = {**sol, "rel_std_pct": 100 * np.asarray(sol["std"], dtype=float) / np.abs(chi[fi])}
     elif not converged and sol is None:
         raise (type(stop) if stop is not None else SimulationError)(f"DIDIM could not start: {message}")
-    if start_row:
-        notes.append(f"the record begins away from the simulation's start ({_start_words(rec)}): the first "
-                     f"{start_row} decimated samples ({1e3 * start_row * dec.factor * rec.dt:.0f} ms: the samples before "
-                     "the simulation joins the record, and the decimation filter's reach) are left out of the "
-                     "regression; start='keep' uses them, as the paper does")
+    notes += start_notes(start_row, dec, rec, "the regression")
     if exclude and sol is not None and sol.get("rows_kept") is not None:
         kept, total = sol["rows_kept"]
         notes.append(f"regression on {kept} of {total} decimated samples: the {total - kept} around velocity reversals "
@@ -601,11 +597,15 @@ def settled_row(rec: Recording, q_sim: np.ndarray, dec: Decimation) -> int:
     return int(heavy[-1]) + 1 if heavy.size else 0
 
 
-def _start_words(rec: Recording) -> str:
-    """Where the simulation starts, for notes: at rest on the reference, or at rest before the record's lead-in."""
-    if rec.qr_lead.size:
-        return f"at rest {1e3 * rec.qr_lead.size * rec.dt:.0f} ms before the record, through its lead-in"
-    return "at rest on the reference"
+def start_notes(skip: int, dec: Decimation, rec: Recording, left_out_of: str) -> List[str]:
+    """The note of a fit that left a record's start out (``skip`` decimated rows) of ``left_out_of``; none without."""
+    if not skip:
+        return []
+    where = (f"at rest {1e3 * rec.qr_lead.size * rec.dt:.0f} ms before the record, through its lead-in"
+             if rec.qr_lead.size else "at rest on the reference")
+    return [f"the record begins away from the simulation's start ({where}): the first {skip} decimated samples "
+            f"({1e3 * skip * dec.factor * rec.dt:.0f} ms: the samples before the simulation joins the record, and the "
+            f"decimation filter's reach) are left out of {left_out_of}; start='keep' uses them, as the paper does"]
 
 
 def start_row_of(rec: Recording, pb, chi: np.ndarray, dec: Decimation, start: str) -> int:

@@ -11,7 +11,7 @@ import numpy as np
 
 from . import _checks, _core
 from ._errors import DataError, DidimError, SimulationError
-from .identification import (FLEXIBLE_CUTOFF_HZ, Progress, _say, _start_words, nelder_mead_simplex, prefetch,
+from .identification import (FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_simplex, prefetch, start_notes,
                              start_row_of)
 from .recording import Recording
 from .result import IdentificationResult, Iteration
@@ -128,14 +128,8 @@ def oe_nm(
         options=dict(criterion=criterion, decimation=dec.describe(), xatol=xatol, fatol=fatol, integrator=integrator,
                      coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol, terms=[t.spec() for t in terms],
                      backlash_gap=backlash_gap, delay=delay, force_lag=force_lag, start_rows_left_out=skip),
-        notes=_start_notes(skip, dec, rec),
+        notes=start_notes(skip, dec, rec, "the criterion"),
     )
-
-
-def _start_notes(skip: int, dec: Decimation, rec: Recording) -> List[str]:
-    return [f"the record begins away from the simulation's start ({_start_words(rec)}): the first {skip} decimated "
-            f"samples ({1e3 * skip * dec.factor * rec.dt:.0f} ms) are left out of the criterion; start='keep' uses "
-            "them"] if skip else []
 
 
 def oe_lm(
@@ -276,7 +270,7 @@ def oe_lm(
                      coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol, terms=[t.spec() for t in terms],
                      backlash_gap=backlash_gap, delay=delay, condition_number=float(sol["condition_number"]),
                      start_rows_left_out=skip),
-        covariance=sol["covariance"], notes=_start_notes(skip, dec, rec),
+        covariance=sol["covariance"], notes=start_notes(skip, dec, rec, "the criterion"),
     )
 
 

@@ -139,13 +139,12 @@ def _lead_in(qr: np.ndarray, dt: float, qm: Optional[np.ndarray], resolution: Op
     a_typ = float(np.percentile(np.abs(acc), LEAD_ACCEL_PERCENTILE)) if acc.size else 0.0
     if not (v0 * a0 > 0 and abs(a0) >= LEAD_ACCEL_SHARE * a_typ):
         return empty  # a log cut in a cruise or a deceleration: its history is not in its head
-    a = a0
-    back = v0 / a  # s back to rest
+    back = v0 / a0  # s back to rest
     lead = math.ceil(back / dt - 1e-9)
     if lead < 1 or lead * dt > LEAD_MAX_S or lead > n:
         return empty
     tt = np.maximum(np.arange(-lead, 0) * dt, -back)
-    q = qr[0] + v0 * tt + 0.5 * a * tt**2
+    q = qr[0] + v0 * tt + 0.5 * a0 * tt**2
     if qm is not None:
         step = resolution if resolution else 1e-6 * max(float(np.ptp(qr)), 1e-12)
         if not math.copysign(1.0, v0) * (qr[0] - qm[0]) > LEAD_LAG_STEPS * step:
@@ -293,6 +292,24 @@ class Recording:
         lead = np.ascontiguousarray(lead, dtype=float)
         lead.setflags(write=False)
         return lead
+
+    def lead_in_signals(self) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+        """The reference and the known external input the simulation runs on: :attr:`qr_lead` then ``qr``, and
+        ``u_ext`` held at its first value through the lead-in (a bias stays on; pulses that begin with the log begin
+        at zero). The record's own arrays when it has no lead-in."""
+        lead = self.qr_lead
+        if not lead.size:
+            return self.qr, self.u_ext
+        u = None if self.u_ext is None else np.concatenate([np.full(lead.size, self.u_ext[0]), self.u_ext])
+        return np.concatenate([lead, self.qr]), u
+
+    def lead_in_note(self) -> str:
+        """One sentence on the record's lead-in for a result's notes or a command's output ("" without one)."""
+        if not self.qr_lead.size:
+            return ""
+        return (f"the record begins in motion: simulated from rest {1e3 * self.qr_lead.size * self.dt:.0f} ms before "
+                "its first sample, through its reference's lead-in (to start at the first sample, as the paper: "
+                "lead_in=None, on the command line --lead-in none)")
 
     @property
     def fs(self) -> float:

@@ -126,14 +126,15 @@ def lead_in_figure(diag):
     st = diag.final_state
     fig, axes = plt.subplots(2, len(recs), figsize=(10, 5.5), squeeze=False, sharex="col")
     for j, rec in enumerate(recs):
-        lead, k = rec.qr_lead, min(rec.n, max(3, int(round(START_SPAN_S / rec.dt))))
-        n_lead = lead.size
+        n_lead, k = rec.qr_lead.size, min(rec.n, max(3, int(round(START_SPAN_S / rec.dt))))
         head = {"qr": rec.qr[:k], "force": rec.force[:k], "qm": rec.qm[:k], "ql": None,
                 "u_ext": None if rec.u_ext is None else rec.u_ext[:k]}
-        # the lead-in's own samples: the record extended by it, simulated from its start (as the lead-in is)
-        ext = replace(rec, qr=np.r_[lead, head["qr"]], force=np.r_[np.zeros(n_lead), head["force"]],
+        # the lead-in's own samples: the record extended by it (the signals the simulation runs on), simulated from
+        # its start as the lead-in is
+        qr_ext, u_ext = rec.lead_in_signals()
+        ext = replace(rec, qr=qr_ext[:n_lead + k], force=np.r_[np.zeros(n_lead), head["force"]],
                       qm=np.r_[np.full(n_lead, rec.qm[0]), head["qm"]], ql=None, lead_in=None,
-                      u_ext=None if rec.u_ext is None else np.r_[np.full(n_lead, rec.u_ext[0]), head["u_ext"]])
+                      u_ext=None if u_ext is None else u_ext[:n_lead + k])
         s_led = simulate(ext, st.all_params(), st.model, **st.sim_kwargs())
         s_rest = simulate(replace(rec, **head, lead_in=None), st.all_params(), st.model, **st.sim_kwargs())
         t = (np.arange(n_lead + k) - n_lead) * rec.dt * 1e3  # ms

@@ -114,31 +114,32 @@ def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
     return np.sign(v)
 
 
-#: :func:`settling_samples`: a record starts away from the simulated initial state when its measured position at the
-#: first sample is further from the simulated one than this many times the gap between the two later (90th
-#: percentile); the start lasts until the gap stays within that bound for ``SETTLE_WINDOW_S``.
+#: :func:`settling_samples`: the bound on the gap between the measured and the simulated position, as a multiple of
+#: its 90th percentile over the record. A record starts away from the simulated initial state when its first gap
+#: exceeds the bound, or exceeds the usual gap and grows past the bound within ``SETTLE_WINDOW_S``; the start lasts
+#: until the gap stays within the bound for ``SETTLE_WINDOW_S``.
 SETTLE_GAP_FACTOR = 5.0
 SETTLE_WINDOW_S = 0.05
 
 
 def settling_samples(qm: np.ndarray, q_sim: np.ndarray, dt: float, resolution: Optional[float] = None) -> int:
     """How many first samples the closed-loop simulation (which starts at rest on the reference, or before the
-    record's lead-in) takes to join a
-    record that began elsewhere (a log started while the axis moved, or away from the reference): 0 when the record
-    starts where the simulation does, or when the two never settle together within the first half of the record.
+    record's lead-in) takes to join a record that began elsewhere (a log started while the axis moved, or away from
+    the reference): 0 when the record starts where the simulation does, or when the two never settle together
+    within the first half of the record.
     ``qm`` the measured and ``q_sim`` the simulated motor position (m); ``resolution`` the encoder's step (m): a gap
     within two steps is a start on the reference whatever the later gap."""
     gap = np.abs(np.asarray(q_sim, float) - np.asarray(qm, float))
     n = len(gap)
     if n < 4 or not np.all(np.isfinite(gap)):
         return 0
-    p90 = float(np.percentile(gap, 90))
-    bound = max(SETTLE_GAP_FACTOR * p90, 2.0 * float(resolution or 0.0))
+    p90, floor = float(np.percentile(gap, 90)), 2.0 * float(resolution or 0.0)
+    bound = max(SETTLE_GAP_FACTOR * p90, floor)
     w = max(1, int(round(SETTLE_WINDOW_S / dt)))
     # a start off the simulation's: the first gap beyond the bound, or a first gap beyond the record's usual one that
     # grows beyond the bound within a window (a log cut as the reference speeds up: the simulation, at rest on the
     # reference, falls behind the axis that was already tracking it)
-    if not (gap[0] > bound or (gap[0] > max(p90, 2.0 * float(resolution or 0.0)) and np.max(gap[:w]) > bound)):
+    if not (gap[0] > bound or (gap[0] > max(p90, floor) and np.max(gap[:w]) > bound)):
         return 0
     over = gap > bound
     # the first sample after which the gap stays within the bound for a whole window
@@ -348,15 +349,11 @@ def problem(recording: Recording, model: Union[str, "Model"] = "rigid", *, offse
     _check_model(model)
     _checks.known_options([sim_options, problem], sim_kw, "the simulator")
     opts = sim_options(recording, **sim_kw)
-    qr, u_ext, lead = recording.qr, recording.u_ext, recording.qr_lead
-    if lead.size:  # a log that begins in motion: simulated from the rest before it, output from its first sample
-        qr = np.concatenate([lead, qr])
-        # the known external input holds its first value through the lead-in (a bias stays on; pulses that begin
-        # with the log begin at zero)
-        u_ext = None if u_ext is None else np.concatenate([np.full(lead.size, u_ext[0]), u_ext])
+    # a log that begins in motion is simulated from the rest before its lead-in, and output from its first sample
+    qr, u_ext = recording.lead_in_signals()
     return _core.Problem(model, qr, recording.dt, recording.controller.kind, list(recording.controller.gains),
                          u_ext=u_ext, offset=bool(offset), terms=_specs(terms), backlash_gap=backlash_gap,
-                         lead=int(lead.size), **opts)
+                         lead=int(recording.qr_lead.size), **opts)
 
 
 def simulate(
