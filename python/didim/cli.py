@@ -19,17 +19,17 @@ def _progress(quiet: bool):
 
 def _load(args, path: str):
     """The record at ``path`` with the command's --controller, --columns and --force-scale."""
-    from .controllers import load_controller
     from .loaders import beside, load_record, parse_columns
 
-    controller = load_controller(args.controller) if getattr(args, "controller", None) else None
+    controller = getattr(args, "controller", None) or None  # a path: load_record reads its "units" too
     if controller is None and not path.lower().endswith(".mat") and beside(path) and not getattr(args, "quiet", False):
         print(f"  … controller from {beside(path)}", file=sys.stderr, flush=True)
     gain = getattr(args, "pulses_gain", "log")
     return load_record(path, controller=controller, columns=parse_columns(getattr(args, "columns", None)),
                        force_scale=getattr(args, "force_scale", 1.0),
                        pulses_gain=gain if gain == "log" else _number_arg("--pulses-gain", gain),
-                       lead_in=None if getattr(args, "lead_in", "auto") == "none" else "auto")
+                       lead_in=None if getattr(args, "lead_in", "auto") == "none" else "auto",
+                       units=getattr(args, "units", None))
 
 
 def _number_arg(flag: str, text: str) -> float:
@@ -53,6 +53,10 @@ def _record_options(p) -> None:
     p.add_argument("--pulses-gain", default="log", metavar="GAIN",
                    help="MAT files with pulses_N: the gain of the pulses in the logged command, 'log' (default: read "
                         "from the log) or a number (1: pulses_N as it is)")
+    p.add_argument("--units", default=None, metavar="UNITS",
+                   help="what the record's positions and force are logged in: m (default), mm, um, rad, deg, rev, "
+                        "counts/rev=N or counts/m=N, with N*m or a drive unit and its scale (e.g. 'deg', 'mm,V=2.5'); "
+                        "also read from a CSV header such as qm[deg] or the controller file's \"units\"")
     p.add_argument("--lead-in", choices=("auto", "none"), default="auto",
                    help="a log that begins in the acceleration from rest, the axis lagging the reference: 'auto' "
                         "(default) simulates from the rest its reference left, extrapolated back; 'none' from rest "

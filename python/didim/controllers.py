@@ -377,7 +377,8 @@ def controller_from_dict(spec: Dict[str, Any], where: str = "controller") -> Con
     if not isinstance(kind, str) or kind not in _FILE_TYPES:
         raise DataError(f"{where}: \"type\" must be one of {', '.join(_FILE_TYPES)}, got {kind!r}")
     allowed = _FILE_TYPES[kind]
-    args = {k: v for k, v in spec.items() if k != "type" and not k.startswith(("note", "_", "comment"))}
+    # "units" belongs to the record the controller ran (read by the loaders: didim.units)
+    args = {k: v for k, v in spec.items() if k not in ("type", "units") and not k.startswith(("note", "_", "comment"))}
     unknown = sorted(set(args) - set(allowed))
     if unknown:
         raise DataError(f"{where}: unknown key(s) {', '.join(unknown)} for a {kind} controller; it takes "
@@ -400,10 +401,18 @@ def controller_from_dict(spec: Dict[str, Any], where: str = "controller") -> Con
         raise DataError(f"{where}: {e}") from None
 
 
-def load_controller(path: Union[str, "os.PathLike[str]"]) -> Controller:
-    """A controller from a JSON (``.json``) or TOML (``.toml``) file with the fields of :func:`controller_from_dict`,
-    e.g. ``{"type": "transfer_function", "dt": 0.001, "b_r": [...], "a_r": [...], "b_y": [...], "a_y": [...],
-    "saturation": 10, "gain": 35.15}``."""
+def in_units(c: Controller, dt: float, position_factor: float, force_factor: float) -> Controller:
+    """The controller ``c`` (designed on positions and a force in a record's own units) acting on SI positions and
+    giving an SI force: with ``q_SI = position_factor·q`` and ``F_SI = force_factor·F``, ``C_r`` and ``C_y`` are
+    divided by ``position_factor`` and the gain multiplied by ``force_factor``; the same law, the same command."""
+    if position_factor == 1.0 and force_factor == 1.0:
+        return c
+    tf = c.transfer_function(dt)
+    return TransferFunction(tuple(b / position_factor for b in tf.b_r), tf.a_r, tuple(b / position_factor for b in tf.b_y),
+                            tf.a_y, tf.dt, tf.saturation, tf.gain * force_factor)
+
+
+def _spec(path) -> Any:
     from ._io import check_input
 
     p = check_input(path, "controller file")
@@ -413,9 +422,8 @@ def load_controller(path: Union[str, "os.PathLike[str]"]) -> Controller:
         if ext == ".toml":
             import tomllib
 
-            spec = tomllib.loads(raw.decode("utf-8"))
-        else:
-            spec = json.loads(raw.decode("utf-8"))
+            return p, tomllib.loads(raw.decode("utf-8"))
+        return p, json.loads(raw.decode("utf-8"))
     except RecursionError:
         raise DataError(f"{p}: not a controller file (nested too deeply)") from None
     except (UnicodeDecodeError, ValueError) as e:
@@ -423,7 +431,29 @@ def load_controller(path: Union[str, "os.PathLike[str]"]) -> Controller:
         raise DataError(f"{p}: not a readable {kind} controller file ({e}); it should hold an object like "
                         '{"type": "transfer_function", "dt": ..., "b_r": [...], "a_r": [...], "b_y": [...], '
                         '"a_y": [...], "saturation": ..., "gain": ...}') from None
+
+
+def controller_file_units(path: Union[str, "os.PathLike[str]"]):
+    """The ``"units"`` a controller file declares for its record (:func:`didim.units.parse`), or None."""
+    from .units import parse
+
+    p, spec = _spec(path)
+    if not isinstance(spec, dict) or spec.get("units") is None:
+        return None
+    try:
+        return parse(spec["units"])
+    except DataError as e:
+        raise DataError(f"{p}: {e}") from None
+
+
+def load_controller(path: Union[str, "os.PathLike[str]"]) -> Controller:
+    """A controller from a JSON (``.json``) or TOML (``.toml``) file with the fields of :func:`controller_from_dict`,
+    e.g. ``{"type": "transfer_function", "dt": 0.001, "b_r": [...], "a_r": [...], "b_y": [...], "a_y": [...],
+    "saturation": 10, "gain": 35.15}``; an optional ``"units"`` (``"deg"``, ``{"position": "counts", "counts_per":
+    1048576, "per": "rev"}``) says what units its record's positions and force are in (:mod:`didim.units`)."""
+    p, spec = _spec(path)
     return controller_from_dict(spec, str(p))
 
 
-__all__ = ["EmpsCascade", "PD", "TransferFunction", "Controller", "load_controller", "controller_from_dict"]
+__all__ = ["EmpsCascade", "PD", "TransferFunction", "Controller", "load_controller", "controller_from_dict", "in_units",
+           "controller_file_units"]

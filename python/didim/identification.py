@@ -30,7 +30,7 @@ from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, 
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation, diffcent, force_lag_mean, lowpass
-from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, cubic_bspline, param_names, params_vector, problem,
+from .simulation import (DEFAULT_TOL, coulomb_eps_of, cubic_bspline, param_names, params_vector, problem,
                          settling_samples, simulate)
 
 Progress = Optional[Callable[[str], None]]
@@ -279,7 +279,7 @@ def didim_iterate(
     tol: float = 1e-3,
     max_iter: int = 30,
     substeps: int = 10,
-    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    coulomb_eps: Optional[float] = None,
     divergence_factor: float = DIVERGENCE_FACTOR,
     progress: Progress = None,
     method: str = "didim",
@@ -335,6 +335,7 @@ def didim_iterate(
         raise DataError(f"reversals must be 'auto', 'exclude' or 'keep', got {reversals!r}")
     _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps,
                     divergence_factor=divergence_factor, cutoff_hz=cutoff_hz)
+    coulomb_eps = coulomb_eps_of(rec, coulomb_eps)  # the number the result's structure carries
     initial = _checks.physical(initial, "initial")
     frozen = _checks.physical(dict(frozen or {}), "frozen")
     names = param_names(model, offset, terms)
@@ -899,7 +900,7 @@ def fit_flexible_mode(
     tol: float = MODE_FTOL,
     max_iter: int = 300,
     substeps: int = 10,
-    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    coulomb_eps: Optional[float] = None,
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
@@ -922,6 +923,7 @@ def fit_flexible_mode(
     t0 = time.perf_counter()
     _checks.options(lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps,
                     coulomb_eps=coulomb_eps)
+    coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     crit = _ModeCriterion(rec, rigid, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
                                                  tol=sim_tol))
@@ -1104,7 +1106,7 @@ def didim_flexible(
     tol: float = 1e-3,
     max_iter: int = 30,
     substeps: int = 10,
-    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    coulomb_eps: Optional[float] = None,
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
@@ -1130,6 +1132,7 @@ def didim_flexible(
     _checks.options(lambda0=lambda0, f0=f0, rigid_cutoff_hz=rigid_cutoff_hz, cutoff_hz=cutoff_hz, tol=tol,
                     max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
     _checks.one_of("variant", variant, VARIANTS)
+    coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
     common = dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, sim_tol=sim_tol)
     _say(progress, "step 1: rigid DIDIM")
     r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress,

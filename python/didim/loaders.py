@@ -17,8 +17,9 @@ import numpy as np
 
 from . import _checks
 from ._errors import DataError
-from .controllers import Controller, load_controller
+from .controllers import Controller, controller_file_units, in_units, load_controller
 from .recording import Recording, load_mat
+from .units import SI, Units, check_stroke, from_header, parse as parse_units
 
 #: The columns of a record: required, then optional.
 REQUIRED = ("t", "qr", "force", "qm")
@@ -45,35 +46,56 @@ def parse_columns(text: Optional[str]) -> Dict[str, str]:
 
 
 def detect_resolution(qm: np.ndarray) -> Optional[float]:
-    """The encoder resolution (m) when every motor position is a whole number of one step, else None.
+    """The encoder resolution (in qm's unit) when every motor position is a whole number of one step, else None.
 
     The step is the largest whole fraction (1/1 … 1/20) of the smallest non-zero change between samples of which
-    every position is a multiple, within 1e-3 of a step (text files round the last digits)."""
-    d = np.abs(np.diff(qm))
-    d = d[d > 0]
-    if d.size < 10:
+    every change is a multiple, refined by least squares over all the changes (a step of 2π/2^20 rad or its
+    degrees is no round decimal, and text files round the positions' last digits); the positions must then lie on
+    one grid of that step within 1e-3 of a step."""
+    d = np.diff(qm)
+    d = d[d != 0]
+    if d.size < 10 or not np.all(np.isfinite(qm)):
         return None
-    smallest = float(d.min())
-    # the step divides every change: try the smallest change and its whole fractions (a record that never moves by a
-    # single count still has its positions on the grid)
+    smallest = float(np.min(np.abs(d)))
     for parts in range(1, 21):
-        step = float(f"{smallest / parts:.6g}")  # a rounded decimal step: 4.99999e-8 reads as 5e-8
-        k = qm / step
-        if not np.all(np.isfinite(k)) or np.max(np.abs(k)) > 2**52:
-            return None
-        if np.max(np.abs(k - np.round(k))) <= 1e-3:
-            return step
+        for step in (float(f"{smallest / parts:.6g}"), smallest / parts):  # a rounded decimal step first: 5e-8
+            few = d[np.abs(d) <= 20 * step]  # small changes first: the step's error grows with the count
+            n = np.round(few / step)
+            if np.max(np.abs(few / step - n)) > 1e-2:
+                continue
+            refined = float(np.dot(few, n) / np.dot(n, n))
+            n = np.round(d / refined)
+            if np.max(np.abs(d / refined - n)) > 1e-2:
+                continue
+            refined = float(np.dot(d, n) / np.dot(n, n))
+            for s in (step, refined):
+                k = qm / s
+                if np.max(np.abs(k)) > 2**52:
+                    return None
+                frac = k - np.round(k)
+                frac = frac - np.median(frac)  # one grid, maybe offset from zero
+                if np.max(np.abs(frac - np.round(frac))) <= 1e-3:
+                    return s
     return None
 
 
 def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[str], where: str, *,
                   controller: Optional[Controller], columns: Optional[Mapping[str, str]], force_scale: float,
-                  dt: Optional[float], position_resolution: Union[None, float, str], name: str) -> Recording:
+                  dt: Optional[float], position_resolution: Union[None, float, str], name: str,
+                  units: Union[None, str, Units] = None, file_units: Optional[Units] = None) -> Recording:
     if columns is not None and (not isinstance(columns, Mapping)
                                 or not all(isinstance(k, str) and isinstance(v, str) for k, v in columns.items())):
         raise DataError(f"columns must map didim's names to the file's, e.g. {{'force': 'F_motor'}}, got {columns!r}"
                         " (on the command line: --columns force=F_motor)")
     columns = dict(columns or {})
+    plain, header_units = from_header(available)  # "qm[deg]" is column qm, in degrees
+    if plain != list(available):
+        raw_get, by_plain = get, dict(zip(plain, available))
+        get, available = (lambda c: raw_get(by_plain[c])), plain
+    declared = parse_units(units, force_scale=None if force_scale == 1.0 else force_scale)
+    if declared is not None and header_units is not None and declared != header_units:
+        raise DataError(f"{where}: units={units!r} but the header says {header_units.describe()}: give one")
+    u = declared or header_units or file_units or SI
     unknown = sorted(set(columns) - set(REQUIRED) - set(OPTIONAL))
     if unknown:
         raise DataError(f"{where}: unknown key(s) {', '.join(unknown)} in the column map; the keys are "
@@ -99,28 +121,50 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
                 raise DataError(f"{where}: column {col!r} ({key}) must hold numbers, got {a.dtype}")
             a = a.astype(float).ravel()
         signals[key] = a
-    force = signals["force"] * float(scale)  # type: ignore[operator]
+    if scale != 1.0 and u.force_factor != 1.0 and u.force_factor != scale:
+        raise DataError(f"{where}: force_scale={scale:g} and units ({u.describe()}) both scale the force: give one")
+    ff = u.force_factor if u.force_factor != 1.0 else float(scale)
+    force = signals["force"] * ff  # type: ignore[operator]
+    k = u.position_factor
+    check_stroke(signals["qr"], u, where)
     qm = signals["qm"]
     assert qm is not None
     if position_resolution == "auto":
-        res = detect_resolution(qm) if np.all(np.isfinite(qm)) else None
+        res = detect_resolution(qm) if np.all(np.isfinite(qm)) else None  # on the logged grid, then in SI
+        res = None if res is None else res * k
     elif position_resolution is None:
         res = None
     else:
         res = _checks.real("position_resolution", position_resolution, "m", lo=0.0, lo_open=False,
-                           hint=" (the encoder step; None for none, 'auto' to detect it)")
+                           hint=" (the encoder step, in SI: m or rad; None for none, 'auto' to detect it)")
     if controller is None:
         raise DataError(f"{where}: no controller given: didim simulates the closed loop, so it needs the law that ran "
                         "the axis. Give controller=didim.load_controller('controller.json') (CLI: --controller FILE) "
                         "or put a controller file beside the record as NAME_controller.json")
-    kw = dict(qr=signals["qr"], force=force, qm=qm, controller=controller, ql=signals["ql"], u_ext=signals["u_ext"],
-              position_resolution=res, name=name)
+    try:
+        controller = in_units(controller, dt if dt is not None else _period(signals["t"]), k, ff)
+    except DataError as e:
+        raise DataError(f"{where}: {e}") from None
+
+    def si(x):
+        return None if x is None else x * k
+
+    kw = dict(qr=si(signals["qr"]), force=force, qm=si(qm), controller=controller, ql=si(signals["ql"]),
+              u_ext=None if signals["u_ext"] is None else signals["u_ext"] * ff, position_resolution=res, name=name,
+              units=u)
     try:
         if signals["t"] is None:
             return Recording(dt=dt, **kw)  # type: ignore[arg-type]
         return Recording.from_time(signals["t"], dt=dt, **kw)  # type: ignore[arg-type]
     except DataError as e:
         raise DataError(f"{where}: {e}") from None
+
+
+def _period(t: Optional[np.ndarray]) -> float:
+    """The sample period of a time column, for scaling a controller (the record checks the time stamps)."""
+    if t is None or t.size < 2 or not np.isfinite(t[1] - t[0]) or t[1] <= t[0]:
+        raise DataError("the time column must increase (didim reads the sample period from it)")
+    return float(np.median(np.diff(t)))
 
 
 def beside(path: PathLike) -> Optional[str]:
@@ -198,7 +242,8 @@ def _hdf5(path: str):
 def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike] = None,
                 columns: Optional[Mapping[str, str]] = None, force_scale: float = 1.0, dt: Optional[float] = None,
                 position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None,
-                pulses_gain: Union[float, str] = "log", lead_in: Union[str, None, np.ndarray] = "auto") -> Recording:
+                pulses_gain: Union[float, str] = "log", lead_in: Union[str, None, np.ndarray] = "auto",
+                units: Union[None, str, Units] = None) -> Recording:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
 
     CSV: a header line naming the columns, then one row of numbers per sample (comma, semicolon, tab or spaces).
@@ -212,8 +257,12 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     detect it from ``qm`` (positions on a grid), or None. ``pulses_gain``: MAT files, see :func:`didim.load_mat`.
     ``lead_in``: the reference before the first sample, see :class:`didim.Recording` (``"auto"``: reconstructed when
     the log begins in the acceleration from rest; None: the simulation starts at rest on the first sample).
+    ``units``: what the positions and force are logged in (:mod:`didim.units`: ``"mm"``, ``"deg"``, ``"rad,N*m"``,
+    ``"counts/rev=1048576"``, ``"mm,V=2.5"``); also read from the CSV header (``qm[deg]``) or the controller file's
+    ``"units"``; SI (m, N) when none says. The record is converted to SI (m or rad, N or N·m) with its controller,
+    and remembers whether its axis is linear or rotary for every unit it prints.
     """
-    rec = _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain)
+    rec = _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain, units)
     if isinstance(lead_in, str) and lead_in == "auto":
         return rec
     import dataclasses
@@ -221,7 +270,8 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     return dataclasses.replace(rec, lead_in=lead_in)
 
 
-def _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain) -> Recording:
+def _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain,
+                 units=None) -> Recording:
     from ._io import check_input
 
     p = check_input(path, "record")
@@ -231,11 +281,14 @@ def _load_record(path, controller, columns, force_scale, dt, position_resolution
                         f"{', '.join(sorted(EXTENSIONS))} (CSV, Parquet, HDF5, MATLAB in the EMPS layout)")
     if os.path.getsize(p) == 0:
         raise DataError(f"{p}: the file is empty (0 bytes)")
+    file_units = None
     if isinstance(controller, (str, os.PathLike)):  # a controller file (JSON or TOML)
+        file_units = controller_file_units(controller)
         controller = load_controller(controller)
     if controller is None:
         side = beside(p)
         if side is not None:
+            file_units = controller_file_units(side)
             controller = load_controller(side)
     label = name if name is not None else os.path.splitext(os.path.basename(p))[0]
     if ext == ".mat":
@@ -245,6 +298,8 @@ def _load_record(path, controller, columns, force_scale, dt, position_resolution
             import dataclasses
 
             rec = dataclasses.replace(rec, controller=controller)
+        if units is not None and parse_units(units) != SI:
+            raise DataError(f"{p}: the EMPS MAT layout is in SI (m, N); units={units!r} does not apply")
         return rec
     try:
         get, names = {"CSV": _csv, "Parquet": _parquet, "HDF5": _hdf5}[EXTENSIONS[ext]](p)
@@ -253,12 +308,13 @@ def _load_record(path, controller, columns, force_scale, dt, position_resolution
     except UnicodeDecodeError:
         raise DataError(f"{p}: not a text file: a {EXTENSIONS[ext]} record was expected from its extension") from None
     return _from_columns(get, names, p, controller=controller, columns=columns, force_scale=force_scale, dt=dt,
-                         position_resolution=position_resolution, name=label)
+                         position_resolution=position_resolution, name=label, units=units, file_units=file_units)
 
 
 def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str, str]] = None,
                    force_scale: float = 1.0, dt: Optional[float] = None,
-                   position_resolution: Union[None, float, str] = "auto", name: str = "") -> Recording:
+                   position_resolution: Union[None, float, str] = "auto", name: str = "",
+                   units: Union[None, str, Units] = None) -> Recording:
     """A record from a pandas DataFrame (or any mapping of column name to array), as :func:`load_record`.
 
     A DataFrame whose index is the time may be passed with ``df.reset_index()`` or ``dt=``."""
@@ -273,7 +329,8 @@ def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str,
         return col.to_numpy() if hasattr(col, "to_numpy") else np.asarray(col)
 
     return _from_columns(get, names, name or "DataFrame", controller=controller, columns=columns,
-                         force_scale=force_scale, dt=dt, position_resolution=position_resolution, name=name)
+                         force_scale=force_scale, dt=dt, position_resolution=position_resolution, name=name,
+                         units=units)
 
 
 __all__ = ["load_record", "from_dataframe", "detect_resolution", "parse_columns", "REQUIRED", "OPTIONAL"]

@@ -16,7 +16,7 @@ from typing import Any, Dict, Optional, Tuple
 
 from . import _checks, _core
 from ._errors import DataError
-from .simulation import DEFAULT_COULOMB_EPS, MODELS, Term, param_names
+from .simulation import MODELS, Term, param_names
 
 @dataclass(frozen=True)
 class Model:
@@ -24,7 +24,8 @@ class Model:
     K12); ``offset``: a constant force OF (N); ``terms``: extra :class:`didim.Term` s (each on the motor or the load);
     ``force_lag``: time constant (s) of a first-order lag from the command to the applied force; ``delay``: actuation delay in
     samples; ``backlash_gap``: total width (m) of a dead zone in K12 (flexible only); ``coulomb_eps``: velocity scale
-    (m/s) of the smoothed Coulomb sign, 0 for the hard sign."""
+    (m/s or rad/s) of the smoothed Coulomb sign, 0 for the hard sign, None for the record's
+    (:func:`didim.simulation.default_coulomb_eps`; an identified model carries the number it was fitted with)."""
 
     kind: str = "rigid"
     offset: bool = False
@@ -32,7 +33,7 @@ class Model:
     delay: int = 0
     backlash_gap: Optional[float] = None
     force_lag: float = 0.0
-    coulomb_eps: float = DEFAULT_COULOMB_EPS
+    coulomb_eps: Optional[float] = None
 
     def __post_init__(self):
         if self.kind not in MODELS:
@@ -47,8 +48,9 @@ class Model:
             object.__setattr__(self, "backlash_gap", _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0))
         object.__setattr__(self, "delay", _checks.whole("delay", self.delay, hint=" (samples)"))
         object.__setattr__(self, "force_lag", _checks.real("force_lag", self.force_lag, "s", lo=0.0, lo_open=False))
-        object.__setattr__(self, "coulomb_eps", _checks.real("coulomb_eps", self.coulomb_eps, "m/s", lo=0.0,
-                                                             lo_open=False))
+        if self.coulomb_eps is not None:
+            object.__setattr__(self, "coulomb_eps", _checks.real("coulomb_eps", self.coulomb_eps, "m/s", lo=0.0,
+                                                                 lo_open=False))
 
     def describe(self) -> str:
         """In words: the kind and every structure field that is not the default."""
@@ -63,8 +65,8 @@ class Model:
             parts.append(f"a force lag of {1e3 * self.force_lag:.3g} ms")
         if self.backlash_gap is not None:
             parts.append(f"a backlash gap of {self.backlash_gap:g} m")
-        if self.coulomb_eps != DEFAULT_COULOMB_EPS:
-            parts.append(f"coulomb_eps {self.coulomb_eps:g} m/s")
+        if self.coulomb_eps is not None:
+            parts.append(f"coulomb_eps {self.coulomb_eps:g}")
         return parts[0] + (" with " + "; ".join(parts[1:]) if len(parts) > 1 else "")
 
     def param_names(self) -> list:
@@ -104,7 +106,7 @@ class Model:
             raise DataError(f"model field offset must be true or false, got {offset!r}")
         return cls(kind=d.get("kind", "rigid"), offset=offset, terms=terms, delay=d.get("delay", 0),
                    force_lag=d.get("force_lag", 0.0),
-                   backlash_gap=d.get("backlash_gap"), coulomb_eps=d.get("coulomb_eps", DEFAULT_COULOMB_EPS))
+                   backlash_gap=d.get("backlash_gap"), coulomb_eps=d.get("coulomb_eps"))
 
     @classmethod
     def of_result(cls, kind: str, params: Dict[str, float], options: Dict[str, Any]) -> Optional["Model"]:
@@ -116,7 +118,7 @@ class Model:
         m = cls(kind=kind, offset="OF" in params, terms=terms, delay=int(options.get("delay") or 0),
                 force_lag=float(options.get("force_lag") or 0.0),
                 backlash_gap=options.get("backlash_gap"),
-                coulomb_eps=float(options.get("coulomb_eps", DEFAULT_COULOMB_EPS)))
+                coulomb_eps=options.get("coulomb_eps"))
         return m if set(m.param_names()) >= set(params) else None
 
 

@@ -16,7 +16,7 @@ from .identification import (FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_sim
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation
-from .simulation import DEFAULT_COULOMB_EPS, DEFAULT_TOL, Term, params_vector, problem
+from .simulation import DEFAULT_TOL, Term, coulomb_eps_of, params_vector, problem
 
 CRITERIA = ("force", "position")
 
@@ -51,7 +51,7 @@ def oe_nm(
     fatol: float = 1e-6,
     max_iter: int = 2000,
     substeps: int = 10,
-    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    coulomb_eps: Optional[float] = None,
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
@@ -73,6 +73,7 @@ def oe_nm(
     _checks.options(cutoff_hz=cutoff_hz, xatol=xatol, fatol=fatol, max_iter=max_iter, substeps=substeps,
                     coulomb_eps=coulomb_eps)
     initial = _checks.physical(initial, "initial")
+    coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
     t0 = time.perf_counter()
     offset = "OF" in initial
     names, x0, offset = params_vector(model, initial, offset, terms)
@@ -143,7 +144,7 @@ def oe_lm(
     tol: float = 1e-8,
     max_iter: int = 50,
     substeps: int = 10,
-    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    coulomb_eps: Optional[float] = None,
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
@@ -160,6 +161,7 @@ def oe_lm(
     _check_criterion(criterion)
     _checks.options(cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
     initial = _checks.physical(initial, "initial")
+    coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
     t0 = time.perf_counter()
     frozen = _checks.physical(dict(frozen or {}), "frozen")
     offset = "OF" in initial or "OF" in frozen

@@ -13,6 +13,7 @@ import numpy as np
 
 from ._errors import DataError
 from .controllers import PD, Controller, EmpsCascade, TransferFunction
+from .units import SI, Units, parse as parse_units
 
 #: Relative tolerance on the sample-time jitter accepted by :func:`load_mat` (the EMPS logs ±2.5e-8 s on 1e-3 s).
 TIME_JITTER_RTOL = 1e-3
@@ -173,6 +174,9 @@ class Recording:
             themselves (m, oldest first, at ``dt``, e.g. from a pre-trigger buffer). The simulation runs through it
             from rest, with ``u_ext`` held at its first value; nothing is compared there. :attr:`qr_lead` is the one
             in use.
+        units: the units the record was logged in (:class:`didim.units.Units`); the arrays hold SI (m or rad, N or
+            N·m), converted by the loaders. It says whether the axis is linear or rotary (:attr:`axis`), for every
+            unit didim prints.
     """
 
     dt: float
@@ -185,6 +189,7 @@ class Recording:
     position_resolution: Optional[float] = None
     name: str = ""
     lead_in: Union[str, None, np.ndarray] = "auto"
+    units: Units = SI
 
     def __post_init__(self) -> None:
         dt = _number("sample period dt", self.dt, "s")
@@ -225,6 +230,8 @@ class Recording:
             object.__setattr__(self, "position_resolution", r)
         if not isinstance(self.name, str):
             raise DataError(f"name must be a string, got {type(self.name).__name__}")
+        if not isinstance(self.units, Units):
+            object.__setattr__(self, "units", parse_units(self.units) or SI)
         lead = self.lead_in
         if isinstance(lead, str):
             if lead not in ("auto", "none"):
@@ -315,6 +322,31 @@ class Recording:
     def fs(self) -> float:
         """Sampling frequency (Hz)."""
         return 1.0 / self.dt
+
+    @property
+    def axis(self) -> str:
+        """``"linear"`` (positions in m, force in N) or ``"rotary"`` (rad, N·m)."""
+        return self.units.axis
+
+    @functools.cached_property
+    def speed_scale(self) -> float:
+        """The record's speed scale (m/s or rad/s): the largest speed of the reference between two samples (of the
+        motor position when the reference does not move). Every speed didim derives (the Coulomb smoothing, the
+        Stribeck speeds it tries) is a fraction of it, so that a record gives the same answer in any unit."""
+        for x in (self.qr, self.qm):
+            v = float(np.max(np.abs(np.diff(x)))) / self.dt
+            if math.isfinite(v) and v > 0:
+                return v
+        return 1.0 / self.dt  # a record that never moves: excitation checks refuse it before any fit
+
+    @functools.cached_property
+    def stroke(self) -> float:
+        """The span of the reference (m or rad), or of the motor position when the reference does not move."""
+        for x in (self.qr, self.qm):
+            s = float(np.ptp(x))
+            if math.isfinite(s) and s > 0:
+                return s
+        return 1.0
 
     @property
     def force_limit(self) -> float:

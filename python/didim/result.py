@@ -79,6 +79,9 @@ class IdentificationResult:
     #: simulation takes to join it, and the force error after that (0 and NaN for a record that starts there).
     start_s: float = 0.0
     force_error_after_start: float = float("nan")
+    #: "linear" (m, N, kg) or "rotary" (rad, N·m, kg·m²): the axis of the record the result was identified on; the
+    #: numbers are SI either way, and :attr:`units` names them for this axis.
+    axis: str = "linear"
 
     def __post_init__(self):
         if self.structure is None:
@@ -88,9 +91,20 @@ class IdentificationResult:
 
     @property
     def units(self) -> Dict[str, str]:
-        """The SI unit of each parameter (from the model's basis functions where the result has a structure)."""
+        """The SI unit of each parameter (from the model's basis functions where the result has a structure), for the
+        result's axis (kg·m², N·m·s/rad, N·m on a rotary one)."""
+        from .units import label
+
         known = self.structure.units() if self.structure is not None else {}
-        return {k: known.get(k, UNITS.get(k, "")) for k in (*self.params, *self.frozen)}
+        if self.structure is not None and self.structure.coulomb_eps is not None:
+            known["coulomb_eps"] = "m/s"
+        return {k: label(known.get(k, UNITS.get(k, "")), self.axis) for k in (*self.params, *self.frozen)}
+
+    def set_axis(self, axis: str) -> None:
+        """Names this result's units (and its steps') for a ``"linear"`` or ``"rotary"`` axis."""
+        self.axis = axis
+        for s in self.steps.values():
+            s.set_axis(axis)
 
     @property
     def all_params(self) -> Dict[str, float]:
@@ -132,6 +146,7 @@ class IdentificationResult:
             "force_error": self.force_error,
             "start_s": self.start_s,
             "force_error_after_start": self.force_error_after_start,
+            "axis": self.axis,
         }
         return jsonable(d)
 
@@ -212,7 +227,10 @@ class IdentificationResult:
                 steps={str(k): cls.from_dict(v) for k, v in steps.items()},
                 notes=notes, structure=structure, force_error=num(d.get("force_error"), "force_error"),
                 start_s=num(d.get("start_s"), "start_s", 0.0),
-                force_error_after_start=num(d.get("force_error_after_start"), "force_error_after_start"))
+                force_error_after_start=num(d.get("force_error_after_start"), "force_error_after_start"),
+                axis=typed(d.get("axis"), str, "axis", "linear"))
+        if r.axis not in ("linear", "rotary"):
+            raise DataError(f"result field 'axis' must be 'linear' or 'rotary', got {r.axis!r}")
         return r
 
     def to_json(self, **kw) -> str:

@@ -25,7 +25,28 @@ MODELS = ("rigid", "flexible")
 INTEGRATORS = ("exponential", "rk4")
 
 #: Default velocity scale of the smoothed Coulomb sign (m/s); see :func:`coulomb_sign`.
+#: The Coulomb smoothing of didim's own generator (:mod:`didim.scenarios`), 0.1 mm/s (m/s), and of
+#: :func:`coulomb_sign` by default. Fits and simulations of a record use :func:`default_coulomb_eps` instead.
 DEFAULT_COULOMB_EPS: float = _core.DEFAULT_COULOMB_EPS
+#: The Coulomb smoothing speed of a record when none is given, as a fraction of its speed scale
+#: (:attr:`Recording.speed_scale`, the reference's top speed): 0.1 mm/s on the EMPS (0.125 m/s). A dimensionless
+#: default, so that a record gives the same answer in m, mm, rad, deg or encoder counts; the doctor fits the
+#: smoothing speed itself (the friction law's shape through zero speed is not known in advance).
+COULOMB_EPS_REL = 8e-4
+
+
+def default_coulomb_eps(recording: "Recording") -> float:
+    """The Coulomb smoothing speed (m/s or rad/s) of ``recording`` when none is given: ``COULOMB_EPS_REL`` of its
+    speed scale."""
+    return COULOMB_EPS_REL * recording.speed_scale
+
+
+def coulomb_eps_of(recording: "Recording", coulomb_eps: Optional[float]) -> float:
+    """``coulomb_eps`` as given, or the record's default (:func:`default_coulomb_eps`) for None."""
+    if coulomb_eps is None:
+        return default_coulomb_eps(recording)
+    _checks.options(coulomb_eps=coulomb_eps)
+    return float(coulomb_eps)
 
 #: Default local tolerance of the exponential integrator, as a fraction of the reference stroke per step.
 DEFAULT_TOL: float = _core.DEFAULT_TOL
@@ -179,7 +200,7 @@ def unpack_model(model, offset: Optional[bool], given: Dict[str, Any]) -> Tuple[
         return model, offset, given
     st = model.sim_kw()
     again = [k for k in ("terms", "delay", "force_lag", "backlash_gap", "coulomb_eps") if k in given
-             and given[k] not in ((), None, 0, DEFAULT_COULOMB_EPS)]
+             and given[k] not in ((), None, 0)]
     if offset is not None and bool(offset) != model.offset:
         again.insert(0, "offset")
     if again:
@@ -319,7 +340,7 @@ def sim_options(
     quantization: Optional[float] = None,
     delay: int = 0,
     force_lag: float = 0.0,
-    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    coulomb_eps: Optional[float] = None,
     integrator: str = "exponential",
     tol: float = DEFAULT_TOL,
 ) -> dict:
@@ -327,7 +348,8 @@ def sim_options(
     if quantization is None:
         quantization = recording.position_resolution or 0.0
     quantization = _checks.real("quantization", quantization, "m", lo=0.0, lo_open=False, hint=" (0 for none)")
-    _checks.options(substeps=substeps, coulomb_eps=coulomb_eps)
+    _checks.options(substeps=substeps)
+    coulomb_eps = coulomb_eps_of(recording, coulomb_eps)
     delay = _checks.whole("delay", delay, lo=0, hi=recording.n - 1, hint=" (actuation delay in samples)")
     if integrator not in INTEGRATORS:
         raise DataError(f"unknown integrator {integrator!r}: use one of {', '.join(INTEGRATORS)}")
@@ -366,7 +388,7 @@ def simulate(
     quantization: Optional[float] = None,
     delay: int = 0,
     force_lag: float = 0.0,
-    coulomb_eps: float = DEFAULT_COULOMB_EPS,
+    coulomb_eps: Optional[float] = None,
     terms: Sequence[Term] = (),
     backlash_gap: Optional[float] = None,
     integrator: str = "exponential",
@@ -385,7 +407,8 @@ def simulate(
         quantization: resolution of the simulated motor encoder (m); default the recording's ``position_resolution``.
         delay: extra actuation delay in samples.
         force_lag: time constant (s) of a first-order lag from the command to the applied force (a current loop).
-        coulomb_eps: velocity scale of the Coulomb sign (m/s), 0 for the hard sign.
+        coulomb_eps: velocity scale of the Coulomb sign (m/s or rad/s), 0 for the hard sign; by default the
+            record's (:func:`default_coulomb_eps`).
         terms: extra model terms (:class:`Term`), whose parameters ``params`` must include.
         backlash_gap: flexible model only: total width (m) of a dead zone in the coupling K12.
         integrator: "exponential" (default: exact for the affine part of the model, adaptive where the Coulomb sign
@@ -544,4 +567,5 @@ def simulate_batch(
 
 
 __all__ = ["simulate", "settling_samples", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
-           "params_vector", "coulomb_sign", "MODELS", "INTEGRATORS", "DEFAULT_COULOMB_EPS", "DEFAULT_TOL"]
+           "params_vector", "coulomb_sign", "MODELS", "INTEGRATORS", "DEFAULT_COULOMB_EPS", "DEFAULT_TOL",
+           "COULOMB_EPS_REL", "default_coulomb_eps", "coulomb_eps_of"]

@@ -42,7 +42,7 @@ from ..simulation import SimResult, param_names, simulate
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNITS, UNNAMED, Candidate, Effect, _g, final_values,
                       separating_experiment)
-from .fit import Data, State, base_columns, refit
+from .fit import Data, State, base_columns, fit_friction_law, refit
 
 #: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
 #: of it (besides being statistically significant). Real friction differs from any smooth law, and at low noise a test
@@ -462,8 +462,10 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress) -> Tuple[S
     """The base model fitted by DIDIM on the training part: rigid from the a priori mass, flexible by the paper's
     three steps (all friction on the motor: load friction is one of the effects to name)."""
     m0 = apM if apM is not None else a_priori_mass(data.rec)
+    axis = data.rec.axis
     if model == "rigid":
-        return refit(data, State("rigid", {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}), {}, progress)
+        st, _ = refit(data, State("rigid", {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}, axis=axis), {}, progress)
+        return fit_friction_law(data, st, progress)
     from ..identification import didim_flexible
 
     fl = didim_flexible(data.rec, m0, variant="paper", reversals="keep")
@@ -480,7 +482,8 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress) -> Tuple[S
         raise BaseFitError(f"no flexible base fit on {data.rec.name or 'the record'}: {fl.message}; diagnose it with "
                            "model='rigid' (command line: --model rigid), which names flexibility when the record "
                            "shows it")
-    return refit(data, State("flexible", dict(fl.params), dict(fl.frozen)), {}, progress)
+    st = State("flexible", dict(fl.params), dict(fl.frozen), coulomb_eps=fl.structure.coulomb_eps, axis=axis)
+    return fit_friction_law(data, st, progress)
 
 
 class BaseFitError(DidimError):

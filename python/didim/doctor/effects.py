@@ -15,7 +15,8 @@ from .._errors import DidimError, SimulationError
 from ..identification import fit_flexible_mode, flexible_from_mode
 from ..result import IdentificationResult
 from ..signal import diffcent
-from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign, cubic_bspline, simulate
+from ..simulation import SimResult, Term, coulomb_sign, cubic_bspline, default_coulomb_eps, simulate
+from .. import units
 from ..stats import orthogonalize
 from .fit import Data, State, motor_columns, motor_columns_many, refit, refit_each
 
@@ -129,24 +130,24 @@ def _offset_remove(state: State) -> State:
 
 # ---------------------------------------------------------------------------------------------------- Stribeck
 
-#: A Stribeck speed below this (m/s; 10 × the Coulomb sign's default smoothing speed) describes the shape of the
-#: Coulomb law's transition through zero speed, which no smooth law matches, rather than a physical Stribeck effect:
-#: the finding then says so (PHYSICS["friction_shape"]).
-FRICTION_SHAPE_SPEED = 10 * DEFAULT_COULOMB_EPS
+#: A Stribeck speed below this many times the model's Coulomb smoothing speed (fitted with the base model)
+#: describes the shape of the Coulomb law's transition through zero speed, which no smooth law matches, rather than a
+#: physical Stribeck effect or a deficit: the finding then says so (PHYSICS["friction_shape"]).
+FRICTION_SHAPE_FACTOR = 10.0
 
 STRIBECK_DEFICIT = ("Friction is lower at low speed than the Coulomb-plus-viscous law says and recovers as the speed "
                     "grows: a low-speed friction deficit (lubricant, preload or seal behaviour that no smooth Coulomb "
                     "law captures); modelled by the Stribeck shape with the opposite sign.")
 FRICTION_SHAPE = ("Friction reaches its Coulomb level at lower speed than the model's smoothed sign v/sqrt(v² + ε²) "
-                  "(ε = 0.1 mm/s by default): the shape of the friction law through zero speed (a sharper transition, "
-                  "or sticking), not necessarily a Stribeck effect; modelled by a Stribeck term at that low speed, or "
-                  "by a smaller coulomb_eps.")
+                  "(ε fitted with the base model): the shape of the friction law through zero speed (a sharper or "
+                  "softer transition, or sticking), not a Stribeck effect nor wear; modelled by a Stribeck term at "
+                  "that low speed.")
 
 
 def _stribeck_grid(sim: SimResult) -> np.ndarray:
     """The Stribeck speeds tried (m/s): 10, geometric, from 1/500 to 1/3 of the top speed."""
     vmax = float(np.max(np.abs(sim.qd[0])))
-    return np.geomspace(max(2e-4, vmax / 500), max(vmax / 3, 3e-4), 10)
+    return np.geomspace(vmax / 500, vmax / 3, 10)
 
 
 def _stribeck_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
@@ -220,11 +221,12 @@ def _stribeck_retune(state: State, data: Data, progress) -> Optional[Adopted]:
 
 
 def _stribeck_physics(params: Dict[str, float], state: State) -> str:
-    # free sign: Fs opposite to the Coulomb friction is a low-speed deficit, named as such
+    # within a few smoothing speeds of rest, more or less friction is the law's shape, whatever its sign; beyond,
+    # Fs opposite to the Coulomb friction is a low-speed deficit, named as such
+    if state.coulomb_eps is not None and params["vs"] < FRICTION_SHAPE_FACTOR * state.coulomb_eps:
+        return FRICTION_SHAPE
     if params["Fs"] * state.coulomb() < 0:
         return STRIBECK_DEFICIT
-    if params["vs"] < FRICTION_SHAPE_SPEED:
-        return FRICTION_SHAPE
     return REGISTRY["stribeck"].physics
 
 
@@ -239,7 +241,7 @@ def _period_grid(v: np.ndarray, q: np.ndarray, data: Data, share: float) -> Opti
     stroke = float(np.ptp(q))
     moving = np.abs(v) > 0.05 * np.max(np.abs(v))
     vslow = float(np.percentile(np.abs(v[moving]), 25)) if moving.any() else 0.0
-    pmin = max(4 * vslow * data.rec.dt * data.dec.factor, 2e-4)
+    pmin = max(4 * vslow * data.rec.dt * data.dec.factor, 1e-3 * stroke)
     pmax = stroke / share if stroke > 0 else 0.0
     return np.geomspace(pmin, pmax, 80) if pmax > pmin else None
 
@@ -304,12 +306,15 @@ def _periodic_note(kinds: Tuple[str, str]):
             fits.append((amp, se, math.atan2(beta[1], beta[0])))
         (at, _, pt), (av, sv, pv) = fits
         if not (av > PERIOD_NOTE_Z * sv):
-            return (f"the held-out residual does not show the period {_g(1e3 * P)} mm (amplitude {_g(av)} ± "
-                    f"{_g(sv)} N against {_g(at)} N in training): it was the training record's")
+            f = units.label("N", state.axis)
+            return (f"the held-out residual does not show the period {units.length(P, state.axis)} (amplitude "
+                    f"{_g(av)} ± {_g(sv)} {f} against {_g(at)} {f} in training): it was the training record's")
         dphi = math.remainder(pv - pt, 2 * math.pi)
         if av >= 0.5 * at and abs(dphi) >= math.radians(PERIOD_NOTE_SHIFT_DEG):
-            return (f"the held-out residual shows the same period ({_g(1e3 * P)} mm, amplitude {_g(av)} N against "
-                    f"{_g(at)} N in training) shifted by {_g(1e3 * abs(dphi) / (2 * math.pi) * P)} mm "
+            f = units.label("N", state.axis)
+            return (f"the held-out residual shows the same period ({units.length(P, state.axis)}, amplitude {_g(av)} "
+                    f"{f} against {_g(at)} {f} in training) shifted by "
+                    f"{units.length(abs(dphi) / (2 * math.pi) * P, state.axis)} "
                     f"({abs(math.degrees(dphi)):.0f}°) along the stroke: the force follows something the recorded "
                     "position does not fix from one record to the next, such as the motor's angle (cogging, when the "
                     "records' position zeros are not at the same motor angle); a model in the recorded position cannot "
@@ -489,7 +494,8 @@ def _flexibility_adopt(c: Candidate, state: State, data: Data, progress) -> Adop
     if state.offset:
         init["OF"] = p0["OF"]
     extra = {t.name: p0[t.name] for t in state.terms}
-    st = State("flexible", {**init, **extra}, {"Fv2": 0.0, "Fc2": 0.0}, state.offset, state.terms, None, state.delay)
+    # the state as it was (offset, terms, delay, force lag, friction law), now flexible
+    st = replace(state, model="flexible", params={**init, **extra}, frozen={"Fv2": 0.0, "Fc2": 0.0}, backlash_gap=None)
     st, r = refit(data, st, {}, progress)
     p = st.params
     return st, r, {"f_n_flex": math.sqrt(p["K12"] / p["M2"]) / (2 * math.pi), "lambda": p["M1"] / (p["M1"] + p["M2"]),
@@ -503,7 +509,8 @@ def _load_friction_candidates(state: State, sim: SimResult, data: Data) -> List[
     if state.model != "flexible" or state.frozen.get("Fv2", None) != 0.0:
         return []
     v12 = sim.qd[1]
-    return [Candidate("load_friction", np.column_stack([v12, coulomb_sign(v12)]), {}, 1)]
+    eps = state.coulomb_eps if state.coulomb_eps is not None else default_coulomb_eps(data.rec)
+    return [Candidate("load_friction", np.column_stack([v12, coulomb_sign(v12, eps)]), {}, 1)]
 
 
 def _load_friction_lm(data: Data, st: State, init: Dict[str, float]) -> IdentificationResult:
@@ -561,7 +568,9 @@ def _backlash_candidates(state: State, sim: SimResult, data: Data) -> List[Candi
         return []
     q2 = sim.q[1] - sim.q[0]
     amp = float(np.percentile(np.abs(q2), 90))
-    grid = np.geomspace(max(amp / 100, 1e-8), max(amp, 2e-8), 8)
+    if not amp > 0:
+        return []
+    grid = np.geomspace(amp / 100, amp, 8)
     k12 = state.all_params()["K12"]
     return [Candidate("backlash", (k12 * (np.sign(q2) * np.maximum(np.abs(q2) - g / 2, 0) - q2))[:, None],
                       {"gap": float(g)}, len(grid)) for g in grid]
@@ -607,16 +616,18 @@ def _g(x: float) -> str:
 def _asym_words(p: Dict[str, float], st: State) -> str:
     q = st.params
     fv, fc = q.get("Fv", q.get("Fv1")), q.get("Fc", q.get("Fc1"))
-    viscous = f"viscous friction {_g(fv + p['dFv'])} N/(m/s) forward, {_g(fv - p['dFv'])} N/(m/s) backward"
+    uv, uf = units.label("N/(m/s)", st.axis), units.label("N", st.axis)
+    viscous = f"viscous friction {_g(fv + p['dFv'])} {uv} forward, {_g(fv - p['dFv'])} {uv} backward"
     if any(t.kind.startswith("coulomb_spline") for t in st.terms):
         # the profile along the stroke carries part of each direction's Coulomb level: Fc ± dFc alone is not it
         return viscous + "; Coulomb friction per direction: see its profile along the stroke"
-    return viscous + f"; Coulomb friction {_g(fc + p['dFc'])} N forward, {_g(fc - p['dFc'])} N backward"
+    return viscous + f"; Coulomb friction {_g(fc + p['dFc'])} {uf} forward, {_g(fc - p['dFc'])} {uf} backward"
 
 
 def _stribeck_words(p: Dict[str, float], st: State) -> str:
     more = "less" if p["Fs"] * st.coulomb() < 0 else "more"
-    return f"{_g(abs(p['Fs']))} N {more} friction near rest, fading above about {_g(1e3 * p['vs'])} mm/s"
+    return (f"{units.force(abs(p['Fs']), st.axis)} {more} friction near rest, fading above about "
+            f"{units.speed(p['vs'], st.axis)}")
 
 
 def _delay_words(p: Dict[str, float], st: State) -> str:
@@ -627,10 +638,12 @@ def _delay_words(p: Dict[str, float], st: State) -> str:
 
 
 def _ripple_words(p: Dict[str, float], st: State) -> str:
-    out = f"{_g(p['amplitude'])} N amplitude, period {_g(1e3 * p['period'])} mm along the stroke"
+    out = (f"{units.force(p['amplitude'], st.axis)} amplitude, period {units.length(p['period'], st.axis)} along "
+           "the stroke")
     if "relative_amplitude" in p:
-        out = (f"the Coulomb friction varies by ±{_g(p['amplitude'])} N ({_g(100 * p['relative_amplitude'])} % of it), "
-               f"period {_g(1e3 * p['period'])} mm along the stroke")
+        out = (f"the Coulomb friction varies by ±{units.force(p['amplitude'], st.axis)} "
+               f"({_g(100 * p['relative_amplitude'])} % of it), period {units.length(p['period'], st.axis)} along the "
+               "stroke")
     return out
 
 
@@ -640,20 +653,22 @@ def _pdc_words(p: Dict[str, float], st: State) -> str:
     q = _spline_summary(st)  # the final model's profile
 
     def side(name):
-        return (f"{_g(q[f'level_{name}'])} N on average moving {name}, varying by {_g(q[f'spread_{name}'])} N "
-                f"(most at {_g(1e3 * q[f'peak_{name}_at'])} mm: {q[f'peak_{name}']:+.3g} N)")
+        return (f"{units.force(q[f'level_{name}'], st.axis)} on average moving {name}, varying by "
+                f"{units.force(q[f'spread_{name}'], st.axis)} (most at {units.length(q[f'peak_{name}_at'], st.axis)}: "
+                f"{q[f'peak_{name}']:+.3g} {units.label('N', st.axis)})")
 
     return (f"Coulomb friction along the stroke: {side('forward')}; {side('backward')} (a profile per direction, "
-            f"splines {_g(1e3 * q['spacing'])} mm apart)")
+            f"splines {units.length(q['spacing'], st.axis)} apart)")
 
 
 def _flex_words(p: Dict[str, float], st: State) -> str:
-    return (f"a mode at {_g(p['f_n_flex'])} Hz: motor side {_g(p['M1'])} kg, load side {_g(p['M2'])} kg, stiffness "
-            f"{_g(p['K12'])} N/m (λ = {p['lambda']:.3f})")
+    kg, k = units.label("kg", st.axis), units.label("N/m", st.axis)
+    return (f"a mode at {_g(p['f_n_flex'])} Hz: motor side {_g(p['M1'])} {kg}, load side {_g(p['M2'])} {kg}, stiffness "
+            f"{_g(p['K12'])} {k} (λ = {p['lambda']:.3f})")
 
 
 _WORDS = {
-    "offset": lambda p, st: f"a constant force of {_g(p['OF'])} N",
+    "offset": lambda p, st: f"a constant {'torque' if st.axis == 'rotary' else 'force'} of {units.force(p['OF'], st.axis)}",
     "asymmetric_friction": _asym_words,
     "stribeck": _stribeck_words,
     "position_ripple": _ripple_words,

@@ -29,10 +29,14 @@ class State:
     backlash_gap: Optional[float] = None
     delay: int = 0
     force_lag: float = 0.0
+    #: The Coulomb smoothing speed (m/s or rad/s): part of the base model, fitted before any effect is looked for.
+    coulomb_eps: Optional[float] = None
+    #: "linear" or "rotary": the units the words say.
+    axis: str = "linear"
 
     def sim_kwargs(self) -> Dict[str, Any]:
         return dict(offset=self.offset, terms=self.terms, backlash_gap=self.backlash_gap, delay=self.delay,
-                    force_lag=self.force_lag)
+                    force_lag=self.force_lag, coulomb_eps=self.coulomb_eps)
 
     def all_params(self) -> Dict[str, float]:
         return {**self.frozen, **self.params}
@@ -42,7 +46,7 @@ class State:
         from ..model import Model
 
         return Model(self.model, offset=self.offset, terms=self.terms, delay=self.delay,
-                     backlash_gap=self.backlash_gap, force_lag=self.force_lag)
+                     backlash_gap=self.backlash_gap, force_lag=self.force_lag, coulomb_eps=self.coulomb_eps)
 
     def coulomb(self) -> float:
         """The Coulomb friction on the motor side (Fc or Fc1)."""
@@ -194,3 +198,48 @@ def base_columns(state: State, sim: SimResult) -> np.ndarray:
     names = param_names(state.model, state.offset, state.terms)
     keep = [i for i, n in enumerate(names) if n not in state.frozen]
     return w[0][:, keep]
+
+
+#: The Coulomb smoothing speeds the base fit tries, as fractions of the record's speed scale
+#: (:attr:`Recording.speed_scale`): from far sharper than any encoder resolves to a law that bends over a percent
+#: of the top speed, a factor of √10 apart, then refined at the vertex of a parabola in log ε.
+EPS_GRID_REL = tuple(float(x) for x in np.geomspace(1e-6, 1e-2, 9))
+
+
+def fit_friction_law(data: Data, state: State, progress) -> Tuple[State, IdentificationResult]:
+    """The base model's friction law through zero speed: the Coulomb smoothing speed ε of ``v/sqrt(v² + ε²)``
+    chosen by closed-loop DIDIM refits on the training samples (lowest decimated output error). Real friction's shape
+    through zero speed is not known in advance (another smoothing, sticking): an ε fixed in m/s is a hidden scale
+    that a rotary axis or a record in mm reads as another law, and whatever it misses shows up as a "low-speed
+    effect" that is only the law's shape."""
+    from .._errors import DidimError
+
+    scale = data.rec.speed_scale
+    say = progress or (lambda s: None)
+    say("friction law: fitting the Coulomb smoothing speed")
+    tried: Dict[float, Tuple[State, IdentificationResult]] = {}
+
+    def run(rels: Sequence[float]) -> None:
+        jobs = [(replace(state, coulomb_eps=rel * scale), {}) for rel in rels]
+        for rel, got in zip(rels, refit_each(data, jobs, progress)):
+            if not isinstance(got, DidimError) and got[1].converged and np.isfinite(got[1].output_error):
+                tried[rel] = got
+
+    run(EPS_GRID_REL)
+    if not tried:
+        raise DidimError("the base model could not be fitted with any Coulomb smoothing speed")
+    rels = sorted(tried)
+    k = min(range(len(rels)), key=lambda i: tried[rels[i]][1].output_error)
+    if 0 < k < len(rels) - 1:
+        x = np.log([rels[k - 1], rels[k], rels[k + 1]])
+        y = [tried[rels[i]][1].output_error for i in (k - 1, k, k + 1)]
+        a, b, _ = np.polyfit(x, y, 2)
+        if a > 0:
+            vertex = float(np.exp(-b / (2 * a)))
+            if rels[k - 1] < vertex < rels[k + 1]:
+                run([vertex])
+    best = min(tried, key=lambda rel: tried[rel][1].output_error)
+    st, r = tried[best]
+    say(f"friction law: Coulomb smoothing speed {best:.2g} of the top speed (output error "
+        f"{100 * r.output_error:.2f} %)")
+    return st, r
