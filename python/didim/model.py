@@ -16,7 +16,7 @@ from typing import Any, Dict, Optional, Tuple
 
 from . import _checks, _core
 from ._errors import DataError
-from .simulation import MODELS, Term, param_names
+from .simulation import DEFAULT_COULOMB_EPS, MODELS, Term, param_names
 
 @dataclass(frozen=True)
 class Model:
@@ -33,7 +33,7 @@ class Model:
     delay: int = 0
     backlash_gap: Optional[float] = None
     force_lag: float = 0.0
-    coulomb_eps: Optional[float] = None
+    coulomb_eps: Optional[float] = DEFAULT_COULOMB_EPS
 
     def __post_init__(self):
         if self.kind not in MODELS:
@@ -65,7 +65,7 @@ class Model:
             parts.append(f"a force lag of {1e3 * self.force_lag:.3g} ms")
         if self.backlash_gap is not None:
             parts.append(f"a backlash gap of {self.backlash_gap:g} m")
-        if self.coulomb_eps is not None:
+        if self.coulomb_eps != DEFAULT_COULOMB_EPS:
             parts.append(f"coulomb_eps {self.coulomb_eps:g}")
         return parts[0] + (" with " + "; ".join(parts[1:]) if len(parts) > 1 else "")
 
@@ -106,7 +106,7 @@ class Model:
             raise DataError(f"model field offset must be true or false, got {offset!r}")
         return cls(kind=d.get("kind", "rigid"), offset=offset, terms=terms, delay=d.get("delay", 0),
                    force_lag=d.get("force_lag", 0.0),
-                   backlash_gap=d.get("backlash_gap"), coulomb_eps=d.get("coulomb_eps"))
+                   backlash_gap=d.get("backlash_gap"), coulomb_eps=d.get("coulomb_eps", DEFAULT_COULOMB_EPS))
 
     @classmethod
     def of_result(cls, kind: str, params: Dict[str, float], options: Dict[str, Any]) -> Optional["Model"]:
@@ -118,7 +118,7 @@ class Model:
         m = cls(kind=kind, offset="OF" in params, terms=terms, delay=int(options.get("delay") or 0),
                 force_lag=float(options.get("force_lag") or 0.0),
                 backlash_gap=options.get("backlash_gap"),
-                coulomb_eps=options.get("coulomb_eps"))
+                coulomb_eps=options.get("coulomb_eps", DEFAULT_COULOMB_EPS))
         return m if set(m.param_names()) >= set(params) else None
 
 

@@ -96,8 +96,6 @@ class IdentificationResult:
         from .units import label
 
         known = self.structure.units() if self.structure is not None else {}
-        if self.structure is not None and self.structure.coulomb_eps is not None:
-            known["coulomb_eps"] = "m/s"
         return {k: label(known.get(k, UNITS.get(k, "")), self.axis) for k in (*self.params, *self.frozen)}
 
     def set_axis(self, axis: str) -> None:

@@ -42,7 +42,7 @@ from ..simulation import SimResult, param_names, simulate
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNITS, UNNAMED, Candidate, Effect, _g, final_values,
                       separating_experiment)
-from .fit import Data, State, base_columns, fit_friction_law, refit
+from .fit import Data, State, base_columns, refit
 
 #: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
 #: of it (besides being statistically significant). Real friction differs from any smooth law, and at low noise a test
@@ -464,8 +464,7 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress) -> Tuple[S
     m0 = apM if apM is not None else a_priori_mass(data.rec)
     axis = data.rec.axis
     if model == "rigid":
-        st, _ = refit(data, State("rigid", {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}, axis=axis), {}, progress)
-        return fit_friction_law(data, st, progress)
+        return refit(data, State("rigid", {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}, axis=axis), {}, progress)
     from ..identification import didim_flexible
 
     fl = didim_flexible(data.rec, m0, variant="paper", reversals="keep")
@@ -482,8 +481,7 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress) -> Tuple[S
         raise BaseFitError(f"no flexible base fit on {data.rec.name or 'the record'}: {fl.message}; diagnose it with "
                            "model='rigid' (command line: --model rigid), which names flexibility when the record "
                            "shows it")
-    st = State("flexible", dict(fl.params), dict(fl.frozen), coulomb_eps=fl.structure.coulomb_eps, axis=axis)
-    return fit_friction_law(data, st, progress)
+    return refit(data, State("flexible", dict(fl.params), dict(fl.frozen), axis=axis), {}, progress)
 
 
 class BaseFitError(DidimError):

@@ -15,7 +15,7 @@ from .._errors import DidimError, SimulationError
 from ..identification import fit_flexible_mode, flexible_from_mode
 from ..result import IdentificationResult
 from ..signal import diffcent
-from ..simulation import SimResult, Term, coulomb_sign, cubic_bspline, default_coulomb_eps, simulate
+from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign, cubic_bspline, simulate
 from .. import units
 from ..stats import orthogonalize
 from .fit import Data, State, motor_columns, motor_columns_many, refit, refit_each
@@ -139,15 +139,15 @@ STRIBECK_DEFICIT = ("Friction is lower at low speed than the Coulomb-plus-viscou
                     "grows: a low-speed friction deficit (lubricant, preload or seal behaviour that no smooth Coulomb "
                     "law captures); modelled by the Stribeck shape with the opposite sign.")
 FRICTION_SHAPE = ("Friction reaches its Coulomb level at lower speed than the model's smoothed sign v/sqrt(v² + ε²) "
-                  "(ε fitted with the base model): the shape of the friction law through zero speed (a sharper or "
-                  "softer transition, or sticking), not a Stribeck effect nor wear; modelled by a Stribeck term at "
-                  "that low speed.")
+                  "(ε = 0.1 mm/s by default): the shape of the friction law through zero speed (a sharper transition, "
+                  "or sticking), not necessarily a Stribeck effect; modelled by a Stribeck term at that low speed, or "
+                  "by a smaller coulomb_eps.")
 
 
 def _stribeck_grid(sim: SimResult) -> np.ndarray:
     """The Stribeck speeds tried (m/s): 10, geometric, from 1/500 to 1/3 of the top speed."""
     vmax = float(np.max(np.abs(sim.qd[0])))
-    return np.geomspace(vmax / 500, vmax / 3, 10)
+    return np.geomspace(max(2e-4, vmax / 500), max(vmax / 3, 3e-4), 10)
 
 
 def _stribeck_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
@@ -221,12 +221,12 @@ def _stribeck_retune(state: State, data: Data, progress) -> Optional[Adopted]:
 
 
 def _stribeck_physics(params: Dict[str, float], state: State) -> str:
-    # within a few smoothing speeds of rest, more or less friction is the law's shape, whatever its sign; beyond,
-    # Fs opposite to the Coulomb friction is a low-speed deficit, named as such
-    if state.coulomb_eps is not None and params["vs"] < FRICTION_SHAPE_FACTOR * state.coulomb_eps:
-        return FRICTION_SHAPE
+    # free sign: Fs opposite to the Coulomb friction is a low-speed deficit, named as such
     if params["Fs"] * state.coulomb() < 0:
         return STRIBECK_DEFICIT
+    eps = state.coulomb_eps if state.coulomb_eps is not None else DEFAULT_COULOMB_EPS
+    if params["vs"] < FRICTION_SHAPE_FACTOR * eps:
+        return FRICTION_SHAPE
     return REGISTRY["stribeck"].physics
 
 
@@ -241,7 +241,7 @@ def _period_grid(v: np.ndarray, q: np.ndarray, data: Data, share: float) -> Opti
     stroke = float(np.ptp(q))
     moving = np.abs(v) > 0.05 * np.max(np.abs(v))
     vslow = float(np.percentile(np.abs(v[moving]), 25)) if moving.any() else 0.0
-    pmin = max(4 * vslow * data.rec.dt * data.dec.factor, 1e-3 * stroke)
+    pmin = max(4 * vslow * data.rec.dt * data.dec.factor, 2e-4)
     pmax = stroke / share if stroke > 0 else 0.0
     return np.geomspace(pmin, pmax, 80) if pmax > pmin else None
 
@@ -509,8 +509,7 @@ def _load_friction_candidates(state: State, sim: SimResult, data: Data) -> List[
     if state.model != "flexible" or state.frozen.get("Fv2", None) != 0.0:
         return []
     v12 = sim.qd[1]
-    eps = state.coulomb_eps if state.coulomb_eps is not None else default_coulomb_eps(data.rec)
-    return [Candidate("load_friction", np.column_stack([v12, coulomb_sign(v12, eps)]), {}, 1)]
+    return [Candidate("load_friction", np.column_stack([v12, coulomb_sign(v12)]), {}, 1)]
 
 
 def _load_friction_lm(data: Data, st: State, init: Dict[str, float]) -> IdentificationResult:
@@ -568,9 +567,7 @@ def _backlash_candidates(state: State, sim: SimResult, data: Data) -> List[Candi
         return []
     q2 = sim.q[1] - sim.q[0]
     amp = float(np.percentile(np.abs(q2), 90))
-    if not amp > 0:
-        return []
-    grid = np.geomspace(amp / 100, amp, 8)
+    grid = np.geomspace(max(amp / 100, 1e-8), max(amp, 2e-8), 8)
     k12 = state.all_params()["K12"]
     return [Candidate("backlash", (k12 * (np.sign(q2) * np.maximum(np.abs(q2) - g / 2, 0) - q2))[:, None],
                       {"gap": float(g)}, len(grid)) for g in grid]

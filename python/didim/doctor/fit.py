@@ -222,12 +222,12 @@ def fit_friction_law(data: Data, state: State, progress) -> Tuple[State, Identif
     def run(rels: Sequence[float]) -> None:
         jobs = [(replace(state, coulomb_eps=rel * scale), {}) for rel in rels]
         for rel, got in zip(rels, refit_each(data, jobs, progress)):
-            if not isinstance(got, DidimError) and got[1].converged and np.isfinite(got[1].output_error):
+            if not isinstance(got, DidimError) and np.isfinite(got[1].output_error):
                 tried[rel] = got
 
     run(EPS_GRID_REL)
-    if not tried:
-        raise DidimError("the base model could not be fitted with any Coulomb smoothing speed")
+    if not tried:  # keep the law the base model came with
+        return refit(data, state, {}, progress)
     rels = sorted(tried)
     k = min(range(len(rels)), key=lambda i: tried[rels[i]][1].output_error)
     if 0 < k < len(rels) - 1:
