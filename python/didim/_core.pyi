@@ -7,6 +7,8 @@ import numpy.typing as npt
 from typing_extensions import final
 
 DEFAULT_COULOMB_EPS: float
+#: The shapes of the Coulomb sign through zero speed: "algebraic", "tanh", "atan", "exp".
+COULOMB_LAWS: List[str]
 DEFAULT_TOL: float
 #: "avx2+fma" or "baseline": the build of the closed loop this processor runs (same results, different speed).
 SIMULATOR_BUILD: str
@@ -15,6 +17,7 @@ TERM_KINDS: List[str]
 _F64 = npt.NDArray[np.float64]
 
 __all__ = [
+    "COULOMB_LAWS",
     "DEFAULT_COULOMB_EPS",
     "DEFAULT_TOL",
     "Decimation",
@@ -48,6 +51,7 @@ def regressor(
     offset: bool = False,
     terms: _Terms = None,
     backlash_gap: Optional[float] = None,
+    coulomb_law: str = "algebraic",
 ) -> _F64: ...
 def lstsq(w: _F64, y: _F64, *, rank_tol: Optional[float] = None, sigma: str = "paper") -> Dict[str, Any]: ...
 def butter(order: int, wn: float, *, sos: bool = False) -> Any: ...
@@ -104,6 +108,7 @@ class Problem:
         terms: _Terms = None,
         backlash_gap: Optional[float] = None,
         lead: int = 0,
+        coulomb_law: str = "algebraic",
     ) -> "Problem": ...
     @property
     def n_params(self) -> int: ...

@@ -15,7 +15,7 @@ from .identification import Progress, didim_iterate, didim_flexible, didim_rigid
 from .oe import CRITERIA, oe_lm, oe_nm, pseudo_regular_initial
 from .recording import Recording
 from .result import IdentificationResult
-from .simulation import DEFAULT_COULOMB_EPS, MODELS, param_names
+from .simulation import MODELS, param_names
 
 METHODS = ("idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn")
 #: Other names of the methods: "oe-gn" is the exact-sensitivity Levenberg-Marquardt solver's former name.
@@ -150,7 +150,7 @@ def identify(
     t0 = time.perf_counter()
     pre: Optional[IdentificationResult] = None
     # the simulator the user chose serves the starting runs too
-    sim_kw = {k: options[k] for k in ("substeps", "coulomb_eps", "integrator", "sim_tol") if k in options}
+    sim_kw = {k: options[k] for k in ("substeps", "coulomb_eps", "coulomb_law", "integrator", "sim_tol") if k in options}
     if initial is None:
         m0 = apM if apM is not None else a_priori_mass(recording)
         if model == "rigid":
@@ -185,7 +185,8 @@ def _model_options(model: Model, offset: bool, options: Dict[str, Any]) -> Tuple
     """A :class:`Model` as identify's model kind, offset and options: its structure fields that are not the default
     become options (a method that cannot take one refuses it by name), and giving one again is an error."""
     st = {k: v for k, v in model.sim_kw().items() if k != "offset"}
-    default = {"terms": (), "delay": 0, "force_lag": 0.0, "backlash_gap": None, "coulomb_eps": DEFAULT_COULOMB_EPS}
+    default = {"terms": (), "delay": 0, "force_lag": 0.0, "backlash_gap": None, "coulomb_eps": None,
+               "coulomb_law": "algebraic"}
     st = {k: v for k, v in st.items() if v != default[k]}
     again = (["offset"] if offset and not model.offset else []) + [k for k in st if k in options]
     if again:

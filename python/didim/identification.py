@@ -280,6 +280,7 @@ def didim_iterate(
     max_iter: int = 30,
     substeps: int = 10,
     coulomb_eps: Optional[float] = None,
+    coulomb_law: str = "algebraic",
     divergence_factor: float = DIVERGENCE_FACTOR,
     progress: Progress = None,
     method: str = "didim",
@@ -365,7 +366,8 @@ def didim_iterate(
     exclude = (reversals == "exclude" or (reversals == "auto" and not profile)) and model == "rigid" and (
         _coulomb_column(free) is not None)
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
-    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, tol=sim_tol,
+    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
+                 integrator=integrator, tol=sim_tol,
                  terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
     m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
     start_row = start_row_of(rec, pb, chi, dec, start)  # the first decimated row regressed
@@ -546,7 +548,8 @@ def didim_iterate(
         initial={n: float(initial[n]) for n in free},
         frozen=frozen,
         history=history,
-        options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps, offset=offset,
+        options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps,
+                     coulomb_law=coulomb_law, offset=offset,
                      terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, force_lag=force_lag,
                      integrator=integrator,
                      sim_tol=sim_tol, reversals="exclude" if exclude else "keep", start_rows_left_out=start_row),
@@ -901,6 +904,7 @@ def fit_flexible_mode(
     max_iter: int = 300,
     substeps: int = 10,
     coulomb_eps: Optional[float] = None,
+    coulomb_law: str = "algebraic",
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
@@ -925,7 +929,8 @@ def fit_flexible_mode(
                     coulomb_eps=coulomb_eps)
     coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
-    crit = _ModeCriterion(rec, rigid, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
+    crit = _ModeCriterion(rec, rigid, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
+                                                 integrator=integrator,
                                                  tol=sim_tol))
     tally = [0]
     grid = _mode_grid(crit, lambda0, f0, friction_split, grid_start, tally)
@@ -1107,6 +1112,7 @@ def didim_flexible(
     max_iter: int = 30,
     substeps: int = 10,
     coulomb_eps: Optional[float] = None,
+    coulomb_law: str = "algebraic",
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
@@ -1133,7 +1139,8 @@ def didim_flexible(
                     max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
     _checks.one_of("variant", variant, VARIANTS)
     coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
-    common = dict(substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator, sim_tol=sim_tol)
+    common = dict(substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law, integrator=integrator,
+                  sim_tol=sim_tol)
     _say(progress, "step 1: rigid DIDIM")
     r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress,
                      reversals=reversals, start=start, **common)
@@ -1145,7 +1152,7 @@ def didim_flexible(
         return r1
 
     r2, notes = _step2(rec, r1, variant, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, grid_start=grid_start,
-                       progress=progress, sim_kw=dict(substeps=substeps, coulomb_eps=coulomb_eps,
+                       progress=progress, sim_kw=dict(substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
                                                       integrator=integrator, tol=sim_tol))
     chosen = "friction-split" if r2.options["friction_split"] else "paper"
     n_sim = r1.simulations + r2.simulations
@@ -1154,7 +1161,8 @@ def didim_flexible(
             model="flexible", method="didim", params=dict(r2.frozen), std={}, rel_std_pct={},
             relative_error=float("nan"), output_error=r2.output_error, iterations=0, simulations=n_sim,
             elapsed_s=time.perf_counter() - t0, converged=False, message=_cannot_support(r2.options["degenerate"], rec),
-            options=dict(variant=chosen, coulomb_eps=coulomb_eps, integrator=integrator, sim_tol=sim_tol,
+            options=dict(variant=chosen, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law, integrator=integrator,
+                         sim_tol=sim_tol,
                          substeps=substeps), steps={"rigid": r1, "mode": r2}, notes=notes)
         return r
 

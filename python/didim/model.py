@@ -16,7 +16,7 @@ from typing import Any, Dict, Optional, Tuple
 
 from . import _checks, _core
 from ._errors import DataError
-from .simulation import DEFAULT_COULOMB_EPS, MODELS, Term, param_names
+from .simulation import COULOMB_LAWS, MODELS, Term, param_names
 
 @dataclass(frozen=True)
 class Model:
@@ -33,7 +33,8 @@ class Model:
     delay: int = 0
     backlash_gap: Optional[float] = None
     force_lag: float = 0.0
-    coulomb_eps: Optional[float] = DEFAULT_COULOMB_EPS
+    coulomb_eps: Optional[float] = None
+    coulomb_law: str = "algebraic"
 
     def __post_init__(self):
         if self.kind not in MODELS:
@@ -48,6 +49,7 @@ class Model:
             object.__setattr__(self, "backlash_gap", _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0))
         object.__setattr__(self, "delay", _checks.whole("delay", self.delay, hint=" (samples)"))
         object.__setattr__(self, "force_lag", _checks.real("force_lag", self.force_lag, "s", lo=0.0, lo_open=False))
+        _checks.one_of("coulomb_law", self.coulomb_law, COULOMB_LAWS)
         if self.coulomb_eps is not None:
             object.__setattr__(self, "coulomb_eps", _checks.real("coulomb_eps", self.coulomb_eps, "m/s", lo=0.0,
                                                                  lo_open=False))
@@ -65,8 +67,10 @@ class Model:
             parts.append(f"a force lag of {1e3 * self.force_lag:.3g} ms")
         if self.backlash_gap is not None:
             parts.append(f"a backlash gap of {self.backlash_gap:g} m")
-        if self.coulomb_eps != DEFAULT_COULOMB_EPS:
+        if self.coulomb_eps is not None:
             parts.append(f"coulomb_eps {self.coulomb_eps:g}")
+        if self.coulomb_law != "algebraic":
+            parts.append(f"a {self.coulomb_law} Coulomb law")
         return parts[0] + (" with " + "; ".join(parts[1:]) if len(parts) > 1 else "")
 
     def param_names(self) -> list:
@@ -82,18 +86,19 @@ class Model:
         """Keyword arguments of :func:`didim.simulate` that describe this structure."""
         return dict(offset=self.offset, terms=self.terms, delay=self.delay, force_lag=self.force_lag,
                     backlash_gap=self.backlash_gap,
-                    coulomb_eps=self.coulomb_eps)
+                    coulomb_eps=self.coulomb_eps, coulomb_law=self.coulomb_law)
 
     def to_dict(self) -> Dict[str, Any]:
         return {"kind": self.kind, "offset": self.offset, "terms": [list(t.spec()) for t in self.terms],
                 "delay": self.delay, "force_lag": self.force_lag, "backlash_gap": self.backlash_gap,
-                "coulomb_eps": self.coulomb_eps}
+                "coulomb_eps": self.coulomb_eps, "coulomb_law": self.coulomb_law}
 
     @classmethod
     def from_dict(cls, d: Dict[str, Any]) -> "Model":
         if not isinstance(d, dict):
             raise DataError(f"a model structure must be a JSON object, got {type(d).__name__}")
-        unknown = set(d) - {"kind", "offset", "terms", "delay", "force_lag", "backlash_gap", "coulomb_eps"}
+        unknown = set(d) - {"kind", "offset", "terms", "delay", "force_lag", "backlash_gap", "coulomb_eps",
+                             "coulomb_law"}
         if unknown:
             raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
         raw = d.get("terms") or []
@@ -106,7 +111,8 @@ class Model:
             raise DataError(f"model field offset must be true or false, got {offset!r}")
         return cls(kind=d.get("kind", "rigid"), offset=offset, terms=terms, delay=d.get("delay", 0),
                    force_lag=d.get("force_lag", 0.0),
-                   backlash_gap=d.get("backlash_gap"), coulomb_eps=d.get("coulomb_eps", DEFAULT_COULOMB_EPS))
+                   backlash_gap=d.get("backlash_gap"), coulomb_eps=d.get("coulomb_eps"),
+                   coulomb_law=d.get("coulomb_law", "algebraic"))
 
     @classmethod
     def of_result(cls, kind: str, params: Dict[str, float], options: Dict[str, Any]) -> Optional["Model"]:
@@ -118,7 +124,8 @@ class Model:
         m = cls(kind=kind, offset="OF" in params, terms=terms, delay=int(options.get("delay") or 0),
                 force_lag=float(options.get("force_lag") or 0.0),
                 backlash_gap=options.get("backlash_gap"),
-                coulomb_eps=options.get("coulomb_eps", DEFAULT_COULOMB_EPS))
+                coulomb_eps=options.get("coulomb_eps"),
+                coulomb_law=options.get("coulomb_law", "algebraic"))
         return m if set(m.param_names()) >= set(params) else None
 
 

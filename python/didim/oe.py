@@ -52,6 +52,7 @@ def oe_nm(
     max_iter: int = 2000,
     substeps: int = 10,
     coulomb_eps: Optional[float] = None,
+    coulomb_law: str = "algebraic",
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
@@ -84,7 +85,8 @@ def oe_nm(
     count = {"sim": 0}
     history: List[Iteration] = []
 
-    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
+    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
+                 integrator=integrator,
                  tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
     skip = start_row_of(rec, pb, x0, dec, start)
     ny = float(np.linalg.norm(yd[skip:]))
@@ -127,7 +129,8 @@ def oe_nm(
         elapsed_s=time.perf_counter() - t0, converged=bool(res.success), message="" if res.success else str(res.message),
         initial=dict(initial), history=history,
         options=dict(criterion=criterion, decimation=dec.describe(), xatol=xatol, fatol=fatol, integrator=integrator,
-                     coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol, terms=[t.spec() for t in terms],
+                     coulomb_eps=coulomb_eps, coulomb_law=coulomb_law, substeps=substeps, sim_tol=sim_tol,
+                     terms=[t.spec() for t in terms],
                      backlash_gap=backlash_gap, delay=delay, force_lag=force_lag, start_rows_left_out=skip),
         notes=start_notes(skip, dec, rec, "the criterion"),
     )
@@ -145,6 +148,7 @@ def oe_lm(
     max_iter: int = 50,
     substeps: int = 10,
     coulomb_eps: Optional[float] = None,
+    coulomb_law: str = "algebraic",
     progress: Progress = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
@@ -171,7 +175,8 @@ def oe_lm(
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 1, "oe-lm")
     measured = _measured(rec, criterion)
-    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, integrator=integrator,
+    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
+                 integrator=integrator,
                  tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay)
     skip = start_row_of(rec, pb, chi, dec, start)
     ny = float(np.linalg.norm(dec(measured)[skip:]))
@@ -269,7 +274,8 @@ def oe_lm(
         iterations=len(history), simulations=n_sim, elapsed_s=time.perf_counter() - t0,
         converged=converged, message=message, initial=dict(initial), frozen=frozen, history=history,
         options=dict(criterion=criterion, decimation=dec.describe(), tol=tol, integrator=integrator,
-                     coulomb_eps=coulomb_eps, substeps=substeps, sim_tol=sim_tol, terms=[t.spec() for t in terms],
+                     coulomb_eps=coulomb_eps, coulomb_law=coulomb_law, substeps=substeps, sim_tol=sim_tol,
+                     terms=[t.spec() for t in terms],
                      backlash_gap=backlash_gap, delay=delay, condition_number=float(sol["condition_number"]),
                      start_rows_left_out=skip),
         covariance=sol["covariance"], notes=start_notes(skip, dec, rec, "the criterion"),

@@ -33,6 +33,8 @@ DEFAULT_COULOMB_EPS: float = _core.DEFAULT_COULOMB_EPS
 #: default, so that a record gives the same answer in m, mm, rad, deg or encoder counts; the doctor fits the
 #: smoothing speed itself (the friction law's shape through zero speed is not known in advance).
 COULOMB_EPS_REL = 8e-4
+#: The shapes of the Coulomb sign through zero speed the core knows (``coulomb_law``).
+COULOMB_LAWS: Tuple[str, ...] = tuple(_core.COULOMB_LAWS)
 
 
 def default_coulomb_eps(recording: "Recording") -> float:
@@ -42,11 +44,9 @@ def default_coulomb_eps(recording: "Recording") -> float:
 
 
 def coulomb_eps_of(recording: "Recording", coulomb_eps: Optional[float]) -> float:
-    """``coulomb_eps`` as given, or for None the default, still ``DEFAULT_COULOMB_EPS`` (m/s or rad/s): the
-    record-relative :func:`default_coulomb_eps` is not the default yet, as it moves the published EMPS and truthbench
-    results (see the closing note of issue 26's first part)."""
+    """``coulomb_eps`` as given, or the record's default (:func:`default_coulomb_eps`) for None."""
     if coulomb_eps is None:
-        return DEFAULT_COULOMB_EPS
+        return default_coulomb_eps(recording)
     _checks.options(coulomb_eps=coulomb_eps)
     return float(coulomb_eps)
 
@@ -201,8 +201,8 @@ def unpack_model(model, offset: Optional[bool], given: Dict[str, Any]) -> Tuple[
     if not _is_model(model):
         return model, offset, given
     st = model.sim_kw()
-    again = [k for k in ("terms", "delay", "force_lag", "backlash_gap", "coulomb_eps") if k in given
-             and given[k] not in ((), None, 0)]
+    again = [k for k in ("terms", "delay", "force_lag", "backlash_gap", "coulomb_eps", "coulomb_law") if k in given
+             and given[k] not in ((), None, 0, "algebraic")]
     if offset is not None and bool(offset) != model.offset:
         again.insert(0, "offset")
     if again:
@@ -343,6 +343,7 @@ def sim_options(
     delay: int = 0,
     force_lag: float = 0.0,
     coulomb_eps: Optional[float] = None,
+    coulomb_law: str = "algebraic",
     integrator: str = "exponential",
     tol: float = DEFAULT_TOL,
 ) -> dict:
@@ -352,6 +353,7 @@ def sim_options(
     quantization = _checks.real("quantization", quantization, "m", lo=0.0, lo_open=False, hint=" (0 for none)")
     _checks.options(substeps=substeps)
     coulomb_eps = coulomb_eps_of(recording, coulomb_eps)
+    _checks.one_of("coulomb_law", coulomb_law, COULOMB_LAWS)
     delay = _checks.whole("delay", delay, lo=0, hi=recording.n - 1, hint=" (actuation delay in samples)")
     if integrator not in INTEGRATORS:
         raise DataError(f"unknown integrator {integrator!r}: use one of {', '.join(INTEGRATORS)}")
@@ -359,7 +361,7 @@ def sim_options(
         raise DataError(f"tol must be a fraction of the stroke between 0 and 1, got {tol!r}")
     force_lag = _checks.real("force_lag", force_lag, "s", lo=0.0, lo_open=False, hint=" (0 for none)")
     return dict(substeps=int(substeps), quantization=float(quantization), delay=int(delay), force_lag=force_lag,
-                coulomb_eps=float(coulomb_eps), integrator=integrator, tol=float(tol))
+                coulomb_eps=float(coulomb_eps), coulomb_law=coulomb_law, integrator=integrator, tol=float(tol))
 
 
 def problem(recording: Recording, model: Union[str, "Model"] = "rigid", *, offset: Optional[bool] = None,
@@ -391,6 +393,7 @@ def simulate(
     delay: int = 0,
     force_lag: float = 0.0,
     coulomb_eps: Optional[float] = None,
+    coulomb_law: str = "algebraic",
     terms: Sequence[Term] = (),
     backlash_gap: Optional[float] = None,
     integrator: str = "exponential",
@@ -411,6 +414,8 @@ def simulate(
         force_lag: time constant (s) of a first-order lag from the command to the applied force (a current loop).
         coulomb_eps: velocity scale of the Coulomb sign (m/s or rad/s), 0 for the hard sign; by default the
             record's (:func:`default_coulomb_eps`).
+        coulomb_law: the shape of the Coulomb sign through zero speed (``COULOMB_LAWS``: "algebraic"
+            ``v/sqrt(v² + ε²)``, "tanh", "atan", "exp"; each with the slope 1/ε at rest).
         terms: extra model terms (:class:`Term`), whose parameters ``params`` must include.
         backlash_gap: flexible model only: total width (m) of a dead zone in the coupling K12.
         integrator: "exponential" (default: exact for the affine part of the model, adaptive where the Coulomb sign
@@ -428,21 +433,23 @@ def simulate(
             raise DataError(f"a result carries its model structure: leave {', '.join(given)} out, or simulate "
                             "result.all_params with the structure you want")
         st = _structure(params)
-        model, offset, terms, backlash_gap, delay, force_lag, coulomb_eps = (
-            st.kind, st.offset, st.terms, st.backlash_gap, st.delay, st.force_lag, st.coulomb_eps)
+        model, offset, terms, backlash_gap, delay, force_lag, coulomb_eps, coulomb_law = (
+            st.kind, st.offset, st.terms, st.backlash_gap, st.delay, st.force_lag, st.coulomb_eps, st.coulomb_law)
         integrator = params.options.get("integrator", integrator)
         tol = params.options.get("sim_tol", tol)
         substeps = params.options.get("substeps", substeps)
         params = params.all_params
     model, offset, st = unpack_model(model, offset, dict(terms=terms, delay=delay, force_lag=force_lag,
-                                                        backlash_gap=backlash_gap, coulomb_eps=coulomb_eps))
+                                                        backlash_gap=backlash_gap, coulomb_eps=coulomb_eps,
+                                                        coulomb_law=coulomb_law))
     terms, delay, force_lag = st["terms"], st["delay"], st["force_lag"]
-    backlash_gap, coulomb_eps = st["backlash_gap"], st["coulomb_eps"]
+    backlash_gap, coulomb_eps, coulomb_law = st["backlash_gap"], st["coulomb_eps"], st["coulomb_law"]
     if offset is not None:
         offset = _checks.flag("offset", offset)
     names, vec, offset = params_vector(model, params, offset, terms)
     out = problem(recording, model, offset=offset, terms=terms, backlash_gap=backlash_gap, substeps=substeps,
                   quantization=quantization, delay=delay, force_lag=force_lag, coulomb_eps=coulomb_eps,
+                  coulomb_law=coulomb_law,
                   integrator=integrator,
                   tol=tol).simulate(vec)
     return SimResult(
@@ -550,7 +557,7 @@ def simulate_batch(
         st = structures.pop()
         model, offset = st.kind, st.offset
         for k, v in dict(terms=st.terms, delay=st.delay, force_lag=st.force_lag, backlash_gap=st.backlash_gap,
-                         coulomb_eps=st.coulomb_eps).items():
+                         coulomb_eps=st.coulomb_eps, coulomb_law=st.coulomb_law).items():
             sim_kw.setdefault(k, v)
         sim_kw.setdefault("integrator", rows[0].options.get("integrator", "exponential"))
         rows = [r.all_params for r in rows]
@@ -570,4 +577,4 @@ def simulate_batch(
 
 __all__ = ["simulate", "settling_samples", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
            "params_vector", "coulomb_sign", "MODELS", "INTEGRATORS", "DEFAULT_COULOMB_EPS", "DEFAULT_TOL",
-           "COULOMB_EPS_REL", "default_coulomb_eps", "coulomb_eps_of"]
+           "COULOMB_EPS_REL", "COULOMB_LAWS", "default_coulomb_eps", "coulomb_eps_of"]

@@ -141,6 +141,108 @@ pub fn coulomb_sign_and_derivative(v: f64, eps: f64) -> (f64, f64) {
     }
 }
 
+/// The shapes of the smoothed Coulomb sign through zero speed. Each is odd, monotone,
+/// saturates at ±1 and has the slope `1/eps` at rest, so that `eps` means the same
+/// transition speed for every shape; real friction's shape is not known in advance,
+/// and the shape is a hyper-parameter of the model (the doctor chooses it by
+/// closed-loop fit).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum LawShape {
+    /// `v / sqrt(v² + eps²)`: saturates slowly (`1 − 1/(2x²)`, `x = v/eps`).
+    #[default]
+    Algebraic,
+    /// `tanh(v / eps)`: saturates exponentially fast.
+    Tanh,
+    /// `(2/π)·atan(π v / (2 eps))`: the slowest (`1 − 4/(π² x)`).
+    Atan,
+    /// `sign(v)·(1 − exp(−|v| / eps))`: a first-order rise.
+    Exp,
+}
+
+/// The names of [`LawShape`]s (`coulomb_law` in the Python layer).
+pub const LAW_SHAPES: &[&str] = &["algebraic", "tanh", "atan", "exp"];
+
+impl LawShape {
+    /// The shape named `name` (one of [`LAW_SHAPES`]).
+    pub fn from_name(name: &str) -> Result<LawShape> {
+        Ok(match name {
+            "algebraic" => LawShape::Algebraic,
+            "tanh" => LawShape::Tanh,
+            "atan" => LawShape::Atan,
+            "exp" => LawShape::Exp,
+            other => {
+                return Err(invalid!(
+                    "unknown Coulomb law {other:?}: use one of {}",
+                    LAW_SHAPES.join(", ")
+                ))
+            }
+        })
+    }
+
+    /// This shape's name, as [`LawShape::from_name`] reads it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            LawShape::Algebraic => "algebraic",
+            LawShape::Tanh => "tanh",
+            LawShape::Atan => "atan",
+            LawShape::Exp => "exp",
+        }
+    }
+}
+
+/// The friction law through zero speed of every Coulomb-type term: its shape and its
+/// transition speed `eps` (m/s or rad/s; 0 for the hard sign, whatever the shape).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct FrictionLaw {
+    pub shape: LawShape,
+    pub eps: f64,
+}
+
+impl FrictionLaw {
+    /// The algebraic law `v / sqrt(v² + eps²)` (didim's default shape).
+    pub fn algebraic(eps: f64) -> FrictionLaw {
+        FrictionLaw {
+            shape: LawShape::Algebraic,
+            eps,
+        }
+    }
+
+    /// The smoothed sign of `v` and its derivative with respect to `v`.
+    #[inline(always)]
+    pub fn sign_and_derivative(&self, v: f64) -> (f64, f64) {
+        let eps = self.eps;
+        if !(eps > 0.0) {
+            return (coulomb_sign(v, 0.0), 0.0);
+        }
+        match self.shape {
+            LawShape::Algebraic => coulomb_sign_and_derivative(v, eps),
+            LawShape::Tanh => {
+                let t = (v / eps).tanh();
+                (t, (1.0 - t * t) / eps)
+            }
+            LawShape::Atan => {
+                let k = std::f64::consts::FRAC_PI_2 / eps;
+                let x = k * v;
+                (std::f64::consts::FRAC_2_PI * x.atan(), 1.0 / (eps * (1.0 + x * x)))
+            }
+            LawShape::Exp => {
+                let e = (-(v.abs() / eps)).exp();
+                if v.is_infinite() {
+                    (v.signum(), 0.0)
+                } else {
+                    (coulomb_sign(v, 0.0) * (1.0 - e), e / eps)
+                }
+            }
+        }
+    }
+
+    /// The smoothed sign of `v`.
+    #[inline]
+    pub fn sign(&self, v: f64) -> f64 {
+        self.sign_and_derivative(v).0
+    }
+}
+
 /// The basis function multiplying one parameter, per degree of freedom.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Basis {
@@ -339,26 +441,26 @@ impl Basis {
     /// physics of every term is here and nowhere else: the direct model, the regressor,
     /// both integrators and the sensitivities all read it.
     #[inline(always)]
-    pub(crate) fn local(&self, x: f64, xd: f64, eps: f64) -> (f64, f64, f64) {
+    pub(crate) fn local(&self, x: f64, xd: f64, law: FrictionLaw) -> (f64, f64, f64) {
         match *self {
             Basis::Inertia { .. } => (0.0, 0.0, 0.0),
             Basis::Viscous { .. } | Basis::Damper { .. } => (xd, 0.0, 1.0),
             Basis::Offset { .. } => (1.0, 0.0, 0.0),
             Basis::Spring { .. } => (x, 1.0, 0.0),
             Basis::Coulomb { .. } => {
-                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                let (s, ds) = law.sign_and_derivative(xd);
                 (s, 0.0, ds)
             }
             Basis::AbsViscous { .. } => {
-                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                let (s, ds) = law.sign_and_derivative(xd);
                 (xd * s, 0.0, s + xd * ds)
             }
             Basis::AbsCoulomb { .. } => {
-                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                let (s, ds) = law.sign_and_derivative(xd);
                 (s.abs(), 0.0, s.signum() * ds)
             }
             Basis::Stribeck { vs, .. } => {
-                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                let (s, ds) = law.sign_and_derivative(xd);
                 let e = (-(xd / vs) * (xd / vs)).exp();
                 (s * e, 0.0, ds * e - s * e * 2.0 * xd / (vs * vs))
             }
@@ -370,7 +472,7 @@ impl Basis {
             Basis::CoulombRipple { period, phase, .. } => {
                 let w = std::f64::consts::TAU / period;
                 let (sn, cs) = (w * x + phase).sin_cos();
-                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                let (s, ds) = law.sign_and_derivative(xd);
                 (s * sn, s * w * cs, ds * sn)
             }
             Basis::CoulombSpline {
@@ -380,7 +482,7 @@ impl Basis {
                 ..
             } => {
                 let (b, db) = cubic_bspline((x - center) / width);
-                let (s, ds) = coulomb_sign_and_derivative(xd, eps);
+                let (s, ds) = law.sign_and_derivative(xd);
                 // the forward or backward part of the sign, s(1 ± s)/2: 1 or 0 (−1 or 0) away from rest, the two
                 // summing to s, and as smooth as s (max(s, 0) would kink the dynamics at every reversal)
                 let side = if forward { 1.0 } else { -1.0 };
@@ -420,14 +522,14 @@ impl Basis {
         q: &SVector<f64, N>,
         qd: &SVector<f64, N>,
         qdd: &SVector<f64, N>,
-        eps: f64,
+        law: FrictionLaw,
         out: &mut SVector<f64, N>,
     ) {
         let phi = match *self {
             Basis::Inertia { dof } => qdd[dof],
             _ => {
                 let (x, xd) = self.coordinates(q, qd);
-                self.local(x, xd, eps).0
+                self.local(x, xd, law).0
             }
         };
         match self.dofs() {
@@ -463,7 +565,7 @@ impl Basis {
         value: f64,
         q: &SVector<f64, N>,
         qd: &SVector<f64, N>,
-        eps: f64,
+        law: FrictionLaw,
         dq: &mut SMatrix<f64, N, N>,
         dv: &mut SMatrix<f64, N, N>,
     ) {
@@ -471,7 +573,7 @@ impl Basis {
             return;
         }
         let (x, xd) = self.coordinates(q, qd);
-        let (_, px, pv) = self.local(x, xd, eps);
+        let (_, px, pv) = self.local(x, xd, law);
         let d = self.direction::<N>();
         let dd = d * d.transpose();
         *dq += dd * (value * px);
@@ -488,7 +590,7 @@ impl Basis {
 pub struct Model<const N: usize> {
     names: Vec<String>,
     basis: Vec<Basis>,
-    coulomb_eps: f64,
+    law: FrictionLaw,
 }
 
 impl<const N: usize> Model<N> {
@@ -535,7 +637,7 @@ impl<const N: usize> Model<N> {
         Ok(Self {
             names,
             basis,
-            coulomb_eps,
+            law: FrictionLaw::algebraic(coulomb_eps),
         })
     }
 
@@ -561,7 +663,19 @@ impl<const N: usize> Model<N> {
 
     /// Velocity scale of the Coulomb sign (m/s), see [`coulomb_sign`].
     pub fn coulomb_eps(&self) -> f64 {
-        self.coulomb_eps
+        self.law.eps
+    }
+
+    /// The friction law through zero speed of every Coulomb-type term.
+    pub fn law(&self) -> FrictionLaw {
+        self.law
+    }
+
+    /// Returns a copy whose Coulomb-type terms follow `shape` (same transition speed).
+    pub fn with_law_shape(&self, shape: LawShape) -> Self {
+        let mut m = self.clone();
+        m.law.shape = shape;
+        m
     }
 
     /// Returns a copy with `extra` terms appended (e.g. a candidate effect of the doctor).
@@ -573,7 +687,7 @@ impl<const N: usize> Model<N> {
             .zip(self.basis.iter().copied())
             .collect();
         terms.extend(extra);
-        Self::new(terms, self.coulomb_eps)
+        Ok(Self::new(terms, self.law.eps)?.with_law_shape(self.law.shape))
     }
 
     /// Returns a copy where the parameter `name` gets another basis function
@@ -592,7 +706,7 @@ impl<const N: usize> Model<N> {
             .zip(self.basis.iter().copied())
             .collect();
         terms[i].1 = basis;
-        Self::new(terms, self.coulomb_eps)
+        Ok(Self::new(terms, self.law.eps)?.with_law_shape(self.law.shape))
     }
 
     /// Returns a copy with another Coulomb velocity scale.
@@ -603,7 +717,7 @@ impl<const N: usize> Model<N> {
             .cloned()
             .zip(self.basis.iter().copied())
             .collect();
-        Self::new(terms, coulomb_eps)
+        Ok(Self::new(terms, coulomb_eps)?.with_law_shape(self.law.shape))
     }
 
     /// Checks a parameter vector for simulation: right length, finite values,
@@ -657,7 +771,7 @@ impl<const N: usize> Model<N> {
     ) -> SVector<f64, N> {
         let mut out = SVector::<f64, N>::zeros();
         for (b, &v) in self.basis.iter().zip(chi) {
-            b.accumulate(v, q, qd, qdd, self.coulomb_eps, &mut out);
+            b.accumulate(v, q, qd, qdd, self.law, &mut out);
         }
         out
     }
@@ -678,7 +792,7 @@ impl<const N: usize> Model<N> {
         let mut f = SVector::<f64, N>::zeros();
         for (b, &v) in self.basis.iter().zip(chi) {
             if !b.is_inertia() {
-                b.accumulate(v, q, qd, &zero, self.coulomb_eps, &mut f);
+                b.accumulate(v, q, qd, &zero, self.law, &mut f);
             }
         }
         (u - f).component_mul(inv_mass)
@@ -697,7 +811,7 @@ impl<const N: usize> Model<N> {
         let mut dq = SMatrix::<f64, N, N>::zeros();
         let mut dv = SMatrix::<f64, N, N>::zeros();
         for (b, &v) in self.basis.iter().zip(chi) {
-            b.accumulate_partials(v, q, qd, self.coulomb_eps, &mut dq, &mut dv);
+            b.accumulate_partials(v, q, qd, self.law, &mut dq, &mut dv);
         }
         for d in 0..N {
             for e in 0..N {
@@ -721,7 +835,7 @@ impl<const N: usize> Model<N> {
         out.iter_mut().for_each(|x| *x = 0.0);
         for (j, b) in self.basis.iter().enumerate() {
             let mut col = SVector::<f64, N>::zeros();
-            b.accumulate(1.0, q, qd, qdd, self.coulomb_eps, &mut col);
+            b.accumulate(1.0, q, qd, qdd, self.law, &mut col);
             for d in 0..N {
                 out[d * p + j] = col[d];
             }

@@ -10,7 +10,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use didim_core::error::Error;
 use didim_core::filter as flt;
 use didim_core::lstsq::{LstsqOptions, SigmaConvention};
-use didim_core::model::{self, Basis, Model, DEFAULT_COULOMB_EPS};
+use didim_core::model::{self, Basis, LawShape, Model, DEFAULT_COULOMB_EPS, LAW_SHAPES};
 use didim_core::{controller::TransferFunction, lstsq as ls, sim, Controller};
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -191,9 +191,11 @@ fn make_model(
     kind: &str,
     offset: bool,
     coulomb_eps: f64,
+    coulomb_law: &str,
     terms: &[(String, String, f64, String, f64)],
     backlash_gap: Option<f64>,
 ) -> Result<AnyModel, Error> {
+    let shape = LawShape::from_name(coulomb_law)?;
     let extra = terms
         .iter()
         .map(|(n, k, h, d, w)| Ok((n.clone(), extra_basis(k, *h, *w, d)?)))
@@ -206,11 +208,13 @@ fn make_model(
                 ));
             }
             Ok(AnyModel::Rigid(
-                model::rigid(offset, coulomb_eps)?.with_terms(extra)?,
+                model::rigid(offset, coulomb_eps)?.with_terms(extra)?.with_law_shape(shape),
             ))
         }
         "flexible" => {
-            let mut m = model::flexible_with(offset, coulomb_eps)?.with_terms(extra)?;
+            let mut m = model::flexible_with(offset, coulomb_eps)?
+                .with_terms(extra)?
+                .with_law_shape(shape);
             if let Some(gap) = backlash_gap {
                 m = m.with_basis(
                     "K12",
@@ -331,7 +335,7 @@ fn sim_options(
 fn param_names(py: Python<'_>, model: &str, offset: bool, terms: Option<Terms>) -> PyResult<Vec<String>> {
     let terms = terms.unwrap_or_default();
     let m = quick(py, || {
-        make_model(model, offset, DEFAULT_COULOMB_EPS, &terms, None)
+        make_model(model, offset, DEFAULT_COULOMB_EPS, "algebraic", &terms, None)
     })?;
     Ok(match m {
         AnyModel::Rigid(m) => m.names().to_vec(),
@@ -352,7 +356,7 @@ fn param_units(
 ) -> PyResult<Vec<&'static str>> {
     let terms = terms.unwrap_or_default();
     let m = quick(py, || {
-        make_model(model, offset, DEFAULT_COULOMB_EPS, &terms, backlash_gap)
+        make_model(model, offset, DEFAULT_COULOMB_EPS, "algebraic", &terms, backlash_gap)
     })?;
     Ok(match m {
         AnyModel::Rigid(m) => m.units(),
@@ -362,7 +366,7 @@ fn param_units(
 
 /// The IDM regressor of a trajectory: q, qd, qdd of shape (ndof, n) -> W of shape (ndof, n, p).
 #[pyfunction]
-#[pyo3(signature = (model, q, qd, qdd, *, coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None))]
+#[pyo3(signature = (model, q, qd, qdd, *, coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None, coulomb_law="algebraic"))]
 #[allow(clippy::too_many_arguments)]
 fn regressor<'py>(
     py: Python<'py>,
@@ -374,13 +378,14 @@ fn regressor<'py>(
     offset: bool,
     terms: Option<Terms>,
     backlash_gap: Option<f64>,
+    coulomb_law: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
     let terms = terms.unwrap_or_default();
     let coulomb_eps = coulomb_eps.0;
     let (q, qd, qdd) = (rows2(&q), rows2(&qd), rows2(&qdd));
     let n = q.first().map_or(0, |r| r.len());
     let (ndof, p, w) = run(py, || {
-        match make_model(model, offset, coulomb_eps, &terms, backlash_gap)? {
+        match make_model(model, offset, coulomb_eps, coulomb_law, &terms, backlash_gap)? {
             AnyModel::Rigid(m) => Ok((1, m.n_params(), m.regressor(&q, &qd, &qdd)?)),
             AnyModel::Flexible(m) => Ok((2, m.n_params(), m.regressor(&q, &qd, &qdd)?)),
         }
@@ -609,6 +614,7 @@ fn default_factor(fs_hz: Real, cutoff_hz: Real) -> usize {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_COULOMB_EPS", DEFAULT_COULOMB_EPS)?;
+    m.add("COULOMB_LAWS", LAW_SHAPES.to_vec())?;
     m.add("DEFAULT_TOL", sim::DEFAULT_TOL)?;
     m.add("SIMULATOR_BUILD", sim::simulator_build())?;
     m.add("TERM_KINDS", model::TERM_KINDS.to_vec())?;

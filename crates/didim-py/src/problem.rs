@@ -191,9 +191,9 @@ fn sim_dict<'py>(py: Python<'py>, out: SimOutput) -> PyResult<Bound<'py, PyDict>
 #[pymethods]
 impl Problem {
     #[new]
-    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), force_lag=Real(0.0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, integrator="exponential", tol=Real(sim::DEFAULT_TOL), terms=None, backlash_gap=None, lead=Whole::new(0)))]
+    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), force_lag=Real(0.0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, integrator="exponential", tol=Real(sim::DEFAULT_TOL), terms=None, backlash_gap=None, lead=Whole::new(0), coulomb_law="algebraic"))]
     #[pyo3(
-        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, force_lag=0.0, coulomb_eps=..., offset=False, integrator='exponential', tol=..., terms=None, backlash_gap=None, lead=0)"
+        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, force_lag=0.0, coulomb_eps=..., offset=False, integrator='exponential', tol=..., terms=None, backlash_gap=None, lead=0, coulomb_law='algebraic')"
     )]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -215,6 +215,7 @@ impl Problem {
         terms: Option<Terms>,
         backlash_gap: Option<f64>,
         lead: Whole,
+        coulomb_law: &str,
     ) -> PyResult<Self> {
         let terms = terms.unwrap_or_default();
         let gains = reals(gains);
@@ -236,7 +237,7 @@ impl Problem {
         let (model, controller) = quick(py, || {
             opts.validate()?;
             Ok((
-                make_model(model, offset, coulomb_eps, &terms, backlash_gap)?,
+                make_model(model, offset, coulomb_eps, coulomb_law, &terms, backlash_gap)?,
                 make_controller(controller, &gains)?,
             ))
         })?;

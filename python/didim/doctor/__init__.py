@@ -27,7 +27,7 @@ import math
 import os
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -38,11 +38,11 @@ from ..identification import a_priori_mass
 from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
-from ..simulation import SimResult, param_names, simulate
+from ..simulation import SimResult, coulomb_eps_of, param_names, simulate
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNITS, UNNAMED, Candidate, Effect, _g, final_values,
                       separating_experiment)
-from .fit import Data, State, base_columns, refit
+from .fit import Data, State, base_columns, fit_friction_law, refit
 
 #: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
 #: of it (besides being statistically significant). Real friction differs from any smooth law, and at low noise a test
@@ -184,6 +184,13 @@ class Diagnosis:
                      f"{100 * f['valid_force_after']:.2f} %{after.get(valid_name, '') if valid_name else ''}"
                      + (f" (the final model; the last finding below ended at {100 * last:.2f} %, before an earlier "
                         "one's hyper-parameter was chosen again)" if retuned else ""))
+        law = self.base.structure
+        if law is not None and law.coulomb_eps is not None:
+            from .. import units
+
+            how = "fitted with the base model" if self.options.get("coulomb_eps") == "fit" else "given"
+            lines.append(f"friction law through zero speed ({how}): {law.coulomb_law}, smoothing speed "
+                         f"{units.speed(law.coulomb_eps, self.base.axis)}")
         for ld in self.locate.get("lead_in", []):
             lines.append("lead-in: " + lead_in_words(ld))
         for st in self.locate.get("start", []):
@@ -458,13 +465,20 @@ def _check_arguments(recording, model, validate, apM, alpha, max_findings, cutof
     return apM, alpha, max_findings
 
 
-def _base_fit(data: Data, model: str, apM: Optional[float], progress) -> Tuple[State, IdentificationResult]:
+def _base_fit(data: Data, model: str, apM: Optional[float], progress,
+              coulomb_eps: Union[str, float, None] = "fit") -> Tuple[State, IdentificationResult]:
     """The base model fitted by DIDIM on the training part: rigid from the a priori mass, flexible by the paper's
     three steps (all friction on the motor: load friction is one of the effects to name)."""
     m0 = apM if apM is not None else a_priori_mass(data.rec)
     axis = data.rec.axis
+    fit = isinstance(coulomb_eps, str)
+    if fit and coulomb_eps != "fit":
+        raise DataError(f"coulomb_eps must be 'fit', a speed or None, got {coulomb_eps!r}")
+    eps = coulomb_eps_of(data.rec, None if fit else coulomb_eps)
     if model == "rigid":
-        return refit(data, State("rigid", {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}, axis=axis), {}, progress)
+        st, r = refit(data, State("rigid", {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}, axis=axis, coulomb_eps=eps), {},
+                      progress)
+        return fit_friction_law(data, st, progress) if fit else (st, r)
     from ..identification import didim_flexible
 
     fl = didim_flexible(data.rec, m0, variant="paper", reversals="keep")
@@ -481,7 +495,8 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress) -> Tuple[S
         raise BaseFitError(f"no flexible base fit on {data.rec.name or 'the record'}: {fl.message}; diagnose it with "
                            "model='rigid' (command line: --model rigid), which names flexibility when the record "
                            "shows it")
-    return refit(data, State("flexible", dict(fl.params), dict(fl.frozen), axis=axis), {}, progress)
+    st, r = refit(data, State("flexible", dict(fl.params), dict(fl.frozen), axis=axis, coulomb_eps=eps), {}, progress)
+    return fit_friction_law(data, st, progress) if fit else (st, r)
 
 
 class BaseFitError(DidimError):
@@ -663,11 +678,14 @@ def doctor(
     cutoff_hz: float = 40.0,
     holdout: float = 0.3,
     progress: Optional[Callable[[str], None]] = None,
+    coulomb_eps: Union[str, float, None] = "fit",
 ) -> Diagnosis:
     """Diagnoses what the ``model`` ("rigid" or "flexible") misses on ``recording``; ``validate`` is a recording the
     fit does not see (otherwise the last ``holdout`` share of the record is held out). ``alpha`` is the family-wise
     level of the candidate tests and of the held-out confirmation. ``cutoff_hz`` is the decimation cutoff of the fits
-    and of the residual analysis."""
+    and of the residual analysis. ``coulomb_eps``: the Coulomb smoothing speed of the base model (m/s or rad/s),
+    ``"fit"`` (default) to fit it with the base model before any effect is looked for
+    (:func:`didim.doctor.fit.fit_friction_law`), None for didim's default."""
     apM, alpha, max_findings = _check_arguments(recording, model, validate, apM, alpha, max_findings, cutoff_hz,
                                                 holdout, progress)
     t0 = time.perf_counter()
@@ -678,7 +696,7 @@ def doctor(
     data = Data(recording, validate, dec, holdout)
     search = _Search(data, alpha, progress)
     search.say(f"base fit: DIDIM {model}")
-    state, base = _base_fit(data, model, apM, progress)
+    state, base = _base_fit(data, model, apM, progress, coulomb_eps)
     data.settle(state)
     cur: Fitted = (state, *data.errors(state))
     search.history.append(cur)
@@ -716,6 +734,7 @@ def doctor(
                 "start": [x for x in (_start(r, state) for r in (recording, validate) if r is not None) if x],
                 "lead_in": [x for x in (_lead_in(r) for r in (recording, validate) if r is not None) if x]},
         options=dict(alpha=alpha, max_findings=max_findings, cutoff_hz=cutoff_hz, holdout=None if validate else holdout,
+                     coulomb_eps=coulomb_eps,
                      _valid_record=(validate.name or "validation recording") if validate is not None else None,
                      validation=(validate.name or "validation recording") if validate else
                      f"last {int(100 * holdout)} % of the record"),

@@ -138,10 +138,10 @@ FRICTION_SHAPE_FACTOR = 10.0
 STRIBECK_DEFICIT = ("Friction is lower at low speed than the Coulomb-plus-viscous law says and recovers as the speed "
                     "grows: a low-speed friction deficit (lubricant, preload or seal behaviour that no smooth Coulomb "
                     "law captures); modelled by the Stribeck shape with the opposite sign.")
-FRICTION_SHAPE = ("Friction reaches its Coulomb level at lower speed than the model's smoothed sign v/sqrt(v² + ε²) "
-                  "(ε = 0.1 mm/s by default): the shape of the friction law through zero speed (a sharper transition, "
-                  "or sticking), not necessarily a Stribeck effect; modelled by a Stribeck term at that low speed, or "
-                  "by a smaller coulomb_eps.")
+FRICTION_SHAPE = ("Friction changes within a few smoothing speeds of rest in a way the model's Coulomb law (its "
+                  "shape and smoothing speed ε, fitted with the base model) does not follow: the shape of the friction "
+                  "law through zero speed (a sharper or softer transition, or sticking), not a Stribeck effect nor "
+                  "wear; modelled by a Stribeck term at that low speed.")
 
 
 def _stribeck_grid(sim: SimResult) -> np.ndarray:

@@ -3,6 +3,7 @@ refit every effect uses."""
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, replace
 from typing import Any, Dict, List, Optional, Sequence, Tuple
@@ -14,7 +15,7 @@ from ..identification import didim_iterate
 from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
-from ..simulation import SimResult, Term, param_names, simulate
+from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, param_names, simulate
 
 
 @dataclass
@@ -31,12 +32,14 @@ class State:
     force_lag: float = 0.0
     #: The Coulomb smoothing speed (m/s or rad/s): part of the base model, fitted before any effect is looked for.
     coulomb_eps: Optional[float] = None
+    #: The shape of that law (one of ``didim.simulation.COULOMB_LAWS``), fitted with it.
+    coulomb_law: str = "algebraic"
     #: "linear" or "rotary": the units the words say.
     axis: str = "linear"
 
     def sim_kwargs(self) -> Dict[str, Any]:
         return dict(offset=self.offset, terms=self.terms, backlash_gap=self.backlash_gap, delay=self.delay,
-                    force_lag=self.force_lag, coulomb_eps=self.coulomb_eps)
+                    force_lag=self.force_lag, coulomb_eps=self.coulomb_eps, coulomb_law=self.coulomb_law)
 
     def all_params(self) -> Dict[str, float]:
         return {**self.frozen, **self.params}
@@ -46,7 +49,13 @@ class State:
         from ..model import Model
 
         return Model(self.model, offset=self.offset, terms=self.terms, delay=self.delay,
-                     backlash_gap=self.backlash_gap, force_lag=self.force_lag, coulomb_eps=self.coulomb_eps)
+                     backlash_gap=self.backlash_gap, force_lag=self.force_lag, coulomb_eps=self.coulomb_eps,
+                     coulomb_law=self.coulomb_law)
+
+    def law(self) -> Dict[str, Any]:
+        """The friction law's keywords for the core's regressor (the simulator's, so that both agree)."""
+        return dict(coulomb_eps=DEFAULT_COULOMB_EPS if self.coulomb_eps is None else self.coulomb_eps,
+                    coulomb_law=self.coulomb_law)
 
     def coulomb(self) -> float:
         """The Coulomb friction on the motor side (Fc or Fc1)."""
@@ -152,6 +161,7 @@ def refit(data: Data, state: State, init: Dict[str, float], progress) -> Tuple[S
     # every sample: the effects the doctor looks for (Stribeck, backlash, ...) live around reversals and stops
     r = didim_iterate(data.rec, state.model, free_init, frozen=state.frozen, decimation=data.dec, tol=1e-4,
                       max_iter=30, fit_samples=data.n_train, reversals="keep", **state.sim_kwargs())
+    r.set_axis(state.axis)
     return replace(state, params=dict(r.params)), r
 
 
@@ -185,7 +195,8 @@ def motor_columns_many(state: State, sim: SimResult, groups: Sequence[Sequence[T
     of every group are computed together, each exactly as alone (a term's column depends on that term only)."""
     extra = [Term(f"{t.name}_{i}", t.kind, t.hyper, t.dof, t.width) for i, g in enumerate(groups) for t in g]
     w = _core.regressor(state.model, sim.q, sim.qd, sim.qdd, offset=state.offset,
-                        terms=[t.spec() for t in (*state.terms, *extra)], backlash_gap=state.backlash_gap)
+                        terms=[t.spec() for t in (*state.terms, *extra)], backlash_gap=state.backlash_gap,
+                        **state.law())
     cols = w[0][:, w.shape[2] - len(extra):]
     ends = np.cumsum([len(g) for g in groups])
     return [cols[:, e - len(g):e] for g, e in zip(groups, ends)]
@@ -194,7 +205,8 @@ def motor_columns_many(state: State, sim: SimResult, groups: Sequence[Sequence[T
 def base_columns(state: State, sim: SimResult) -> np.ndarray:
     """Columns of the motor-row regressor of the state's free parameters."""
     w = _core.regressor(state.model, sim.q, sim.qd, sim.qdd, offset=state.offset,
-                        terms=[t.spec() for t in state.terms] or None, backlash_gap=state.backlash_gap)
+                        terms=[t.spec() for t in state.terms] or None, backlash_gap=state.backlash_gap,
+                        **state.law())
     names = param_names(state.model, state.offset, state.terms)
     keep = [i for i, n in enumerate(names) if n not in state.frozen]
     return w[0][:, keep]
@@ -202,44 +214,71 @@ def base_columns(state: State, sim: SimResult) -> np.ndarray:
 
 #: The Coulomb smoothing speeds the base fit tries, as fractions of the record's speed scale
 #: (:attr:`Recording.speed_scale`): from far sharper than any encoder resolves to a law that bends over a percent
-#: of the top speed, a factor of √10 apart, then refined at the vertex of a parabola in log ε.
+#: of the top speed, a factor of √10 apart.
 EPS_GRID_REL = tuple(float(x) for x in np.geomspace(1e-6, 1e-2, 9))
 
 
+#: The precision of the fitted smoothing speed, as a relative step (the criterion is sharp in ε: on the truthbench's
+#: portal axis the output error doubles between 0.6 and 1 times the best ε).
+EPS_XTOL = 0.01
+
+
 def fit_friction_law(data: Data, state: State, progress) -> Tuple[State, IdentificationResult]:
-    """The base model's friction law through zero speed: the Coulomb smoothing speed ε of ``v/sqrt(v² + ε²)``
-    chosen by closed-loop DIDIM refits on the training samples (lowest decimated output error). Real friction's shape
-    through zero speed is not known in advance (another smoothing, sticking): an ε fixed in m/s is a hidden scale
-    that a rotary axis or a record in mm reads as another law, and whatever it misses shows up as a "low-speed
-    effect" that is only the law's shape."""
+    """The base model's friction law through zero speed, fitted before any effect is looked for: the shape of the
+    Coulomb sign (``COULOMB_LAWS``: algebraic ``v/sqrt(v² + ε²)``, tanh, atan, exp, each with the slope 1/ε at rest)
+    and its transition speed ε, chosen by closed-loop DIDIM refits on the training samples (lowest decimated output
+    error). Real friction's shape through zero speed is not known in advance (another smoothing, sticking): an ε fixed
+    in m/s is a hidden scale that a rotary axis or a record in mm reads as another law, and whatever the law misses
+    shows up as a "low-speed effect" that is only the law's shape.
+
+    The search: ε on ``EPS_GRID_REL`` with the algebraic law brackets the optimum; then, for each shape, a bounded
+    scalar search in log ε within that bracket (to ``EPS_XTOL``), the shapes in parallel."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from scipy.optimize import minimize_scalar
+
     from .._errors import DidimError
+    from ..simulation import COULOMB_LAWS
 
     scale = data.rec.speed_scale
     say = progress or (lambda s: None)
-    say("friction law: fitting the Coulomb smoothing speed")
-    tried: Dict[float, Tuple[State, IdentificationResult]] = {}
+    say("friction law: fitting the Coulomb law's shape and smoothing speed")
 
-    def run(rels: Sequence[float]) -> None:
-        jobs = [(replace(state, coulomb_eps=rel * scale), {}) for rel in rels]
-        for rel, got in zip(rels, refit_each(data, jobs, progress)):
-            if not isinstance(got, DidimError) and np.isfinite(got[1].output_error):
-                tried[rel] = got
+    def fit(st: State, law: str, rel: float):
+        try:
+            got = refit(data, replace(st, coulomb_law=law, coulomb_eps=rel * scale), {}, progress)
+        except DidimError:
+            return None
+        return got if np.isfinite(got[1].output_error) else None
 
-    run(EPS_GRID_REL)
-    if not tried:  # keep the law the base model came with
+    grid = [(rel, fit(state, "algebraic", rel)) for rel in EPS_GRID_REL]
+    grid = [(rel, g) for rel, g in grid if g is not None]
+    if not grid:  # keep the law the base model came with
         return refit(data, state, {}, progress)
-    rels = sorted(tried)
-    k = min(range(len(rels)), key=lambda i: tried[rels[i]][1].output_error)
-    if 0 < k < len(rels) - 1:
-        x = np.log([rels[k - 1], rels[k], rels[k + 1]])
-        y = [tried[rels[i]][1].output_error for i in (k - 1, k, k + 1)]
-        a, b, _ = np.polyfit(x, y, 2)
-        if a > 0:
-            vertex = float(np.exp(-b / (2 * a)))
-            if rels[k - 1] < vertex < rels[k + 1]:
-                run([vertex])
-    best = min(tried, key=lambda rel: tried[rel][1].output_error)
-    st, r = tried[best]
-    say(f"friction law: Coulomb smoothing speed {best:.2g} of the top speed (output error "
-        f"{100 * r.output_error:.2f} %)")
-    return st, r
+    k = min(range(len(grid)), key=lambda i: grid[i][1][1].output_error)
+    lo = grid[max(k - 1, 0)][0] if k > 0 else grid[k][0] / 3
+    hi = grid[min(k + 1, len(grid) - 1)][0] if k < len(grid) - 1 else grid[k][0] * 3
+    start = grid[k][1][0]
+
+    def line(law: str):
+        best: Dict[str, Any] = {}
+
+        def f(x: float) -> float:
+            got = fit(best.get("state", start), law, math.exp(x))
+            if got is None:
+                return math.inf
+            if got[1].output_error < best.get("err", math.inf):
+                best.update(err=got[1].output_error, state=got[0], result=got[1], rel=math.exp(x))
+            return got[1].output_error
+
+        minimize_scalar(f, bounds=(math.log(lo), math.log(hi)), method="bounded", options=dict(xatol=EPS_XTOL))
+        return law, best
+
+    with ThreadPoolExecutor(max(1, min(len(COULOMB_LAWS), os.cpu_count() or 1))) as pool:
+        lines = [b for b in pool.map(line, COULOMB_LAWS) if b[1]]
+    if not lines:
+        return grid[k][1]
+    law, best = min(lines, key=lambda b: b[1]["err"])
+    say(f"friction law: {law}, Coulomb smoothing speed {best['rel']:.3g} of the top speed (output error "
+        f"{100 * best['err']:.2f} %)")
+    return best["state"], best["result"]

@@ -33,7 +33,7 @@ use super::driver::{CommandSens, Stepper, Tangent, V};
 use super::SimOptions;
 use crate::controller::TransferFunction;
 use crate::error::{filled, invalid, Error, Result};
-use crate::model::{Basis, Model};
+use crate::model::{Basis, FrictionLaw, Model};
 use nalgebra::{DMatrix, SMatrix};
 
 type Mat<const N: usize> = SMatrix<f64, N, N>;
@@ -91,7 +91,7 @@ pub(super) struct Plant<const N: usize> {
     pub a0: V<N>,
     /// The non-affine, non-inertial terms, each ready to add its acceleration.
     terms: Vec<GTerm<N>>,
-    pub eps: f64,
+    pub law: FrictionLaw,
     pub dt: f64,
     /// Absolute position tolerance of one step (m).
     pub atol: f64,
@@ -109,7 +109,7 @@ pub(super) struct Plant<const N: usize> {
 impl<const N: usize> Plant<N> {
     pub fn new(model: &Model<N>, chi: &[f64], dt: f64, atol: f64) -> Result<Self> {
         let inv_mass = model.masses(chi).map(|m| 1.0 / m);
-        let eps = model.coulomb_eps();
+        let law = model.law();
         let zero = V::<N>::zeros();
         let affine: Vec<(Basis, f64)> = model
             .basis()
@@ -137,7 +137,7 @@ impl<const N: usize> Plant<N> {
         let force = |q: &V<N>, v: &V<N>| {
             let mut f = V::<N>::zeros();
             for (b, x) in &affine {
-                b.accumulate(*x, q, v, &zero, eps, &mut f);
+                b.accumulate(*x, q, v, &zero, law, &mut f);
             }
             f
         };
@@ -161,7 +161,7 @@ impl<const N: usize> Plant<N> {
             av,
             a0,
             terms,
-            eps,
+            law,
             dt,
             atol,
             levels: vec![None; MAX_LEVEL + 2],
@@ -272,7 +272,7 @@ impl<const N: usize> Plant<N> {
         let mut g = V::<N>::zeros();
         for t in &self.terms {
             let (x, xd) = t.basis.coordinates(q, v);
-            g += t.dir * t.basis.local(x, xd, self.eps).0;
+            g += t.dir * t.basis.local(x, xd, self.law).0;
         }
         g.component_mul(&self.inv_mass)
     }
@@ -285,7 +285,7 @@ impl<const N: usize> Plant<N> {
         let mut dv = Mat::<N>::zeros();
         for t in &self.terms {
             let (x, xd) = t.basis.coordinates(q, v);
-            let (phi, px, pv) = t.basis.local(x, xd, self.eps);
+            let (phi, px, pv) = t.basis.local(x, xd, self.law);
             g += t.dir * phi;
             dq += t.outer * px;
             dv += t.outer * pv;
@@ -823,7 +823,7 @@ impl<const N: usize> Sens<N> {
                 Role::Affine(_) => zero,
                 Role::Nonlinear(b) => {
                     let mut f = V::<N>::zeros();
-                    b.accumulate(1.0, q, v, &zero, plant.eps, &mut f);
+                    b.accumulate(1.0, q, v, &zero, plant.law, &mut f);
                     -f.component_mul(&plant.inv_mass)
                 }
             };
@@ -867,7 +867,7 @@ impl<const N: usize> Tangent<N, Exponential<N>> for Sens<N> {
                 Role::Affine(b) => {
                     let force = |q: &V<N>, v: &V<N>| {
                         let mut f = V::<N>::zeros();
-                        b.accumulate(1.0, q, v, &zero, plant.eps, &mut f);
+                        b.accumulate(1.0, q, v, &zero, plant.law, &mut f);
                         f
                     };
                     let c = force(&zero, &zero);
