@@ -87,3 +87,15 @@ def cut_log(rec, i0: int, name: str = "cut log"):
 
     return didim.Recording(dt=rec.dt, qr=rec.qr[i0:], force=rec.force[i0:], qm=rec.qm[i0:], controller=rec.controller,
                            position_resolution=rec.position_resolution, name=name)
+
+
+def resolved(model, rec, coulomb_eps=None):
+    """``model`` as a result identified on ``rec`` carries it: a Coulomb smoothing left to the record resolved to the
+    record's (``didim.simulation.default_coulomb_eps``), or to ``coulomb_eps`` when the method was given one."""
+    import dataclasses
+
+    from didim.simulation import default_coulomb_eps
+
+    if model.coulomb_eps is not None:
+        return model
+    return dataclasses.replace(model, coulomb_eps=default_coulomb_eps(rec) if coulomb_eps is None else coulomb_eps)

@@ -197,6 +197,8 @@ def test_a_start_whose_gap_grows_after_the_first_sample_is_found(truthbench):
         late = didim.identify(cut, "rigid")
         d = didim.doctor(cut, "rigid")
     assert late.converged and abs(late.params["M"] / whole.params["M"] - 1) < 0.005, (late.params, whole.params)
-    assert 0.1 < late.start_s < 0.4 and late.force_error_after_start < 0.03, late
+    # after its start the cut log is explained as the whole log is (2.1 %); the start's last samples still carry some
+    # of the transient (a start found 3 samples earlier adds 0.9 point), hence the margin
+    assert 0.1 < late.start_s < 0.4 and late.force_error_after_start < 1.5 * whole.force_error, (late, whole)
     assert [f.effect for f in d.findings if f.effect == "flexibility"] == [], d.summary()
     assert d.locate["start"] and abs(d.base.params["M"] / whole.params["M"] - 1) < 0.02, d.base.params

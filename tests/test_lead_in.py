@@ -188,7 +188,8 @@ def test_a_pi_cascade_log_cut_in_its_acceleration_fits_as_the_whole_log(ms):
     """The truthbench's drive record (an independent simulator, a PI velocity loop with feedforward and a low-pass,
     truth M 85 kg, Fv 180 N/(m/s), Fc 17 N; the reference rests 0.5 s, then accelerates at 1 m/s²) logged from ``ms``
     ms into the move. Through the lead-in the PI's integrator builds up as it did on the axis: rigid DIDIM gives the
-    whole log's parameters within 0.5 % and its force error within 0.2 point (2.1 %). From rest on the first sample
+    whole log's parameters within three standard errors (0.3–0.7 %) and its force error within 0.2 point (2.1 %).
+    From rest on the first sample
     (lead_in=None) the error is 3.5 % at 10 ms and 32 % at 60 ms (2.7 % and 2.2 % after the start the fits leave
     out), with M 1.5 % low at 10 ms."""
     from conftest import TRUTHBENCH_DIR
@@ -204,8 +205,8 @@ def test_a_pi_cascade_log_cut_in_its_acceleration_fits_as_the_whole_log(ms):
         warnings.simplefilter("ignore", didim.DidimWarning)
         whole = didim.identify(rec, "rigid")
         led = didim.identify(cut, "rigid")
-    for k in ("M", "Fv", "Fc"):
-        assert abs(led.params[k] / whole.params[k] - 1) < 0.005, (k, led.params, whole.params)
+    for k in ("M", "Fv", "Fc"):  # the two estimates share most of their data: 3 σ of one bounds their difference
+        assert abs(led.params[k] - whole.params[k]) < 3 * whole.std[k], (k, led.params, whole.params, whole.std)
     assert abs(led.force_error - whole.force_error) < 0.002, (led.force_error, whole.force_error)
 
 

@@ -16,6 +16,7 @@ import pytest
 
 import didim
 from didim.controllers import in_units
+from didim.doctor.fit import EPS_XTOL
 from didim.units import Units, parse
 
 from conftest import TRUTHBENCH_DIR
@@ -100,3 +101,40 @@ def test_a_rotary_result_prints_rotary_units(wrist):
     assert r.units == {"M": "kg·m²", "Fv": "N·m·s/rad", "Fc": "N·m"}
     assert "M (kg·m²)" in r.summary()
     assert didim.IdentificationResult.from_dict(r.to_dict()).units == r.units  # a saved result keeps them
+
+
+@needs_axes
+@pytest.mark.parametrize("s", SCALES)
+def test_rigid_didim_gives_the_same_parameters_in_any_unit(wrist, s):
+    """Scaling the positions by s (controller scaled back, units not declared) scales M and Fv by 1/s and leaves Fc:
+    the same identified parameters after conversion, to 1e-6 (the records agree to rounding), in the same number of
+    iterations and simulations, with the Coulomb smoothing speed scaled by s (it is a fraction of the speed scale)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        r0 = didim.identify(wrist, "rigid", "didim")
+        r = didim.identify(_scaled(wrist, s), "rigid", "didim")
+    assert r.iterations == r0.iterations and r.simulations == r0.simulations
+    assert r.params["M"] * s == pytest.approx(r0.params["M"], rel=1e-6)
+    assert r.params["Fv"] * s == pytest.approx(r0.params["Fv"], rel=1e-6)
+    assert r.params["Fc"] == pytest.approx(r0.params["Fc"], rel=1e-6)
+    assert r.structure.coulomb_eps / s == pytest.approx(r0.structure.coulomb_eps, rel=1e-12)
+    # the full-rate force error runs through the encoder quantizer, where a rounding difference of the scaled positions
+    # can flip one count somewhere: a count flip moves the error by far less than 1e-3 of itself on 8000 samples
+    assert r.force_error == pytest.approx(r0.force_error, rel=1e-3)
+
+
+@needs_axes
+@pytest.mark.parametrize("s", (1e-3, 180 / math.pi, 2**17 / (2 * math.pi)))
+def test_the_doctor_gives_the_same_findings_and_law_in_any_unit(wrist, s):
+    """Same fitted friction law (its shape, and its smoothing speed scaled), same findings, same errors."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        d0 = didim.doctor(wrist, "rigid")
+        d = didim.doctor(_scaled(wrist, s), "rigid")
+    assert [f.effect for f in d.findings] == [f.effect for f in d0.findings]
+    law, law0 = d.final_result.structure, d0.final_result.structure
+    assert law.coulomb_law == law0.coulomb_law
+    # the smoothing speed is searched to EPS_XTOL (in log ε) near a flat optimum: the records' rounding may end the
+    # search elsewhere within a few of it
+    assert law.coulomb_eps / s == pytest.approx(law0.coulomb_eps, rel=3 * EPS_XTOL)
+    assert d.fit["valid_force_after"] == pytest.approx(d0.fit["valid_force_after"], rel=1e-3)  # quantizer, as above

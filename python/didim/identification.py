@@ -62,14 +62,15 @@ def _check_spline_cover(rec: Recording, terms, free: Sequence[str]) -> None:
     if not coulomb:
         return
     q = np.asarray(rec.qm, dtype=float)
-    for side in ("fwd", "bwd"):
-        spl = [t for t in terms or () if t.kind == f"coulomb_spline_{side}"]
+    for side, kind in (("forward", "coulomb_spline_fwd"), ("backward", "coulomb_spline_bwd"),
+                       ("both-direction", "coulomb_spline")):
+        spl = [t for t in terms or () if t.kind == kind]
         if not spl:
             continue
         total = sum(cubic_bspline((q - t.hyper) / t.width) for t in spl)
         if np.min(total) > 0.999:
             raise IdentifiabilityError(
-                f"the {'forward' if side == 'fwd' else 'backward'} friction splines ({', '.join(t.name for t in spl)}) "
+                f"the {side} friction splines ({', '.join(t.name for t in spl)}) "
                 f"cover the whole recorded stroke and sum to 1 there, so they equal that direction's part of the "
                 f"Coulomb sign, which {coulomb[0]} already is" + SPLINE_HINT)
 

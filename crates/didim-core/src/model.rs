@@ -41,6 +41,7 @@ pub const TERM_KINDS: &[&str] = &[
     "coulomb_ripple_cos",
     "coulomb_spline_fwd",
     "coulomb_spline_bwd",
+    "coulomb_spline",
     "damper",
 ];
 
@@ -223,7 +224,10 @@ impl FrictionLaw {
             LawShape::Atan => {
                 let k = std::f64::consts::FRAC_PI_2 / eps;
                 let x = k * v;
-                (std::f64::consts::FRAC_2_PI * x.atan(), 1.0 / (eps * (1.0 + x * x)))
+                (
+                    std::f64::consts::FRAC_2_PI * x.atan(),
+                    1.0 / (eps * (1.0 + x * x)),
+                )
             }
             LawShape::Exp => {
                 let e = (-(v.abs() / eps)).exp();
@@ -283,12 +287,13 @@ pub enum Basis {
     /// −1 moving backward, summing to `s`, smooth through rest. A set of them is a smooth friction
     /// profile along the stroke for each direction, each parameter the friction added near
     /// its knot (a tight or worn zone of a guide, a preload that changes along a screw, seen
-    /// differently going forward and backward).
+    /// differently going forward and backward). `side`: 1 forward, −1 backward, 0 both
+    /// directions alike (`σ = s`: one profile against the motion whichever way it goes).
     CoulombSpline {
         dof: usize,
         center: f64,
         width: f64,
-        forward: bool,
+        side: i8,
     },
     /// Damper in parallel with the spring between dofs `a` and `b` (N/(m/s)):
     /// `φ_a = q̇_a − q̇_b`, `φ_b = q̇_b − q̇_a` (coupling damping of a flexible joint).
@@ -388,11 +393,15 @@ impl Basis {
                     0.0
                 },
             },
-            "coulomb_spline_fwd" | "coulomb_spline_bwd" => Basis::CoulombSpline {
+            "coulomb_spline_fwd" | "coulomb_spline_bwd" | "coulomb_spline" => Basis::CoulombSpline {
                 dof,
                 center: hyper,
                 width,
-                forward: kind == "coulomb_spline_fwd",
+                side: match kind {
+                    "coulomb_spline_fwd" => 1,
+                    "coulomb_spline_bwd" => -1,
+                    _ => 0,
+                },
             },
             "damper" => Basis::Damper { a: MOTOR, b: LOAD },
             other => {
@@ -476,18 +485,18 @@ impl Basis {
                 (s * sn, s * w * cs, ds * sn)
             }
             Basis::CoulombSpline {
-                center,
-                width,
-                forward,
-                ..
+                center, width, side, ..
             } => {
                 let (b, db) = cubic_bspline((x - center) / width);
                 let (s, ds) = law.sign_and_derivative(xd);
                 // the forward or backward part of the sign, s(1 ± s)/2: 1 or 0 (−1 or 0) away from rest, the two
-                // summing to s, and as smooth as s (max(s, 0) would kink the dynamics at every reversal)
-                let side = if forward { 1.0 } else { -1.0 };
-                let sigma = 0.5 * s * (1.0 + side * s);
-                let dsigma = 0.5 * ds * (1.0 + 2.0 * side * s);
+                // summing to s, and as smooth as s (max(s, 0) would kink the dynamics at every reversal); both: s
+                let (sigma, dsigma) = if side == 0 {
+                    (s, ds)
+                } else {
+                    let side = f64::from(side);
+                    (0.5 * s * (1.0 + side * s), 0.5 * ds * (1.0 + 2.0 * side * s))
+                };
                 (b * sigma, db / width * sigma, b * dsigma)
             }
             Basis::Backlash { gap, .. } => {
@@ -970,9 +979,11 @@ mod tests {
         }
         assert!((cubic_bspline(0.0).0 - 2.0 / 3.0).abs() < 1e-15);
         let eps = 1e-4;
-        let (fwd, bwd) = (
+        let law = FrictionLaw::algebraic(eps);
+        let (fwd, bwd, both) = (
             Basis::from_kind("coulomb_spline_fwd", 0.05, 0.03, MOTOR).unwrap(),
             Basis::from_kind("coulomb_spline_bwd", 0.05, 0.03, MOTOR).unwrap(),
+            Basis::from_kind("coulomb_spline", 0.05, 0.03, MOTOR).unwrap(),
         );
         for (x, v) in [
             (0.05, 0.02),
@@ -981,8 +992,13 @@ mod tests {
             (0.11, -2e-4),
             (0.2, 0.1),
         ] {
-            let (pf, xf, vf) = fwd.local(x, v, eps);
-            let (pb, xb, vb) = bwd.local(x, v, eps);
+            let (pf, xf, vf) = fwd.local(x, v, law);
+            let (pb, xb, vb) = bwd.local(x, v, law);
+            // the profile of both directions is their sum, derivatives included
+            let (p2, x2, v2) = both.local(x, v, law);
+            assert!(
+                (p2 - pf - pb).abs() < 1e-15 && (x2 - xf - xb).abs() < 1e-12 && (v2 - vf - vb).abs() < 1e-9
+            );
             // forward and backward together are the whole Coulomb sign times the spline
             let whole = cubic_bspline((x - 0.05) / 0.03).0 * coulomb_sign(v, eps);
             assert!((pf + pb - whole).abs() < 1e-15);
@@ -994,8 +1010,8 @@ mod tests {
             // partial derivatives against central differences
             let (hx, hv) = (1e-7, 1e-9);
             for (b, px, pv) in [(fwd, xf, vf), (bwd, xb, vb)] {
-                let fx = (b.local(x + hx, v, eps).0 - b.local(x - hx, v, eps).0) / (2.0 * hx);
-                let fv = (b.local(x, v + hv, eps).0 - b.local(x, v - hv, eps).0) / (2.0 * hv);
+                let fx = (b.local(x + hx, v, law).0 - b.local(x - hx, v, law).0) / (2.0 * hx);
+                let fv = (b.local(x, v + hv, law).0 - b.local(x, v - hv, law).0) / (2.0 * hv);
                 assert!((fx - px).abs() < 1e-6 * (1.0 + px.abs()), "{x} {v}: {fx} vs {px}");
                 assert!((fv - pv).abs() < 1e-4 * (1.0 + pv.abs()), "{x} {v}: {fv} vs {pv}");
             }
@@ -1005,6 +1021,47 @@ mod tests {
             .check()
             .unwrap_err();
         assert!(e.to_string().contains("knot spacing width > 0"), "{e}");
+    }
+
+    #[test]
+    fn every_friction_law_is_odd_saturating_with_slope_one_over_eps_and_its_derivative() {
+        let eps = 2e-3;
+        for name in LAW_SHAPES {
+            let shape = LawShape::from_name(name).unwrap();
+            assert_eq!(shape.name(), *name);
+            let law = FrictionLaw { shape, eps };
+            // slope 1/eps at rest
+            let h = 1e-9;
+            let slope = (law.sign(h) - law.sign(-h)) / (2.0 * h);
+            assert!((slope * eps - 1.0).abs() < 1e-6, "{name}: {slope}");
+            for v in [
+                -5.0,
+                -0.3,
+                -4e-3,
+                -1e-4,
+                0.0,
+                2e-5,
+                1e-3,
+                0.02,
+                7.0,
+                f64::INFINITY,
+            ] {
+                let (s, ds) = law.sign_and_derivative(v);
+                assert!((law.sign(-v) + s).abs() < 1e-15, "{name} odd at {v}");
+                assert!(s.abs() <= 1.0 && ds >= 0.0, "{name} at {v}: {s} {ds}");
+                if v.is_finite() && v != 0.0 {
+                    let hv = 1e-7 * v.abs().max(eps);
+                    let fd = (law.sign(v + hv) - law.sign(v - hv)) / (2.0 * hv);
+                    assert!(
+                        (fd - ds).abs() <= 1e-5 * (1.0 / eps),
+                        "{name} at {v}: {fd} vs {ds}"
+                    );
+                }
+            }
+            assert!(law.sign(1e3 * eps) > 0.99, "{name} saturates");
+            assert_eq!(FrictionLaw { shape, eps: 0.0 }.sign(-3.0), -1.0);
+        }
+        assert!(LawShape::from_name("linear").is_err());
     }
 
     #[test]

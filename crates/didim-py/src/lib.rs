@@ -208,7 +208,9 @@ fn make_model(
                 ));
             }
             Ok(AnyModel::Rigid(
-                model::rigid(offset, coulomb_eps)?.with_terms(extra)?.with_law_shape(shape),
+                model::rigid(offset, coulomb_eps)?
+                    .with_terms(extra)?
+                    .with_law_shape(shape),
             ))
         }
         "flexible" => {
@@ -356,7 +358,14 @@ fn param_units(
 ) -> PyResult<Vec<&'static str>> {
     let terms = terms.unwrap_or_default();
     let m = quick(py, || {
-        make_model(model, offset, DEFAULT_COULOMB_EPS, "algebraic", &terms, backlash_gap)
+        make_model(
+            model,
+            offset,
+            DEFAULT_COULOMB_EPS,
+            "algebraic",
+            &terms,
+            backlash_gap,
+        )
     })?;
     Ok(match m {
         AnyModel::Rigid(m) => m.units(),

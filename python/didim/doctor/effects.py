@@ -336,26 +336,31 @@ PERIOD_NOTE_SHIFT_DEG = 45.0
 SPLINE_INTERVALS = (2, 3, 5, 8)
 
 
-def _spline_terms(lo: float, w: float, intervals: int) -> List[Term]:
-    """The friction splines of a profile with knots ``lo + j·w``, j = −1 … intervals + 1, forward and backward; the
-    last knot of each direction is left out: the splines sum to 1, which the Coulomb friction already is."""
+def _spline_terms(lo: float, w: float, intervals: int, per_direction: bool = True) -> List[Term]:
+    """The friction splines of a profile with knots ``lo + j·w``, j = −1 … intervals + 1, forward and backward (or,
+    not ``per_direction``, one profile for both directions); the last knot of each is left out: the splines sum to 1,
+    which the Coulomb friction already is."""
+    if not per_direction:
+        return [Term(f"Fcz{j + 1}", "coulomb_spline", lo + j * w, width=w) for j in range(-1, intervals + 1)]
     return [Term(f"Fc{d[0]}{j + 1}", f"coulomb_spline_{d}", lo + j * w, width=w)
             for d in ("fwd", "bwd") for j in range(-1, intervals + 1)]
 
 
 def _spline_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
-    """Profiles per direction, once the model has direction-dependent Coulomb friction: a profile per direction also
-    spans (nearly) a constant per direction, so offered first it takes the simpler effect's credit and its many
-    parameters generalise worse (on the EMPS: 4.67 % held-out error against 4.55 % without any profile)."""
-    if any(t.kind.startswith("coulomb_spline") for t in state.terms) or not any(
-            t.kind == "abs_coulomb" for t in state.terms):
+    """Friction profiles along the stroke: one for both directions (a tight or worn zone of a guide felt whichever way
+    the axis moves), or, once the model has direction-dependent Coulomb friction, one per direction: a profile per
+    direction also spans (nearly) a constant per direction, so offered first it takes the simpler effect's credit and
+    its many parameters generalise worse (on the EMPS: 4.67 % held-out error against 4.55 % without any profile)."""
+    if any(t.kind.startswith("coulomb_spline") for t in state.terms):
         return []
+    per_direction = any(t.kind == "abs_coulomb" for t in state.terms)
     q = sim.q[0][: data.n_train]
     lo, stroke = float(np.min(q)), float(np.ptp(q))
     if not stroke > 0:
         return []
-    groups = [_spline_terms(lo, stroke / m, m) for m in SPLINE_INTERVALS]
-    return [Candidate("position_dependent_coulomb", x, {"intervals": float(m), "origin": lo, "spacing": stroke / m},
+    groups = [_spline_terms(lo, stroke / m, m, per_direction) for m in SPLINE_INTERVALS]
+    return [Candidate("position_dependent_coulomb", x, {"intervals": float(m), "origin": lo, "spacing": stroke / m,
+                                                         "per_direction": float(per_direction)},
                       len(SPLINE_INTERVALS))
             for m, x in zip(SPLINE_INTERVALS, motor_columns_many(state, sim, groups))]
 
@@ -371,9 +376,9 @@ def spline_profile(state: State, n: int = 201) -> Optional[Dict[str, np.ndarray]
     x = np.linspace(knots[0] + w, knots[-1], n)  # where the splines sum to 1: the stroke
     out = {"q": x}
     for d in ("fwd", "bwd"):
-        b = cubic_bspline((x[:, None] - np.array([t.hyper for t in splines if t.kind.endswith(d)])[None, :]) / w)
-        coef = np.array([state.params[t.name] for t in splines if t.kind.endswith(d)])
-        out[d] = b @ coef
+        mine = [t for t in splines if t.kind.endswith(d) or t.kind == "coulomb_spline"]  # both-direction: each
+        b = cubic_bspline((x[:, None] - np.array([t.hyper for t in mine])[None, :]) / w)
+        out[d] = b @ np.array([state.params[t.name] for t in mine])
     return out
 
 
@@ -389,7 +394,7 @@ def _spline_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
     lo, stroke = c.hyper["origin"], c.hyper["spacing"] * c.hyper["intervals"]
     jobs, spacings = [], []
     for m in SPLINE_INTERVALS:
-        terms = _spline_terms(lo, stroke / m, m)
+        terms = _spline_terms(lo, stroke / m, m, bool(c.hyper.get("per_direction", 1.0)))
         init = ({t.name: float(b) for t, b in zip(terms, c.test.beta)} if m == int(c.hyper["intervals"])
                 else {t.name: 0.0 for t in terms})
         jobs.append((replace(state, terms=state.terms + tuple(terms)), init))
@@ -654,6 +659,12 @@ def _pdc_words(p: Dict[str, float], st: State) -> str:
                 f"{units.force(q[f'spread_{name}'], st.axis)} (most at {units.length(q[f'peak_{name}_at'], st.axis)}: "
                 f"{q[f'peak_{name}']:+.3g} {units.label('N', st.axis)})")
 
+    if not any(t.kind in ("coulomb_spline_fwd", "coulomb_spline_bwd") for t in st.terms):
+        f = units.label("N", st.axis)
+        return (f"Coulomb friction along the stroke, the same both ways: {units.force(q['level_forward'], st.axis)} on "
+                f"average, varying by {units.force(q['spread_forward'], st.axis)} (most at "
+                f"{units.length(q['peak_forward_at'], st.axis)}: {q['peak_forward']:+.3g} {f}; splines "
+                f"{units.length(q['spacing'], st.axis)} apart)")
     return (f"Coulomb friction along the stroke: {side('forward')}; {side('backward')} (a profile per direction, "
             f"splines {units.length(q['spacing'], st.axis)} apart)")
 

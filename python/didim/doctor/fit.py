@@ -220,10 +220,11 @@ EPS_GRID_REL = tuple(float(x) for x in np.geomspace(1e-6, 1e-2, 9))
 
 #: The precision of the fitted smoothing speed, as a relative step (the criterion is sharp in ε: on the truthbench's
 #: portal axis the output error doubles between 0.6 and 1 times the best ε).
-EPS_XTOL = 0.01
+EPS_XTOL = 0.02
 
 
-def fit_friction_law(data: Data, state: State, progress) -> Tuple[State, IdentificationResult]:
+def fit_friction_law(data: Data, state: State, progress, around: Optional[float] = None,
+                     shapes: Optional[Sequence[str]] = None) -> Tuple[State, IdentificationResult]:
     """The base model's friction law through zero speed, fitted before any effect is looked for: the shape of the
     Coulomb sign (``COULOMB_LAWS``: algebraic ``v/sqrt(v² + ε²)``, tanh, atan, exp, each with the slope 1/ε at rest)
     and its transition speed ε, chosen by closed-loop DIDIM refits on the training samples (lowest decimated output
@@ -231,8 +232,9 @@ def fit_friction_law(data: Data, state: State, progress) -> Tuple[State, Identif
     in m/s is a hidden scale that a rotary axis or a record in mm reads as another law, and whatever the law misses
     shows up as a "low-speed effect" that is only the law's shape.
 
-    The search: ε on ``EPS_GRID_REL`` with the algebraic law brackets the optimum; then, for each shape, a bounded
-    scalar search in log ε within that bracket (to ``EPS_XTOL``), the shapes in parallel."""
+    The search: ε on ``EPS_GRID_REL`` with the algebraic law (or the first of ``shapes``) brackets the optimum (or, given ``around``, a smoothing
+    speed in m/s or rad/s, the bracket is √10 either side of it); then, for each shape, a bounded scalar search in
+    log ε within that bracket (to ``EPS_XTOL``), the shapes (``shapes``, all by default) in parallel."""
     from concurrent.futures import ThreadPoolExecutor
 
     from scipy.optimize import minimize_scalar
@@ -251,13 +253,21 @@ def fit_friction_law(data: Data, state: State, progress) -> Tuple[State, Identif
             return None
         return got if np.isfinite(got[1].output_error) else None
 
-    grid = [(rel, fit(state, "algebraic", rel)) for rel in EPS_GRID_REL]
-    grid = [(rel, g) for rel, g in grid if g is not None]
-    if not grid:  # keep the law the base model came with
-        return refit(data, state, {}, progress)
-    k = min(range(len(grid)), key=lambda i: grid[i][1][1].output_error)
-    lo = grid[max(k - 1, 0)][0] if k > 0 else grid[k][0] / 3
-    hi = grid[min(k + 1, len(grid) - 1)][0] if k < len(grid) - 1 else grid[k][0] * 3
+    step = float(EPS_GRID_REL[1] / EPS_GRID_REL[0])
+    if around is not None:
+        here = refit(data, state, {}, progress)
+        grid, k = [(around / scale, here)], 0
+        lo, hi = around / scale / step, around / scale * step
+    else:
+        first = shapes[0] if shapes else "algebraic"
+        jobs = [(replace(state, coulomb_law=first, coulomb_eps=rel * scale), {}) for rel in EPS_GRID_REL]
+        grid = [(rel, g) for rel, g in zip(EPS_GRID_REL, refit_each(data, jobs, progress))
+                if not isinstance(g, DidimError) and np.isfinite(g[1].output_error)]
+        if not grid:  # keep the law the base model came with
+            return refit(data, state, {}, progress)
+        k = min(range(len(grid)), key=lambda i: grid[i][1][1].output_error)
+        lo = grid[k - 1][0] if k > 0 else grid[k][0] / step
+        hi = grid[k + 1][0] if k < len(grid) - 1 else grid[k][0] * step
     start = grid[k][1][0]
 
     def line(law: str):
@@ -274,8 +284,9 @@ def fit_friction_law(data: Data, state: State, progress) -> Tuple[State, Identif
         minimize_scalar(f, bounds=(math.log(lo), math.log(hi)), method="bounded", options=dict(xatol=EPS_XTOL))
         return law, best
 
-    with ThreadPoolExecutor(max(1, min(len(COULOMB_LAWS), os.cpu_count() or 1))) as pool:
-        lines = [b for b in pool.map(line, COULOMB_LAWS) if b[1]]
+    shapes = tuple(shapes or COULOMB_LAWS)
+    with ThreadPoolExecutor(max(1, min(len(shapes), os.cpu_count() or 1))) as pool:
+        lines = [b for b in pool.map(line, shapes) if b[1]]
     if not lines:
         return grid[k][1]
     law, best = min(lines, key=lambda b: b[1]["err"])
