@@ -212,7 +212,7 @@ impl FrictionLaw {
     #[inline(always)]
     pub fn sign_and_derivative(&self, v: f64) -> (f64, f64) {
         let eps = self.eps;
-        if !(eps > 0.0) {
+        if eps.is_nan() || eps <= 0.0 {
             return (coulomb_sign(v, 0.0), 0.0);
         }
         match self.shape {
