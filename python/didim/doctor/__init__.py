@@ -203,6 +203,9 @@ class Diagnosis:
                      PHYSICS["stribeck_deficit"]: " (a low-speed friction deficit)"}.get(x.physics, "")
             text = x.words or x.evidence
             gain = x.held_out()
+            twins = [e for a in self.ambiguities if x.effect in a["effects"] for e in a["effects"] if e != x.effect]
+            if twins:  # the record cannot tell them apart: no pick of one as the physics
+                label += f" or {' or '.join(dict.fromkeys(twins))} (this record cannot tell them apart: see below)"
             lines.append(f"- {x.effect}{label}: {text}" + (f"; {gain}" if gain and x.words else ""))
         accepted = {x.effect for x in self.findings}
         if any(x.effect not in accepted for x in self.rejected):
@@ -644,6 +647,8 @@ class _Search:
                          f"fitted again ({st_alt.coulomb_law}, smoothing speed {st_alt.coulomb_eps:.4g}) predicts the "
                          f"held-out data as well ({100 * self.data.rel(alt[2], False):.2f} %, Diebold-Mariano p = "
                          f"{p_keep:.2g})")
+        old.note = (f"the friction law's shape: the law refitted instead ({st_alt.coulomb_law}) explains it as well "
+                    "on held-out data")
         self.findings.remove(old)
         self.rejected.append(old)
         self.done = [x.effect for x in self.findings]
@@ -684,17 +689,22 @@ class _Search:
             except DidimError:
                 continue
             _, p_keep, _ = diebold_mariano(dropped[2], cur[2])
-            if p_keep >= self.alpha:
+            # kept only while it still matters in practice (as when it was accepted): a later finding can leave an
+            # earlier one significant but negligible (a ripple whose amplitude fell to a few hundredths of a newton)
+            negligible = self.data.rel(cur[2], False) >= (1 - MIN_HELDOUT_GAIN) * self.data.rel(dropped[2], False)
+            if p_keep >= self.alpha or negligible:
                 old.accepted = False
                 old.evidence += (f"; taken out again once {f.effect} was modelled (held-out error without it "
-                                 f"{100 * self.data.rel(dropped[2], False):.2f} %, Diebold-Mariano p = {p_keep:.2g})")
+                                 f"{100 * self.data.rel(dropped[2], False):.2f} % against "
+                                 f"{100 * self.data.rel(cur[2], False):.2f} % with it, Diebold-Mariano p = {p_keep:.2g})")
                 self.findings.remove(old)
                 self.rejected.append(old)
                 cur = dropped
                 self.force_now = self.data.force_errors(cur[0])
                 self.say(f"removed {old.effect}: no longer improves the held-out fit")
-        if self.law_fitted and cur[0].model == "rigid":  # a flexible model keeps its law (see _base_fit)
-            cur = self.refit_law(cur, f)
+        if self.law_fitted:
+            if cur[0].model == "rigid":  # a flexible model keeps its law (see _base_fit) unless a Stribeck term asks
+                cur = self.refit_law(cur, f)
             for old in [x for x in self.findings if x.effect == "stribeck"]:
                 cur = self.law_instead(old, cur)
         for old in [x for x in self.findings[:-1] if REGISTRY[x.effect].retune is not None]:
