@@ -213,6 +213,12 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
             x.force_error = float("nan")
             return x.force_error
         x.force_error = sim.relative_error(recording)
+        band = x.options.get("band_hz")
+        if band and band < 0.5 * recording.fs:
+            from .signal import lowpass
+
+            y, ys = (lowpass(f, band, recording.fs) for f in (recording.force, sim.force))
+            x.force_error_band = float(np.linalg.norm(y - ys) / np.linalg.norm(y))
         k, after = sim.settled(recording)
         if k and np.isfinite(after):
             x.start_s, x.force_error_after_start = k * recording.dt, after

@@ -200,7 +200,7 @@ def idim_ls(
         simulations=0,
         elapsed_s=time.perf_counter() - t0,
         options=dict(lowpass_hz=lowpass_hz, lowpass_order=lowpass_order, padding=padding, border=border,
-                     decimation=dec.describe(), _decimation=dec, sigma=sigma, coulomb_eps=coulomb_eps, zoh_align=zoh_align,
+                     decimation=dec.describe(), band_hz=dec.cutoff_hz, _decimation=dec, sigma=sigma, coulomb_eps=coulomb_eps, zoh_align=zoh_align,
                      terms=[t.spec() for t in terms], condition_number=float(sol["condition_number"])),
         covariance=sol["covariance"],
     )
@@ -549,7 +549,7 @@ def didim_iterate(
         initial={n: float(initial[n]) for n in free},
         frozen=frozen,
         history=history,
-        options=dict(decimation=dec.describe(), tol=tol, substeps=substeps, coulomb_eps=coulomb_eps,
+        options=dict(decimation=dec.describe(), band_hz=dec.cutoff_hz, tol=tol, substeps=substeps, coulomb_eps=coulomb_eps,
                      coulomb_law=coulomb_law, offset=offset,
                      terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, force_lag=force_lag,
                      integrator=integrator,

@@ -79,6 +79,10 @@ class IdentificationResult:
     #: simulation takes to join it, and the force error after that (0 and NaN for a record that starts there).
     start_s: float = 0.0
     force_error_after_start: float = float("nan")
+    #: The closed-loop force error below ``options["band_hz"]``, the band the method fitted in (measured and
+    #: simulated force low-passed alike, zero-phase): on a coarse encoder the full-rate error is mostly encoder-count
+    #: chatter the velocity loop amplifies, which no model reproduces sample by sample (NaN when not computed).
+    force_error_band: float = float("nan")
     #: "linear" (m, N, kg) or "rotary" (rad, N·m, kg·m²): the axis of the record the result was identified on; the
     #: numbers are SI either way, and :attr:`units` names them for this axis.
     axis: str = "linear"
@@ -145,6 +149,7 @@ class IdentificationResult:
             "start_s": self.start_s,
             "force_error_after_start": self.force_error_after_start,
             "axis": self.axis,
+            "force_error_band": self.force_error_band,
         }
         return jsonable(d)
 
@@ -226,7 +231,8 @@ class IdentificationResult:
                 notes=notes, structure=structure, force_error=num(d.get("force_error"), "force_error"),
                 start_s=num(d.get("start_s"), "start_s", 0.0),
                 force_error_after_start=num(d.get("force_error_after_start"), "force_error_after_start"),
-                axis=typed(d.get("axis"), str, "axis", "linear"))
+                axis=typed(d.get("axis"), str, "axis", "linear"),
+                force_error_band=num(d.get("force_error_band"), "force_error_band"))
         if r.axis not in ("linear", "rotary"):
             raise DataError(f"result field 'axis' must be 'linear' or 'rotary', got {r.axis!r}")
         return r
@@ -268,7 +274,12 @@ class IdentificationResult:
         if math.isfinite(self.force_error):
             lines.append(f"closed-loop force error (simulated vs measured, all samples) = {100 * self.force_error:.2f} %"
                          + (f"; {100 * self.force_error_after_start:.2f} % after the first {1e3 * self.start_s:.0f} ms, "
-                            "where the simulation joins a record that began elsewhere than its start" if self.start_s > 0 and math.isfinite(self.force_error_after_start) else ""))
+                            "where the simulation joins a record that began elsewhere than its start" if self.start_s > 0 and math.isfinite(self.force_error_after_start) else "")
+                         + (f"; below {self.options['band_hz']:g} Hz, the band the fit used: "
+                            f"{100 * self.force_error_band:.2f} %"
+                            + (" (the rest is mostly encoder-count chatter above that band, which no model follows "
+                               "sample by sample)" if self.force_error > 2 * self.force_error_band else "")
+                            if math.isfinite(self.force_error_band) and self.options.get("band_hz") else ""))
         if math.isfinite(self.relative_error) and not self.method.startswith("oe-"):  # OE methods fit no regression
             lines.append(f"regression error ‖Y − Wχ‖/‖Y‖ (decimated) = {100 * self.relative_error:.2f} %")
         if math.isfinite(self.output_error):

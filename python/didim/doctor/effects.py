@@ -470,6 +470,18 @@ def _delay_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
     return st, r, {"delay_samples": float(st.delay), "delay_s": st.delay * dt}, {}
 
 
+def _delay_retune(state: State, data: Data, progress) -> Optional[Adopted]:
+    """The delay or force lag chosen again on the current model (the one chosen on an earlier model may have stood
+    in for what a later finding models): the same search as when it was found, on the model without it; training
+    data only; None when it fails."""
+    if not (state.delay or state.force_lag):
+        return None
+    try:
+        return _delay_adopt(None, replace(state, delay=0, force_lag=0.0), data, progress)  # type: ignore[arg-type]
+    except DidimError:
+        return None
+
+
 # ---------------------------------------------------------------------------------------------------- flexibility
 
 
@@ -747,7 +759,7 @@ REGISTRY: Dict[str, Effect] = _registry(
     Effect("delay", "The force is applied later than commanded: a current loop's lag (a first-order lag below a "
            "sample period) or a communication or computation delay (whole samples).", "spectrum", _delay_candidates,
            _delay_adopt, lambda state: replace(state, delay=0, force_lag=0.0),
-           tried_with="flexibility"),
+           tried_with="flexibility", retune=_delay_retune),
     Effect("flexibility", "The drive is not rigid: a flexible coupling (a two-mass model) shows as a resonance that the "
            "rigid model cannot follow.", "spectrum", _flexibility_candidates, _flexibility_adopt,
            confusable={"delay": "excite with a chirp through the expected mode and measure the load position",
