@@ -203,7 +203,8 @@ class Diagnosis:
                      PHYSICS["stribeck_deficit"]: " (a low-speed friction deficit)"}.get(x.physics, "")
             text = x.words or x.evidence
             gain = x.held_out()
-            twins = [e for a in self.ambiguities if x.effect in a["effects"] for e in a["effects"] if e != x.effect]
+            twins = [e for a in self.ambiguities if a.get("equal") and x.effect in a["effects"]
+                     for e in a["effects"] if e != x.effect]
             if twins:  # the record cannot tell them apart: no pick of one as the physics
                 label += f" or {' or '.join(dict.fromkeys(twins))} (this record cannot tell them apart: see below)"
             lines.append(f"- {x.effect}{label}: {text}" + (f"; {gain}" if gain and x.words else ""))
@@ -639,10 +640,11 @@ class _Search:
         try:
             st, _ = refit(self.data, replace(cur[0], coulomb_law="algebraic",
                                              coulomb_eps=default_coulomb_eps(self.data.rec)), {}, self.progress)
+            chosen = {}
             for old in [x for x in self.findings if REGISTRY[x.effect].retune is not None]:
                 got = REGISTRY[old.effect].retune(st, self.data, self.progress)
                 if got is not None:
-                    st = got[0]
+                    st, chosen[id(old)] = got[0], (got[2], got[3])
             st, _ = fit_friction_law(self.data, st, self.progress, shapes=(st.coulomb_law,))
             alt = (st, *self.data.errors(st))
         except DidimError:
@@ -650,8 +652,9 @@ class _Search:
         if self.data.rel(alt[1], True) < (1 - RETUNE_GAIN) * self.data.rel(cur[1], True):
             self.say(f"a second start from the default friction law ends lower: {st.coulomb_law}, smoothing speed "
                      f"{st.coulomb_eps:.4g}")
-            for old in [x for x in self.findings if REGISTRY[x.effect].retune is not None]:
-                old.params.update({k: st.params[k] for k in old.params if k in st.params})
+            for old in self.findings:  # the hyper-parameters chosen again; the final values are read from st
+                if id(old) in chosen:
+                    old.params, old.std = dict(chosen[id(old)][0]), dict(chosen[id(old)][1])
             return alt
         return cur
 
@@ -693,7 +696,9 @@ class _Search:
             res_o = orthogonalize(xo, xc)
             share = 1 - float(np.sum(res_o**2) / max(np.sum(xo**2), 1e-300))
             if share > 0.9:
+                # "equal": the other explains (nearly) as much of the residual, so the record cannot say which it is
                 self.ambiguities.append({"effects": [c.effect, other.effect], "shared_pct": 100 * share,
+                                         "equal": bool(other.test.explained >= 0.9 * c.test.explained),
                                          "experiment": separating_experiment(c.effect, other.effect)})
 
     def accept(self, f: Finding, new: Fitted) -> Fitted:
