@@ -134,7 +134,8 @@ def test_the_doctor_gives_the_same_findings_and_law_in_any_unit(wrist, s):
     assert [f.effect for f in d.findings] == [f.effect for f in d0.findings]
     law, law0 = d.final_result.structure, d0.final_result.structure
     assert law.coulomb_law == law0.coulomb_law
-    # the smoothing speed is searched to EPS_XTOL (in log ε) near a flat optimum: the records' rounding may end the
-    # search elsewhere within a few of it
+    # the smoothing speed is searched to EPS_XTOL (in log ε) near a flat optimum, on simulations through the encoder
+    # quantizer, where the scaled positions' rounding flips a count here and there: the search may end elsewhere
+    # within a few EPS_XTOL, and the final error moves by as much as that law's difference (a few 1e-3 of itself)
     assert law.coulomb_eps / s == pytest.approx(law0.coulomb_eps, rel=3 * EPS_XTOL)
-    assert d.fit["valid_force_after"] == pytest.approx(d0.fit["valid_force_after"], rel=1e-3)  # quantizer, as above
+    assert d.fit["valid_force_after"] == pytest.approx(d0.fit["valid_force_after"], rel=5e-3)

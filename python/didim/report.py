@@ -10,6 +10,8 @@ from typing import Any, Dict
 
 import numpy as np
 
+from . import units
+
 
 def _view(effect: str, where: Dict[str, Any], default: Any = "time") -> Any:
     """The residual view where an effect shows (its registry entry's), else where the finding says it lives."""
@@ -48,6 +50,7 @@ def figure(diag, view: str):
     import matplotlib.pyplot as plt
 
     before, after = diag.locate["before"], diag.locate["after"]
+    axis = diag.final_state.axis
     if view in ("velocity", "position"):
         fig, axes = plt.subplots(1, 2, figsize=(10, 3.4), sharey=True)
         for ax, d in zip(axes, ("forward", "backward")):
@@ -55,16 +58,17 @@ def figure(diag, view: str):
             _binned(ax, after[view][d], "after", "tab:blue")
             ax.axhline(0, color="k", lw=0.6)
             ax.set_title(f"moving {d}")
-            ax.set_xlabel("speed |q̇| (m/s)" if view == "velocity" else "position q (m)")
+            ax.set_xlabel(f"speed |q̇| ({units.label('m/s', axis)})" if view == "velocity"
+                          else f"position q ({units.label('m', axis)})")
             ax.grid(True, alpha=0.3)
-        axes[0].set_ylabel("mean residual force (N)")
+        axes[0].set_ylabel(f"mean residual force ({units.force_unit(axis)})")
         axes[0].legend()
     elif view == "spectrum":
         fig, ax = plt.subplots(figsize=(10, 3.4))
         ax.semilogy(before["spectrum"]["f"], before["spectrum"]["psd"], color="tab:red", label="before")
         ax.semilogy(after["spectrum"]["f"], after["spectrum"]["psd"], color="tab:blue", label="after")
         ax.set_xlabel("frequency (Hz)")
-        ax.set_ylabel("residual PSD (N²/Hz)")
+        ax.set_ylabel(f"residual PSD (({units.force_unit(axis)})²/Hz)")
         ax.grid(True, alpha=0.3)
         ax.legend()
     else:  # time
@@ -73,7 +77,7 @@ def figure(diag, view: str):
         _binned(ax, after["time"], "after", "tab:blue")
         ax.axhline(0, color="k", lw=0.6)
         ax.set_xlabel("time (s)")
-        ax.set_ylabel("mean residual force (N)")
+        ax.set_ylabel(f"mean residual force ({units.force_unit(axis)})")
         ax.grid(True, alpha=0.3)
         ax.legend()
     fig.suptitle(f"residual against {view}: base model (red) and final model (blue), 95 % bands", fontsize=10)
@@ -87,18 +91,19 @@ def fit_figure(diag):
 
     ctx = diag._context
     data, hist = ctx["data"], ctx["history"]
+    axis = data.rec.axis
     t = diag._context["data"].rec.t
     (_, rt0, _, _), (_, rt1, _, s1) = hist[0], hist[-1]
     fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
     axes[0].plot(t, data.rec.force, color="tab:red", lw=0.6, label="measured")
     axes[0].plot(t, s1.force, color="tab:blue", lw=0.6, label="simulated (final model)")
-    axes[0].set_ylabel("motor force (N)")
+    axes[0].set_ylabel(f"motor force ({units.force_unit(axis)})")
     axes[0].legend(loc="upper right")
     td = t[:: data.dec.factor][: len(rt0)]
     axes[1].plot(td, rt0, color="tab:red", lw=0.6, label="residual, base model")
     axes[1].plot(td, rt1, color="tab:blue", lw=0.6, label="residual, final model")
     axes[1].set_xlabel("time (s)")
-    axes[1].set_ylabel("decimated residual (N)")
+    axes[1].set_ylabel(f"decimated residual ({units.force_unit(axis)})")
     axes[1].legend(loc="upper right")
     for ax in axes:
         ax.grid(True, alpha=0.3)
@@ -139,11 +144,12 @@ def lead_in_figure(diag):
         s_rest = simulate(replace(rec, **head, lead_in=None), st.all_params(), st.model, **st.sim_kwargs())
         t = (np.arange(n_lead + k) - n_lead) * rec.dt * 1e3  # ms
         ax = axes[0][j]
-        ax.plot(t[:n_lead + 1], 1e3 * ext.qr[:n_lead + 1], color="0.5", lw=1.2, ls="--", label="reference, lead-in")
-        ax.plot(t[n_lead:], 1e3 * head["qr"], color="k", lw=1.0, label="reference")
-        ax.plot(t[n_lead:], 1e3 * head["qm"], color="tab:red", lw=1.0, label="measured")
-        ax.plot(t, 1e3 * s_led.q[0], color="tab:blue", lw=1.0, label="simulated")
-        ax.set_ylabel("motor position (mm)")
+        c, unit = units.plot_length(rec.axis)
+        ax.plot(t[:n_lead + 1], c * ext.qr[:n_lead + 1], color="0.5", lw=1.2, ls="--", label="reference, lead-in")
+        ax.plot(t[n_lead:], c * head["qr"], color="k", lw=1.0, label="reference")
+        ax.plot(t[n_lead:], c * head["qm"], color="tab:red", lw=1.0, label="measured")
+        ax.plot(t, c * s_led.q[0], color="tab:blue", lw=1.0, label="simulated")
+        ax.set_ylabel(f"motor position ({unit})")
         ax.set_title(rec.name or "record", fontsize=10)
         ax.legend(loc="upper left", fontsize=8)
         ax = axes[1][j]
@@ -151,7 +157,7 @@ def lead_in_figure(diag):
         ax.plot(t, s_led.force, color="tab:blue", lw=1.0, label="simulated through the lead-in")
         ax.plot(t[n_lead:], s_rest.force, color="0.5", lw=1.0, ls="--", label="simulated from rest at 0 ms")
         ax.set_xlabel("time from the record's first sample (ms)")
-        ax.set_ylabel("motor force (N)")
+        ax.set_ylabel(f"motor force ({units.force_unit(rec.axis)})")
         ax.legend(loc="upper right", fontsize=8)
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)

@@ -329,7 +329,7 @@ class SimResult:
             ax.plot(self.t, recording.force - self.force, color="k", lw=0.6, label="error")
             ax.set_title(f"{self.model} model, relative error {100 * self.relative_error(recording):.2f} %")
         ax.set_xlabel("time (s)")
-        ax.set_ylabel("motor force (N)")
+        ax.set_ylabel(f"motor force ({'N·m' if recording is not None and recording.axis == 'rotary' else 'N'})")
         ax.legend(loc="upper right")
         ax.grid(True, alpha=0.3)
         return fig

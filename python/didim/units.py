@@ -210,6 +210,16 @@ def force(f: float, axis: str) -> str:
     return f"{_g(f)} {'N·m' if axis == 'rotary' else 'N'}"
 
 
+def force_unit(axis: str) -> str:
+    """N on a linear axis, N·m on a rotary one."""
+    return "N·m" if axis == "rotary" else "N"
+
+
+def plot_length(axis: str) -> tuple:
+    """The factor and unit a plot shows positions in: mm on a linear axis, rad on a rotary one."""
+    return (1.0, "rad") if axis == "rotary" else (1e3, "mm")
+
+
 def _g(x: float) -> str:
     return f"{x:.4g}"
 
@@ -229,4 +239,5 @@ def check_stroke(qr, units: Units, where: str) -> None:
                         f"{guess.split()[0]}, or a CSV header qm[{guess.split()[0]}])")
 
 
-__all__ = ["Units", "SI", "parse", "from_header", "label", "length", "speed", "force", "check_stroke"]
+__all__ = ["Units", "SI", "parse", "from_header", "label", "length", "speed", "force", "force_unit", "plot_length",
+           "check_stroke"]
