@@ -145,6 +145,8 @@ def test_three_step_didim_through_a_lead_in_on_an_independent_flexible_plant():
     the truth within the whole log's tolerance (5 %), with a full-rate force error within 0.5 point of the whole
     log's (without the lead-in it is 2.7 points higher: the start)."""
     plant = bench_module("independent_flexible")
+    if not (plant.TRUTHBENCH / "flexible").is_dir():  # the plant plays the truthbench's paper-like references
+        pytest.skip(f"truthbench {plant.TRUTHBENCH} not available (set DIDIM_TRUTHBENCH_DIR)")
     _, t, ref = plant.CASES[0]
     rec = plant.recording(plant.reference(ref), t, seed=100)
     i0 = int(np.flatnonzero(np.diff(rec.qr) != 0)[0]) + 20

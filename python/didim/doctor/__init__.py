@@ -612,11 +612,12 @@ class _Search:
 
     def refit_law(self, cur: Fitted, f: Finding) -> Fitted:
         """The friction law's smoothing speed fitted again once ``f`` is modelled (the law was fitted on a model that
-        missed it: a missing delay or mode bends the fitted law: on a record with a 2-sample delay, the law fitted
-        without it was a hard sign), its shape kept; kept when it lowers the training error by ``RETUNE_GAIN``
-        (training data only)."""
+        missed it: a missing delay or mode bends the fitted law), its shape kept, within √10 of the present speed
+        (a law far off, as the hard sign fitted beside a missing 2-sample delay, is left to :meth:`second_start`);
+        kept when it lowers the training error by ``RETUNE_GAIN`` (training data only)."""
         try:
-            st, _ = fit_friction_law(self.data, cur[0], self.progress, shapes=(cur[0].coulomb_law,))
+            st, _ = fit_friction_law(self.data, cur[0], self.progress, around=cur[0].coulomb_eps,
+                                     shapes=(cur[0].coulomb_law,))
         except DidimError:
             return cur
         if (st.coulomb_law, st.coulomb_eps) == (cur[0].coulomb_law, cur[0].coulomb_eps):
@@ -797,7 +798,12 @@ def doctor(
     fit0["train_force_before"], fit0["valid_force_before"] = search.force_now = data.force_errors(state)
     locate_before = _locate(data, cur[1], cur[3])
 
-    for _ in range(max_findings):
+    t_rounds = time.perf_counter()
+    for k in range(max_findings):
+        if k:  # how long the rest may take, at the pace of the rounds so far (each round may end the search)
+            pace = (time.perf_counter() - t_rounds) / k
+            search.say(f"{time.perf_counter() - t0:.0f} s so far; at most {max_findings - k} more round(s), up to "
+                       f"about {pace * (max_findings - k):.0f} s at this pace")
         ranked, wb = search.rank(cur)
         significant = [c for c in ranked if c.p_adj < alpha]
         if not significant:
