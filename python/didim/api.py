@@ -75,6 +75,7 @@ def identify(
     initial: Optional[Dict[str, float]] = None,
     criterion: str = "force",
     progress: Progress = None,
+    controller_check: str = "error",
     **options,
 ) -> IdentificationResult:
     """Identifies the ``model`` ("rigid" or "flexible", or a :class:`didim.Model` with its structure: offset, terms,
@@ -98,6 +99,11 @@ def identify(
     deficient, :class:`SimulationError` when the loop diverges from the start. Issues a :class:`DidimWarning` for
     each finding of :meth:`Recording.diagnose` (saturated command, force scale not matching the controller). A
     method that stops without converging returns ``converged=False`` with a message and its history.
+
+    ``controller_check``: before any fit, the record's controller applied to the logged reference and position must
+    give the logged force (:func:`didim.check.check_controller`); "error" (default) refuses a controller that does
+    not, naming the likely mistake, "warn" goes on with a :class:`DidimWarning`, "off" skips the check. The check is
+    in the result's ``options["controller_check"]``.
     """
     structure = model if isinstance(model, Model) else None
     if structure is not None:
@@ -138,8 +144,21 @@ def identify(
     if not np.any(recording.force):
         raise DataError(f"{recording.name or 'record'}: the measured force is zero everywhere: nothing to identify "
                         "from (check the force column and its scale, e.g. gtau)")
+    from .check import enforce
+
+    chk = enforce(recording, controller_check)
     for finding in recording.diagnose():
         warnings.warn(f"{recording.name or 'record'}: {finding}", DidimWarning, stacklevel=2)
+    return _with_check(_identify(recording, model, method, offset, apM, initial, criterion, progress, options), chk)
+
+
+def _with_check(r: IdentificationResult, chk) -> IdentificationResult:
+    r.options["controller_check"] = None if chk is None else chk.to_dict()
+    return r
+
+
+def _identify(recording, model, method, offset, apM, initial, criterion, progress, options) -> IdentificationResult:
+    """:func:`identify` once its arguments and the record are checked."""
     if method == "idim-ls":
         return _with_force_error(recording, idim_ls(recording, model, offset=offset, **options))
     if method == "didim":

@@ -57,6 +57,10 @@ def _record_options(p) -> None:
                    help="what the record's positions and force are logged in: m (default), mm, um, rad, deg, rev, "
                         "counts/rev=N or counts/m=N, with N*m or a drive unit and its scale (e.g. 'deg', 'mm,V=2.5'); "
                         "also read from a CSV header such as qm[deg] or the controller file's \"units\"")
+    p.add_argument("--controller-check", choices=("error", "warn", "off"), default="error",
+                   help="before any fit the controller's law on the logged qr and qm must give the logged force: "
+                        "'error' (default) refuses a controller that does not (exit 2), naming the likely mistake; "
+                        "'warn' goes on; 'off' skips the check")
     p.add_argument("--lead-in", choices=("auto", "none"), default="auto",
                    help="a log that begins in the acceleration from rest, the axis lagging the reference: 'auto' "
                         "(default) simulates from the rest its reference left, extrapolated back; 'none' from rest "
@@ -95,7 +99,8 @@ def cmd_identify(args) -> int:
 
             raise DataError(f"--set {k}=…: {k} has its own option (see didim identify --help)")
         opts[k] = v[0] if len(v) == 1 else v
-    res = identify(rec, args.model, args.method, offset=args.offset, progress=_progress(args.quiet), **opts)
+    res = identify(rec, args.model, args.method, offset=args.offset, progress=_progress(args.quiet),
+                   controller_check=args.controller_check, **opts)
     print(res.summary())
     if args.json:
         write_text(args.json, res.to_json() + "\n")
@@ -121,8 +126,11 @@ def cmd_simulate(args) -> int:
     _check_outputs([args.file, args.result, args.controller], [args.json, args.plot])
     if args.plot:
         _check_figure_format(args.plot)
+    from .check import enforce
+
     result = load_result(args.result)
     rec = _load(args, args.file)
+    chk = enforce(rec, args.controller_check)
     sim = simulate(rec, result)
     err = sim.relative_error(rec)
     st = result.structure
@@ -131,10 +139,14 @@ def cmd_simulate(args) -> int:
         print(f"  (on its own record, as fitted: {100 * result.force_error:.2f} %)")
     if rec.qr_lead.size:
         print(f"  ({rec.lead_in_note()})")
+    if chk is not None:
+        print(f"  ({chk.summary()})")
     if args.json:
         write_text(args.json, json.dumps({"record": args.file, "result": args.result, "force_error": err,
                                           "lead_in_s": rec.qr_lead.size * rec.dt,
-                                          "model": st.to_dict(), "params": result.all_params}, indent=2) + "\n")
+                                          "model": st.to_dict(), "params": result.all_params,
+                                          "controller_check": None if chk is None else chk.to_dict()},
+                                         indent=2) + "\n")
         print(f"wrote {args.json}")
     if args.plot:
         save_figure(sim.plot(rec), args.plot, dpi=110)
@@ -207,7 +219,8 @@ def cmd_doctor(args) -> int:
     from .doctor import BaseFitError
 
     try:
-        d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet))
+        d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet),
+                   controller_check=args.controller_check)
     except BaseFitError as e:  # not bad input: the record does not support the base model (like a fit not converged)
         print(f"didim: doctor: {_one_line(str(e))}", file=sys.stderr)
         return 1

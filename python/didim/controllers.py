@@ -14,7 +14,7 @@ import json
 import math
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Dict, Optional, Tuple, Union
 
 import numpy as np
@@ -178,6 +178,9 @@ class TransferFunction:
     dt: float
     saturation: float = math.inf
     gain: float = 1.0
+    #: The cascade's settings when built by :meth:`cascade` (kp, kv, ti, ...), as (name, value) pairs: what a user
+    #: described, which the controller check (:mod:`didim.check`) varies to name a likely mistake.
+    design: Optional[Tuple[Tuple[str, Any], ...]] = field(default=None, compare=False, repr=False)
 
     kind = "tf"
 
@@ -301,8 +304,10 @@ class TransferFunction:
         b_r = _padd(loop_r, kaff * np.convolve(np.convolve(d, d), pi_a)) if kaff else loop_r
         b_y = kv * np.convolve(pi_b, _padd(kp * one, d))
         den = np.convolve(pi_a, f_a)
+        design = dict(kp=kp, kv=kv, dt=dt, ti=ti, kff=kff, kaff=kaff, f_lp=f_lp, notch_hz=notch_hz, notch_q=notch_q,
+                      gain=gain, saturation=saturation)
         return cls(b_r=tuple(np.convolve(b_r, f_b)), a_r=tuple(den), b_y=tuple(np.convolve(b_y, f_b)), a_y=tuple(den),
-                   dt=dt, saturation=saturation, gain=gain)
+                   dt=dt, saturation=saturation, gain=gain, design=tuple(design.items()))
 
     @classmethod
     def from_lti(cls, c_r, c_y, *, dt: Optional[float] = None, gain: float = 1.0,
@@ -408,6 +413,10 @@ def in_units(c: Controller, dt: float, position_factor: float, force_factor: flo
     if position_factor == 1.0 and force_factor == 1.0:
         return c
     tf = c.transfer_function(dt)
+    if tf.design is not None:  # the cascade's own settings in SI: kv and kaff per (m/s), (m/s²); the force gain
+        d = dict(tf.design)
+        d.update(kv=d["kv"] / position_factor, kaff=d["kaff"] / position_factor, gain=d["gain"] * force_factor)
+        return TransferFunction.cascade(**d)
     return TransferFunction(tuple(b / position_factor for b in tf.b_r), tf.a_r, tuple(b / position_factor for b in tf.b_y),
                             tf.a_y, tf.dt, tf.saturation, tf.gain * force_factor)
 

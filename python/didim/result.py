@@ -280,6 +280,11 @@ class IdentificationResult:
                             + (" (the rest is mostly encoder-count chatter above that band, which no model follows "
                                "sample by sample)" if self.force_error > 2 * self.force_error_band else "")
                             if math.isfinite(self.force_error_band) and self.options.get("band_hz") else ""))
+        chk = self.options.get("controller_check")
+        if isinstance(chk, dict) and "mismatch" in chk:
+            lines.append(f"controller check: its law on the logged qr and qm gives the logged force within "
+                         f"{100 * chk['mismatch']:.3g} %" + ("" if chk.get("passed") else " (NOT within the "
+                                                          f"{100 * chk['tolerance']:g} % accepted: {chk.get('likely')})"))
         if math.isfinite(self.relative_error) and not self.method.startswith("oe-"):  # OE methods fit no regression
             lines.append(f"regression error ‖Y − Wχ‖/‖Y‖ (decimated) = {100 * self.relative_error:.2f} %")
         if math.isfinite(self.output_error):

@@ -184,6 +184,11 @@ class Diagnosis:
                      f"{100 * f['valid_force_after']:.2f} %{after.get(valid_name, '') if valid_name else ''}"
                      + (f" (the final model; the last finding below ended at {100 * last:.2f} %, before an earlier "
                         "one's hyper-parameter or the friction law was chosen again)" if retuned else ""))
+        for name, c in (self.options.get("controller_check") or {}).items():
+            if c is not None:
+                lines.append(f"controller check ({name}): the law on the logged qr and qm gives the logged force "
+                             f"within {100 * c['mismatch']:.3g} %" + ("" if c["passed"] else " (NOT within "
+                                                                    f"{100 * c['tolerance']:g} %: {c['likely'] or 'no usual mistake explains it'})"))
         law = self.final_state.structure() if self.final_state is not None else self.base.structure
         if law is not None and law.coulomb_eps is not None:
             from .. import units
@@ -773,15 +778,21 @@ def doctor(
     holdout: float = 0.3,
     progress: Optional[Callable[[str], None]] = None,
     coulomb_eps: Union[str, float, None] = "fit",
+    controller_check: str = "error",
 ) -> Diagnosis:
     """Diagnoses what the ``model`` ("rigid" or "flexible") misses on ``recording``; ``validate`` is a recording the
     fit does not see (otherwise the last ``holdout`` share of the record is held out). ``alpha`` is the family-wise
     level of the candidate tests and of the held-out confirmation. ``cutoff_hz`` is the decimation cutoff of the fits
     and of the residual analysis. ``coulomb_eps``: the Coulomb smoothing speed of the base model (m/s or rad/s),
     ``"fit"`` (default) to fit it with the base model before any effect is looked for
-    (:func:`didim.doctor.fit.fit_friction_law`), None for didim's default."""
+    (:func:`didim.doctor.fit.fit_friction_law`), None for didim's default. ``controller_check``: as for
+    :func:`didim.identify`, on both records."""
     apM, alpha, max_findings = _check_arguments(recording, model, validate, apM, alpha, max_findings, cutoff_hz,
                                                 holdout, progress)
+    from ..check import enforce
+
+    checks = {(r.name or f"record {i}"): enforce(r, controller_check)
+              for i, r in enumerate((recording, validate)) if r is not None}
     t0 = time.perf_counter()
     dec = Decimation.lowpass(cutoff_hz, recording.fs)
     n_fit = recording.n if validate is not None else int(recording.n * (1 - holdout))
@@ -835,6 +846,7 @@ def doctor(
                 "start": [x for x in (_start(r, state) for r in (recording, validate) if r is not None) if x],
                 "lead_in": [x for x in (_lead_in(r) for r in (recording, validate) if r is not None) if x]},
         options=dict(alpha=alpha, max_findings=max_findings, cutoff_hz=cutoff_hz, holdout=None if validate else holdout,
+                     controller_check={k: (None if c is None else c.to_dict()) for k, c in checks.items()},
                      friction_law="fitted" if search.law_fitted else ("default" if coulomb_eps in ("fit", None)
                                                                        else "given"),
                      _valid_record=(validate.name or "validation recording") if validate is not None else None,

@@ -1,0 +1,210 @@
+"""The controller against the log: before any fit, the described controller's law applied to the logged reference and
+motor position must give the logged force.
+
+DIDIM simulates the closed loop, so everything rests on the controller. A described controller that is not the one
+that ran the axis (the feedforward forgotten, an integral time typed in ms, a gain in the wrong unit) still gives a
+fit, with biased parameters and invented effects. The log holds the evidence: ``u = C_r(z)·qr − C_y(z)·qm`` on the
+logged signals is the logged command, to rounding, when the description is right (0.0 % on the truthbench's drive
+records, at most 0.3 % on the EMPS). :func:`check_controller` measures that mismatch on the samples where the drive
+does not saturate, says where it lives (during moves, at rest, around reversals), and, when it is too large, tries the
+usual mistakes and names the one that explains the log.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from ._errors import DataError
+from .controllers import TransferFunction
+
+#: A described controller is refused when its law misses the logged force by more than this share of it (RMS, on
+#: the unsaturated samples). A right description replays the log to rounding (0.0 % on the truthbench's drive records,
+#: at most 0.3 % on the EMPS, whose force is the logged command); the usual mistakes miss it by 94–1573 %. Between the
+#: two, a force that is a measured current rather than the command carries the current loop's noise and lag: above
+#: this level no linear law of the described kind explains it.
+CHECK_TOLERANCE = 0.05
+#: Samples within this share of the saturation are left out (the law's output is clipped there).
+SATURATION_MARGIN = 0.999
+#: The factors tried on a gain or a time constant given in another unit: ms for s, rad/s for Hz (2π), and back.
+UNIT_FACTORS = (1e-3, 1e3, 2 * math.pi, 1 / (2 * math.pi))
+
+
+@dataclass
+class ControllerCheck:
+    """The described controller against the log: ``mismatch`` = ‖F − F_law‖/‖F‖ on the ``samples`` where the drive
+    does not saturate; ``passed`` when it is within ``tolerance``; ``where`` the share of the mismatch's energy during
+    moves, at rest and around reversals; ``likely`` the mistake that explains the log (in words) and
+    ``likely_mismatch`` the mismatch with it corrected, when one does."""
+
+    mismatch: float
+    tolerance: float
+    samples: int
+    where: Dict[str, float] = field(default_factory=dict)
+    likely: Optional[str] = None
+    likely_mismatch: float = float("nan")
+    tried: List[Tuple[str, float]] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.mismatch <= self.tolerance)
+
+    def summary(self) -> str:
+        head = (f"controller check: its law on the logged qr and qm gives the logged force within "
+                f"{100 * self.mismatch:.3g} % (RMS, {self.samples} unsaturated samples; at most "
+                f"{100 * self.tolerance:g} % is accepted)")
+        if self.passed:
+            return head
+        where = ", ".join(f"{100 * v:.0f} % {k}" for k, v in self.where.items() if v >= 0.005)
+        out = head.replace("within", "only within") + f"; the mismatch lives {where}"
+        if self.likely:
+            out += f"; likely: {self.likely} (corrected, the law gives the log within {100 * self.likely_mismatch:.3g} %)"
+        else:
+            out += ("; none of the usual mistakes (feedforward missing or doubled, a time constant or gain in another "
+                    "unit, the force gain, the sign, a sample of delay) explains it: check that this is the controller "
+                    "that ran the axis and that the force is its command, not a measured current")
+        return out
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"mismatch": self.mismatch, "tolerance": self.tolerance, "passed": self.passed,
+                "samples": self.samples, "where": dict(self.where), "likely": self.likely,
+                "likely_mismatch": self.likely_mismatch}
+
+
+def _law(tf: TransferFunction, rec) -> np.ndarray:
+    return tf.command(rec.qr, rec.qm, rec.u_ext)
+
+
+def _mismatch(f: np.ndarray, c: np.ndarray, keep: np.ndarray) -> float:
+    den = float(np.linalg.norm(f[keep]))
+    return float(np.linalg.norm(f[keep] - c[keep]) / den) if den > 0 else math.inf
+
+
+def _variants(tf: TransferFunction) -> List[Tuple[str, TransferFunction]]:
+    """The usual mistakes of a description, each as (what it was, the controller with it corrected)."""
+    out: List[Tuple[str, TransferFunction]] = []
+    if tf.design is None:
+        return out
+    d = dict(tf.design)
+
+    def build(**change) -> Optional[TransferFunction]:
+        try:
+            return TransferFunction.cascade(**{**d, **change})
+        except (DataError, ValueError, ZeroDivisionError):
+            return None
+
+    if d["kff"] == 0:
+        out.append(("the velocity feedforward is missing from the description (kff = 0; the log says kff = 1)",
+                    build(kff=1.0)))
+    else:
+        out.append((f"the velocity feedforward is in the description (kff = {d['kff']:g}) but not in the drive",
+                    build(kff=0.0)))
+        if d["kff"] != 1.0:
+            out.append((f"the velocity feedforward is {d['kff']:g}, the drive's is 1", build(kff=1.0)))
+    for name, unit in (("ti", "s"), ("f_lp", "Hz"), ("kv", ""), ("kp", "1/s")):
+        v = d.get(name)
+        if v is None:
+            continue
+        for k in UNIT_FACTORS:
+            what = {1e-3: f"in thousandths (given {v:g}, the log says {v * k:g}: ms for s?)",
+                    1e3: f"in thousands (given {v:g}, the log says {v * k:g}: s for ms?)",
+                    2 * math.pi: f"in the wrong unit by 2π (given {v:g}, the log says {v * k:g}: Hz for rad/s?)",
+                    1 / (2 * math.pi): f"in the wrong unit by 2π (given {v:g}, the log says {v * k:g}: rad/s for "
+                                       "Hz?)"}[k]
+            out.append((f"{name} {what}", build(**{name: v * k})))
+    return [(w, c) for w, c in out if c is not None]
+
+
+def check_controller(rec) -> ControllerCheck:
+    """The recording's controller against its log (see the module's text). Tries the usual mistakes only when the
+    description fails: the cascade's settings (feedforward, ti, f_lp, kv, kp in another unit) when the controller was
+    built by :meth:`TransferFunction.cascade` or from a ``"cascade"`` file, and for any controller the force gain (a
+    least-squares factor), the sign and one or two samples of delay between the command and the log."""
+    tf = rec.controller.transfer_function(rec.dt)
+    f = np.asarray(rec.force, dtype=float)
+    c = _law(tf, rec)
+    limit = tf.force_limit
+    keep = np.ones(rec.n, bool) if not math.isfinite(limit) else np.abs(c) < SATURATION_MARGIN * limit
+    keep[:2] = False  # the law's first samples take the first position for the earlier ones
+    if np.count_nonzero(keep) < 10:
+        raise DataError(f"{rec.name or 'record'}: the controller's command is at its saturation on almost every sample: "
+                        "the controller cannot be checked against the log (check the saturation and gain)")
+    out = ControllerCheck(_mismatch(f, c, keep), CHECK_TOLERANCE, int(np.count_nonzero(keep)))
+    if out.passed:
+        return out
+    # where the mismatch lives
+    v = np.gradient(rec.qr, rec.dt)
+    vmax = float(np.max(np.abs(v))) or 1.0
+    moving = np.abs(v) > 0.05 * vmax
+    sign = np.sign(np.where(moving, v, 0.0))
+    idx = np.flatnonzero(sign)
+    rev = np.zeros(rec.n, bool)
+    if idx.size > 1:
+        flips = idx[1:][np.diff(sign[idx]) != 0]
+        w = max(1, int(round(0.05 / rec.dt)))
+        for k in flips:
+            rev[max(0, k - w):k + w] = True
+    e2 = (f - c) ** 2 * keep
+    tot = float(np.sum(e2)) or 1.0
+    out.where = {"during moves": float(np.sum(e2[moving & ~rev]) / tot), "at rest": float(np.sum(e2[~moving & ~rev]) / tot),
+                 "around reversals": float(np.sum(e2[rev]) / tot)}
+    # the usual mistakes
+    cands: List[Tuple[str, np.ndarray]] = [(what, _law(alt, rec)) for what, alt in _variants(tf)]
+    cc = float(np.dot(c[keep], c[keep]))
+    if cc > 0:
+        a = float(np.dot(f[keep], c[keep]) / cc)
+        if a < 0 and abs(abs(a) - 1) < 0.05:
+            cands.append(("the force's sign is reversed against the command (a motor wired or logged the other way)",
+                          a * c))
+        elif a != 0:
+            unit = next((u for k, u in ((2 * math.pi, "2π: a gain per rad/s given for per m/s, or Hz for rad/s?"),
+                                         (1 / (2 * math.pi), "1/2π: a gain per m/s given for per rad/s?"),
+                                         (1e3, "1000: a unit prefix, m for mm or ms for s?"),
+                                         (1e-3, "1/1000: a unit prefix, mm for m or s for ms?"))
+                         if abs(a / k - 1) < 0.01), None)
+            scale = (f"the velocity-loop gain kv ({dict(tf.design)['kv']:g} → {dict(tf.design)['kv'] * a:.4g}) or the "
+                     f"force gain ({tf.gain:.4g} → {tf.gain * a:.4g})" if tf.design is not None
+                     else f"the force gain ({tf.gain:.4g} → {tf.gain * a:.4g})")
+            cands.append((f"the command's scale is off by a factor {a:.4g}{f' ({unit})' if unit else ''}: {scale}, or "
+                          f"a force logged in other units (force_scale {1 / a:.4g})", a * c))
+    for lag in (1, 2):
+        cands.append((f"the logged force is {lag} sample{'s' if lag > 1 else ''} late against the logged positions "
+                      "(a delay in the drive's log, or the positions logged early)", np.r_[np.full(lag, c[0]), c[:-lag]]))
+    out.tried = [(what, _mismatch(f, alt, keep)) for what, alt in cands]
+    best = min(out.tried, key=lambda t: t[1]) if out.tried else None
+    if best is not None and best[1] <= CHECK_TOLERANCE:
+        out.likely, out.likely_mismatch = best
+    return out
+
+
+#: What to do when the described controller does not give the logged force: refuse (a DataError, exit 2 from the
+#: command line), warn (a DidimWarning) and go on, or not check at all.
+CHECK_MODES = ("error", "warn", "off")
+
+
+def enforce(rec, mode: str = "error") -> Optional[ControllerCheck]:
+    """:func:`check_controller` on ``rec`` as ``mode`` asks (``CHECK_MODES``); the check, or None when "off"."""
+    import warnings
+
+    from . import _checks
+    from ._errors import DidimWarning
+
+    _checks.one_of("controller_check", mode, CHECK_MODES)
+    if mode == "off":
+        return None
+    chk = check_controller(rec)
+    if not chk.passed:
+        text = (f"{rec.name or 'record'}: the described controller does not give the logged force: {chk.summary()}. "
+                "didim simulates the closed loop with this controller, so a fit would be wrong; correct the "
+                "description (Python: controller=..., CLI: --controller FILE), or go on anyway with "
+                "controller_check='warn' (CLI: --controller-check warn)")
+        if mode == "error":
+            raise DataError(text)
+        warnings.warn(text, DidimWarning, stacklevel=3)
+    return chk
+
+
+__all__ = ["ControllerCheck", "check_controller", "enforce", "CHECK_TOLERANCE", "CHECK_MODES"]

@@ -1,0 +1,108 @@
+"""The controller against the log (issue 27): before any fit the described controller's law on the logged reference
+and position must give the logged force; a wrong description is refused with the likely mistake named."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import didim
+from didim.check import CHECK_TOLERANCE, check_controller
+
+from conftest import TRUTHBENCH_DIR
+
+DRIVE = TRUTHBENCH_DIR / "drive" / "pi_cascade_train.csv"
+needs_drive = pytest.mark.skipif(not DRIVE.exists(), reason="truthbench drive records not found")
+#: The truthbench drive's cascade, as its truth.json describes it (force = 35.15 N per unit of u, ±10 units).
+RIGHT = dict(kp=90.0, kv=220.0, ti=0.04, kff=1.0, f_lp=250.0, dt=1e-3, gain=35.15065188248547, saturation=10.0)
+#: The issue's four mistakes, and the words the refusal must use for each.
+MISTAKES = {
+    "feedforward forgotten": (dict(kff=0.0), "feedforward is missing"),
+    "integral time typed in ms": (dict(ti=40.0), "ti in thousandths"),
+    "velocity gain in the wrong unit": (dict(kv=220.0 / (2 * math.pi)), "velocity-loop gain kv"),
+    "force gain wrong": (dict(gain=3.515065188248547), "force gain"),
+}
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return didim.load_record(DRIVE)
+
+
+def _with(rec, **change):
+    return dataclasses.replace(rec, controller=didim.TransferFunction.cascade(**{**RIGHT, **change}))
+
+
+@needs_drive
+def test_the_right_description_gives_the_logged_force_to_rounding(drive):
+    for rec in (drive, _with(drive)):  # the record's transfer-function file, and the cascade described by its settings
+        chk = check_controller(rec)
+        assert chk.passed and chk.mismatch < 1e-4, chk.summary()
+
+
+@needs_drive
+@pytest.mark.parametrize("mistake", list(MISTAKES))
+def test_each_usual_mistake_is_refused_naming_it(drive, mistake):
+    change, words = MISTAKES[mistake]
+    rec = _with(drive, **change)
+    chk = check_controller(rec)
+    assert chk.mismatch > 0.5 and not chk.passed  # 84-285 %
+    assert chk.likely is not None and words in chk.likely, chk.summary()
+    assert chk.likely_mismatch < 1e-4  # corrected, the law replays the log
+    with pytest.raises(didim.DataError, match="does not give the logged force") as e:
+        didim.identify(rec, "rigid", "didim")
+    assert words in str(e.value)
+
+
+@needs_drive
+def test_warn_goes_on_and_the_result_carries_the_check(drive):
+    rec = _with(drive, gain=3.515065188248547)
+    with pytest.warns(didim.DidimWarning, match="does not give the logged force"):
+        r = didim.identify(rec, "rigid", "idim-ls", controller_check="warn")
+    assert r.options["controller_check"]["passed"] is False and "force gain" in r.options["controller_check"]["likely"]
+    ok = didim.identify(drive, "rigid", "idim-ls")
+    assert ok.options["controller_check"]["passed"] and "controller check" in ok.summary()
+    assert didim.identify(drive, "rigid", "idim-ls", controller_check="off").options["controller_check"] is None
+
+
+@needs_drive
+def test_a_force_no_linear_law_of_the_described_kind_explains_is_refused_without_a_guess(drive):
+    """A force that is a measured current (the command through a 20 Hz current loop) is not the command: no usual
+    mistake explains it, and the message says so."""
+    from scipy.signal import lfilter
+
+    p = math.exp(-2 * math.pi * 20.0 * drive.dt)
+    rec = dataclasses.replace(drive, force=lfilter([1 - p], [1, -p], drive.force))
+    chk = check_controller(rec)
+    assert not chk.passed and chk.likely is None, chk.summary()
+    assert "none of the usual mistakes" in chk.summary()
+
+
+def test_the_real_emps_and_the_truthbench_axes_pass(emps):
+    assert check_controller(emps).mismatch < 0.003  # the EMPS force is its logged command, gtau·vir (0.24 %)
+    axes = TRUTHBENCH_DIR / "axes"
+    if axes.is_dir():
+        for name in ("null_belt_pid", "null_portal_notch", "null_spindle_pic", "null_wrist_pic"):
+            chk = check_controller(didim.load_record(axes / f"{name}_train.csv"))
+            assert chk.passed and chk.mismatch < 1e-3, (name, chk.summary())
+
+
+@needs_drive
+def test_the_command_line_refuses_with_exit_2_and_the_mistake(drive, tmp_path):
+    spec = {"type": "cascade", **{k: v for k, v in RIGHT.items()}, "ti": 40.0}
+    ctl = tmp_path / "drive.json"
+    ctl.write_text(json.dumps(spec))
+    p = subprocess.run([sys.executable, "-m", "didim", "identify", str(DRIVE), "--controller", str(ctl), "--quiet"],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 2 and "ti in thousandths" in p.stderr, p.stderr
+    p = subprocess.run([sys.executable, "-m", "didim", "identify", str(DRIVE), "--controller", str(ctl), "--quiet",
+                        "--controller-check", "warn", "--method", "idim-ls"], capture_output=True, text=True, timeout=600)
+    assert p.returncode in (0, 1) and "warning" in p.stderr, p.stderr
