@@ -217,9 +217,12 @@ def test_a_command_saturating_for_long_stretches_is_warned_with_the_evidence():
 
 def test_force_in_volts_is_warned_with_the_rms_evidence(emps):
     volts = didim.Recording(controller=didim.EmpsCascade(), dt=emps.dt, qr=emps.qr, force=emps.force / emps.controller.gtau, qm=emps.qm)
-    with pytest.warns(didim.DidimWarning) as w:
+    # by default the controller check refuses it, naming the scale (1/gtau) and the force_scale that fixes it
+    with pytest.raises(didim.DataError, match=r"the command's scale is off by a factor 0\.02845.*force_scale 35\.1"):
         didim.identify(volts, "rigid", "idim-ls")
-    msg = str(w[0].message)
+    with pytest.warns(didim.DidimWarning) as w:
+        didim.identify(volts, "rigid", "idim-ls", controller_check="warn")
+    msg = str(w[1].message)  # after the controller check's own warning
     assert "looks like volts, not newtons" in msg
     assert "RMS is 1.539 against the 54.1 N RMS that the controller" in msg
     assert "multiply the drive command by gtau = 35.15065188 N/V" in msg
@@ -340,10 +343,10 @@ def test_unstable_loop_names_the_parameter_set_and_the_sample(emps):
         warnings.simplefilter("ignore", didim.DidimWarning)
         with pytest.raises(didim.SimulationError, match=r"DIDIM could not start: iteration 0: the simulation with χ0 "
                                                          r"failed \(closed-loop simulation diverged at sample -?\d+.*M=0.01"):
-            didim.identify(stiff, "rigid", "didim", apM=0.01)
+            didim.identify(stiff, "rigid", "didim", apM=0.01, controller_check="off")
         with pytest.raises(didim.SimulationError, match=r"oe-lm: the simulation with the initial parameters failed.*"
                                                          r"M=0.01"):
-            didim.identify(stiff, "rigid", "oe-gn", initial=dict(M=0.01, Fv=0.0, Fc=0.0))
+            didim.identify(stiff, "rigid", "oe-gn", initial=dict(M=0.01, Fv=0.0, Fc=0.0), controller_check="off")
 
 
 def test_rank_deficient_regressor_names_the_dependent_columns(emps):
@@ -405,7 +408,11 @@ def test_cli_debug_shows_the_traceback(tmp_path):
 def test_cli_warnings_are_one_line_each(tmp_path, emps_path):
     d = emps_vars(emps_path)
     d["vir"] = d["vir"] * d["gtau"]  # vir in newtons, as the benchmark's PDF says: load_mat multiplies by gtau again
-    p = _cli("identify", str(save(tmp_path, "g1.mat", d)), "--method", "idim-ls", "--quiet")
+    refused = _cli("identify", str(save(tmp_path, "g1.mat", d)), "--method", "idim-ls", "--quiet")
+    assert refused.returncode == 2 and "the command's scale is off by a factor 35.1" in refused.stderr, refused.stderr
+    assert len([l for l in refused.stderr.splitlines() if l]) == 1
+    p = _cli("identify", str(save(tmp_path, "g1.mat", d)), "--method", "idim-ls", "--quiet", "--controller-check",
+             "warn")
     lines = [l for l in p.stderr.splitlines() if l]
     # the fit itself is flagged too (exit 1, one line): with the force 35 times too large its model cannot reproduce
     # the closed loop (force error far above 100 %)

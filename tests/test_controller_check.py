@@ -106,3 +106,66 @@ def test_the_command_line_refuses_with_exit_2_and_the_mistake(drive, tmp_path):
     p = subprocess.run([sys.executable, "-m", "didim", "identify", str(DRIVE), "--controller", str(ctl), "--quiet",
                         "--controller-check", "warn", "--method", "idim-ls"], capture_output=True, text=True, timeout=600)
     assert p.returncode in (0, 1) and "warning" in p.stderr, p.stderr
+
+
+# ---------------------------------------------------------------------------------------------------- the fit
+
+AXES = TRUTHBENCH_DIR / "axes"
+
+
+@pytest.mark.skipif(not AXES.is_dir(), reason="truthbench axes records not found")
+@pytest.mark.parametrize("name", ["null_belt_pid", "null_portal_notch", "null_spindle_pic", "null_wrist_pic"])
+def test_without_a_controller_the_fitted_law_gives_the_true_controllers_parameters(name, tmp_path):
+    """Four controller types (PID, cascade with notch, cascade with feedforward and low-pass) fitted from the log: the
+    law replays the logged force within 0.5 % (to rounding, in fact) and rigid DIDIM gives the parameters it gives
+    with the true controller within 1 %."""
+    src = AXES / f"{name}_train.csv"
+    bare = tmp_path / f"{name}.csv"
+    bare.write_bytes(src.read_bytes())  # no controller file beside it
+    fitted = didim.load_record(bare)
+    true = didim.load_record(src)
+    assert "fitted from the log" in fitted.controller_origin
+    cf = didim.fit_controller(fitted)
+    assert cf.error < 0.005 and cf.heldout_error < 0.005, cf.summary()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", didim.DidimWarning)
+        a, b = didim.identify(fitted, "rigid", "didim"), didim.identify(true, "rigid", "didim")
+    for k in ("M", "Fv", "Fc"):
+        assert a.params[k] == pytest.approx(b.params[k], rel=0.01), (k, a.params, b.params)
+    assert any("no controller was described" in n for n in a.notes)
+
+
+def test_the_emps_cascade_is_recovered_from_its_log(emps):
+    """The EMPS law (a P position loop and a velocity loop on a two-sample difference, no denominator) from
+    DATA_EMPS's qg, qm and gtau·vir: the fitted law replays the force as the true one does (0.24 %), and its
+    coefficients are the cascade's within a percent of the largest."""
+    cf = didim.fit_controller(emps)
+    true = emps.controller.transfer_function(emps.dt)
+    assert cf.error < 0.005 and not math.isinf(cf.error)
+    assert abs(cf.error - check_controller(emps).mismatch) < 0.001
+    b = np.array(cf.controller.b_y)
+    t = np.array(true.b_y) * true.gain
+    assert len(cf.controller.a_y) == 1 and np.max(np.abs(b[:3] - t[:3])) < 0.01 * np.max(np.abs(t))
+
+
+def test_a_force_no_linear_law_explains_is_refused_with_the_numbers(emps):
+    """A force with a nonlinear feedforward (a cubic of the reference speed) is no linear law's."""
+    v = np.gradient(emps.qr, emps.dt)
+    rec = dataclasses.replace(emps, force=emps.force + 2e5 * v**3)
+    with pytest.raises(didim.DataError, match=r"no linear controller .* replays the logged force: the best misses"):
+        didim.fit_controller(rec)
+
+
+def test_the_command_line_writes_a_controller_file_that_reads_back(tmp_path, emps_path):
+    import scipy.io as sio
+
+    d = sio.loadmat(emps_path)
+    csv = tmp_path / "emps.csv"
+    np.savetxt(csv, np.c_[d["t"].ravel(), d["qg"].ravel(), d["gtau"].ravel()[0] * d["vir"].ravel(), d["qm"].ravel()],
+               delimiter=",", header="t,qr,force,qm", comments="", fmt="%.12g")
+    out = tmp_path / "ctl.json"
+    p = subprocess.run([sys.executable, "-m", "didim", "controller", "fit", str(csv), "--json", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0 and "fitted from the log" in p.stdout, p.stderr
+    rec = didim.load_record(csv, controller=out)
+    assert check_controller(rec).mismatch < 0.005

@@ -17,6 +17,9 @@ from . import scenarios
 from .doctor import Diagnosis, Finding, doctor
 from .simulation import Term
 from .model import Model, load_result
+from .check import check_controller
+from .controller_fit import fit_controller
+from .units import Units
 
 __version__ = "0.1.0"
 
@@ -54,4 +57,7 @@ __all__ = [
     "Term",
     "Model",
     "load_result",
+    "check_controller",
+    "fit_controller",
+    "Units",
 ]

@@ -149,22 +149,12 @@ def identify(
     chk = enforce(recording, controller_check)
     for finding in recording.diagnose():
         warnings.warn(f"{recording.name or 'record'}: {finding}", DidimWarning, stacklevel=2)
-    return _with_check(_identify(recording, model, method, offset, apM, initial, criterion, progress, options), chk)
-
-
-def _with_check(r: IdentificationResult, chk) -> IdentificationResult:
-    r.options["controller_check"] = None if chk is None else chk.to_dict()
-    return r
-
-
-def _identify(recording, model, method, offset, apM, initial, criterion, progress, options) -> IdentificationResult:
-    """:func:`identify` once its arguments and the record are checked."""
     if method == "idim-ls":
-        return _with_force_error(recording, idim_ls(recording, model, offset=offset, **options))
+        return _with_check(_with_force_error(recording, idim_ls(recording, model, offset=offset, **options)), chk)
     if method == "didim":
-        if model == "rigid":
-            return _with_force_error(recording, didim_rigid(recording, apM, offset=offset, progress=progress, **options))
-        return _with_force_error(recording, didim_flexible(recording, apM, offset=offset, progress=progress, **options))
+        fit = didim_rigid if model == "rigid" else didim_flexible
+        return _with_check(_with_force_error(recording, fit(recording, apM, offset=offset, progress=progress, **options)),
+                           chk)
 
     t0 = time.perf_counter()
     pre: Optional[IdentificationResult] = None
@@ -197,7 +187,13 @@ def _identify(recording, model, method, offset, apM, initial, criterion, progres
         r.steps = {"didim" if pre.model == "flexible" and "rigid" in pre.steps else "rigid": pre}
         r.simulations += pre.simulations
     r.elapsed_s = time.perf_counter() - t0
-    return _with_force_error(recording, r)
+    return _with_check(_with_force_error(recording, r), chk)
+
+
+def _with_check(r: IdentificationResult, chk) -> IdentificationResult:
+    """The result with the controller check it was fitted after (:func:`didim.check.enforce`), None when off."""
+    r.options["controller_check"] = None if chk is None else chk.to_dict()
+    return r
 
 
 def _model_options(model: Model, offset: bool, options: Dict[str, Any]) -> Tuple[str, bool, Dict[str, Any]]:
@@ -249,6 +245,8 @@ def _with_force_error(recording: Recording, r: IdentificationResult) -> Identifi
         measure(step)
     if recording.qr_lead.size and r.structure is not None:
         r.notes.append(recording.lead_in_note())
+    if recording.controller_origin:
+        r.notes.append(f"no controller was described: the {recording.controller_origin}")
     judged = measure(r)  # the error the sanity checks below judge: after a record's start, when it has one
     # one sanity check for every method: a model whose simulated force misses the measured one by more than the force
     # itself explains nothing, whatever the method's own convergence test said

@@ -129,7 +129,7 @@ def check_controller(rec) -> ControllerCheck:
     limit = tf.force_limit
     keep = np.ones(rec.n, bool) if not math.isfinite(limit) else np.abs(c) < SATURATION_MARGIN * limit
     keep[:2] = False  # the law's first samples take the first position for the earlier ones
-    if np.count_nonzero(keep) < 10:
+    if np.count_nonzero(keep) < max(3, 0.05 * rec.n):
         raise DataError(f"{rec.name or 'record'}: the controller's command is at its saturation on almost every sample: "
                         "the controller cannot be checked against the log (check the saturation and gain)")
     out = ControllerCheck(_mismatch(f, c, keep), CHECK_TOLERANCE, int(np.count_nonzero(keep)))

@@ -193,6 +193,42 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"didim: warning: {_one_line(str(message))}", file=sys.stderr, flush=True)
 
 
+def cmd_controller_fit(args) -> int:
+    """Fits the controller of a record from its log and writes it as a controller file."""
+    import json
+
+    from ._io import write_text
+    from .controller_fit import fit_controller
+
+    _check_outputs([args.file], [args.json])
+    rec = _load_plain(args, args.file)
+    cf = fit_controller(rec)
+    print(f"{args.file}: {cf.summary()}")
+    if args.json:
+        write_text(args.json, json.dumps(cf.to_dict(), indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
+def cmd_controller_check(args) -> int:
+    """Checks the record's described controller against its log."""
+    from .check import enforce
+
+    rec = _load(args, args.file)
+    chk = enforce(rec, "warn" if args.controller_check == "off" else args.controller_check)
+    print(f"{args.file}: {chk.summary()}")
+    return 0 if chk.passed else 2
+
+
+def _load_plain(args, path: str):
+    """A record whose controller is fitted from its own log (no --controller): its signals, in SI."""
+    from .loaders import load_record, parse_columns
+
+    return load_record(path, controller=None, columns=parse_columns(getattr(args, "columns", None)),
+                       force_scale=getattr(args, "force_scale", 1.0), units=getattr(args, "units", None),
+                       beside_controller=False)
+
+
 def cmd_demo(args) -> int:
     from ._io import write_text
     from .demo import demo_report, run_demo, run_rest_case
@@ -381,6 +417,24 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--plot", metavar="PNG", help="measured and simulated force and their difference")
     m.add_argument("--quiet", action="store_true", help="no progress messages")
     m.set_defaults(func=cmd_simulate)
+
+    c = sub.add_parser("controller", help="the drive's controller from the log: fit the linear law u = C_r·qr − C_y·qm, "
+                                          "or check a described one against the log")
+    csub = c.add_subparsers(dest="action", required=True)
+    cf = csub.add_parser("fit", help="fit the controller from a record's qr, qm and force (no controller needed)")
+    cf.add_argument("file", help="the record (CSV, Parquet, HDF5)")
+    cf.add_argument("--columns", metavar="MAP", help="column names of the file, e.g. force=F_motor,qm=encoder")
+    cf.add_argument("--force-scale", type=float, default=1.0, metavar="N_PER_UNIT")
+    cf.add_argument("--units", default=None, metavar="UNITS", help="as for identify")
+    cf.add_argument("--json", metavar="OUT", help="write the fitted controller as a controller file "
+                                                 "(type transfer_function; --controller reads it back)")
+    cf.add_argument("--quiet", action="store_true")
+    cf.set_defaults(func=cmd_controller_fit)
+    cc = csub.add_parser("check", help="check a described controller against the log (exit 2 when it fails)")
+    cc.add_argument("file", help="the record")
+    _record_options(cc)
+    cc.add_argument("--quiet", action="store_true")
+    cc.set_defaults(func=cmd_controller_check)
 
     d = sub.add_parser("demo", help="simulated flexible EMPS with known truth: IDIM-LS, three-step DIDIM, exact-sensitivity OE")
     d.add_argument("--seed", type=int, default=0)

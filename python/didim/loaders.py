@@ -137,21 +137,34 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
     else:
         res = _checks.real("position_resolution", position_resolution, "m", lo=0.0, lo_open=False,
                            hint=" (the encoder step, in SI: m or rad; None for none, 'auto' to detect it)")
-    if controller is None:
-        raise DataError(f"{where}: no controller given: didim simulates the closed loop, so it needs the law that ran "
-                        "the axis. Give controller=didim.load_controller('controller.json') (CLI: --controller FILE) "
-                        "or put a controller file beside the record as NAME_controller.json")
-    try:
-        controller = in_units(controller, dt if dt is not None else _period(signals["t"]), k, ff)
-    except DataError as e:
-        raise DataError(f"{where}: {e}") from None
+    origin = ""
+    if controller is None:  # nobody described it: the linear law that ran the axis, from the log itself
+        from .controller_fit import fit_controller
+
+        t = signals["t"]
+        period = dt if dt is not None else _period(t)
+        try:
+            cf = fit_controller(dict(dt=period, qr=signals["qr"] * k, qm=qm * k, force=force,
+                                     u_ext=None if signals["u_ext"] is None else signals["u_ext"] * ff, name=where))
+        except DataError as e:
+            raise DataError(f"{e}. No controller was given (controller=..., CLI: --controller FILE, or "
+                            "NAME_controller.json beside the record), so didim tried to fit one from the log") from None
+        controller, origin = cf.controller, cf.summary()
+        k_in = 1.0  # fitted on SI positions and force already
+    else:
+        k_in = None
+    if k_in is None:
+        try:
+            controller = in_units(controller, dt if dt is not None else _period(signals["t"]), k, ff)
+        except DataError as e:
+            raise DataError(f"{where}: {e}") from None
 
     def si(x):
         return None if x is None else x * k
 
     kw = dict(qr=si(signals["qr"]), force=force, qm=si(qm), controller=controller, ql=si(signals["ql"]),
               u_ext=None if signals["u_ext"] is None else signals["u_ext"] * ff, position_resolution=res, name=name,
-              units=u)
+              units=u, controller_origin=origin)
     try:
         if signals["t"] is None:
             return Recording(dt=dt, **kw)  # type: ignore[arg-type]
@@ -164,7 +177,7 @@ def _period(t: Optional[np.ndarray]) -> float:
     """The sample period of a time column, for scaling a controller (the record checks the time stamps)."""
     if t is None or t.size < 2 or not np.isfinite(t[1] - t[0]) or t[1] <= t[0]:
         raise DataError("the time column must increase (didim reads the sample period from it)")
-    return float(np.median(np.diff(t)))
+    return float((t[-1] - t[0]) / (len(t) - 1))  # as the record computes it (recording._time_step)
 
 
 def beside(path: PathLike) -> Optional[str]:
@@ -243,7 +256,7 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
                 columns: Optional[Mapping[str, str]] = None, force_scale: float = 1.0, dt: Optional[float] = None,
                 position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None,
                 pulses_gain: Union[float, str] = "log", lead_in: Union[str, None, np.ndarray] = "auto",
-                units: Union[None, str, Units] = None) -> Recording:
+                units: Union[None, str, Units] = None, beside_controller: bool = True) -> Recording:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
 
     CSV: a header line naming the columns, then one row of numbers per sample (comma, semicolon, tab or spaces).
@@ -260,9 +273,12 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     ``units``: what the positions and force are logged in (:mod:`didim.units`: ``"mm"``, ``"deg"``, ``"rad,N*m"``,
     ``"counts/rev=1048576"``, ``"mm,V=2.5"``); also read from the CSV header (``qm[deg]``) or the controller file's
     ``"units"``; SI (m, N) when none says. The record is converted to SI (m or rad, N or N·m) with its controller,
-    and remembers whether its axis is linear or rotary for every unit it prints.
+    and remembers whether its axis is linear or rotary for every unit it prints. Without a controller (given, or a
+    file beside the record unless ``beside_controller=False``), the controller is fitted from the log
+    (:func:`didim.fit_controller`) and ``Recording.controller_origin`` says so.
     """
-    rec = _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain, units)
+    rec = _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain, units,
+                       beside_controller)
     if isinstance(lead_in, str) and lead_in == "auto":
         return rec
     import dataclasses
@@ -271,7 +287,7 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
 
 
 def _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain,
-                 units=None) -> Recording:
+                 units=None, beside_controller=True) -> Recording:
     from ._io import check_input
 
     p = check_input(path, "record")
@@ -285,7 +301,7 @@ def _load_record(path, controller, columns, force_scale, dt, position_resolution
     if isinstance(controller, (str, os.PathLike)):  # a controller file (JSON or TOML)
         file_units = controller_file_units(controller)
         controller = load_controller(controller)
-    if controller is None:
+    if controller is None and beside_controller:
         side = beside(p)
         if side is not None:
             file_units = controller_file_units(side)

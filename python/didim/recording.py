@@ -190,6 +190,9 @@ class Recording:
     name: str = ""
     lead_in: Union[str, None, np.ndarray] = "auto"
     units: Units = SI
+    #: Where the controller comes from when nobody described it: the fit's summary (:func:`didim.fit_controller`),
+    #: else empty.
+    controller_origin: str = ""
 
     def __post_init__(self) -> None:
         dt = _number("sample period dt", self.dt, "s")

@@ -184,6 +184,8 @@ class Diagnosis:
                      f"{100 * f['valid_force_after']:.2f} %{after.get(valid_name, '') if valid_name else ''}"
                      + (f" (the final model; the last finding below ended at {100 * last:.2f} %, before an earlier "
                         "one's hyper-parameter or the friction law was chosen again)" if retuned else ""))
+        if self.options.get("controller_origin"):
+            lines.append(f"no controller was described: the {self.options['controller_origin']}")
         for name, c in (self.options.get("controller_check") or {}).items():
             if c is not None:
                 lines.append(f"controller check ({name}): the law on the logged qr and qm gives the logged force "
@@ -847,6 +849,7 @@ def doctor(
                 "lead_in": [x for x in (_lead_in(r) for r in (recording, validate) if r is not None) if x]},
         options=dict(alpha=alpha, max_findings=max_findings, cutoff_hz=cutoff_hz, holdout=None if validate else holdout,
                      controller_check={k: (None if c is None else c.to_dict()) for k, c in checks.items()},
+                     controller_origin=recording.controller_origin,
                      friction_law="fitted" if search.law_fitted else ("default" if coulomb_eps in ("fit", None)
                                                                        else "given"),
                      _valid_record=(validate.name or "validation recording") if validate is not None else None,
