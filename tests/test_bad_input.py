@@ -525,9 +525,9 @@ def test_a_sweep_where_no_run_converges_exits_1_and_one_that_cannot_start_exits_
     p = _cli("sweep", str(drive_csv), "--model", "rigid", "--grid", "apM=80,90", "--set", "max_iter=1",
              "--workers", "1", "--quiet")
     assert p.returncode == 1 and "none of the 2 runs converged" in p.stderr, (p.stdout, p.stderr)
-    os.remove(tmp_path / "rec_controller.json")  # the record cannot be loaded: no controller
+    (tmp_path / "rec_controller.json").write_text('{"type": "pd", "kp": -1.0, "kd": 1.0}\n')  # cannot be loaded
     p = _cli("sweep", str(drive_csv), "--model", "rigid", "--grid", "apM=80,90", "--workers", "1", "--quiet")
-    assert p.returncode == 2 and "no controller given" in p.stderr, (p.stdout, p.stderr)
+    assert p.returncode == 2 and "kp" in p.stderr, (p.stdout, p.stderr)
 
 
 def test_simulate_reports_a_result_that_does_not_describe_the_record(tmp_path, emps_path):
