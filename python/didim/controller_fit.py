@@ -52,20 +52,92 @@ class ControllerFit:
     error: float
     saturation: float
     tried: List[Tuple[int, int, float]] = field(default_factory=list)
+    #: The usual cascade's settings that give this law (:func:`cascade_reading`): none, one, or two when the log cannot
+    #: tell kp from 1/ti (no feedforward difference).
+    cascade: Optional[List[Dict[str, float]]] = None
 
     def summary(self) -> str:
         parts = [f"controller fitted from the log: order {self.order}"
                  + (f", a pure delay of {self.delay} sample{'s' if self.delay > 1 else ''}" if self.delay else ""),
                  "integral action" if _has_integrator(self.controller) else "no integral action",
-                 ("the reference and the position enter differently (C_r ≠ C_y: a feedforward, or a derivative on "
-                  "the position only)") if _has_feedforward(self.controller) else "C_r = C_y (no feedforward)",
+                 ("the reference and the position enter differently (C_r ≠ C_y: a feedforward other than the full "
+                  "velocity one, or a derivative on the position only)") if _has_feedforward(self.controller)
+                 else "C_r = C_y (the law acts on the tracking error alone: in a cascade, full velocity feedforward)",
                  (f"saturation ±{self.saturation:.4g}" if math.isfinite(self.saturation) else "no saturation seen"),
                  f"its law gives the logged force within {100 * self.error:.3g} % ({100 * self.heldout_error:.3g} % "
                  "on the held-out samples)"]
+        if self.cascade:
+            said = [", ".join(f"{k} = {r[k]:.5g}{u}" for k, u in (("kp", " 1/s"), ("kv", ""), ("ti", " s"), ("kff", ""),
+                                                                    ("f_lp", " Hz"))) for r in self.cascade]
+            parts.append("as the usual cascade (P position loop, PI velocity loop, velocity feedforward, command "
+                         "low-pass; kv in force per unit speed): " + " or ".join(said)
+                         + (" (this log cannot tell kp from 1/ti: with C_r = C_y they play symmetric parts)"
+                            if len(said) > 1 else ""))
         return "; ".join(parts)
 
     def to_dict(self) -> Dict[str, Any]:
         return {**self.controller.to_dict(), "note": self.summary()}
+
+
+#: A fitted law's coefficient below this share of its largest is zero when it is read as a cascade (the least
+#: squares leave some 1e-5 of it where the cascade has none).
+READING_RTOL = 1e-4
+
+
+def cascade_reading(tf: TransferFunction) -> Optional[List[Dict[str, float]]]:
+    """The usual cascade's settings (:meth:`TransferFunction.cascade` with a PI velocity loop, velocity feedforward
+    and a first-order command low-pass; force gain 1) of a fitted law that has its structure, read off its
+    coefficients; None when it has another (no integrator, more poles, a delay).
+
+    Over the denominator ``(1 − z⁻¹)(1 − p·z⁻¹)`` the cascade's feedback numerator is ``kv(1 − p)·[α, −1] ∗
+    [β, −1/T]`` with ``α = 1 + T/ti`` (the PI's zero) and ``β = kp + 1/T`` (the position loop's), and its
+    feedforward numerator ``C_r − C_y`` is ``kv(1 − p)(kff − 1)/T·[α, −1] ∗ [1, −1]``. The feedforward's zero gives α
+    and kff; without a feedforward difference (kff = 1, or C_r = C_y) the two zeros play symmetric parts and the log
+    cannot tell kp from 1/ti: both readings are returned."""
+    T = tf.dt
+    a, b_y, b_r = np.array(tf.a_y), np.array(tf.b_y), np.array(tf.b_r)
+    if tf.a_r != tf.a_y or len(a) != 3 or not _has_integrator(tf):
+        return None
+    p = float(-(a[1] + 1.0))  # a = [1, −(1 + p), p]
+    if not (0.0 < p < 1.0) or abs(a[2] - p) > 1e-6 * max(abs(p), 1e-12) + 1e-9:
+        return None
+    def three(b):  # the numerator's taps without trailing zeros, to three
+        b = np.trim_zeros(np.where(np.abs(b) <= READING_RTOL * np.abs(b).max(), 0.0, b), "b")
+        return np.pad(b, (0, 3 - len(b))) if len(b) <= 3 else None
+
+    b_y, b_r = three(b_y), three(b_r)
+    if b_y is None or b_r is None or not b_y[2] > 0:
+        return None
+    g = b_y[2] * T  # kv(1 − p)
+    kv = g / (1.0 - p)
+    # b_y = g·[αβ, −(α/T + β), 1/T]: α·β = b_y0/g, α/T + β = −b_y1/g
+    prod, S = b_y[0] / g, -b_y[1] / g
+    disc = S * S - 4.0 * prod / T
+    if disc < 0:
+        return None
+    roots = [(S + sg * math.sqrt(disc)) * T / 2.0 for sg in (1.0, -1.0)]  # α candidates
+    f_lp = -math.log(p) / (2.0 * math.pi * T)
+    d = b_r - b_y
+    readings = []
+    for alpha in roots:
+        beta = prod / alpha
+        ti, kp = T / (alpha - 1.0) if alpha > 1.0 else -1.0, beta - 1.0 / T
+        if not (ti > 0 and kp > 0):
+            continue
+        kff = 1.0 + float(d[2]) * T / g  # the feedforward numerator's last coefficient is kv(1 − p)(kff − 1)/T
+        readings.append({"kp": float(kp), "kv": float(kv), "ti": float(ti), "kff": float(kff), "f_lp": float(f_lp)})
+    if np.linalg.norm(d) > READING_RTOL * np.linalg.norm(b_y) and len(readings) > 1:
+        # the feedforward's zero [α, −1] tells the PI's zero: keep the reading that has it
+        alpha_ff = float(d[0] / d[2]) if d[2] else math.nan
+        readings = [min(readings, key=lambda r: abs(1.0 + T / r["ti"] - alpha_ff))]
+    # a reading must reproduce the fitted law
+    ok = []
+    for r in readings:
+        c = TransferFunction.cascade(dt=T, **r)
+        tol = dict(rtol=10 * READING_RTOL, atol=READING_RTOL * np.abs(b_y).max())
+        if np.allclose(c.b_y, b_y[:len(c.b_y)], **tol) and np.allclose(c.b_r, b_r[:len(c.b_r)], **tol):
+            ok.append(r)
+    return ok or None
 
 
 def _has_integrator(tf: TransferFunction) -> bool:
@@ -74,7 +146,7 @@ def _has_integrator(tf: TransferFunction) -> bool:
 
 def _has_feedforward(tf: TransferFunction) -> bool:
     br, by = np.array(tf.b_r), np.array(tf.b_y)
-    return bool(np.linalg.norm(br - by) > 1e-6 * np.linalg.norm(by))
+    return bool(np.linalg.norm(br - by) > READING_RTOL * np.linalg.norm(by))
 
 
 def _plateau(f: np.ndarray) -> float:
@@ -193,7 +265,7 @@ def fit_controller(rec_or_signals, *, holdout: float = 0.3, max_order: int = MAX
     keep = ~clipped
     keep[:len(tf.b_y)] = False
     whole = mismatch(tf, f, tf.command(qr, qm), keep)
-    return ControllerFit(tf, n, d, err, whole, sat, tried)
+    return ControllerFit(tf, n, d, err, whole, sat, tried, cascade_reading(tf) if d == 0 else None)
 
 
 __all__ = ["ControllerFit", "fit_controller"]
