@@ -139,6 +139,8 @@ def cmd_simulate(args) -> int:
         print(f"  (on its own record, as fitted: {100 * result.force_error:.2f} %)")
     if rec.qr_lead.size:
         print(f"  ({rec.lead_in_note()})")
+    if rec.controller_origin:
+        print(f"  (no controller was described: the {rec.controller_origin})")
     if chk is not None:
         print(f"  ({chk.summary()})")
     if args.json:
