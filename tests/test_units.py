@@ -74,7 +74,7 @@ def test_declared_units_give_the_si_record_and_its_encoder_step():
 
 @needs_axes
 def test_a_stroke_no_axis_has_is_refused_with_the_unit_to_declare(tmp_path):
-    with pytest.raises(didim.DataError, match="look like mm"):
+    with pytest.raises(didim.DataError, match="another unit than m, mm on a linear axis"):
         didim.load_record(os.path.join(AXES, "null_belt_pid_mm_train.csv"))
     rec = didim.load_record(os.path.join(AXES, "null_belt_pid_mm_train.csv"), units="mm")
     assert rec.stroke == pytest.approx(0.6573, rel=1e-3)

@@ -232,11 +232,11 @@ def check_stroke(qr, units: Units, where: str) -> None:
         return
     stroke = float(np.ptp(qr)) * units.position_factor
     if stroke > MAX_LINEAR_STROKE_M:
-        guess = "mm" if stroke / 1e3 <= MAX_LINEAR_STROKE_M else "um or encoder counts"
+        guess = "mm" if stroke / 1e3 <= MAX_LINEAR_STROKE_M else "um"
         raise DataError(f"{where}: the reference spans {stroke:.4g} m, more than any machine axis "
-                        f"({MAX_LINEAR_STROKE_M:g} m); the positions look like {guess}, not "
-                        f"{units.position}: declare them, e.g. units='{guess.split()[0]}' (CLI: --units "
-                        f"{guess.split()[0]}, or a CSV header qm[{guess.split()[0]}])")
+                        f"({MAX_LINEAR_STROKE_M:g} m): the positions are in another unit than {units.position}, "
+                        f"{guess} on a linear axis, or deg, rev or encoder counts on a rotary one; declare it, e.g. "
+                        f"units='{guess}' or units='deg' (CLI: --units {guess}, or a CSV header such as qm[{guess}])")
 
 
 __all__ = ["Units", "SI", "parse", "from_header", "label", "length", "speed", "force", "force_unit", "plot_length",
