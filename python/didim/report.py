@@ -194,6 +194,10 @@ def diagnosis_html(diag) -> str:
     ]
     from .doctor import lead_in_words, start_words
 
+    # the summary's lines on the controller (checked against the log, or fitted from it) and the friction law
+    parts += [f"<p><b>{e(line.split(':')[0].capitalize())}.</b>{e(line.split(':', 1)[1])}</p>"
+              for line in diag.summary().splitlines()
+              if line.startswith(("controller check", "no controller was described", "friction law"))]
     parts += [f"<p><b>Lead-in.</b> {e(lead_in_words(ld))}</p>" for ld in diag.locate.get("lead_in", [])]
     if diag.locate.get("lead_in"):
         fig = lead_in_figure(diag)
