@@ -6,7 +6,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import subprocess
 import sys
 import warnings
@@ -15,7 +14,7 @@ import numpy as np
 import pytest
 
 import didim
-from didim.check import CHECK_TOLERANCE, check_controller
+from didim.check import check_controller
 
 from conftest import TRUTHBENCH_DIR
 

@@ -17,7 +17,7 @@ import pytest
 import didim
 from didim.controllers import in_units
 from didim.doctor.fit import EPS_XTOL
-from didim.units import Units, parse
+from didim.units import parse
 
 from conftest import TRUTHBENCH_DIR
 
