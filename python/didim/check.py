@@ -6,8 +6,10 @@ that ran the axis (the feedforward forgotten, an integral time typed in ms, a ga
 fit, with biased parameters and invented effects. The log holds the evidence: ``u = C_r(z)·qr − C_y(z)·qm`` on the
 logged signals is the logged command, to rounding, when the description is right (0.0 % on the truthbench's drive
 records, at most 0.3 % on the EMPS). :func:`check_controller` measures that mismatch on the samples where the drive
-does not saturate, says where it lives (during moves, at rest, around reversals), and, when it is too large, tries the
-usual mistakes and names the one that explains the log.
+does not saturate (the law's unknown state at the first sample taken out), says where it lives (during moves, at rest,
+around reversals), and, when it is too large, tries the usual mistakes and names the one that explains the log. Too
+large is beyond rounding (``ROUNDING_LEVEL``) and beyond ``NOISE_MARGIN`` times what the best linear law fitted from
+the same log reaches (:func:`didim.fit_controller`): what that law misses is noise, which no description explains.
 """
 
 from __future__ import annotations
