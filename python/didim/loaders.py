@@ -18,7 +18,7 @@ import numpy as np
 from . import _checks
 from ._errors import DataError
 from .controllers import Controller, controller_file_units, in_units, load_controller
-from .recording import Recording, load_mat
+from .recording import Recording, _time_step, load_mat
 from .units import SI, Units, check_stroke, from_header, parse as parse_units
 
 #: The columns of a record: required, then optional.
@@ -142,7 +142,7 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
         from .controller_fit import fit_controller
 
         t = signals["t"]
-        period = dt if dt is not None else _period(t)
+        period = dt if dt is not None else _time_step(t, f"{where}: ")
         try:
             cf = fit_controller(dict(dt=period, qr=signals["qr"] * k, qm=qm * k, force=force,
                                      u_ext=None if signals["u_ext"] is None else signals["u_ext"] * ff, name=where))
@@ -155,7 +155,7 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
         k_in = None
     if k_in is None:
         try:
-            controller = in_units(controller, dt if dt is not None else _period(signals["t"]), k, ff)
+            controller = in_units(controller, dt if dt is not None else _time_step(signals["t"], f"{where}: "), k, ff)
         except DataError as e:
             raise DataError(f"{where}: {e}") from None
 
@@ -171,13 +171,6 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
         return Recording.from_time(signals["t"], dt=dt, **kw)  # type: ignore[arg-type]
     except DataError as e:
         raise DataError(f"{where}: {e}") from None
-
-
-def _period(t: Optional[np.ndarray]) -> float:
-    """The sample period of a time column, for scaling a controller (the record checks the time stamps)."""
-    if t is None or t.size < 2 or not np.isfinite(t[1] - t[0]) or t[1] <= t[0]:
-        raise DataError("the time column must increase (didim reads the sample period from it)")
-    return float((t[-1] - t[0]) / (len(t) - 1))  # as the record computes it (recording._time_step)
 
 
 def beside(path: PathLike) -> Optional[str]:
