@@ -170,6 +170,7 @@ def _stribeck_adopted(st: State, r: IdentificationResult, vs: float) -> Adopted:
 
 
 def _stribeck_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    """The Stribeck term refitted in closed loop at speeds around the grid optimum (0.7, 1 and 1.4 times)."""
     vs = c.hyper["vs"]
     best = None
     speeds = [vs * f for f in (0.7, 1.0, 1.4)]  # refine the Stribeck speed around the grid optimum
