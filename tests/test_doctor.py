@@ -81,6 +81,20 @@ def test_doctor_finds_a_hidden_flexible_mode_and_its_frequency(bench):
     assert d.findings[0].params["f_n_flex"] == pytest.approx(25.0, rel=0.03)
 
 
+def test_an_effect_a_fitted_friction_law_partly_stands_in_for_is_still_named(bench):
+    """A 45 Hz mode (effect-to-noise ratio 0.57) behind the generator's algebraic law at 0.1 mm/s: the law fitted
+    before any effect softened to 0.18 mm/s and took a part of the mode's force at the reversals, and the mode then
+    failed the held-out test (2.96 % -> 2.65 %, p = 0.057). Adopted from didim's default law as well, it is named, at
+    its frequency, and the law comes back to the generator's."""
+    rec, h, enr = bench.make("flexibility", 45.0, "emps", bench.TEST_SEED0 + 1)
+    d = didim.doctor(rec, "rigid", apM=80.0)
+    named = [f.effect for f in d.findings]
+    assert named and named[0] == "flexibility", d.summary()
+    assert d.findings[0].params["f_n_flex"] == pytest.approx(45.0, rel=0.1)
+    law = d.final_result.structure
+    assert law.coulomb_law == "algebraic" and law.coulomb_eps == pytest.approx(1e-4, rel=0.5), law
+
+
 def test_diagnosis_json_and_html_contract(bench, tmp_path):
     rec, _, _ = bench.make("offset", 5.6, "emps", bench.TEST_SEED0 + 1)
     d = didim.doctor(rec, "rigid", apM=80.0)
@@ -212,3 +226,27 @@ def test_the_summary_gives_the_final_model_in_words_with_units(emps_path, emps_p
     assert f"Coulomb friction {p['Fc'] + p['dFc']:.4g} N forward" in f.words
     assert f.words in d.summary() and "details" in d.summary() and "dFv = " in d.summary()
     assert " N/(m/s)," in d.summary().split("details")[1]  # the details carry units too
+
+
+def test_a_force_lag_accepted_before_flexibility_survives_its_adoption():
+    """Issue 28: the flexibility's adoption rebuilt the doctor's state field by field and dropped a force lag (and the
+    friction law) accepted before it. The state it returns is the one it was given, made flexible."""
+    from didim.doctor.effects import _flexibility_adopt
+    from didim.doctor.fit import Data, State
+    from didim.signal import Decimation
+
+    truth = didim.scenarios.TABLE3_TRUTH
+    plan = didim.scenarios.make_recording(truth, "flexible", force_noise=0.0, seed=3)
+    sim = didim.simulate(plan, truth, "flexible", force_lag=4e-4)
+    rng = np.random.default_rng(3)
+    rec = didim.Recording(dt=plan.dt, qr=plan.qr, force=sim.force + rng.standard_normal(plan.n), qm=sim.q1,
+                          controller=plan.controller, lead_in=None)
+    rigid = didim.identify(rec, "rigid", "didim", force_lag=4e-4)
+    state = State("rigid", dict(rigid.params), {}, force_lag=4e-4, coulomb_eps=2e-4, coulomb_law="tanh")
+    data = Data(rec, None, Decimation.lowpass(40.0, rec.fs), 0.3)
+    st, r, params, _ = _flexibility_adopt(None, state, data, None)
+    assert st.model == "flexible" and r.model == "flexible"
+    assert (st.force_lag, st.coulomb_eps, st.coulomb_law) == (4e-4, 2e-4, "tanh")
+    assert r.structure.force_lag == 4e-4
+    # the blocked-motor mode, as the doctor states it
+    assert params["f_n_flex"] == pytest.approx(np.sqrt(truth["K12"] / truth["M2"]) / (2 * np.pi), rel=0.05)
