@@ -139,3 +139,13 @@ def test_the_doctor_gives_the_same_findings_and_law_in_any_unit(wrist, s):
     # within a few EPS_XTOL, and the final error moves by as much as that law's difference (a few 1e-3 of itself)
     assert law.coulomb_eps / s == pytest.approx(law0.coulomb_eps, rel=3 * EPS_XTOL)
     assert d.fit["valid_force_after"] == pytest.approx(d0.fit["valid_force_after"], rel=5e-3)
+
+
+def test_a_findings_details_carry_the_axis_units():
+    """The doctor's details lines (each finding's params) in the record's units: N·m and rad/s on a rotary axis."""
+    from didim.doctor.effects import params_text
+
+    p = {"Fs": -5e-4, "vs": 0.15, "f_n_flex": 30.0, "M1": 2e-3, "K12": 40.0}
+    assert params_text(p, "rotary") == ("Fs = -0.0005 N·m, vs = 0.15 rad/s, f_n_flex = 30 Hz, M1 = 0.002 kg·m², "
+                                        "K12 = 40 N·m/rad")
+    assert params_text(p, "linear") == "Fs = -0.0005 N, vs = 0.15 m/s, f_n_flex = 30 Hz, M1 = 0.002 kg, K12 = 40 N/m"

@@ -31,7 +31,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
-from .. import _checks
+from .. import _checks, units
 from .._errors import DataError, DidimError
 from .._io import jsonable as _clean
 from ..identification import a_priori_mass
@@ -40,8 +40,8 @@ from ..result import IdentificationResult
 from ..signal import Decimation
 from ..simulation import SimResult, coulomb_eps_of, param_names, simulate
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
-from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNITS, UNNAMED, Candidate, Effect, _g, final_values,
-                      separating_experiment)
+from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect, _g, final_values,
+                      params_text, separating_experiment)
 from .fit import Data, State, base_columns, fit_friction_law, refit
 
 #: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
@@ -193,8 +193,6 @@ class Diagnosis:
                                                                     f"{100 * c['tolerance']:g} %: {c['likely'] or 'no usual mistake explains it'})"))
         law = self.final_state.structure() if self.final_state is not None else self.base.structure
         if law is not None and law.coulomb_eps is not None:
-            from .. import units
-
             how = {"fitted": "fitted in closed loop", "given": "given",
                    "default": "didim's default for the record"}[self.options.get("friction_law", "default")]
             lines.append(f"friction law through zero speed ({how}): {law.coulomb_law}, smoothing speed "
@@ -232,7 +230,7 @@ class Diagnosis:
                      f"{100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, validation "
                      f"{100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %):")
         for x in self.findings + self.rejected:
-            ps = ", ".join(f"{k} = {v:.4g}{(' ' + UNITS[k]) if UNITS.get(k) else ''}" for k, v in x.params.items())
+            ps = params_text(x.params, self.base.axis)
             rnd = f" (round {x.where['round']})" if "round" in x.where else ""
             lines.append(f"  {x.effect}{rnd}: {ps + '; ' if ps else ''}{x.evidence}")
         return "\n".join(lines)

@@ -609,6 +609,12 @@ UNITS = {"OF": "N", "dFv": "N/(m/s)", "dFc": "N", "Fs": "N", "vs": "m/s", "ampli
          "peak_backward_at": "m"}
 
 
+def params_text(params: Dict[str, float], axis: str) -> str:
+    """A finding's ``params`` as ``name = value unit`` pairs, in the units of a ``"linear"`` or ``"rotary"`` axis."""
+    return ", ".join(f"{k} = {v:.4g}{(' ' + units.label(UNITS[k], axis)) if UNITS.get(k) else ''}"
+                     for k, v in params.items())
+
+
 def final_values(effect: str, params: Dict[str, float], state: State) -> Dict[str, float]:
     """A finding's ``params`` with the values of ``state`` (the final model, refitted after later findings): its own
     parameters, and the quantities derived from them."""
