@@ -250,3 +250,17 @@ def test_a_force_lag_accepted_before_flexibility_survives_its_adoption():
     assert r.structure.force_lag == 4e-4
     # the blocked-motor mode, as the doctor states it
     assert params["f_n_flex"] == pytest.approx(np.sqrt(truth["K12"] / truth["M2"]) / (2 * np.pi), rel=0.05)
+
+
+def test_the_fit_plot_simulates_a_doctor_result_with_its_own_structure(bench):
+    """plot_fit guessed the model from the parameter names ("OF" in params, "K12" in params) and failed on a result
+    with extra terms; it simulates the result as it is (its terms, delay, force lag and friction law)."""
+    from didim.plots import plot_fit
+
+    rec, _, _ = bench.make("asymmetric_friction", 5.6, "emps", bench.TEST_SEED0 + 2)
+    d = didim.doctor(rec, "rigid", apM=80.0)
+    assert d.final_result.structure.terms, d.summary()
+    fig = plot_fit(rec, d.final_result)
+    err = didim.simulate(rec, d.final_result).relative_error(rec)
+    assert f"{100 * err:.2f} %" in fig.axes[0].get_title()
+    assert err < 0.5 * d.fit["train_force_before"]

@@ -21,11 +21,12 @@ def plot_fit(recording: Recording, result: IdentificationResult, *, title: str =
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    params = full_params(result)
-    if "lambda" in params:  # a step-2 result: simulate its flexible parameter set
-        params = {k: v for k, v in result.frozen.items()}
-    model = "flexible" if "K12" in params else "rigid"
-    sim = simulate(recording, params, model, offset="OF" in params)
+    if "lambda" in result.params:  # a step-2 result: simulate its flexible parameter set
+        params, model = dict(result.frozen), "flexible"
+        sim = simulate(recording, params, model, offset="OF" in params)
+    else:  # the result's own structure (terms, delay, force lag, friction law) and numerics
+        model = result.model
+        sim = simulate(recording, result)
     fig, axes = plt.subplots(2, 1, figsize=(11, 7), gridspec_kw=dict(height_ratios=[3, 2]))
     sim.plot(recording, ax=axes[0])
     axes[0].set_title(title or f"{recording.name}: {result.method}, {model} model — measured (red), simulated (blue), "
