@@ -313,8 +313,8 @@ def main() -> int:
                 t_rest, f"cost of the lead-in: {t_lead / t_rest:.2f}× (target ≤ 1.10×)", didim_row=False)
 
     # ---------------------------------------------------------------- sensitivities
-    pb_exp = _core.Problem("flexible", plain.qr, plain.dt, "emps", list(gains))
-    pb_rk4 = _core.Problem("flexible", plain.qr, plain.dt, "emps", list(gains), integrator="rk4")
+    pb_exp = _core.Problem(_core.Model("flexible"), plain.qr, plain.dt, "emps", list(gains))
+    pb_rk4 = _core.Problem(_core.Model("flexible"), plain.qr, plain.dt, "emps", list(gains), integrator="rk4")
     t_sens, _ = best(lambda: pb_exp.simulate_sensitivity(p), repeat=rep)
     t_sens_rk4, _ = best(lambda: pb_rk4.simulate_sensitivity(p), repeat=2)
     tab.add(sec, "didim forward sensitivities (7 parameters), exponential", t_sens, "same with RK4 10 substeps",

@@ -311,7 +311,7 @@ def test_zero_substeps(emps):
     with pytest.raises(didim.DataError, match="substeps must be between 1 and 100000, got 0"):
         didim.identify(emps, "rigid", "didim", apM=78.0, substeps=0)
     with pytest.raises(didim.DataError, match="substeps must be a whole number between 0 and"):
-        didim._core.Problem("rigid", emps.qr, 1e-3, "emps", [1.0, 1.0, 1.0, 1.0], substeps=-1)
+        didim._core.Problem(didim._core.Model("rigid"), emps.qr, 1e-3, "emps", [1.0, 1.0, 1.0, 1.0], substeps=-1)
 
 
 def test_unknown_and_unused_options_are_refused_with_the_accepted_ones(emps):
@@ -587,7 +587,7 @@ def test_api_arguments_of_the_wrong_type_are_data_errors(emps, tmp_path):
         (lambda: didim.load_mat("DATA_EMPS.mat\x00x"), "NUL character"),
         (lambda: didim.Recording(1e-300, rec.qr, rec.force, rec.qm, controller=rec.controller), "time column's unit"),
         (lambda: didim.identify(rec, "rigid", "didim", decimation="x"), "decimation must be a didim.Decimation"),
-        (lambda: didim.simulate(rec, p, terms=["x"]), "terms must be a list of didim.Term"),
+        (lambda: didim.simulate(rec, p, terms=["x"]), "a model term is a didim.Term"),
         (lambda: didim.simulate(rec, None), "parameters must be a mapping"),
         (lambda: didim.simulate_batch(None, [p]), "recording must be a didim.Recording"),
         (lambda: didim.simulate_batch(rec, 5), "takes a sequence of parameter sets"),

@@ -242,11 +242,11 @@ def test_a_force_lag_accepted_before_flexibility_survives_its_adoption():
     rec = didim.Recording(dt=plan.dt, qr=plan.qr, force=sim.force + rng.standard_normal(plan.n), qm=sim.q1,
                           controller=plan.controller, lead_in=None)
     rigid = didim.identify(rec, "rigid", "didim", force_lag=4e-4)
-    state = State("rigid", dict(rigid.params), {}, force_lag=4e-4, coulomb_eps=2e-4, coulomb_law="tanh")
+    state = State(didim.Model("rigid", force_lag=4e-4, coulomb_eps=2e-4, coulomb_law="tanh"), dict(rigid.params), {})
     data = Data(rec, None, Decimation.lowpass(40.0, rec.fs), 0.3)
     st, r, params, _ = _flexibility_adopt(None, state, data, None)
-    assert st.model == "flexible" and r.model == "flexible"
-    assert (st.force_lag, st.coulomb_eps, st.coulomb_law) == (4e-4, 2e-4, "tanh")
+    assert st.kind == "flexible" and r.model == "flexible"
+    assert (st.model.force_lag, st.model.coulomb_eps, st.model.coulomb_law) == (4e-4, 2e-4, "tanh")
     assert r.structure.force_lag == 4e-4
     # the blocked-motor mode, as the doctor states it
     assert params["f_n_flex"] == pytest.approx(np.sqrt(truth["K12"] / truth["M2"]) / (2 * np.pi), rel=0.05)

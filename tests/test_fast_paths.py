@@ -49,7 +49,7 @@ def test_with_the_encoder_quantizer_both_integrators_agree_to_the_quantization_l
 def test_simulated_states_satisfy_the_idm_with_both_integrators(emps):
     for integrator in ("exponential", "rk4"):
         sim = didim.simulate(emps, TABLE3, "flexible", integrator=integrator)
-        w = didim._core.regressor("flexible", sim.q, sim.qd, sim.qdd, coulomb_eps=default_coulomb_eps(emps))
+        w = didim.Model("flexible", coulomb_eps=default_coulomb_eps(emps)).core().regressor(sim.q, sim.qd, sim.qdd)
         np.testing.assert_allclose(w[0] @ TABLE3, sim.force, atol=1e-7 * np.abs(sim.force).max())
         np.testing.assert_allclose(w[1] @ TABLE3, 0.0, atol=1e-6)
 
@@ -99,7 +99,7 @@ def test_core_objectives_equal_their_python_definitions(emps):
     # DIDIM's system: both rows of eq. (4), frozen Fv2 and Fc2 moved to the targets
     free = [0, 1, 2, 3, 6]
     y, w, force_dec = pb.didim_system(TABLE3, emps.force, free, dec.core)
-    wr = didim._core.regressor("flexible", sim.q, sim.qd, sim.qdd, coulomb_eps=default_coulomb_eps(emps))
+    wr = didim.Model("flexible", coulomb_eps=default_coulomb_eps(emps)).core().regressor(sim.q, sim.qd, sim.qdd)
     frozen = [4, 5]
     rows = [(emps.force - wr[0][:, frozen] @ TABLE3[frozen], wr[0][:, free]),
             (-wr[1][:, frozen] @ TABLE3[frozen], wr[1][:, free])]

@@ -71,7 +71,7 @@ def test_a_model_carries_its_force_lag_and_didim_fits_through_it(short_emps):
 
 
 def test_the_force_lag_is_refused_where_it_has_no_sensitivities(short_emps):
-    with pytest.raises(didim.DataError, match=r"unknown option\(s\) .force_lag. for method .oe-lm."):
+    with pytest.raises(didim.DataError, match=r"oe-lm .*cannot identify .*does not support force_lag"):
         didim.identify(short_emps, didim.Model("rigid", force_lag=3e-4), "oe-lm", apM=80.0)
     with pytest.raises(didim.DataError, match="force_lag must be a finite number >= 0 s"):
         didim.simulate(short_emps, dict(M=95.0, Fv=200.0, Fc=20.0), force_lag=-1e-3)
@@ -79,17 +79,26 @@ def test_the_force_lag_is_refused_where_it_has_no_sensitivities(short_emps):
 
 @pytest.mark.parametrize("lag", [2e-4, 1e-3, 5e-2])
 def test_force_lag_mean_is_the_mean_of_the_exact_lag_over_each_period(lag):
-    """`force_lag_mean` (what DIDIM regresses when the model has a lag) against the lag's exact solution under held
-    commands, integrated over each period: f(t) = τ + (f₀ − τ)·e^(−t/T), its mean T/dt·(1 − e^(−dt/T))·(f₀ − τ) + τ."""
+    """The applied force of a loop with a lag (what DIDIM regresses, computed by the core as its simulator applies the
+    lag) against the lag's exact solution under held commands, integrated over each period: f(t) = τ + (f₀ − τ)·e^(−t/T),
+    its mean T/dt·(1 − e^(−dt/T))·(f₀ − τ) + τ."""
     from scipy.integrate import quad
 
-    from didim.signal import force_lag_mean
+    import didim
+    from didim.simulation import problem
 
     dt = 1e-3
     tau = np.random.default_rng(1).standard_normal(200) * 50
+    rec = didim.Recording(dt, np.linspace(0, 0.1, 200), tau, np.linspace(0, 0.1, 200),
+                          controller=didim.PD(kp=1e3, kd=50.0, tau_max=1e3))
+    pb = problem(rec, didim.Model("rigid", force_lag=lag))
     f0, expected = tau[0], np.empty_like(tau)
     for k, t in enumerate(tau):
         expected[k] = quad(lambda s: t + (f0 - t) * np.exp(-s / lag), 0, dt, epsabs=0, epsrel=1e-10)[0] / dt
         f0 = t + (f0 - t) * np.exp(-dt / lag)
     # the quadrature's relative 1e-10 on forces of up to 200 N: 2e-8 N
-    np.testing.assert_allclose(force_lag_mean(tau, lag, dt), expected, rtol=0, atol=2e-8)
+    np.testing.assert_allclose(pb.applied_force(tau), expected, rtol=0, atol=2e-8)
+    # with a delay too: the command of two samples earlier (0 before the first) through the same lag
+    delayed = problem(rec, didim.Model("rigid", force_lag=lag, delay=2)).applied_force(tau)
+    np.testing.assert_allclose(delayed[2:], problem(rec, didim.Model("rigid", force_lag=lag)).applied_force(
+        np.r_[0.0, 0.0, tau[:-2]])[2:], rtol=0, atol=1e-12)

@@ -25,7 +25,7 @@ def test_the_simulated_states_satisfy_the_idm_with_every_law(emps, law):
     """The regressor with the same law reproduces the simulated force to rounding (both read the core's one law)."""
     eps = default_coulomb_eps(emps)
     sim = didim.simulate(emps, TABLE3, didim.Model("flexible", coulomb_law=law))
-    w = didim._core.regressor("flexible", sim.q, sim.qd, sim.qdd, coulomb_eps=eps, coulomb_law=law)
+    w = didim.Model("flexible", coulomb_eps=eps, coulomb_law=law).core().regressor(sim.q, sim.qd, sim.qdd)
     chi = np.array(list(TABLE3.values()))
     np.testing.assert_allclose(w[0] @ chi, sim.force, atol=1e-7 * np.abs(sim.force).max())
     np.testing.assert_allclose(w[1] @ chi, 0.0, atol=1e-6)

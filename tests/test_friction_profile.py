@@ -62,14 +62,14 @@ def test_the_terms_are_bsplines_times_the_sign_of_one_direction():
     terms = _splines()[:3] + _splines()[9:12]
     p = {"M": M, "Fv": FV, "Fc": 20.0, **{t.name: 1.0 for t in terms}}
     sim = didim.simulate(rec, p, "rigid", terms=terms)
-    w = didim._core.regressor("rigid", sim.q, sim.qd, sim.qdd, terms=[t.spec() for t in terms])
+    w = didim.Model("rigid", terms=terms).core().regressor(sim.q, sim.qd, sim.qdd)
     s = didim.coulomb_sign(sim.qd1)
     for i, t in enumerate(terms):
-        side = s * (1 + s) / 2 if t.kind.endswith("fwd") else s * (1 - s) / 2  # 1|0 forward, 0|-1 backward
-        np.testing.assert_allclose(w[0, :, 3 + i], _bspline((sim.q1 - t.hyper) / t.width) * side, atol=1e-12)
+        side = s * (1 + s) / 2 if t.hypers["side"] > 0 else s * (1 - s) / 2  # 1|0 forward, 0|-1 backward
+        np.testing.assert_allclose(w[0, :, 3 + i], _bspline((sim.q1 - t.hypers["center"]) / t.hypers["width"]) * side, atol=1e-12)
     # the whole set of one direction sums to its side of the sign along the stroke (a partition of unity)
     full = _splines()
-    wf = didim._core.regressor("rigid", sim.q, sim.qd, sim.qdd, terms=[t.spec() for t in full])[0, :, 3:]
+    wf = didim.Model("rigid", terms=full).core().regressor(sim.q, sim.qd, sim.qdd)[0, :, 3:]
     inside = (sim.q1 > 0.0) & (sim.q1 < 0.24)
     np.testing.assert_allclose(wf[inside, :9].sum(axis=1), (s * (1 + s) / 2)[inside], atol=1e-12)
     np.testing.assert_allclose(wf[inside, 9:].sum(axis=1), (s * (1 - s) / 2)[inside], atol=1e-12)
@@ -101,7 +101,7 @@ def test_didim_recovers_both_profiles_from_the_independent_plant(records):
     assert r.params["Fv"] == pytest.approx(FV, rel=0.02)
     from didim.doctor.fit import State
 
-    st = State("rigid", dict(r.params), {}, terms=tuple(terms))
+    st = State(didim.Model("rigid", terms=terms), dict(r.params), {})
     prof = spline_profile(st)
     q = prof["q"]
     fc, dfc = r.params["Fc"], r.params["dFc"]
@@ -181,10 +181,13 @@ def test_a_full_set_of_knots_is_refused_with_what_to_leave_out(emps):
 
 
 def test_terms_say_what_is_wrong_with_their_width():
-    with pytest.raises(didim.DataError, match="needs its knot spacing: give width="):
+    with pytest.raises(didim.DataError, match="needs its width .m.: e.g. didim.Term"):
         didim.Term("a", "coulomb_spline_fwd", 0.1)
-    with pytest.raises(didim.DataError, match="must be a finite number > 0 m"):
+    with pytest.raises(didim.DataError, match="knot spacing width > 0 m, got 0.1 and -0.02"):
         didim.Term("a", "coulomb_spline_bwd", 0.1, width=-0.02)
     with pytest.raises(didim.DataError, match="only spline terms have a width"):
         didim.Term("a", "stribeck", 0.01, width=0.05)
-    assert didim.Term("a", "coulomb_spline_fwd", 0.1, width=0.05).spec() == ("a", "coulomb_spline_fwd", 0.1, "motor", 0.05)
+    # the older name is the kind with its side fixed, and the hyper-parameters are named
+    t = didim.Term("a", "coulomb_spline_fwd", 0.1, width=0.05)
+    assert t == didim.Term("a", "coulomb_spline", center=0.1, width=0.05, side=1)
+    assert t.spec() == ("a", "coulomb_spline", "motor", [("center", 0.1), ("width", 0.05), ("side", 1.0)])

@@ -17,9 +17,9 @@ def test_a_load_side_term_reads_the_load_state_and_acts_on_the_load_row():
     q = np.cumsum(rng.normal(0, 1e-4, (2, n)), axis=1)
     qd = rng.normal(0, 0.02, (2, n))
     qdd = rng.normal(0, 1.0, (2, n))
-    terms = [didim.Term("Fs1", "stribeck", vs).spec(), didim.Term("Fs2", "stribeck", vs, "load").spec()]
-    w = _core.regressor("flexible", q, qd, qdd, terms=terms)
-    names = didim.param_names("flexible", terms=[didim.Term(*t) for t in terms])
+    terms = [didim.Term("Fs1", "stribeck", vs), didim.Term("Fs2", "stribeck", vs, "load")]
+    w = didim.Model("flexible", terms=terms).core().regressor(q, qd, qdd)
+    names = didim.param_names("flexible", terms=terms)
     i1, i2 = names.index("Fs1"), names.index("Fs2")
     # the Stribeck basis sign(v)·exp(−(v/vs)²), written here from its definition with numpy
     expect = lambda v: coulomb_sign(v) * np.exp(-(v / vs) ** 2)  # noqa: E731

@@ -29,7 +29,7 @@ def record():
 
 def test_the_term_is_the_coulomb_friction_modulated_along_the_stroke(record):
     sim = didim.simulate(record, TRUTH, "rigid", terms=TERMS, quantization=0.0)
-    w = didim._core.regressor("rigid", sim.q, sim.qd, sim.qdd, terms=[t.spec() for t in TERMS])
+    w = didim.Model("rigid", terms=TERMS).core().regressor(sim.q, sim.qd, sim.qdd)
     sign = didim.coulomb_sign(sim.qd1)
     np.testing.assert_allclose(w[0, :, 3], sign * np.sin(2 * np.pi * sim.q1 / P), atol=1e-12)
     np.testing.assert_allclose(w[0, :, 4], sign * np.cos(2 * np.pi * sim.q1 / P), atol=1e-12)

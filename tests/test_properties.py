@@ -198,7 +198,9 @@ SIM_HOSTILE = dict(model=models, params=arrays(10), qr=arrays(150), dt=floats,
 @prop
 @given(model=st.one_of(models, st.integers(), st.none()), offset=st.one_of(st.booleans(), st.integers()))
 def test_core_param_names_never_panics(model, offset):
-    attempt(_core.param_names, model, offset)
+    m = attempt(_core.Model, model, offset=offset)
+    if m is not None:
+        assert list(m.names)[:3] in (["M", "Fv", "Fc"], ["M1", "Fv1", "Fc1"])
 
 
 @prop
@@ -206,7 +208,10 @@ def test_core_param_names_never_panics(model, offset):
 def test_core_simulate_never_panics(data, sens):
     a = mutated(data, data.draw(sim_args()), SIM_HOSTILE)
     params = a.pop("params")
-    pos = [a.pop(k) for k in ("model", "qr", "dt", "controller", "gains")]
+    model = attempt(_core.Model, a.pop("model"), offset=a.pop("offset"), coulomb_eps=a.pop("coulomb_eps"))
+    if model is None:
+        return
+    pos = [model] + [a.pop(k) for k in ("qr", "dt", "controller", "gains")]
     pb = attempt(_core.Problem, *pos, **a)
     out = None if pb is None else attempt(pb.simulate_sensitivity if sens else pb.simulate, params)
     if out is not None:
@@ -226,7 +231,8 @@ def test_core_regressor_never_panics(data):
     hostile = dict(model=models, q=arrays(60, ndim=2), qd=arrays(60, ndim=2), qdd=arrays(60, ndim=2), coulomb_eps=floats,
                    offset=st.integers())
     a = mutated(data, valid, hostile)
-    w = attempt(_core.regressor, a.pop("model"), a.pop("q"), a.pop("qd"), a.pop("qdd"), **a)
+    model = attempt(_core.Model, a.pop("model"), offset=a.pop("offset"), coulomb_eps=a.pop("coulomb_eps"))
+    w = None if model is None else attempt(model.regressor, a.pop("q"), a.pop("qd"), a.pop("qdd"))
     if w is not None:
         assert np.all(np.isfinite(w))
 

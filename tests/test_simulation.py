@@ -37,7 +37,7 @@ def test_emps_pulses_record_is_simulated_with_its_injected_input(emps_pulses):
 def test_simulated_states_satisfy_the_inverse_dynamic_model(emps):
     params = dict(M1=68.0, Fv1=104.0, Fc1=10.0, M2=38.0, Fv2=96.5, Fc2=9.5, K12=8.8e5)
     sim = didim.simulate(emps, params, model="flexible")
-    w = didim._core.regressor("flexible", sim.q, sim.qd, sim.qdd, coulomb_eps=default_coulomb_eps(emps))
+    w = didim.Model("flexible", coulomb_eps=default_coulomb_eps(emps)).core().regressor(sim.q, sim.qd, sim.qdd)
     chi = np.array(list(params.values()))
     assert w.shape == (2, emps.n, 7)
     np.testing.assert_allclose(w[0] @ chi, sim.force, atol=1e-7 * np.abs(sim.force).max())

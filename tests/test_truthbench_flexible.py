@@ -126,7 +126,7 @@ def test_exponential_sensitivities_stay_finite_where_the_coulomb_sign_is_stiff(t
     rec = load("flexible/paperlike_moving_chirp")
     p = {"M1": 66.17449375953105, "Fv1": 94.2554781650991, "Fc1": 8.607159626198905, "M2": 35.99957880029411,
          "Fv2": 95.63070446845238, "Fc2": 9.376452841680262, "K12": 800864.5794629008}
-    _, chi, _ = params_vector("flexible", p)
+    _, chi = params_vector(didim.Model("flexible"), p)
     dec = Decimation.lowpass(60.0, rec.fs)
     cols = {}
     for integrator in ("exponential", "rk4"):
@@ -162,11 +162,11 @@ def test_the_coarse_grid_ranks_step_2_starts_as_the_fine_one(truthbench, name):
     rec = truthbench[0](f"flexible/{name}")
     r1 = I.didim_rigid(rec)
     crit = I._ModeCriterion(rec, r1, Decimation.lowpass(I.FLEXIBLE_CUTOFF_HZ, rec.fs),
-                            dict(substeps=10, coulomb_eps=didim.DEFAULT_COULOMB_EPS, integrator="exponential",
-                                 tol=didim.simulation.DEFAULT_TOL))
+                            didim.Model("flexible", coulomb_eps=didim.DEFAULT_COULOMB_EPS),
+                            dict(substeps=10, integrator="exponential", tol=didim.simulation.DEFAULT_TOL))
     pts, coarse = I._mode_grid(crit, 0.5, 40.0, friction_split=True, grid_start=True)
     fine = didim.simulation.problem(rec, "flexible", tol=didim.simulation.DEFAULT_TOL)
-    vec = [didim.simulation.params_vector("flexible", crit.params(*x), False)[1] for x in pts]
+    vec = [didim.simulation.params_vector(crit.model, crit.params(*x))[1] for x in pts]
     fine_vals = fine.squared_error_batch(np.array(vec), crit.yd, crit.dec.core)[0] ** 0.5 / crit.ny
     assert coarse == pytest.approx(fine_vals, rel=0.10)
     assert set(np.argsort(coarse)[:3]) == set(np.argsort(fine_vals)[:3])

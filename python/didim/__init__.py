@@ -15,8 +15,8 @@ from .result import IdentificationResult, compare
 from .api import METHODS, identify
 from . import scenarios
 from .doctor import Diagnosis, Finding, doctor
-from .simulation import Term
-from .model import Model, load_result
+from .model import Model, Term
+from .result import load_result
 from .check import check_controller
 from .controller_fit import fit_controller
 from .units import Units

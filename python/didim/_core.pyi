@@ -12,7 +12,10 @@ COULOMB_LAWS: List[str]
 DEFAULT_TOL: float
 #: "avx2+fma" or "baseline": the build of the closed loop this processor runs (same results, different speed).
 SIMULATOR_BUILD: str
-TERM_KINDS: List[str]
+#: The term kinds: (kind, [(hyper-parameter, SI unit, default or None)], description).
+TERM_TABLE: List[Tuple[str, List[Tuple[str, str, Optional[float]]], str]]
+#: Older kind names: (alias, kind, [(hyper-parameter, fixed value)]).
+TERM_ALIASES: List[Tuple[str, str, List[Tuple[str, float]]]]
 
 _F64 = npt.NDArray[np.float64]
 
@@ -23,36 +26,49 @@ __all__ = [
     "Decimation",
     "Problem",
     "SIMULATOR_BUILD",
-    "TERM_KINDS",
+    "Model",
+    "TERM_ALIASES",
+    "TERM_TABLE",
     "butter",
     "cheby1",
     "decimate",
     "default_factor",
     "filtfilt",
     "lstsq",
-    "param_names",
-    "param_units",
-    "regressor",
+    "coulomb_sign",
     "sosfiltfilt",
 ]
 
-_Terms = Optional[Sequence[Tuple[str, str, float, str, float]]]
+#: Extra terms: (name, kind, dof "motor" or "load", [(hyper-parameter, value), ...]).
+_Terms = Optional[Sequence[Tuple[str, str, str, Sequence[Tuple[str, float]]]]]
 
-def param_names(model: str, offset: bool = False, terms: _Terms = None) -> List[str]: ...
-def param_units(model: str, offset: bool = False, terms: _Terms = None,
-                backlash_gap: Optional[float] = None) -> List[str]: ...
-def regressor(
-    model: str,
-    q: _F64,
-    qd: _F64,
-    qdd: _F64,
-    *,
-    coulomb_eps: float = ...,
-    offset: bool = False,
-    terms: _Terms = None,
-    backlash_gap: Optional[float] = None,
-    coulomb_law: str = "algebraic",
-) -> _F64: ...
+@final
+class Model:
+    def __new__(
+        cls,
+        kind: str,
+        *,
+        offset: bool = False,
+        terms: _Terms = None,
+        backlash_gap: Optional[float] = None,
+        coulomb_eps: float = ...,
+        coulomb_law: str = "algebraic",
+    ) -> "Model": ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def names(self) -> List[str]: ...
+    @property
+    def units(self) -> List[str]: ...
+    @property
+    def roles(self) -> List[str]: ...
+    @property
+    def ndof(self) -> int: ...
+    @property
+    def coulomb_eps(self) -> float: ...
+    def regressor(self, q: _F64, qd: _F64, qdd: _F64) -> _F64: ...
+
+def coulomb_sign(v: _F64, eps: float = ..., law: str = "algebraic") -> _F64: ...
 def lstsq(w: _F64, y: _F64, *, rank_tol: Optional[float] = None, sigma: str = "paper") -> Dict[str, Any]: ...
 def butter(order: int, wn: float, *, sos: bool = False) -> Any: ...
 def cheby1(order: int, rp_db: float, wn: float, *, sos: bool = False) -> Any: ...
@@ -90,7 +106,7 @@ class Decimation:
 class Problem:
     def __new__(
         cls,
-        model: str,
+        model: Model,
         qr: _F64,
         dt: float,
         controller: str,
@@ -101,14 +117,9 @@ class Problem:
         quantization: float = 0.0,
         delay: int = 0,
         force_lag: float = 0.0,
-        coulomb_eps: float = ...,
-        offset: bool = False,
         integrator: str = "exponential",
         tol: float = ...,
-        terms: _Terms = None,
-        backlash_gap: Optional[float] = None,
         lead: int = 0,
-        coulomb_law: str = "algebraic",
     ) -> "Problem": ...
     @property
     def n_params(self) -> int: ...
@@ -116,6 +127,7 @@ class Problem:
     def ndof(self) -> int: ...
     @property
     def n(self) -> int: ...
+    def applied_force(self, force: _F64) -> _F64: ...
     def simulate(self, params: _F64) -> Dict[str, _F64]: ...
     def simulate_sensitivity(self, params: _F64) -> Dict[str, _F64]: ...
     def simulate_batch(self, params: _F64, *, states: bool = False) -> Dict[str, Any]: ...

@@ -4,18 +4,20 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Any, Dict, Optional, Tuple, Union
+from dataclasses import replace
+from typing import Dict, Optional, Union
 
 import numpy as np
 
 from . import _checks
 from ._errors import DataError, DidimWarning
-from .model import Model
-from .identification import Progress, didim_iterate, didim_flexible, didim_rigid, idim_ls, a_priori_mass
+from .model import Model, as_model
+from .identification import (IDIM_LS_SUPPORTS, MODEL_FIELDS, SIMULATING_SUPPORTS, THREE_STEP_SUPPORTS, Progress,
+                             a_priori_mass, didim_flexible, didim_iterate, didim_rigid, idim_ls, supports)
 from .oe import CRITERIA, oe_lm, oe_nm, pseudo_regular_initial
 from .recording import Recording
 from .result import IdentificationResult
-from .simulation import MODELS, param_names
+from .simulation import MODELS
 
 METHODS = ("idim-ls", "didim", "oe-nm", "oe-lm", "oe-gn")
 #: Other names of the methods: "oe-gn" is the exact-sensitivity Levenberg-Marquardt solver's former name.
@@ -38,7 +40,8 @@ def _targets(model: str, method: str):
     """The functions ``identify`` hands a method's options to, and the keywords it sets itself."""
     return {
         "idim-ls": ([idim_ls], ("offset",)),
-        "didim": ([didim_rigid, didim_iterate] if model == "rigid" else [didim_flexible], ("offset", "progress", "frozen", "method")),
+        "didim": ([didim_rigid, didim_iterate] if model == "rigid" else [didim_flexible],
+                  ("offset", "model", "progress", "frozen", "method")),
         "oe-nm": ([oe_nm], ("criterion", "progress")),
         "oe-lm": ([oe_lm], ("criterion", "progress")),
     }[method]
@@ -105,17 +108,20 @@ def identify(
     not, naming the likely mistake, "warn" goes on with a :class:`DidimWarning`, "off" skips the check. The check is
     in the result's ``options["controller_check"]``.
     """
-    structure = model if isinstance(model, Model) else None
-    if structure is not None:
-        model, offset, options = _model_options(structure, offset, options)
-    if not isinstance(model, str) or model not in MODELS:
+    if not isinstance(model, Model) and (not isinstance(model, str) or model not in MODELS):
         raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)} or a didim.Model")
+    # the model, converted once: a didim.Model, or a kind with its structure fields as options
+    if offset is not None:
+        offset = _checks.flag("offset", offset)
+    # IDIM-LS's coulomb_eps is its own option (the benchmark's hard sign by default), not the simulator's
+    fields = [k for k in MODEL_FIELDS if not (k == "coulomb_eps" and ALIASES.get(method, method) == "idim-ls")]
+    structure = as_model(model, offset=offset or None, **{k: options.pop(k) for k in fields if k in options})
+    model, offset = structure.kind, structure.offset
     if not isinstance(method, str) or method not in METHODS:
         raise DataError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     method = ALIASES.get(method, method)
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
-    offset = _checks.flag("offset", offset)
     if apM is not None:
         if method == "idim-ls":
             raise DataError("apM (a priori mass) is not used by idim-ls, which needs no initial values; leave it out")
@@ -132,15 +138,11 @@ def identify(
         raise DataError(f"criterion={criterion!r} applies to the output-error methods (oe-nm, oe-lm), not to {method}")
     if progress is not None and not callable(progress):
         raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
-    try:
-        check_options(model, method, options)
-    except DataError as e:
-        if structure is None:
-            raise
-        raise DataError(f"{method} cannot identify {structure.describe()}: {e}. Give a didim.Model without those fields, "
-                        "or use method 'didim'") from None
+    check_options(model, method, options)
+    supports(structure, {"idim-ls": IDIM_LS_SUPPORTS, "oe-lm": SIMULATING_SUPPORTS - {"force_lag"}}.get(
+        method, THREE_STEP_SUPPORTS if (method, model) == ("didim", "flexible") else SIMULATING_SUPPORTS), method)
     check_sampling(recording, model, method, options)
-    _checks.excitation(recording.qr, recording.u_ext, param_names(model, offset))
+    _checks.excitation(recording.qr, recording.u_ext, Model(model, offset=offset).param_names())
     if not np.any(recording.force):
         raise DataError(f"{recording.name or 'record'}: the measured force is zero everywhere: nothing to identify "
                         "from (check the force column and its scale, e.g. gtau)")
@@ -150,16 +152,17 @@ def identify(
     for finding in recording.diagnose():
         warnings.warn(f"{recording.name or 'record'}: {finding}", DidimWarning, stacklevel=2)
     if method == "idim-ls":
-        return _with_check(_with_force_error(recording, idim_ls(recording, model, offset=offset, **options)), chk)
+        return _with_check(_with_force_error(recording, idim_ls(recording, structure, **options)), chk)
     if method == "didim":
         fit = didim_rigid if model == "rigid" else didim_flexible
-        return _with_check(_with_force_error(recording, fit(recording, apM, offset=offset, progress=progress, **options)),
-                           chk)
+        return _with_check(_with_force_error(recording, fit(recording, apM, model=structure, progress=progress,
+                                                            **options)), chk)
 
     t0 = time.perf_counter()
     pre: Optional[IdentificationResult] = None
     # the simulator the user chose serves the starting runs too
-    sim_kw = {k: options[k] for k in ("substeps", "coulomb_eps", "coulomb_law", "integrator", "sim_tol") if k in options}
+    numerics = {k: options[k] for k in ("substeps", "integrator", "sim_tol") if k in options}
+    law = Model(model, offset=offset, coulomb_eps=structure.coulomb_eps, coulomb_law=structure.coulomb_law)
     if initial is None:
         m0 = apM if apM is not None else a_priori_mass(recording)
         if model == "rigid":
@@ -167,22 +170,22 @@ def identify(
         elif method == "oe-lm":
             # a local method: start it from the three-step DIDIM estimate, the pseudo-regular values of eq. (33) only
             # when DIDIM did not converge (they can lead it to a local minimum when the load friction is large)
-            pre = didim_flexible(recording, apM, offset=offset, progress=progress, **sim_kw)
+            pre = didim_flexible(recording, apM, model=law, progress=progress, **numerics)
             if pre.converged:
                 initial = {**pre.frozen, **pre.params}
             else:
                 rigid = pre.steps.get("rigid", pre) if pre.model == "flexible" else pre
                 initial = pseudo_regular_initial(rigid.params)
         else:
-            pre = didim_rigid(recording, m0, offset=offset, progress=progress, **sim_kw)
+            pre = didim_rigid(recording, m0, model=replace(law, kind="rigid"), progress=progress, **numerics)
             initial = pseudo_regular_initial(pre.params)
         # extra terms start at 0, like the frictions of eq. (22)
-        initial = {**{t.name: 0.0 for t in options.get("terms", ())}, **initial}
+        initial = {**{t.name: 0.0 for t in structure.terms}, **initial}
     solver = oe_nm if method == "oe-nm" else oe_lm
     if method == "oe-nm" and model == "rigid" and any(v == 0 for v in initial.values()):
         # Nelder-Mead scales by the initial values: zero frictions start from a small fraction of the force scale
         initial = {k: (v if v != 0 else 1.0) for k, v in initial.items()}
-    r = solver(recording, model, initial, criterion=criterion, progress=progress, **options)
+    r = solver(recording, structure, initial, criterion=criterion, progress=progress, **options)
     if pre is not None:
         r.steps = {"didim" if pre.model == "flexible" and "rigid" in pre.steps else "rigid": pre}
         r.simulations += pre.simulations
@@ -194,22 +197,6 @@ def _with_check(r: IdentificationResult, chk) -> IdentificationResult:
     """The result with the controller check it was fitted after (:func:`didim.check.enforce`), None when off."""
     r.options["controller_check"] = None if chk is None else chk.to_dict()
     return r
-
-
-def _model_options(model: Model, offset: bool, options: Dict[str, Any]) -> Tuple[str, bool, Dict[str, Any]]:
-    """A :class:`Model` as identify's model kind, offset and options: its structure fields that are not the default
-    become options (a method that cannot take one refuses it by name), and giving one again is an error."""
-    st = {k: v for k, v in model.sim_kw().items() if k != "offset"}
-    default = {"terms": (), "delay": 0, "force_lag": 0.0, "backlash_gap": None, "coulomb_eps": None,
-               "coulomb_law": "algebraic"}
-    st = {k: v for k, v in st.items() if v != default[k]}
-    again = (["offset"] if offset and not model.offset else []) + [k for k in st if k in options]
-    if again:
-        raise DataError(f"a didim.Model ({model.describe()}) carries its structure: leave {', '.join(again)} out, or give "
-                        "the model's kind as text with the options you want")
-    if "terms" in st:
-        st["terms"] = list(st["terms"])
-    return model.kind, model.offset, {**options, **st}
 
 
 def _with_force_error(recording: Recording, r: IdentificationResult) -> IdentificationResult:

@@ -120,7 +120,7 @@ def cmd_simulate(args) -> int:
     import json
 
     from ._io import save_figure, write_text
-    from .model import load_result
+    from .result import load_result
     from .simulation import simulate
 
     _check_outputs([args.file, args.result, args.controller], [args.json, args.plot])

@@ -21,7 +21,8 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from typing import Callable, Dict, List, Optional, Sequence
+from dataclasses import replace
+from typing import Callable, Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
@@ -29,11 +30,32 @@ from . import _checks, _core
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .recording import Recording
 from .result import IdentificationResult, Iteration
-from .signal import Decimation, diffcent, force_lag_mean, lowpass
-from .simulation import (DEFAULT_TOL, coulomb_eps_of, cubic_bspline, param_names, params_vector, problem,
-                         settling_samples, simulate)
+from .model import Model, Term, as_model
+from .signal import Decimation, diffcent, lowpass
+from .simulation import DEFAULT_TOL, coulomb_eps_of, params_vector, problem, settling_samples, simulate
 
 Progress = Optional[Callable[[str], None]]
+
+#: The structure fields of :class:`didim.Model` each method supports beyond the kind and the offset (the methods that
+#: simulate the closed loop take them all; IDIM-LS regresses measured states and has no simulator).
+IDIM_LS_SUPPORTS = frozenset({"terms", "coulomb_eps", "coulomb_law"})
+SIMULATING_SUPPORTS = frozenset({"terms", "delay", "force_lag", "backlash_gap", "coulomb_eps", "coulomb_law"})
+#: The three-step DIDIM builds its flexible model from the rigid one's: the friction law only.
+THREE_STEP_SUPPORTS = frozenset({"coulomb_eps", "coulomb_law"})
+
+
+#: The structure fields of :class:`didim.Model`, as keywords of the methods' entry points.
+MODEL_FIELDS = ("offset", "terms", "delay", "force_lag", "backlash_gap", "coulomb_eps", "coulomb_law")
+
+
+def supports(model: Model, fields, method: str) -> None:
+    """Refuses a model whose structure uses a field ``method`` does not support, naming it."""
+    default = Model(model.kind)
+    used = [f for f in ("terms", "delay", "force_lag", "backlash_gap", "coulomb_eps", "coulomb_law")
+            if getattr(model, f) != getattr(default, f) and f not in fields]
+    if used:
+        raise DataError(f"{method} cannot identify {model.describe()}: it does not support {', '.join(used)}; give a "
+                        "didim.Model without those fields, or use method 'didim'")
 
 #: Decimation cutoffs of the paper: 5 Hz for the rigid step, 60 Hz for the flexible steps.
 RIGID_CUTOFF_HZ = 5.0
@@ -51,7 +73,7 @@ SPLINE_HINT = ("; friction-profile splines of one direction sum to that directio
 
 
 def _spline_hint(terms) -> str:
-    return SPLINE_HINT if any(t.kind.startswith("coulomb_spline") for t in terms or ()) else ""
+    return SPLINE_HINT if any(t.kind == "coulomb_spline" for t in terms or ()) else ""
 
 
 def _check_spline_cover(rec: Recording, terms, free: Sequence[str]) -> None:
@@ -61,13 +83,16 @@ def _check_spline_cover(rec: Recording, terms, free: Sequence[str]) -> None:
     coulomb = [n for n in ("Fc", "Fc1") if n in free]
     if not coulomb:
         return
-    q = np.asarray(rec.qm, dtype=float)
-    for side, kind in (("forward", "coulomb_spline_fwd"), ("backward", "coulomb_spline_bwd"),
-                       ("both-direction", "coulomb_spline")):
-        spl = [t for t in terms or () if t.kind == kind]
+    q = np.asarray(rec.qm, dtype=float)[None, :]
+    one = np.ones_like(q)
+    for side, code in (("forward", 1), ("backward", -1), ("both-direction", 0)):
+        spl = [t for t in terms or () if t.kind == "coulomb_spline" and t.hypers["side"] == code]
         if not spl:
             continue
-        total = sum(cubic_bspline((q - t.hyper) / t.width) for t in spl)
+        # each spline's B((q − c)/w), the core's basis function moving forward (or backward) at full speed
+        both = [Term(t.name, t.kind, center=t.hypers["center"], width=t.hypers["width"]) for t in spl]
+        w = Model("rigid", terms=both, coulomb_eps=0.0).core().regressor(q, one, np.zeros_like(q))
+        total = w[0, :, 3:].sum(axis=1)
         if np.min(total) > 0.999:
             raise IdentifiabilityError(
                 f"the {side} friction splines ({', '.join(t.name for t in spl)}) "
@@ -110,24 +135,24 @@ def _stack_rows(rows: List[tuple], dec: Decimation):
 # --------------------------------------------------------------------------------------------------------------------
 
 
-def _idim_system(rec: Recording, model: str, offset: bool, lowpass_hz: float, lowpass_order: int, padding: str,
-                 border: int, dec: Decimation, coulomb_eps: float, zoh_align: bool, terms: Sequence = ()):
-    """The decimated IDIM-LS system (Y, W) of a record (both rows of eq. (4) for the flexible model)."""
-    if model == "flexible" and rec.ql is None:
+def _idim_system(rec: Recording, model: Model, lowpass_hz: float, lowpass_order: int, padding: str,
+                 border: int, dec: Decimation, zoh_align: bool):
+    """The decimated IDIM-LS system (Y, W) of a record (both rows of eq. (4) for the flexible model); ``model``
+    carries its Coulomb smoothing (0: the hard sign on the filtered velocities)."""
+    if model.kind == "flexible" and rec.ql is None:
         raise DataError("IDIM-LS of the flexible model needs the load position ql (a second encoder); use method='didim'")
     if not (0 <= border < rec.n // 2):
         raise DataError(f"border must be between 0 and half the record ({rec.n // 2}), got {border}")
-    positions = [rec.qm] + ([rec.ql] if model == "flexible" else [])
+    positions = [rec.qm] + ([rec.ql] if model.kind == "flexible" else [])
     q = np.array([lowpass(x, lowpass_hz, rec.fs, order=lowpass_order, padding=padding) for x in positions])
     qd = diffcent(q, rec.dt)
     qdd = diffcent(qd, rec.dt)
-    w = _core.regressor(model, q, qd, qdd, coulomb_eps=coulomb_eps, offset=offset,
-                        terms=[t.spec() for t in terms] or None)
+    w = model.core().regressor(q, qd, qdd)
     force = rec.force
     if zoh_align:
         force = np.concatenate([force[:1], 0.5 * (force[1:] + force[:-1])])
     rows = [(force[border:], w[0, border:, :])]
-    if model == "flexible":
+    if model.kind == "flexible":
         rows.append((np.zeros(rec.n - border), w[1, border:, :]))
     return _stack_rows(rows, dec)
 
@@ -136,18 +161,18 @@ def idim_cross_test(rec: Recording, result: IdentificationResult) -> float:
     """Relative error ‖Y − Wχ̂‖/‖Y‖ of an IDIM-LS result on another record, built with the same recipe."""
     o = result.options
     dec = result.options.get("_decimation") or Decimation.matlab(10)
-    terms = result.structure.terms if result.structure is not None else ()
-    y, w = _idim_system(rec, result.model, "OF" in result.params, o["lowpass_hz"], o["lowpass_order"], o["padding"],
-                        o["border"], dec, o["coulomb_eps"], o["zoh_align"], terms)
-    chi = np.array([result.params[n] for n in param_names(result.model, "OF" in result.params, terms)])
+    model = result.structure
+    y, w = _idim_system(rec, model, o["lowpass_hz"], o["lowpass_order"], o["padding"], o["border"], dec,
+                        o["zoh_align"])
+    chi = np.array([result.params[n] for n in model.param_names()])
     return float(np.linalg.norm(y - w @ chi) / np.linalg.norm(y))
 
 
 def idim_ls(
     rec: Recording,
-    model: str = "rigid",
+    model: Union[str, Model] = "rigid",
     *,
-    offset: bool = False,
+    offset: Optional[bool] = None,
     lowpass_hz: float = 100.0,
     lowpass_order: int = 4,
     padding: str = "matlab",
@@ -174,23 +199,32 @@ def idim_ls(
     flexible parameters once the excitation reaches tens of Hz. Off by default (the benchmark's recipe).
 
     ``terms`` (:class:`didim.Term`) add columns to W, built by the core's basis functions on the filtered states.
+    ``model`` may be a :class:`didim.Model` (its offset and terms; IDIM-LS supports no actuation delay, force lag or
+    backlash, see ``IDIM_LS_SUPPORTS``).
     """
     t0 = time.perf_counter()
     _checks.options(lowpass_hz=lowpass_hz, lowpass_order=lowpass_order, border=border, coulomb_eps=coulomb_eps,
                     zoh_align=zoh_align)
     _checks.one_of("sigma", sigma, ("paper", "sample_std"))
-    names = param_names(model, offset, terms)
+    model = as_model(model, offset=offset, terms=tuple(terms))
+    supports(model, IDIM_LS_SUPPORTS, "idim-ls")
+    if model.coulomb_eps is not None and coulomb_eps not in (0.0, model.coulomb_eps):
+        raise DataError(f"the model's coulomb_eps is {model.coulomb_eps:g}: leave the option coulomb_eps out")
+    coulomb_eps = float(coulomb_eps if model.coulomb_eps is None else model.coulomb_eps)
+    model = replace(model, coulomb_eps=coulomb_eps)
+    terms = model.terms
+    names = model.param_names()
     _check_spline_cover(rec, terms, names)
     dec = decimation or Decimation.matlab(10)
     _checks.decimation_matches(dec, rec.fs)
-    _checks.record_long_enough(dec, rec.n - min(border, rec.n - 1), rec.dt, len(names), 2 if model == "flexible" else 1,
-                               "IDIM-LS")
-    y, wd = _idim_system(rec, model, offset, lowpass_hz, lowpass_order, padding, border, dec, coulomb_eps, zoh_align,
-                         terms)
+    _checks.record_long_enough(dec, rec.n - min(border, rec.n - 1), rec.dt, len(names),
+                               2 if model.kind == "flexible" else 1, "IDIM-LS")
+    y, wd = _idim_system(rec, model, lowpass_hz, lowpass_order, padding, border, dec, zoh_align)
     sol = _solve(wd, y, names, sigma, hint=_spline_hint(terms))
     p = dict(zip(names, map(float, sol["params"])))
     return IdentificationResult(
-        model=model,
+        model=model.kind,
+        structure=model,
         method="idim-ls",
         params=p,
         std=dict(zip(names, map(float, sol["std"]))),
@@ -201,7 +235,7 @@ def idim_ls(
         elapsed_s=time.perf_counter() - t0,
         options=dict(lowpass_hz=lowpass_hz, lowpass_order=lowpass_order, padding=padding, border=border,
                      decimation=dec.describe(), band_hz=dec.cutoff_hz, _decimation=dec, sigma=sigma, coulomb_eps=coulomb_eps, zoh_align=zoh_align,
-                     terms=[t.spec() for t in terms], condition_number=float(sol["condition_number"])),
+                     terms=[t.to_dict() for t in terms], condition_number=float(sol["condition_number"])),
         covariance=sol["covariance"],
     )
 
@@ -270,30 +304,24 @@ def _physical(names: Sequence[str], chi: np.ndarray, ref: Optional[np.ndarray] =
 
 def didim_iterate(
     rec: Recording,
-    model: str,
+    model: Union[str, Model],
     initial: Dict[str, float],
     *,
     frozen: Optional[Dict[str, float]] = None,
-    offset: bool = False,
     cutoff_hz: Optional[float] = None,
     decimation: Optional[Decimation] = None,
     tol: float = 1e-3,
     max_iter: int = 30,
     substeps: int = 10,
-    coulomb_eps: Optional[float] = None,
-    coulomb_law: str = "algebraic",
     divergence_factor: float = DIVERGENCE_FACTOR,
     progress: Progress = None,
     method: str = "didim",
-    terms: Sequence = (),
-    backlash_gap: Optional[float] = None,
-    delay: int = 0,
-    force_lag: float = 0.0,
     fit_samples: Optional[int] = None,
     integrator: str = "exponential",
     sim_tol: float = DEFAULT_TOL,
     reversals: str = "auto",
     start: str = "auto",
+    **structure,
 ) -> IdentificationResult:
     """DIDIM iterations, eqs. (16)-(21): simulate the closed loop with χᵏ, build the IDM regressor of the simulated
     (noise-free) states, decimate Y and W in parallel, solve by QR for χᵏ⁺¹; stop when
@@ -311,8 +339,8 @@ def didim_iterate(
 
     ``fit_samples`` restricts the regression and the output errors to the first samples (the rest of the record is
     then held out for validation). ``integrator``, ``sim_tol`` and ``substeps`` choose the simulator's scheme (see
-    :func:`didim.simulate`); ``terms``, ``backlash_gap``, ``delay`` and ``force_lag`` extend the model (see
-    :func:`didim.simulate`).
+    :func:`didim.simulate`). ``model`` is a :class:`didim.Model`, or a kind with its structure fields as keywords
+    (``offset``, ``terms``, ``backlash_gap``, ``delay``, ``force_lag``, ``coulomb_eps``, ``coulomb_law``).
 
     ``reversals`` (not in the paper): ``"exclude"`` leaves out of the regression the decimated samples around velocity
     reversals and stops, where the decimated Coulomb regressor of the simulated velocity is not saturated
@@ -335,15 +363,18 @@ def didim_iterate(
     t0 = time.perf_counter()
     if reversals not in ("auto", "exclude", "keep"):
         raise DataError(f"reversals must be 'auto', 'exclude' or 'keep', got {reversals!r}")
-    _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps,
-                    divergence_factor=divergence_factor, cutoff_hz=cutoff_hz)
-    coulomb_eps = coulomb_eps_of(rec, coulomb_eps)  # the number the result's structure carries
+    model = as_model(model, **structure)
+    _checks.options(tol=tol, max_iter=max_iter, substeps=substeps, divergence_factor=divergence_factor,
+                    cutoff_hz=cutoff_hz)
+    # the number the result's structure carries
+    model = replace(model, coulomb_eps=coulomb_eps_of(rec, model.coulomb_eps))
+    kind, terms = model.kind, model.terms
     initial = _checks.physical(initial, "initial")
     frozen = _checks.physical(dict(frozen or {}), "frozen")
-    names = param_names(model, offset, terms)
+    names = model.param_names()
     unknown = [k for k in list(initial) + list(frozen) if k not in names]
     if unknown:
-        raise DataError(f"unknown parameter(s) {', '.join(unknown)} for the {model} model ({', '.join(names)})")
+        raise DataError(f"unknown parameter(s) {', '.join(unknown)} for the {model.describe()} ({', '.join(names)})")
     free = [n for n in names if n not in frozen]
     _check_spline_cover(rec, terms, free)
     hint = _spline_hint(terms)  # what a rank deficiency also says
@@ -351,35 +382,30 @@ def didim_iterate(
     if missing:
         raise DataError(f"initial values missing for {', '.join(missing)}")
     if decimation is None:
-        cutoff = cutoff_hz if cutoff_hz is not None else (RIGID_CUTOFF_HZ if model == "rigid" else FLEXIBLE_CUTOFF_HZ)
+        cutoff = cutoff_hz if cutoff_hz is not None else (RIGID_CUTOFF_HZ if kind == "rigid" else FLEXIBLE_CUTOFF_HZ)
         decimation = Decimation.lowpass(cutoff, rec.fs)
     dec = decimation
     _checks.decimation_matches(dec, rec.fs)
-    _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 2 if model == "flexible" else 1, f"{method} ({model})")
+    _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 2 if kind == "flexible" else 1, f"{method} ({kind})")
     fi = [names.index(n) for n in free]
-    if reversals == "exclude" and model != "rigid":
+    if reversals == "exclude" and kind != "rigid":
         raise DataError("reversals='exclude' is for the rigid model (the flexible regression has a load row per "
                         "sample whose friction reverses on its own); use 'keep' or 'auto'")
     # a friction profile along the stroke lives where the axis reverses (its knots near the ends of the stroke): "auto"
     # keeps the reversals then, else those splines lose most of their samples, and the samples left out change with
     # each iterate's simulated velocity (DIDIM alternated between two points on the EMPS)
-    profile = any(t.kind.startswith("coulomb_spline") for t in terms)
-    exclude = (reversals == "exclude" or (reversals == "auto" and not profile)) and model == "rigid" and (
+    profile = any(t.kind == "coulomb_spline" for t in terms)
+    exclude = (reversals == "exclude" or (reversals == "auto" and not profile)) and kind == "rigid" and (
         _coulomb_column(free) is not None)
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
-    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
-                 integrator=integrator, tol=sim_tol,
-                 terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
+    pb = problem(rec, model, substeps=substeps, integrator=integrator, tol=sim_tol)
     m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
     start_row = start_row_of(rec, pb, chi, dec, start)  # the first decimated row regressed
     yd_motor = dec(rec.force)[:m_fit]
     ny = float(np.linalg.norm(yd_motor[start_row:]))  # the output errors leave the start out too
-    _checks.measured_signal("force", ny, f"{method} ({model})")
-    y_motor = rec.force
-    if delay:  # the states answer the force applied, which is the command `delay` samples earlier
-        y_motor = np.concatenate([np.zeros(delay), rec.force[:-delay]])
-    if force_lag:  # ... and through the lag, its mean over each period
-        y_motor = force_lag_mean(y_motor, force_lag, rec.dt)
+    _checks.measured_signal("force", ny, f"{method} ({kind})")
+    # the states answer the force applied: the command `delay` samples earlier, through the force lag
+    y_motor = pb.applied_force(rec.force)
 
     history: List[Iteration] = []
     notes: List[str] = []
@@ -491,7 +517,7 @@ def didim_iterate(
                 output_error=float("nan"),
             )
         )
-        _say(progress, f"{method} {model} iteration {len(history)}: ‖Y−Wχ‖/‖Y‖ = {100 * sol['relative_error']:.3f} %, "
+        _say(progress, f"{method} {kind} iteration {len(history)}: ‖Y−Wχ‖/‖Y‖ = {100 * sol['relative_error']:.3f} %, "
              f"output error of χ{len(history) - 1} = {100 * out_err:.3f} %")
         if alpha == 1 and rho_prev is not None and (abs(rho - rho_prev) / rho_prev <= tol
                                                      or sol["relative_error"] <= EXACT_FIT):
@@ -534,7 +560,8 @@ def didim_iterate(
                      "reversals='keep' uses them, as the paper does")
 
     return IdentificationResult(
-        model=model,
+        model=kind,
+        structure=model,
         method=method,
         params={n: float(chi[i]) for i, n in enumerate(names) if n in free},
         std=dict(zip(free, map(float, sol["std"]))),
@@ -549,10 +576,10 @@ def didim_iterate(
         initial={n: float(initial[n]) for n in free},
         frozen=frozen,
         history=history,
-        options=dict(decimation=dec.describe(), band_hz=dec.cutoff_hz, tol=tol, substeps=substeps, coulomb_eps=coulomb_eps,
-                     coulomb_law=coulomb_law, offset=offset,
-                     terms=[t.spec() for t in terms], backlash_gap=backlash_gap, delay=delay, force_lag=force_lag,
-                     integrator=integrator,
+        options=dict(decimation=dec.describe(), band_hz=dec.cutoff_hz, tol=tol, substeps=substeps,
+                     coulomb_eps=model.coulomb_eps, coulomb_law=model.coulomb_law, offset=model.offset,
+                     terms=[t.to_dict() for t in terms], backlash_gap=model.backlash_gap, delay=model.delay,
+                     force_lag=model.force_lag, integrator=integrator,
                      sim_tol=sim_tol, reversals="exclude" if exclude else "keep", start_rows_left_out=start_row),
         covariance=sol["covariance"],
         notes=notes,
@@ -677,8 +704,8 @@ def _check_apm(rec: Recording, apM: float) -> Optional[str]:
     return None
 
 
-def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: bool = False, cutoff_hz: float = RIGID_CUTOFF_HZ,
-                **kw) -> IdentificationResult:
+def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: Optional[bool] = None,
+                cutoff_hz: float = RIGID_CUTOFF_HZ, model: Union[str, Model] = "rigid", **kw) -> IdentificationResult:
     """Step 1: rigid DIDIM from χ⁰ = (apM, 0, 0[, 0]), eq. (22), decimation cutoff 5 Hz by default; extra ``terms``
     (in ``kw``) start at 0 like the frictions. Without ``apM``, χ⁰ starts from :func:`a_priori_mass`; an ``apM``
     outside the robust range around it gives a :class:`~didim.DidimWarning`."""
@@ -689,11 +716,15 @@ def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: bool = F
         warning = _check_apm(rec, apM)
         if warning:
             warnings.warn(f"{rec.name or 'record'}: {warning}", DidimWarning, stacklevel=3)
+    structure = {k: kw.pop(k) for k in list(kw) if k in MODEL_FIELDS}
+    model = as_model(model, offset=offset, **structure)
+    if model.kind != "rigid":
+        raise DataError(f"didim_rigid fits the rigid model, got {model.describe()}")
     init = {"M": float(apM), "Fv": 0.0, "Fc": 0.0}
-    if offset:
+    if model.offset:
         init["OF"] = 0.0
-    init.update({t.name: 0.0 for t in kw.get("terms", ())})
-    return didim_iterate(rec, "rigid", init, offset=offset, cutoff_hz=cutoff_hz, **kw)
+    init.update({t.name: 0.0 for t in model.terms})
+    return didim_iterate(rec, model, init, cutoff_hz=cutoff_hz, **kw)
 
 
 def flexible_from_mode(m_tot: float, lam: float, f_n: float) -> Dict[str, float]:
@@ -733,15 +764,16 @@ class _ModeCriterion:
     M_tot, Fv_tot, Fc_tot (and OF) from step 1: eqs. (26)-(27) put all friction on the motor (s = 0); the friction
     split (beyond the paper) puts the share s of both totals on the load side."""
 
-    def __init__(self, rec: Recording, rigid: IdentificationResult, dec: Decimation, sim_kw: dict):
+    def __init__(self, rec: Recording, rigid: IdentificationResult, dec: Decimation, model: Model, numerics: dict):
         self.rec = rec
         self.rigid = rigid.params
-        self.offset = "OF" in self.rigid
-        self.integrator = sim_kw.get("integrator", "exponential")
+        self.model = model  # the flexible model, with step 1's offset and friction law
+        self.offset = model.offset
+        self.integrator = numerics.get("integrator", "exponential")
         self._rigid_limit: Optional[float] = None
         self.dec = dec
         self.yd = dec(rec.force)
-        tol = sim_kw.get("tol", DEFAULT_TOL)
+        tol = numerics.get("tol", DEFAULT_TOL)
         # a log that began away from the simulation's start: its first rows are left out, as in step 1 (start="auto";
         # the step-1 model's simulation says where the start ends)
         self.skip = 0
@@ -749,9 +781,8 @@ class _ModeCriterion:
             self.skip = settled_row(rec, simulate(rec, rigid).q[0], dec)
         self.ny = float(np.linalg.norm(self.yd[self.skip:]))
         _checks.measured_signal("force", self.ny, "step 2")
-        self.pb = problem(rec, "flexible", offset=self.offset, **dict(sim_kw, tol=max(MODE_SIM_TOL, tol)))
-        coarse = dict(sim_kw, tol=max(GRID_SIM_TOL, tol))
-        self.pb_grid = problem(rec, "flexible", offset=self.offset, **coarse)
+        self.pb = problem(rec, model, **dict(numerics, tol=max(MODE_SIM_TOL, tol)))
+        self.pb_grid = problem(rec, model, **dict(numerics, tol=max(GRID_SIM_TOL, tol)))
         self.bad = 1e3  # returned for points outside the domain or that fail to simulate (relative error 100000 %)
 
     def params(self, lam: float, f: float, s: float = 0.0) -> Dict[str, float]:
@@ -774,7 +805,7 @@ class _ModeCriterion:
         ok = np.array([self.valid(x) for x in xs], dtype=bool)
         out = np.full(len(xs), self.bad)
         if ok.any():
-            pts = np.array([params_vector("flexible", self.params(*x), self.offset)[1] for x in xs[ok]])
+            pts = np.array([params_vector(self.model, self.params(*x))[1] for x in xs[ok]])
             if tally is not None:
                 tally[0] += len(pts)
             vals, _ = (self.pb_grid if coarse else self.pb).squared_error_batch(pts, self.yd, self.dec.core,
@@ -930,9 +961,9 @@ def fit_flexible_mode(
                     coulomb_eps=coulomb_eps)
     coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
-    crit = _ModeCriterion(rec, rigid, dec, dict(substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
-                                                 integrator=integrator,
-                                                 tol=sim_tol))
+    flexible = Model("flexible", offset=rigid.structure.offset,
+                     coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
+    crit = _ModeCriterion(rec, rigid, dec, flexible, dict(substeps=substeps, integrator=integrator, tol=sim_tol))
     tally = [0]
     grid = _mode_grid(crit, lambda0, f0, friction_split, grid_start, tally)
     search = _mode_search(crit, grid, friction_split, grid_start, max_iter, progress, tally)
@@ -982,6 +1013,7 @@ def _mode_result(search: _ModeSearch, crit: _ModeCriterion, grid: tuple, tally: 
         frozen=crit.params(*x),
         history=history,
         options=dict(decimation=crit.dec.describe(), tol=tol, integrator=crit.integrator, grid_start=grid_start,
+                     frozen_structure=crit.model.to_dict(),
                      nelder_mead_start=dict(zip(names, map(float, search.x0))), rigid_output_error=rigid_limit,
                      degenerate=why, friction_split=dims == 3),
     )
@@ -1019,7 +1051,8 @@ def _split_needed(crit: _ModeCriterion, paper: IdentificationResult, grid: tuple
 
 
 def _step2(rec: Recording, r1: IdentificationResult, variant: str, *, lambda0: float, f0: float, cutoff_hz: float,
-           grid_start: bool, progress: Progress, sim_kw: dict, tol: float = MODE_FTOL, max_iter: int = 300):
+           grid_start: bool, progress: Progress, model: Model, numerics: dict, tol: float = MODE_FTOL,
+           max_iter: int = 300):
     """Step 2 of :func:`didim_flexible` for ``variant``; returns its result (of the variant kept) and the notes that
     say which variant was kept and why.
 
@@ -1030,7 +1063,7 @@ def _step2(rec: Recording, r1: IdentificationResult, variant: str, *, lambda0: f
     the paper's search before deciding, so the loose stop never decides a close call."""
     t0 = time.perf_counter()
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
-    crit = _ModeCriterion(rec, r1, dec, sim_kw)
+    crit = _ModeCriterion(rec, r1, dec, model, numerics)
     tally = [0]
     grid = _mode_grid(crit, lambda0, f0, variant != "paper", grid_start, tally)
     search = dict(grid_start=grid_start, max_iter=max_iter, progress=progress, tally=tally)
@@ -1103,7 +1136,8 @@ def didim_flexible(
     rec: Recording,
     apM: Optional[float] = None,
     *,
-    offset: bool = False,
+    offset: Optional[bool] = None,
+    model: Union[str, Model] = "flexible",
     variant: str = "auto",
     lambda0: float = 0.5,
     f0: float = 40.0,
@@ -1139,11 +1173,16 @@ def didim_flexible(
     _checks.options(lambda0=lambda0, f0=f0, rigid_cutoff_hz=rigid_cutoff_hz, cutoff_hz=cutoff_hz, tol=tol,
                     max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
     _checks.one_of("variant", variant, VARIANTS)
-    coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
-    common = dict(substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law, integrator=integrator,
-                  sim_tol=sim_tol)
+    model = as_model(model, offset=offset, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
+    supports(model, THREE_STEP_SUPPORTS, "the three-step DIDIM")
+    if model.kind != "flexible":
+        raise DataError(f"the three-step DIDIM fits the flexible model, got {model.describe()}")
+    model = replace(model, coulomb_eps=coulomb_eps_of(rec, model.coulomb_eps))
+    coulomb_eps, coulomb_law, offset = model.coulomb_eps, model.coulomb_law, model.offset
+    common = dict(substeps=substeps, integrator=integrator, sim_tol=sim_tol)
     _say(progress, "step 1: rigid DIDIM")
-    r1 = didim_rigid(rec, apM, offset=offset, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress,
+    rigid = Model("rigid", offset=offset, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
+    r1 = didim_rigid(rec, apM, model=rigid, cutoff_hz=rigid_cutoff_hz, tol=tol, max_iter=max_iter, progress=progress,
                      reversals=reversals, start=start, **common)
     if not r1.converged:
         # nothing sensible to start steps 2 and 3 from: hand back step 1, flagged, with its history
@@ -1153,13 +1192,13 @@ def didim_flexible(
         return r1
 
     r2, notes = _step2(rec, r1, variant, lambda0=lambda0, f0=f0, cutoff_hz=cutoff_hz, grid_start=grid_start,
-                       progress=progress, sim_kw=dict(substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
-                                                      integrator=integrator, tol=sim_tol))
+                       progress=progress, model=model,
+                       numerics=dict(substeps=substeps, integrator=integrator, tol=sim_tol))
     chosen = "friction-split" if r2.options["friction_split"] else "paper"
     n_sim = r1.simulations + r2.simulations
     if r2.options["degenerate"]:
         r = IdentificationResult(
-            model="flexible", method="didim", params=dict(r2.frozen), std={}, rel_std_pct={},
+            model="flexible", structure=model, method="didim", params=dict(r2.frozen), std={}, rel_std_pct={},
             relative_error=float("nan"), output_error=r2.output_error, iterations=0, simulations=n_sim,
             elapsed_s=time.perf_counter() - t0, converged=False, message=_cannot_support(r2.options["degenerate"], rec),
             options=dict(variant=chosen, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law, integrator=integrator,
@@ -1179,8 +1218,8 @@ def didim_flexible(
         frozen = {}
     if offset:
         init["OF"] = 0.0
-    r3 = didim_iterate(rec, "flexible", init, frozen=frozen, offset=offset, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter,
-               progress=progress, start=start, **common)
+    r3 = didim_iterate(rec, model, init, frozen=frozen, cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter,
+                       progress=progress, start=start, **common)
     r3.steps = {"rigid": r1, "mode": r2}
     r3.notes = notes + r3.notes
     if r3.converged and r3.output_error > STEP3_DRIFT_FACTOR * r2.output_error:

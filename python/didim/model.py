@@ -1,22 +1,155 @@
 """The model structure as one object: what a result was identified with and what the simulator needs to reproduce it.
 
-A :class:`Model` is the kind (rigid or flexible), the constant force offset, the extra terms, the actuation delay, the
-backlash of the coupling and the Coulomb smoothing. Every identification result carries one (``result.structure``),
-with all its parameters (``result.all_params``, frozen ones included), so ``didim.simulate(rec, result)`` reproduces
-the result's own closed loop, and a saved result reloads with it (:func:`load_result`).
+A :class:`Model` is the kind (rigid or flexible), the constant force offset, the extra terms (:class:`Term`, each with
+its named hyper-parameters), the actuation delay and force lag, the backlash of the coupling and the Coulomb friction
+law. Every method, the doctor and every result take and carry one (``result.structure``); a kind given as text is
+converted once, where it enters (:func:`as_model`). Names, units and roles of the parameters come from the core's
+model (:meth:`Model.core`), which also builds the simulator's and the regressor's basis functions.
 """
 
 from __future__ import annotations
 
-import json
-import os
-from dataclasses import dataclass, field
+import functools
+from dataclasses import dataclass, field, replace
 from typing import Any, Dict, Optional, Tuple
-
 
 from . import _checks, _core
 from ._errors import DataError
-from .simulation import COULOMB_LAWS, MODELS, Term, param_names
+
+MODELS = ("rigid", "flexible")
+#: The shapes of the Coulomb sign through zero speed the core knows (``coulomb_law``).
+COULOMB_LAWS: Tuple[str, ...] = tuple(_core.COULOMB_LAWS)
+#: Degrees of freedom a term can act on (the load only in the flexible model).
+TERM_DOFS = ("motor", "load")
+#: The core's table of term kinds: kind -> ((hyper-parameter, unit, default or None), ...), and its description.
+TERM_HYPERS: Dict[str, Tuple[Tuple[str, str, Optional[float]], ...]] = {k: tuple(h) for k, h, _ in _core.TERM_TABLE}
+TERM_DOCS: Dict[str, str] = {k: d for k, _, d in _core.TERM_TABLE}
+#: Older kind names, read from saved models: alias -> (kind, {hyper-parameter: fixed value}).
+TERM_ALIASES: Dict[str, Tuple[str, Dict[str, float]]] = {a: (k, dict(f)) for a, k, f in _core.TERM_ALIASES}
+#: Every kind name a :class:`Term` accepts.
+TERM_KINDS: Tuple[str, ...] = tuple(TERM_HYPERS) + tuple(TERM_ALIASES)
+
+
+@dataclass(frozen=True, init=False)
+class Term:
+    """An extra term of a model: a parameter ``name`` times a basis function of the state, of a ``kind`` of the core's
+    table (:data:`TERM_HYPERS`, :data:`TERM_DOCS`) with its hyper-parameters by name (SI units, load side):
+
+    - ``offset``: 1 (N); ``viscous``: q̇; ``coulomb``: sign(q̇);
+    - ``abs_viscous``: |q̇| and ``abs_coulomb``: |sign(q̇)|, friction that depends on the direction of motion;
+    - ``stribeck``: sign(q̇)·exp(−(q̇/vs)²), ``vs`` (m/s);
+    - ``ripple``: sin(2π q/period + phase), ``period`` (m), ``phase`` (rad, 0 by default; π/2 for the cosine);
+    - ``coulomb_ripple``: sign(q̇)·sin(2π q/period + phase): Coulomb friction that varies along the stroke;
+    - ``coulomb_spline``: B((q − center)/width)·σ(q̇), ``center`` and ``width`` (m), ``side`` 1 forward, −1 backward,
+      0 both (the default): a friction profile along the stroke, B the cubic B-spline (B-splines ``width`` apart sum
+      to 1), σ the forward or backward part of sign(q̇), smooth through rest;
+    - ``gravity``: sin(q + angle_offset + phase) (N·m), q the joint angle (rad); ``A sin(q) + B cos(q)`` is two terms,
+      ``phase`` 0 and π/2;
+    - ``damper`` (flexible model): coupling damping in parallel with K12 (N/(m/s)).
+
+    ``Term("Fs", "stribeck", vs=0.017)``; a kind's first hyper-parameter may be given by position
+    (``Term("Fs", "stribeck", 0.017)``). ``dof``: "motor" (default) or "load" (flexible model); a damper couples the
+    two. The older names ``ripple_sin``/``ripple_cos``, ``coulomb_ripple_sin``/``_cos`` and
+    ``coulomb_spline_fwd``/``_bwd`` are read as their kind with the phase or side they fixed.
+    """
+
+    name: str
+    kind: str
+    dof: str
+    hyper_values: Tuple[Tuple[str, float], ...]
+
+    def __init__(self, name: str, kind: str, hyper: Optional[float] = None, dof: str = "motor",
+                 width: Optional[float] = None, **hypers: float):
+        if not isinstance(name, str) or not name:
+            raise DataError(f"a term's name must be a non-empty text, got {name!r}")
+        if not isinstance(kind, str) or kind not in TERM_KINDS:
+            raise DataError(f"unknown term kind {kind!r}: use one of {', '.join(TERM_HYPERS)}")
+        base, fixed = TERM_ALIASES.get(kind, (kind, {}))
+        table = TERM_HYPERS[base]
+        given = dict(hypers)
+        free = [h for h, _, _ in table if h not in fixed]
+        if hyper is not None:
+            if not free:
+                if hyper != 0:  # saved models of older releases give 0 for kinds without one
+                    raise DataError(f"term {name}: a {kind} term has no hyper-parameter, got {hyper!r}")
+            elif free[0] in given:
+                raise DataError(f"term {name}: {free[0]} given twice (by position and by name)")
+            else:
+                given[free[0]] = hyper
+        if width is not None and not (width == 0 and "width" not in free):
+            if "width" not in free:
+                raise DataError(f"term {name}: only spline terms have a width (knot spacing); leave it out for a "
+                                f"{kind} term")
+            given["width"] = width
+        for h, v in given.items():
+            if h not in [t[0] for t in table]:
+                names = ", ".join(t[0] for t in table) or "none"
+                raise DataError(f"term {name}: a {kind} term's hyper-parameters are {names}, got {h!r}")
+            if h in fixed and v != fixed[h]:
+                raise DataError(f"term {name}: a {kind} term has {h} = {fixed[h]:g}; give a {base} term for another {h}")
+        values = []
+        for h, unit, default in table:
+            v = given.get(h, fixed.get(h, default))
+            if v is None:
+                example = ", ".join(f"{t}=..." for t, _, d in table if d is None)
+                raise DataError(f"term {name}: a {base} term needs its {h} ({unit}): e.g. didim.Term({name!r}, "
+                                f"{base!r}, {example})")
+            values.append((h, _checks.real(f"term {name}'s {h}", v, unit)))
+        _checks.one_of(f"term {name}'s dof", dof, TERM_DOFS)
+        if base == "damper" and dof != "motor":
+            raise DataError(f"term {name}: a damper couples the motor and the load; leave its dof out")
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "kind", base)
+        object.__setattr__(self, "dof", dof)
+        object.__setattr__(self, "hyper_values", tuple(values))
+        # the core checks the values (a Stribeck speed > 0, a knot spacing > 0, a side in {-1, 0, 1})
+        _core_model("rigid" if dof == "motor" and base != "damper" else "flexible", False, (_freeze(self.spec()),),
+                    None, 1.0, "algebraic")
+
+    @property
+    def hypers(self) -> Dict[str, float]:
+        """The hyper-parameters by name (SI units, load side)."""
+        return dict(self.hyper_values)
+
+    def __repr__(self) -> str:
+        h = "".join(f", {k}={v!r}" for k, v in self.hyper_values)
+        return f"Term({self.name!r}, {self.kind!r}{h}{'' if self.dof == 'motor' else f', dof={self.dof!r}'})"
+
+    def spec(self) -> tuple:
+        """(name, kind, dof, [(hyper-parameter, value), ...]), as the core takes it."""
+        return (self.name, self.kind, self.dof, list(self.hyper_values))
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"name": self.name, "kind": self.kind, "dof": self.dof, "hypers": dict(self.hyper_values)}
+
+    @classmethod
+    def from_saved(cls, t) -> "Term":
+        """A term as a saved model holds it: {"name", "kind", "dof", "hypers"}, or the [name, kind, hyper, dof, width]
+        list of older releases."""
+        if isinstance(t, Term):
+            return t
+        if isinstance(t, dict):
+            unknown = set(t) - {"name", "kind", "dof", "hypers"}
+            if unknown or not isinstance(t.get("hypers", {}), dict):
+                raise DataError(f"a saved term is {{name, kind, dof, hypers}}, got {t!r}")
+            return cls(t.get("name"), t.get("kind"), dof=t.get("dof", "motor"), **t.get("hypers", {}))
+        if isinstance(t, (list, tuple)) and 2 <= len(t) <= 5:
+            return cls(*t)
+        raise DataError(f"a model term is a didim.Term or a {{name, kind, dof, hypers}} object, got {t!r}")
+
+
+@functools.lru_cache(maxsize=512)
+def _core_model(kind: str, offset: bool, specs: tuple, backlash_gap: Optional[float], coulomb_eps: float,
+                coulomb_law: str) -> "_core.Model":
+    """The core's model of a structure, built once per structure (identification loops ask at every step)."""
+    return _core.Model(kind, offset=offset, terms=[(n, k, d, list(h)) for n, k, d, h in specs] or None,
+                       backlash_gap=backlash_gap, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
+
+
+def _freeze(spec: tuple) -> tuple:
+    n, k, d, h = spec
+    return (n, k, d, tuple(h))
+
 
 @dataclass(frozen=True)
 class Model:
@@ -41,10 +174,8 @@ class Model:
             raise DataError(f"unknown model kind {self.kind!r}: use one of {', '.join(MODELS)}")
         if not isinstance(self.kind, str) or not isinstance(self.terms, (tuple, list)):
             raise DataError(f"a model needs a kind (text) and a list of terms, got {self.kind!r}, {self.terms!r}")
-        for t in self.terms:
-            if not isinstance(t, (Term, tuple, list)) or (not isinstance(t, Term) and len(t) not in (2, 3, 4, 5)):
-                raise DataError(f"a model term is a didim.Term or a (name, kind, hyper[, dof[, width]]) tuple, got {t!r}")
-        object.__setattr__(self, "terms", tuple(t if isinstance(t, Term) else Term(*t) for t in self.terms))
+        object.__setattr__(self, "terms", tuple(Term.from_saved(t) for t in self.terms))
+        object.__setattr__(self, "offset", _checks.flag("offset", self.offset))
         if self.backlash_gap is not None:
             object.__setattr__(self, "backlash_gap", _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0))
         object.__setattr__(self, "delay", _checks.whole("delay", self.delay, hint=" (samples)"))
@@ -73,23 +204,31 @@ class Model:
             parts.append(f"a {self.coulomb_law} Coulomb law")
         return parts[0] + (" with " + "; ".join(parts[1:]) if len(parts) > 1 else "")
 
+    def core(self, coulomb_eps: Optional[float] = None) -> "_core.Model":
+        """The core's model of this structure (names, units, roles, regressor; what the simulator integrates), with
+        ``coulomb_eps`` for a structure whose smoothing is the record's (``self.coulomb_eps`` None)."""
+        eps = self.coulomb_eps if self.coulomb_eps is not None else coulomb_eps
+        return _core_model(self.kind, self.offset, tuple(_freeze(t.spec()) for t in self.terms), self.backlash_gap,
+                           _core.DEFAULT_COULOMB_EPS if eps is None else float(eps), self.coulomb_law)
+
     def param_names(self) -> list:
         """Parameter names in the order of the parameter vector."""
-        return param_names(self.kind, self.offset, self.terms)
+        return list(self.core().names)
 
     def units(self) -> Dict[str, str]:
         """Unit of each parameter (SI, load side), as the core's basis functions give them."""
-        specs = [t.spec() for t in self.terms] or None
-        return dict(zip(self.param_names(), _core.param_units(self.kind, self.offset, specs, self.backlash_gap)))
+        return dict(zip(self.core().names, self.core().units))
 
-    def sim_kw(self) -> Dict[str, Any]:
-        """Keyword arguments of :func:`didim.simulate` that describe this structure."""
-        return dict(offset=self.offset, terms=self.terms, delay=self.delay, force_lag=self.force_lag,
-                    backlash_gap=self.backlash_gap,
-                    coulomb_eps=self.coulomb_eps, coulomb_law=self.coulomb_law)
+    def roles(self) -> Dict[str, str]:
+        """What each parameter is ("mass", "friction", "stiffness", "damping", "force"), from the core."""
+        return dict(zip(self.core().names, self.core().roles))
+
+    def with_terms(self, *terms: Term) -> "Model":
+        """This structure with more terms."""
+        return replace(self, terms=self.terms + tuple(terms))
 
     def to_dict(self) -> Dict[str, Any]:
-        return {"kind": self.kind, "offset": self.offset, "terms": [list(t.spec()) for t in self.terms],
+        return {"kind": self.kind, "offset": self.offset, "terms": [t.to_dict() for t in self.terms],
                 "delay": self.delay, "force_lag": self.force_lag, "backlash_gap": self.backlash_gap,
                 "coulomb_eps": self.coulomb_eps, "coulomb_law": self.coulomb_law}
 
@@ -102,10 +241,9 @@ class Model:
         if unknown:
             raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
         raw = d.get("terms") or []
-        if not isinstance(raw, list) or not all(isinstance(t, list) and len(t) in (3, 4, 5) for t in raw):
-            raise DataError("model terms must be a list of [name, kind, hyper, dof, width] lists (dof 'motor' and "
-                            "width 0 by default)")
-        terms = tuple(Term(*t) for t in raw)
+        if not isinstance(raw, list):
+            raise DataError("model terms must be a list of {name, kind, dof, hypers} objects")
+        terms = tuple(Term.from_saved(t) for t in raw)
         offset = d.get("offset", False)
         if not isinstance(offset, bool):
             raise DataError(f"model field offset must be true or false, got {offset!r}")
@@ -116,47 +254,42 @@ class Model:
 
     @classmethod
     def of_result(cls, kind: str, params: Dict[str, float], options: Dict[str, Any]) -> Optional["Model"]:
-        """The structure a method's options describe, or None for results that are not parameter sets of a model
-        (step 2's λ, f_n_flex)."""
+        """The structure a method's options describe, for a result made without one: None for results that are not
+        parameter sets of a model (step 2's λ, f_n_flex). Every method of didim sets the structure it fitted; this
+        reads results saved by releases that did not."""
         if kind not in MODELS:
             return None
-        terms = tuple(Term(*t) for t in options.get("terms") or ())
-        m = cls(kind=kind, offset="OF" in params, terms=terms, delay=int(options.get("delay") or 0),
-                force_lag=float(options.get("force_lag") or 0.0),
-                backlash_gap=options.get("backlash_gap"),
-                coulomb_eps=options.get("coulomb_eps"),
+        terms = tuple(Term.from_saved(t) for t in options.get("terms") or ())
+        m = cls(kind=kind, offset=bool(options.get("offset", False)), terms=terms,
+                delay=int(options.get("delay") or 0), force_lag=float(options.get("force_lag") or 0.0),
+                backlash_gap=options.get("backlash_gap"), coulomb_eps=options.get("coulomb_eps"),
                 coulomb_law=options.get("coulomb_law", "algebraic"))
         return m if set(m.param_names()) >= set(params) else None
 
 
-def load_result(path) -> "IdentificationResult":  # noqa: F821
-    """Reloads a result saved as JSON (``result.save("r.json")``, ``didim identify --json``) with its model structure,
-    so that ``didim.simulate(rec, load_result("r.json"))`` applies it to another record (the paper's cross-test)."""
-    from .result import IdentificationResult
-
-    from ._io import check_input
-
-    path = check_input(path, "result file (JSON)")
-    try:
-        with open(path, "r", encoding="utf-8") as f:
-            text = f.read(64 * 1024 * 1024)
-    except (OSError, ValueError) as e:
-        raise DataError(f"cannot read the result {path!r}: {e}") from None
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise DataError(f"{os.fspath(path)}: not a JSON result ({e})") from None
-    except RecursionError:
-        raise DataError(f"{os.fspath(path)}: not a didim result (its JSON is nested too deeply)") from None
-    if not isinstance(d, dict) or "params" not in d or "model" not in d:
-        raise DataError(f"{os.fspath(path)}: not a didim result (needs 'model' and 'params'; save one with "
-                        "result.save('r.json') or didim identify --json)")
-    try:
-        return IdentificationResult.from_dict(d)
-    except DataError as e:
-        raise DataError(f"{os.fspath(path)}: {e}") from None
-    except RecursionError:
-        raise DataError(f"{os.fspath(path)}: not a didim result (its steps are nested too deeply)") from None
+def as_model(model, **structure) -> Model:
+    """A model given where it enters didim, once: a :class:`Model` as it is (giving a structure field again, set to
+    anything but its default, is an error naming it), or a kind ("rigid", "flexible") with the structure fields
+    (``offset``, ``terms``, ``delay``, ``force_lag``, ``backlash_gap``, ``coulomb_eps``, ``coulomb_law``)."""
+    defaults = {"offset": None, "terms": (), "delay": 0, "force_lag": 0.0, "backlash_gap": None, "coulomb_eps": None,
+                "coulomb_law": "algebraic"}
+    unknown = set(structure) - set(defaults)
+    if unknown:
+        raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
+    if isinstance(model, Model):
+        again = [k for k, v in structure.items()
+                 if not (v is None or (k != "offset" and v == defaults[k]) or (isinstance(v, (tuple, list)) and not v)
+                         or (k == "offset" and bool(v) == model.offset))]
+        if again:
+            raise DataError(f"a didim.Model ({model.describe()}) carries its structure: leave {', '.join(again)} out, "
+                            "or give the model's kind as text with the structure you want")
+        return model
+    if not isinstance(model, str) or model not in MODELS:
+        raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)} or a didim.Model")
+    given = {k: v for k, v in structure.items() if v is not None}
+    given["offset"] = bool(given.get("offset", False))
+    given["terms"] = tuple(given.get("terms") or ())
+    return Model(model, **given)
 
 
-__all__ = ["Model", "load_result"]
+__all__ = ["Model", "Term", "as_model", "MODELS", "TERM_KINDS", "TERM_HYPERS", "COULOMB_LAWS"]

@@ -5,30 +5,31 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Dict, List, Optional, Sequence
+from dataclasses import replace
+from typing import Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
 from . import _checks, _core
 from ._errors import DataError, DidimError, SimulationError
-from .identification import (FLEXIBLE_CUTOFF_HZ, Progress, _say, nelder_mead_simplex, prefetch, start_notes,
-                             start_row_of)
+from .identification import (FLEXIBLE_CUTOFF_HZ, SIMULATING_SUPPORTS, Progress, _say, nelder_mead_simplex, prefetch,
+                             start_notes, start_row_of, supports)
+from .model import Model
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .signal import Decimation
-from .simulation import DEFAULT_TOL, Term, coulomb_eps_of, params_vector, problem
+from .simulation import DEFAULT_TOL, Term, coulomb_eps_of, entry_model, params_vector, problem
 
 CRITERIA = ("force", "position")
 
 
 def pseudo_regular_initial(rigid: Dict[str, float], f_n_nat: float = 30.0) -> Dict[str, float]:
-    """Eq. (33): half the rigid totals on each side, K12 = π² f_n_nat² M_tot (M_eq = M_tot/4)."""
+    """Eq. (33): half the rigid totals on each side, K12 = π² f_n_nat² M_tot (M_eq = M_tot/4); the rigid model's
+    other parameters (an offset OF) as they are."""
     m, fv, fc = rigid["M"], rigid["Fv"], rigid["Fc"]
     d = {"M1": m / 2, "Fv1": fv / 2, "Fc1": fc / 2, "M2": m / 2, "Fv2": fv / 2, "Fc2": fc / 2,
          "K12": math.pi**2 * f_n_nat**2 * m}
-    if "OF" in rigid:
-        d["OF"] = rigid["OF"]
-    return d
+    return {**d, **{k: v for k, v in rigid.items() if k not in ("M", "Fv", "Fc")}}
 
 
 def _check_criterion(criterion: str) -> None:
@@ -42,7 +43,7 @@ def _measured(rec: Recording, criterion: str) -> np.ndarray:
 
 def oe_nm(
     rec: Recording,
-    model: str,
+    model: Union[str, Model],
     initial: Dict[str, float],
     *,
     criterion: str = "force",
@@ -60,6 +61,7 @@ def oe_nm(
     backlash_gap: Optional[float] = None,
     delay: int = 0,
     force_lag: float = 0.0,
+    offset: Optional[bool] = None,
     start: str = "auto",
 ) -> IdentificationResult:
     """Nelder-Mead (scipy's) on all parameters with J_τ = ‖τ_ddm − τ‖² or J_q = ‖q1_ddm − q1‖² (eq. (32)) on
@@ -74,10 +76,12 @@ def oe_nm(
     _checks.options(cutoff_hz=cutoff_hz, xatol=xatol, fatol=fatol, max_iter=max_iter, substeps=substeps,
                     coulomb_eps=coulomb_eps)
     initial = _checks.physical(initial, "initial")
-    coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
+    model = entry_model(model, initial, offset=offset, terms=tuple(terms), backlash_gap=backlash_gap, delay=delay,
+                        force_lag=force_lag, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
+    supports(model, SIMULATING_SUPPORTS, "oe-nm")
+    model = replace(model, coulomb_eps=coulomb_eps_of(rec, model.coulomb_eps))
     t0 = time.perf_counter()
-    offset = "OF" in initial
-    names, x0, offset = params_vector(model, initial, offset, terms)
+    names, x0 = params_vector(model, initial)
     scale = np.where(x0 != 0, np.abs(x0), 1.0)
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(names), 1, "oe-nm")
@@ -85,9 +89,7 @@ def oe_nm(
     count = {"sim": 0}
     history: List[Iteration] = []
 
-    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
-                 integrator=integrator,
-                 tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay, force_lag=force_lag)
+    pb = problem(rec, model, substeps=substeps, integrator=integrator, tol=sim_tol)
     skip = start_row_of(rec, pb, x0, dec, start)
     ny = float(np.linalg.norm(yd[skip:]))
     _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-nm")
@@ -123,22 +125,22 @@ def oe_nm(
     out = math.sqrt(float(res.fun)) / ny
     nan = {n: float("nan") for n in names}
     return IdentificationResult(
-        model=model, method=f"oe-nm ({'J_tau' if criterion == 'force' else 'J_q'})",
+        model=model.kind, structure=model, method=f"oe-nm ({'J_tau' if criterion == 'force' else 'J_q'})",
         params=dict(zip(names, map(float, chi))), std=dict(nan), rel_std_pct=dict(nan),
         relative_error=out, output_error=out, iterations=int(res.nit), simulations=count["sim"],
         elapsed_s=time.perf_counter() - t0, converged=bool(res.success), message="" if res.success else str(res.message),
         initial=dict(initial), history=history,
         options=dict(criterion=criterion, decimation=dec.describe(), band_hz=dec.cutoff_hz, xatol=xatol, fatol=fatol, integrator=integrator,
-                     coulomb_eps=coulomb_eps, coulomb_law=coulomb_law, substeps=substeps, sim_tol=sim_tol,
-                     terms=[t.spec() for t in terms],
-                     backlash_gap=backlash_gap, delay=delay, force_lag=force_lag, start_rows_left_out=skip),
+                     coulomb_eps=model.coulomb_eps, coulomb_law=model.coulomb_law, substeps=substeps, sim_tol=sim_tol,
+                     offset=model.offset, terms=[t.to_dict() for t in model.terms], backlash_gap=model.backlash_gap,
+                     delay=model.delay, force_lag=model.force_lag, start_rows_left_out=skip),
         notes=start_notes(skip, dec, rec, "the criterion"),
     )
 
 
 def oe_lm(
     rec: Recording,
-    model: str,
+    model: Union[str, Model],
     initial: Dict[str, float],
     *,
     criterion: str = "force",
@@ -155,6 +157,7 @@ def oe_lm(
     terms: Sequence[Term] = (),
     backlash_gap: Optional[float] = None,
     delay: int = 0,
+    offset: Optional[bool] = None,
     start: str = "auto",
 ) -> IdentificationResult:
     """Closed-loop output error by Levenberg-Marquardt with the exact Jacobian of the decimated simulated output
@@ -165,19 +168,19 @@ def oe_lm(
     _check_criterion(criterion)
     _checks.options(cutoff_hz=cutoff_hz, tol=tol, max_iter=max_iter, substeps=substeps, coulomb_eps=coulomb_eps)
     initial = _checks.physical(initial, "initial")
-    coulomb_eps = coulomb_eps_of(rec, coulomb_eps)
     t0 = time.perf_counter()
     frozen = _checks.physical(dict(frozen or {}), "frozen")
-    offset = "OF" in initial or "OF" in frozen
     full = {**initial, **frozen}
-    names, chi, offset = params_vector(model, full, offset, terms)
+    model = entry_model(model, full, offset=offset, terms=tuple(terms), backlash_gap=backlash_gap, delay=delay,
+                        coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
+    supports(model, SIMULATING_SUPPORTS - {"force_lag"}, "oe-lm (its sensitivities)")
+    model = replace(model, coulomb_eps=coulomb_eps_of(rec, model.coulomb_eps))
+    names, chi = params_vector(model, full)
     free = [i for i, n in enumerate(names) if n not in frozen]
     dec = Decimation.lowpass(cutoff_hz, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 1, "oe-lm")
     measured = _measured(rec, criterion)
-    pb = problem(rec, model, offset=offset, substeps=substeps, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
-                 integrator=integrator,
-                 tol=sim_tol, terms=terms, backlash_gap=backlash_gap, delay=delay)
+    pb = problem(rec, model, substeps=substeps, integrator=integrator, tol=sim_tol)
     skip = start_row_of(rec, pb, chi, dec, start)
     ny = float(np.linalg.norm(dec(measured)[skip:]))
     _checks.measured_signal("force" if criterion == "force" else "motor position", ny, "oe-lm")
@@ -265,7 +268,7 @@ def oe_lm(
         sol = dict(std=nan, covariance=None, condition_number=np.nan)
         message = (message + "; " if message else "") + f"no covariance: {e}"
     return IdentificationResult(
-        model=model, method=f"oe-lm ({'J_tau' if criterion == 'force' else 'J_q'})",
+        model=model.kind, structure=model, method=f"oe-lm ({'J_tau' if criterion == 'force' else 'J_q'})",
         params={n: float(chi[i]) for i, n in enumerate(names) if i in free},
         std=dict(zip(fnames, map(float, sol["std"]))),
         rel_std_pct={n: float(100 * s / abs(chi[names.index(n)])) if chi[names.index(n)] else math.inf
@@ -274,9 +277,9 @@ def oe_lm(
         iterations=len(history), simulations=n_sim, elapsed_s=time.perf_counter() - t0,
         converged=converged, message=message, initial=dict(initial), frozen=frozen, history=history,
         options=dict(criterion=criterion, decimation=dec.describe(), band_hz=dec.cutoff_hz, tol=tol, integrator=integrator,
-                     coulomb_eps=coulomb_eps, coulomb_law=coulomb_law, substeps=substeps, sim_tol=sim_tol,
-                     terms=[t.spec() for t in terms],
-                     backlash_gap=backlash_gap, delay=delay, condition_number=float(sol["condition_number"]),
+                     coulomb_eps=model.coulomb_eps, coulomb_law=model.coulomb_law, substeps=substeps, sim_tol=sim_tol,
+                     offset=model.offset, terms=[t.to_dict() for t in model.terms], backlash_gap=model.backlash_gap,
+                     delay=model.delay, condition_number=float(sol["condition_number"]),
                      start_rows_left_out=skip),
         covariance=sol["covariance"], notes=start_notes(skip, dec, rec, "the criterion"),
     )
@@ -301,14 +304,18 @@ def check_sensitivities(
     """
     from .simulation import simulate_batch
 
-    names, chi, offset = params_vector(model, params, offset, terms)
+    from .simulation import NUMERICS
+
+    numerics = {k: sim_kw.pop(k) for k in NUMERICS if k in sim_kw}
+    model = entry_model(model, params, offset=offset, terms=tuple(terms), backlash_gap=backlash_gap, **sim_kw)
+    names, chi = params_vector(model, params)
     if output not in ("force", "position"):
         raise DataError(f"output must be 'force' or 'position', got {output!r}")
-    sens = problem(rec, model, offset=offset, terms=terms, backlash_gap=backlash_gap, **sim_kw).simulate_sensitivity(chi)
+    sens = problem(rec, model, **numerics).simulate_sensitivity(chi)
     exact = sens["dforce"] if output == "force" else sens["dq"][0]
     h = rel_step * np.maximum(np.abs(chi), 1e-3)
     sets = np.vstack([chi + np.diag(h), chi - np.diag(h)])
-    b = simulate_batch(rec, sets, model, offset=offset, terms=terms, backlash_gap=backlash_gap, **sim_kw)
+    b = simulate_batch(rec, sets, model, **numerics)
     if not all(e is None for e in b.errors):
         raise SimulationError(f"a perturbed simulation failed: {next(e for e in b.errors if e)}")
     sim = b.force if output == "force" else b.q[:, 0, :]

@@ -3,6 +3,7 @@ over the iterations (Fig. 5)."""
 
 from __future__ import annotations
 
+from .model import Model
 from .recording import Recording
 from .result import IdentificationResult
 from .simulation import simulate
@@ -21,9 +22,10 @@ def plot_fit(recording: Recording, result: IdentificationResult, *, title: str =
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    if "lambda" in result.params:  # a step-2 result: simulate its flexible parameter set
-        params, model = dict(result.frozen), "flexible"
-        sim = simulate(recording, params, model, offset="OF" in params)
+    if result.structure is None and result.options.get("frozen_structure"):  # step 2: its flexible parameter set
+        structure = Model.from_dict(result.options["frozen_structure"])
+        model = structure.kind
+        sim = simulate(recording, dict(result.frozen), structure)
     else:  # the result's own structure (terms, delay, force lag, friction law) and numerics
         model = result.model
         sim = simulate(recording, result)

@@ -122,7 +122,6 @@ def lead_in_figure(diag):
     import matplotlib.pyplot as plt
     from dataclasses import replace
 
-    from .simulation import simulate
 
     data = diag._context["data"]
     recs = [r for r in (data.rec, data.validate) if r is not None and r.qr_lead.size]
@@ -140,8 +139,8 @@ def lead_in_figure(diag):
         ext = replace(rec, qr=qr_ext[:n_lead + k], force=np.r_[np.zeros(n_lead), head["force"]],
                       qm=np.r_[np.full(n_lead, rec.qm[0]), head["qm"]], ql=None, lead_in=None,
                       u_ext=None if u_ext is None else u_ext[:n_lead + k])
-        s_led = simulate(ext, st.all_params(), st.model, **st.sim_kwargs())
-        s_rest = simulate(replace(rec, **head, lead_in=None), st.all_params(), st.model, **st.sim_kwargs())
+        s_led = st.simulate(ext)
+        s_rest = st.simulate(replace(rec, **head, lead_in=None))
         t = (np.arange(n_lead + k) - n_lead) * rec.dt * 1e3  # ms
         ax = axes[0][j]
         c, unit = units.plot_length(rec.axis)
@@ -236,8 +235,8 @@ def diagnosis_html(diag) -> str:
         b, a = diag.base.params.get(n), diag.final_params.get(n)
         parts.append(f"<tr><td>{e(n)}</td><td>{'' if b is None else f'{b:.5g}'}</td><td>{'' if a is None else f'{a:.5g}'}</td></tr>")
     st = diag.final_state
-    for label, value in (("delay (samples)", st.delay or None), ("force lag (s)", st.force_lag or None),
-                         ("backlash gap (m)", st.backlash_gap)):
+    for label, value in (("delay (samples)", st.model.delay or None), ("force lag (s)", st.model.force_lag or None),
+                         ("backlash gap (m)", st.model.backlash_gap)):
         if value is not None:
             parts.append(f"<tr><td>{e(label)}</td><td></td><td>{value:.5g}</td></tr>")
     parts.append("</table><h2>Candidate ranking per round</h2>")

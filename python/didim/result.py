@@ -11,7 +11,9 @@ from typing import Any, Dict, List, Mapping, Optional
 import numpy as np
 
 from . import _checks
-from ._io import jsonable
+from ._errors import DataError
+from ._io import check_input, jsonable
+from .model import Model
 
 #: Units of the paper's parameters (SI, load side) and of step 2's mode parameters; a result with a model structure
 #: takes its units from the model's basis functions (:attr:`IdentificationResult.units`).
@@ -89,7 +91,6 @@ class IdentificationResult:
 
     def __post_init__(self):
         if self.structure is None:
-            from .model import Model
 
             self.structure = Model.of_result(self.model, self.all_params, self.options)
 
@@ -156,8 +157,6 @@ class IdentificationResult:
     @classmethod
     def from_dict(cls, d: Dict[str, Any]) -> "IdentificationResult":
         """The inverse of :meth:`to_dict` (history and steps included)."""
-        from ._errors import DataError
-        from .model import Model
 
         def floats(x, what):
             if x is None:
@@ -243,7 +242,6 @@ class IdentificationResult:
     def save(self, path) -> None:
         """Writes the result to ``path``: JSON for ``.json`` (the contract of :meth:`to_dict`), the summary table for
         ``.txt``. Atomic: a failed write leaves the old file as it was."""
-        from ._errors import DataError
         from ._io import write_text
 
         ext = os.path.splitext(os.fspath(path))[1].lower()
@@ -413,4 +411,30 @@ def compare(results: Dict[str, IdentificationResult], reference: Optional[str] =
     return "\n".join(lines)
 
 
-__all__ = ["IdentificationResult", "Iteration", "compare", "UNITS"]
+def load_result(path) -> "IdentificationResult":  # noqa: F821
+    """Reloads a result saved as JSON (``result.save("r.json")``, ``didim identify --json``) with its model structure,
+    so that ``didim.simulate(rec, load_result("r.json"))`` applies it to another record (the paper's cross-test)."""
+    path = check_input(path, "result file (JSON)")
+    try:
+        with open(path, "r", encoding="utf-8") as f:
+            text = f.read(64 * 1024 * 1024)
+    except (OSError, ValueError) as e:
+        raise DataError(f"cannot read the result {path!r}: {e}") from None
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise DataError(f"{os.fspath(path)}: not a JSON result ({e})") from None
+    except RecursionError:
+        raise DataError(f"{os.fspath(path)}: not a didim result (its JSON is nested too deeply)") from None
+    if not isinstance(d, dict) or "params" not in d or "model" not in d:
+        raise DataError(f"{os.fspath(path)}: not a didim result (needs 'model' and 'params'; save one with "
+                        "result.save('r.json') or didim identify --json)")
+    try:
+        return IdentificationResult.from_dict(d)
+    except DataError as e:
+        raise DataError(f"{os.fspath(path)}: {e}") from None
+    except RecursionError:
+        raise DataError(f"{os.fspath(path)}: not a didim result (its steps are nested too deeply)") from None
+
+
+__all__ = ["IdentificationResult", "Iteration", "compare", "UNITS", "load_result"]

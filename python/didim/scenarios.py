@@ -8,13 +8,14 @@ controller already sees quantized positions).
 from __future__ import annotations
 
 import math
-from typing import Dict, Optional
+from typing import Dict, Optional, Union
 
 import numpy as np
 
 from . import _checks
 from ._errors import DataError
 from .controllers import Controller, EmpsCascade
+from .model import Model
 from .recording import Recording
 from .simulation import DEFAULT_COULOMB_EPS, simulate
 
@@ -128,7 +129,7 @@ def pulses(n: int, dt: float, amplitude: float, *, period_s: float = 1.0, first_
 
 def make_recording(
     truth: Dict[str, float],
-    model: str = "flexible",
+    model: Union[str, Model] = "flexible",
     qr: Optional[np.ndarray] = None,
     *,
     dt: float = 1e-3,
@@ -157,7 +158,9 @@ def make_recording(
                      position_resolution=quantization, name=name)
     noise_corr = _checks.real("noise correlation noise_corr", noise_corr, lo=0.0, lo_open=False, hi=1.0)
     force_noise = _checks.real("force_noise", force_noise, "N", lo=0.0, lo_open=False, hint=" (RMS of the noise)")
-    sim = simulate(plan, truth, model, substeps=substeps, coulomb_eps=coulomb_eps)
+    # a didim.Model carries its own friction law; a kind gets coulomb_eps
+    sim = simulate(plan, truth, model, substeps=substeps, **({} if isinstance(model, Model) else
+                                                              dict(coulomb_eps=coulomb_eps)))
     try:
         rng = np.random.default_rng(seed)
     except (TypeError, ValueError) as e:

@@ -139,20 +139,4 @@ class Decimation:
         return f"Butterworth order {self.order} at {self.cutoff_hz:g} Hz, zero phase, factor {self.factor}"
 
 
-def force_lag_mean(force: np.ndarray, lag: float, dt: float) -> np.ndarray:
-    """The mean over each sample period of the force a first-order lag ``lag`` (s) applies under the held commands
-    ``force`` (the core's ``SimOptions::force_lag``): what the plant answers when the drive logs ``force``."""
-    force = np.asarray(force, dtype=float)
-    if lag <= 0 or len(force) == 0:
-        return force
-    from scipy.signal import lfilter
-
-    decay = math.exp(-dt / lag)
-    share = lag / dt * (1.0 - decay)
-    # the lag's force at the start of each period: f₀ = τ₀, f(k+1) = decay·f(k) + (1 − decay)·τ(k)
-    g, _ = lfilter([1.0 - decay], [1.0, -decay], force, zi=[decay * force[0]])
-    f = np.concatenate([force[:1], g[:-1]])
-    return force + (f - force) * share
-
-
-__all__ = ["lowpass", "diffcent", "default_factor", "Decimation", "PADDINGS", "force_lag_mean"]
+__all__ = ["lowpass", "diffcent", "default_factor", "Decimation", "PADDINGS"]

@@ -2,22 +2,17 @@
 
 from __future__ import annotations
 
-import functools
 import math
 import numbers
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Dict, Mapping, Optional, Sequence, Tuple, Union
+from typing import Dict, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _checks, _core
 from ._errors import DataError, DidimError
+from .model import COULOMB_LAWS, MODELS, TERM_KINDS, Model, Term, as_model
 from .recording import Recording
-
-if TYPE_CHECKING:
-    from .model import Model
-
-MODELS = ("rigid", "flexible")
 
 #: Integration schemes of the simulator: "exponential" (exact discretization of the affine part of the model, the
 #: Coulomb terms by implicit second-order exponential time differencing with step control; the default) and "rk4"
@@ -33,8 +28,6 @@ DEFAULT_COULOMB_EPS: float = _core.DEFAULT_COULOMB_EPS
 #: default, so that a record gives the same answer in m, mm, rad, deg or encoder counts; the doctor fits the
 #: smoothing speed itself (the friction law's shape through zero speed is not known in advance).
 COULOMB_EPS_REL = 8e-4
-#: The shapes of the Coulomb sign through zero speed the core knows (``coulomb_law``).
-COULOMB_LAWS: Tuple[str, ...] = tuple(_core.COULOMB_LAWS)
 
 
 def default_coulomb_eps(recording: "Recording") -> float:
@@ -55,86 +48,14 @@ DEFAULT_TOL: float = _core.DEFAULT_TOL
 
 Params = Union[Mapping[str, float], Sequence[float], np.ndarray]
 
-#: Degrees of freedom a term can act on (the load only in the flexible model).
-TERM_DOFS = ("motor", "load")
-#: Kinds of extra model terms, as the core's model defines them (``Basis::from_kind``): see :class:`Term`.
-TERM_KINDS = tuple(_core.TERM_KINDS)
-
-
-@dataclass(frozen=True)
-class Term:
-    """An extra term of a model, a parameter ``name`` times a basis function of the motor state:
-
-    - ``offset``: 1 (N); ``viscous``: q̇; ``coulomb``: sign(q̇);
-    - ``abs_viscous``: |q̇| and ``abs_coulomb``: |sign(q̇)|, friction that depends on the direction of motion;
-    - ``stribeck``: sign(q̇)·exp(−(q̇/vs)²) with ``hyper`` = vs (m/s);
-    - ``ripple_sin``/``ripple_cos``: sin/cos(2π q/P) with ``hyper`` = P (m);
-    - ``coulomb_ripple_sin``/``coulomb_ripple_cos``: sign(q̇)·sin/cos(2π q/P), ``hyper`` = P (m): Coulomb friction
-      that varies along the stroke, always against the motion;
-    - ``coulomb_spline_fwd``/``coulomb_spline_bwd``: B((q − c)/w)·s(1 ± s)/2 with s = sign(q̇) (1 or 0 forward, 0 or
-      −1 backward, smooth through rest), ``hyper`` = c the knot (m), ``width`` = w the knot spacing (m), B the cubic B-spline (B-splines w
-      apart sum to 1): a friction profile along the stroke for each direction, each parameter the friction added near
-      its knot (N);
-    - ``damper`` (flexible model): coupling damping in parallel with K12, q̇1 − q̇12 on the motor row and its opposite
-      on the load row (N/(m/s)).
-
-    ``dof``: the degree of freedom whose state the term reads and whose row it acts on, "motor" (default) or "load"
-    (flexible model: e.g. a Stribeck friction of the load, read on q̇12); a ``damper`` always couples the two.
-    ``width``: the knot spacing of a spline term (m); 0 for the other kinds.
-    """
-
-    name: str
-    kind: str
-    hyper: float = 0.0
-    dof: str = "motor"
-    width: float = 0.0
-
-    def __post_init__(self):
-        if not isinstance(self.name, str) or not self.name:
-            raise DataError(f"a term's name must be a non-empty text, got {self.name!r}")
-        if not isinstance(self.kind, str) or self.kind not in TERM_KINDS:
-            raise DataError(f"unknown term kind {self.kind!r}: use one of {', '.join(TERM_KINDS)}")
-        object.__setattr__(self, "hyper", _checks.real(f"term {self.name}'s hyper-parameter", self.hyper))
-        spline = self.kind.startswith("coulomb_spline")
-        if spline and isinstance(self.width, (int, float)) and not isinstance(self.width, bool) and self.width == 0:
-            raise DataError(f"term {self.name}: a {self.kind} term needs its knot spacing: give width= (m, > 0), e.g. "
-                            f"didim.Term({self.name!r}, {self.kind!r}, {self.hyper!r}, width=0.05)")
-        object.__setattr__(self, "width", _checks.real(
-            f"term {self.name}'s width", self.width, "m", lo=0.0, lo_open=spline,
-            hint=" (the knot spacing of a spline term, > 0 m)" if spline else " (only spline terms have a width: 0)"))
-        if self.width and not spline:
-            raise DataError(f"term {self.name}: only spline terms have a width (knot spacing); leave it 0 for a "
-                            f"{self.kind} term")
-        _checks.one_of(f"term {self.name}'s dof", self.dof, TERM_DOFS)
-        if self.kind == "damper" and self.dof != "motor":
-            raise DataError(f"term {self.name}: a damper couples the motor and the load; leave its dof out")
-
-    def spec(self) -> tuple:
-        """(name, kind, hyper, dof, width), as the core and a saved model take it."""
-        return (self.name, self.kind, float(self.hyper), self.dof, float(self.width))
-
-
-def _specs(terms) -> Optional[list]:
-    if terms is None or (isinstance(terms, (tuple, list)) and not terms):
-        return None
-    if not isinstance(terms, (tuple, list)) or not all(isinstance(t, Term) for t in terms):
-        raise DataError(f"terms must be a list of didim.Term, e.g. [didim.Term('Fs', 'stribeck', 0.01)], got {terms!r}")
-    return [t.spec() for t in terms]
-
-
-def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS) -> np.ndarray:
-    """The sign used by every Coulomb friction term, identical to the core's: ``v/sqrt(v²+eps²)``, hard sign for eps = 0."""
+def coulomb_sign(v, eps: float = DEFAULT_COULOMB_EPS, law: str = "algebraic") -> np.ndarray:
+    """The sign used by every Coulomb friction term, the core's own: ``law`` through zero speed with the transition
+    speed ``eps`` (m/s or rad/s; "algebraic" is ``v/sqrt(v²+eps²)``), the hard sign for eps = 0."""
     v = _checks.real_array("v", v, None)
     eps = _checks.real("eps", eps, "m/s", lo=0.0, lo_open=False)
-    if eps > 0:
-        with np.errstate(all="ignore"):
-            d = v * v + eps * eps
-            out = v / np.sqrt(d)
-            odd = ~(np.isfinite(d) & (d >= np.finfo(float).tiny))  # v² + eps² under- or overflows: as the core
-            if np.any(odd):
-                out = np.where(odd, np.where(np.isinf(v), np.sign(v), v / np.hypot(v, eps)), out)
-        return out
-    return np.sign(v)
+    _checks.one_of("law", law, COULOMB_LAWS)
+    shape = np.shape(v)
+    return _core.coulomb_sign(np.ascontiguousarray(np.ravel(v), dtype=float), eps, law).reshape(shape)
 
 
 #: :func:`settling_samples`: the bound on the gap between the measured and the simulated position, as a multiple of
@@ -175,67 +96,21 @@ def settling_samples(qm: np.ndarray, q_sim: np.ndarray, dt: float, resolution: O
     return 0
 
 
-def cubic_bspline(u) -> np.ndarray:
-    """The uniform cubic B-spline of the friction-profile terms (``coulomb_spline_*``), the core's function: support
-    ``|u| < 2``, ``B(0) = 2/3``, the B-splines at the integers summing to 1."""
-    a = np.abs(np.asarray(u, dtype=float))
-    return np.where(a < 1, 2 / 3 - a * a + 0.5 * a * a * a, np.where(a < 2, (2 - a) ** 3 / 6, 0.0))
-
-
-def _check_model(model: str) -> None:
-    if model not in MODELS:
-        raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)}")
-
-
-def _is_model(x) -> bool:
-    from .model import Model
-
-    return isinstance(x, Model)
-
-
-def unpack_model(model, offset: Optional[bool], given: Dict[str, Any]) -> Tuple[str, Optional[bool], Dict[str, Any]]:
-    """``model`` as a kind name ("rigid", "flexible") or a :class:`didim.Model`: returns the kind, the offset and the
-    structure keywords (terms, delay, force_lag, backlash_gap, coulomb_eps) merged into ``given``. A Model carries its structure:
-    giving one of its fields again (``offset`` or any of ``given``'s structure keywords, set to anything but its
-    default) is an error naming it."""
-    if not _is_model(model):
-        return model, offset, given
-    st = model.sim_kw()
-    again = [k for k in ("terms", "delay", "force_lag", "backlash_gap", "coulomb_eps", "coulomb_law") if k in given
-             and given[k] not in ((), None, 0, "algebraic")]
-    if offset is not None and bool(offset) != model.offset:
-        again.insert(0, "offset")
-    if again:
-        raise DataError(f"a didim.Model ({model.describe()}) carries its structure: leave {', '.join(again)} out, or give "
-                        "the model's kind as text with the structure you want")
-    return model.kind, model.offset, {**given, **{k: v for k, v in st.items() if k != "offset"}}
-
-
-def param_names(model: str = "rigid", offset: bool = False, terms: Sequence[Term] = ()) -> list:
+def param_names(model: Union[str, Model] = "rigid", offset: bool = False, terms: Sequence[Term] = ()) -> list:
     """Parameter names of a model in the order of its parameter vector (M, Fv, Fc[, OF] or M1, Fv1, Fc1, M2, Fv2, Fc2,
     K12[, OF]), followed by the extra terms'."""
-    _check_model(model)
-    return list(_names(model, bool(offset), tuple(_specs(terms) or ())))
+    return as_model(model, offset=offset or None, terms=tuple(terms)).param_names()
 
 
-@functools.lru_cache(maxsize=256)
-def _names(model: str, offset: bool, specs: tuple) -> tuple:
-    """The core's names, kept per structure: identification loops ask for them at every step."""
-    return tuple(_core.param_names(model, offset, list(specs) or None))
-
-
-def params_vector(model: str, params: Params, offset: Optional[bool] = None, terms: Sequence[Term] = ()):
-    """Returns ``(names, vector, offset)`` for parameters given as a name → value mapping or a sequence."""
-    _check_model(model)
+def params_vector(model: Model, params: Params) -> Tuple[list, np.ndarray]:
+    """Returns ``(names, vector)`` of ``model`` for parameters given as a name → value mapping or a sequence."""
+    names = model.param_names()
     if isinstance(params, Mapping):
-        if offset is None:
-            offset = "OF" in params
-        names = param_names(model, offset, terms)
         missing = [k for k in names if k not in params]
         unknown = [k for k in params if k not in names]
         if missing or unknown:
             raise DataError(
-                f"parameters for the {model} model{' with offset' if offset else ''} are {', '.join(names)}"
+                f"parameters for the {model.describe()} are {', '.join(names)}"
                 + (f"; missing {', '.join(missing)}" if missing else "")
                 + (f"; unknown {', '.join(map(str, unknown))}" if unknown else "")
             )
@@ -247,12 +122,26 @@ def params_vector(model: str, params: Params, offset: Optional[bool] = None, ter
             vec = np.asarray(params, dtype=float).ravel()
         except (TypeError, ValueError) as e:
             raise DataError(f"parameters must be a mapping name -> value or a sequence of real numbers: {e}") from None
-        if offset is None:
-            offset = vec.size == len(param_names(model, False, terms)) + 1
-        names = param_names(model, offset, terms)
         if vec.size != len(names):
-            raise DataError(f"the {model} model takes {len(names)} parameters ({', '.join(names)}), got {vec.size}")
-    return names, vec, bool(offset)
+            raise DataError(f"the {model.describe()} takes {len(names)} parameters ({', '.join(names)}), got {vec.size}")
+    return names, vec
+
+
+def entry_model(model, params, **structure) -> Model:
+    """The model of a call made with a kind as text and a parameter mapping (``simulate(rec, {"M": …, "OF": …},
+    "rigid")``): with ``offset`` not given, the mapping or the sequence's length says whether it has OF. A
+    :class:`Model` is taken as it is. The one place where didim reads the structure from the parameters: everything
+    behind the entry points carries a Model."""
+    if not isinstance(model, Model) and structure.get("offset") is None and params is not None:
+        base = as_model(model, **{**structure, "offset": False})
+        if isinstance(params, Mapping):
+            structure["offset"] = "OF" in params and "OF" not in base.param_names()
+        elif not isinstance(params, (str, bytes, numbers.Number)):
+            try:
+                structure["offset"] = np.asarray(params, dtype=float).size == len(base.param_names()) + 1
+            except (TypeError, ValueError):
+                pass
+    return as_model(model, **structure)
 
 
 @dataclass(frozen=True)
@@ -335,57 +224,43 @@ class SimResult:
         return fig
 
 
-def sim_options(
-    recording: Recording,
-    *,
-    substeps: int = 10,
-    quantization: Optional[float] = None,
-    delay: int = 0,
-    force_lag: float = 0.0,
-    coulomb_eps: Optional[float] = None,
-    coulomb_law: str = "algebraic",
-    integrator: str = "exponential",
-    tol: float = DEFAULT_TOL,
-) -> dict:
-    """Validated simulator keyword options for the core, with the recording's encoder resolution by default."""
+#: The simulator's numerical options (not the model's): see :func:`simulate`.
+NUMERICS = ("substeps", "quantization", "integrator", "tol")
+
+
+def sim_options(recording: Recording, *, substeps: int = 10, quantization: Optional[float] = None,
+                integrator: str = "exponential", tol: float = DEFAULT_TOL) -> dict:
+    """Validated numerical options of the simulator, with the recording's encoder resolution by default."""
     if quantization is None:
         quantization = recording.position_resolution or 0.0
     quantization = _checks.real("quantization", quantization, "m", lo=0.0, lo_open=False, hint=" (0 for none)")
     _checks.options(substeps=substeps)
-    coulomb_eps = coulomb_eps_of(recording, coulomb_eps)
-    _checks.one_of("coulomb_law", coulomb_law, COULOMB_LAWS)
-    delay = _checks.whole("delay", delay, lo=0, hi=recording.n - 1, hint=" (actuation delay in samples)")
     if integrator not in INTEGRATORS:
         raise DataError(f"unknown integrator {integrator!r}: use one of {', '.join(INTEGRATORS)}")
     if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0 < tol < 1):
         raise DataError(f"tol must be a fraction of the stroke between 0 and 1, got {tol!r}")
-    force_lag = _checks.real("force_lag", force_lag, "s", lo=0.0, lo_open=False, hint=" (0 for none)")
-    return dict(substeps=int(substeps), quantization=float(quantization), delay=int(delay), force_lag=force_lag,
-                coulomb_eps=float(coulomb_eps), coulomb_law=coulomb_law, integrator=integrator, tol=float(tol))
+    return dict(substeps=int(substeps), quantization=float(quantization), integrator=integrator, tol=float(tol))
 
 
-def problem(recording: Recording, model: Union[str, "Model"] = "rigid", *, offset: Optional[bool] = None,
-            terms: Sequence[Term] = (), backlash_gap: Optional[float] = None, **sim_kw) -> "_core.Problem":
-    """The recording's closed loop held by the Rust core (reference, controller, external input, model structure and
-    simulator options), for repeated simulations with varying parameters. ``model`` is a kind name or a
-    :class:`didim.Model`; ``sim_kw`` as for :func:`simulate`."""
-    model, offset, kw = unpack_model(model, offset, dict(sim_kw, terms=terms, backlash_gap=backlash_gap))
-    terms, backlash_gap = kw.pop("terms"), kw.pop("backlash_gap")
-    sim_kw = kw
-    _check_model(model)
-    _checks.known_options([sim_options, problem], sim_kw, "the simulator")
-    opts = sim_options(recording, **sim_kw)
+def problem(recording: Recording, model: Model, **numerics) -> "_core.Problem":
+    """The recording's closed loop held by the Rust core (reference, controller, external input, the model and its
+    actuation, the simulator's numerics), for repeated simulations with varying parameters. ``numerics`` as for
+    :func:`simulate` (``substeps``, ``quantization``, ``integrator``, ``tol``)."""
+    model = as_model(model)  # a kind as text: that kind's model with no extra structure
+    _checks.known_options([sim_options], numerics, "the simulator")
+    opts = sim_options(recording, **numerics)
+    _checks.whole("delay", model.delay, lo=0, hi=recording.n - 1, hint=" (actuation delay in samples)")
     # a log that begins in motion is simulated from the rest before its lead-in, and output from its first sample
     qr, u_ext = recording.lead_in_signals()
-    return _core.Problem(model, qr, recording.dt, recording.controller.kind, list(recording.controller.gains),
-                         u_ext=u_ext, offset=bool(offset), terms=_specs(terms), backlash_gap=backlash_gap,
+    return _core.Problem(model.core(default_coulomb_eps(recording)), qr, recording.dt, recording.controller.kind,
+                         list(recording.controller.gains), u_ext=u_ext, delay=model.delay, force_lag=model.force_lag,
                          lead=int(recording.qr_lead.size), **opts)
 
 
 def simulate(
     recording: Recording,
     params: Params,
-    model: Union[str, "Model"] = "rigid",
+    model: Union[str, Model] = "rigid",
     *,
     offset: Optional[bool] = None,
     substeps: int = 10,
@@ -404,10 +279,12 @@ def simulate(
 
     Args:
         recording: the record whose reference, controller, sample period and external input drive the simulation.
-        params: a mapping name → value (SI units, load side) or a sequence in the order of :func:`param_names`.
-        model: "rigid" (eq. (6)) or "flexible" (eq. (2)), or a :class:`didim.Model` (its kind and structure: offset,
-            terms, delay, backlash, Coulomb smoothing).
-        offset: rigid model with a constant force OF; by default, when params names OF or has 4 values.
+        params: a mapping name → value (SI units, load side) or a sequence in the order of :func:`param_names`, or
+            an identification result (its parameters, its model and its simulator's numerics).
+        model: a :class:`didim.Model`, or its kind "rigid" (eq. (6)) or "flexible" (eq. (2)) with the structure given
+            by the keywords below (``offset``, ``terms``, ``delay``, ``force_lag``, ``backlash_gap``,
+            ``coulomb_eps``, ``coulomb_law``: the fields of :class:`didim.Model`).
+        offset: rigid model with a constant force OF; by default, when params names OF or has one value more.
         substeps: RK4 substeps per sample period (``integrator="rk4"`` only).
         quantization: resolution of the simulated motor encoder (m); default the recording's ``position_resolution``.
         delay: extra actuation delay in samples.
@@ -426,41 +303,25 @@ def simulate(
         _checks.known_options([simulate], unknown, "simulate")
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
+    structure = dict(offset=offset, terms=tuple(terms), delay=delay, force_lag=force_lag, backlash_gap=backlash_gap,
+                     coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
     if _is_result(params):  # a result carries its model structure and its simulator's numerics
-        given = [k for k, v in (("terms", terms), ("backlash_gap", backlash_gap), ("delay", delay), ("force_lag", force_lag))
-                 if v not in ((), None, 0)]
+        given = [k for k, v in structure.items() if v not in ((), None, 0, "algebraic")]
         if given:
             raise DataError(f"a result carries its model structure: leave {', '.join(given)} out, or simulate "
                             "result.all_params with the structure you want")
-        st = _structure(params)
-        model, offset, terms, backlash_gap, delay, force_lag, coulomb_eps, coulomb_law = (
-            st.kind, st.offset, st.terms, st.backlash_gap, st.delay, st.force_lag, st.coulomb_eps, st.coulomb_law)
+        model = _structure(params)
         integrator = params.options.get("integrator", integrator)
         tol = params.options.get("sim_tol", tol)
         substeps = params.options.get("substeps", substeps)
         params = params.all_params
-    model, offset, st = unpack_model(model, offset, dict(terms=terms, delay=delay, force_lag=force_lag,
-                                                        backlash_gap=backlash_gap, coulomb_eps=coulomb_eps,
-                                                        coulomb_law=coulomb_law))
-    terms, delay, force_lag = st["terms"], st["delay"], st["force_lag"]
-    backlash_gap, coulomb_eps, coulomb_law = st["backlash_gap"], st["coulomb_eps"], st["coulomb_law"]
-    if offset is not None:
-        offset = _checks.flag("offset", offset)
-    names, vec, offset = params_vector(model, params, offset, terms)
-    out = problem(recording, model, offset=offset, terms=terms, backlash_gap=backlash_gap, substeps=substeps,
-                  quantization=quantization, delay=delay, force_lag=force_lag, coulomb_eps=coulomb_eps,
-                  coulomb_law=coulomb_law,
-                  integrator=integrator,
+    else:
+        model = entry_model(model, params, **structure)
+    names, vec = params_vector(model, params)
+    out = problem(recording, model, substeps=substeps, quantization=quantization, integrator=integrator,
                   tol=tol).simulate(vec)
-    return SimResult(
-        model=model,
-        params=dict(zip(names, map(float, vec))),
-        t=recording.t,
-        force=out["force"],
-        q=out["q"],
-        qd=out["qd"],
-        qdd=out["qdd"],
-    )
+    return SimResult(model=model.kind, params=dict(zip(names, map(float, vec))), t=recording.t, force=out["force"],
+                     q=out["q"], qd=out["qd"], qdd=out["qdd"])
 
 
 def _is_result(x) -> bool:
@@ -547,34 +408,30 @@ def simulate_batch(
         raise DataError("simulate_batch takes a sequence of parameter sets (a list of mappings or results, or an "
                         f"(m, p) array), got {type(params).__name__}")
     states = _checks.flag("states", states)
-    model, offset, sim_kw = unpack_model(model, offset, sim_kw)
+    numerics = {k: sim_kw.pop(k) for k in NUMERICS if k in sim_kw}
     rows = list(params) if not isinstance(params, np.ndarray) else params
     if len(rows) and all(_is_result(r) for r in rows):  # results: one structure for all, its options by default
         structures = {_structure(r) for r in rows}
         if len(structures) > 1:
             raise DataError("the results of a batch must share one model structure (kind, offset, terms, delay, force lag, "
                             "backlash, Coulomb smoothing); simulate them one by one")
-        st = structures.pop()
-        model, offset = st.kind, st.offset
-        for k, v in dict(terms=st.terms, delay=st.delay, force_lag=st.force_lag, backlash_gap=st.backlash_gap,
-                         coulomb_eps=st.coulomb_eps, coulomb_law=st.coulomb_law).items():
-            sim_kw.setdefault(k, v)
-        sim_kw.setdefault("integrator", rows[0].options.get("integrator", "exponential"))
+        model = as_model(structures.pop(), offset=offset, **sim_kw)
+        numerics.setdefault("integrator", rows[0].options.get("integrator", "exponential"))
         rows = [r.all_params for r in rows]
+    elif len(rows):
+        model = entry_model(model, rows[0], offset=offset, **sim_kw)
     if isinstance(rows, np.ndarray) and rows.ndim == 1:
         raise DataError("params must be 2-D, one parameter set per row (use simulate for one set)")
     if len(rows) == 0:
         raise DataError("params holds no parameter set")
-    vecs = [params_vector(model, r, offset, sim_kw.get("terms", ())) for r in rows]
-    names, _, offset = vecs[0]
-    if any(v[2] != offset for v in vecs):
-        raise DataError("all parameter sets of a batch must have the same parameters (with or without OF)")
+    vecs = [params_vector(model, r) for r in rows]
+    names = vecs[0][0]
     mat = np.ascontiguousarray(np.array([v[1] for v in vecs], dtype=float))
-    out = problem(recording, model, offset=offset, **sim_kw).simulate_batch(mat, states=bool(states))
-    return BatchResult(model=model, names=names, params=mat, t=recording.t, force=out["force"], q=out["q"],
+    out = problem(recording, model, **numerics).simulate_batch(mat, states=bool(states))
+    return BatchResult(model=model.kind, names=names, params=mat, t=recording.t, force=out["force"], q=out["q"],
                        qd=out.get("qd"), qdd=out.get("qdd"), errors=list(out["errors"]))
 
 
 __all__ = ["simulate", "settling_samples", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
-           "params_vector", "coulomb_sign", "MODELS", "INTEGRATORS", "DEFAULT_COULOMB_EPS", "DEFAULT_TOL",
+           "params_vector", "entry_model", "coulomb_sign", "MODELS", "NUMERICS", "INTEGRATORS", "DEFAULT_COULOMB_EPS", "DEFAULT_TOL",
            "COULOMB_EPS_REL", "COULOMB_LAWS", "default_coulomb_eps", "coulomb_eps_of"]

@@ -27,23 +27,242 @@ pub const MOTOR: usize = 0;
 /// Index of the load degree of freedom of the flexible model (`q12`).
 pub const LOAD: usize = 1;
 
-/// The kinds of extra model terms [`Basis::from_kind`] builds (the Python layer's `TERM_KINDS`).
-pub const TERM_KINDS: &[&str] = &[
-    "offset",
-    "viscous",
-    "coulomb",
-    "abs_viscous",
-    "abs_coulomb",
-    "stribeck",
-    "ripple_sin",
-    "ripple_cos",
-    "coulomb_ripple_sin",
-    "coulomb_ripple_cos",
-    "coulomb_spline_fwd",
-    "coulomb_spline_bwd",
-    "coulomb_spline",
-    "damper",
+/// A named hyper-parameter of a term kind: a number fixed while the term's parameter is
+/// identified (a Stribeck speed, a period, a knot), with its SI unit on the load side and
+/// its default (None: it must be given).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hyper {
+    pub name: &'static str,
+    pub unit: &'static str,
+    pub default: Option<f64>,
+}
+
+const fn hyper(name: &'static str, unit: &'static str) -> Hyper {
+    Hyper {
+        name,
+        unit,
+        default: None,
+    }
+}
+
+const fn hyper_or(name: &'static str, unit: &'static str, default: f64) -> Hyper {
+    Hyper {
+        name,
+        unit,
+        default: Some(default),
+    }
+}
+
+/// One kind of extra model term: its name, its named hyper-parameters and how its basis
+/// function is built from them (in the order of `hypers`) on a degree of freedom.
+pub struct TermKind {
+    pub name: &'static str,
+    pub hypers: &'static [Hyper],
+    /// What it is, in a few words (the Python layer's docs and errors).
+    pub doc: &'static str,
+    build: fn(usize, &[f64]) -> Basis,
+}
+
+/// The kinds of extra model terms, the one table every layer reads (the Python layer's
+/// `TERM_KINDS`, the saved models, the doctor). A new term kind is one row here, one
+/// [`Basis`] variant with its arm in [`Basis::local`], [`Basis::unit`] and [`Basis::role`],
+/// and its test.
+pub const TERM_TABLE: &[TermKind] = &[
+    TermKind {
+        name: "offset",
+        hypers: &[],
+        doc: "a constant force: 1",
+        build: |dof, _| Basis::Offset { dof },
+    },
+    TermKind {
+        name: "viscous",
+        hypers: &[],
+        doc: "viscous friction: q̇",
+        build: |dof, _| Basis::Viscous { dof },
+    },
+    TermKind {
+        name: "coulomb",
+        hypers: &[],
+        doc: "Coulomb friction: sign(q̇)",
+        build: |dof, _| Basis::Coulomb { dof },
+    },
+    TermKind {
+        name: "abs_viscous",
+        hypers: &[],
+        doc: "direction-dependent viscous friction: |q̇|",
+        build: |dof, _| Basis::AbsViscous { dof },
+    },
+    TermKind {
+        name: "abs_coulomb",
+        hypers: &[],
+        doc: "direction-dependent Coulomb friction: |sign(q̇)|",
+        build: |dof, _| Basis::AbsCoulomb { dof },
+    },
+    TermKind {
+        name: "stribeck",
+        hypers: &[hyper("vs", "m/s")],
+        doc: "Stribeck friction: sign(q̇)·exp(−(q̇/vs)²)",
+        build: |dof, h| Basis::Stribeck { dof, vs: h[0] },
+    },
+    TermKind {
+        name: "ripple",
+        hypers: &[hyper("period", "m"), hyper_or("phase", "rad", 0.0)],
+        doc: "a position-periodic force: sin(2π q/period + phase)",
+        build: |dof, h| Basis::Ripple {
+            dof,
+            period: h[0],
+            phase: h[1],
+        },
+    },
+    TermKind {
+        name: "coulomb_ripple",
+        hypers: &[hyper("period", "m"), hyper_or("phase", "rad", 0.0)],
+        doc: "Coulomb friction varying along the stroke: sign(q̇)·sin(2π q/period + phase)",
+        build: |dof, h| Basis::CoulombRipple {
+            dof,
+            period: h[0],
+            phase: h[1],
+        },
+    },
+    TermKind {
+        name: "coulomb_spline",
+        hypers: &[
+            hyper("center", "m"),
+            hyper("width", "m"),
+            hyper_or("side", "1", 0.0),
+        ],
+        doc: "a friction profile's knot: B((q − center)/width)·σ(q̇), side 1 forward, −1 backward, 0 both",
+        build: |dof, h| Basis::CoulombSpline {
+            dof,
+            center: h[0],
+            width: h[1],
+            side: h[2] as i8,
+        },
+    },
+    TermKind {
+        name: "damper",
+        hypers: &[],
+        doc: "coupling damping in parallel with K12: q̇1 − q̇12 (flexible model)",
+        build: |_, _| Basis::Damper { a: MOTOR, b: LOAD },
+    },
+    TermKind {
+        name: "gravity",
+        hypers: &[
+            hyper_or("angle_offset", "rad", 0.0),
+            hyper_or("phase", "rad", 0.0),
+        ],
+        doc: "the gravity torque of a rotary joint: sin(q + angle_offset + phase) (phase π/2 for the cosine)",
+        build: |dof, h| Basis::Gravity {
+            dof,
+            angle_offset: h[0],
+            phase: h[1],
+        },
+    },
 ];
+
+/// An older kind name, the kind it stands for and the hyper-parameters its name fixed.
+pub type TermAlias = (&'static str, &'static str, &'static [(&'static str, f64)]);
+
+/// Older kind names, read from saved models: each is a kind of [`TERM_TABLE`] with some
+/// hyper-parameters fixed (the phase or the side that was part of the name).
+pub const TERM_ALIASES: &[TermAlias] = &[
+    ("ripple_sin", "ripple", &[("phase", 0.0)]),
+    ("ripple_cos", "ripple", &[("phase", std::f64::consts::FRAC_PI_2)]),
+    ("coulomb_ripple_sin", "coulomb_ripple", &[("phase", 0.0)]),
+    (
+        "coulomb_ripple_cos",
+        "coulomb_ripple",
+        &[("phase", std::f64::consts::FRAC_PI_2)],
+    ),
+    ("coulomb_spline_fwd", "coulomb_spline", &[("side", 1.0)]),
+    ("coulomb_spline_bwd", "coulomb_spline", &[("side", -1.0)]),
+];
+
+/// The row of [`TERM_TABLE`] named `kind`.
+pub fn term_kind(kind: &str) -> Result<&'static TermKind> {
+    TERM_TABLE.iter().find(|k| k.name == kind).ok_or_else(|| {
+        invalid!(
+            "unknown term kind {kind:?}: use one of {} (damper: flexible model)",
+            TERM_TABLE.iter().map(|k| k.name).collect::<Vec<_>>().join(", ")
+        )
+    })
+}
+
+/// A kind and its named hyper-parameters in canonical form: an alias of [`TERM_ALIASES`]
+/// becomes its kind with the hyper-parameters its name fixed; every hyper-parameter of
+/// the kind is given a value (the given one, else its default) in the table's order. An
+/// unknown or repeated name, a missing hyper-parameter without default, or an alias's
+/// fixed one given otherwise is an error naming it.
+pub fn canonical_term(kind: &str, given: &[(&str, f64)]) -> Result<(&'static TermKind, Vec<f64>)> {
+    let (name, fixed): (&str, &[(&str, f64)]) = match TERM_ALIASES.iter().find(|a| a.0 == kind) {
+        Some((_, k, f)) => (k, f),
+        None => (kind, &[]),
+    };
+    let tk = term_kind(name)?;
+    let names = || tk.hypers.iter().map(|h| h.name).collect::<Vec<_>>().join(", ");
+    for (i, (n, _)) in given.iter().enumerate() {
+        if !tk.hypers.iter().any(|h| h.name == *n) {
+            return Err(if tk.hypers.is_empty() {
+                invalid!("a {kind} term has no hyper-parameter, got {n:?}")
+            } else {
+                invalid!("a {kind} term's hyper-parameters are {}, got {n:?}", names())
+            });
+        }
+        if given[..i].iter().any(|(m, _)| m == n) {
+            return Err(invalid!("hyper-parameter {n:?} of a {kind} term given twice"));
+        }
+        if let Some((_, v)) = fixed.iter().find(|(m, _)| m == n) {
+            if given[i].1 != *v {
+                return Err(invalid!(
+                    "a {kind} term has {n} = {v}; give a {name} term for another {n}"
+                ));
+            }
+        }
+    }
+    let values = tk
+        .hypers
+        .iter()
+        .map(|h| {
+            given
+                .iter()
+                .chain(fixed.iter())
+                .find(|(n, _)| *n == h.name)
+                .map(|(_, v)| *v)
+                .or(h.default)
+                .ok_or_else(|| {
+                    invalid!(
+                        "a {name} term needs its hyper-parameter {} ({}); its hyper-parameters are {}",
+                        h.name,
+                        h.unit,
+                        names()
+                    )
+                })
+        })
+        .collect::<Result<Vec<f64>>>()?;
+    Ok((tk, values))
+}
+
+/// What a parameter is, physically: how the doctor and the reports group parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    Mass,
+    Friction,
+    Stiffness,
+    Damping,
+    Force,
+}
+
+impl Role {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Role::Mass => "mass",
+            Role::Friction => "friction",
+            Role::Stiffness => "stiffness",
+            Role::Damping => "damping",
+            Role::Force => "force",
+        }
+    }
+}
 
 /// Default velocity scale of the smoothed Coulomb sign, in m/s.
 ///
@@ -295,6 +514,14 @@ pub enum Basis {
         width: f64,
         side: i8,
     },
+    /// Gravity torque of a rotary joint (N·m, the core's "N" on the load side): `φ =
+    /// sin(q + angle_offset + phase)`, q the joint angle (rad); the torque `A sin(q + θ0) + B cos(q + θ0)`
+    /// is two terms, phases 0 and π/2, with `angle_offset` θ0 where the joint's zero is.
+    Gravity {
+        dof: usize,
+        angle_offset: f64,
+        phase: f64,
+    },
     /// Damper in parallel with the spring between dofs `a` and `b` (N/(m/s)):
     /// `φ_a = q̇_a − q̇_b`, `φ_b = q̇_b − q̇_a` (coupling damping of a flexible joint).
     Damper { a: usize, b: usize },
@@ -335,7 +562,8 @@ impl Basis {
             | Basis::Stribeck { dof, .. }
             | Basis::Ripple { dof, .. }
             | Basis::CoulombRipple { dof, .. }
-            | Basis::CoulombSpline { dof, .. } => (dof, None),
+            | Basis::CoulombSpline { dof, .. }
+            | Basis::Gravity { dof, .. } => (dof, None),
             Basis::Spring { a, b } | Basis::Damper { a, b } | Basis::Backlash { a, b, .. } => (a, Some(b)),
         }
     }
@@ -359,6 +587,12 @@ impl Basis {
                      got {center} and {width}"
                 ))
             }
+            Basis::CoulombSpline { side, .. } if !(-1..=1).contains(&side) => {
+                Err(invalid!("a friction spline's side is 1 (forward), -1 (backward) or 0 (both), got {side}"))
+            }
+            Basis::Gravity { angle_offset, phase, .. } if !(angle_offset.is_finite() && phase.is_finite()) => {
+                Err(invalid!("a gravity term needs a finite angle offset and phase (rad), got {angle_offset} and {phase}"))
+            }
             Basis::Backlash { gap, .. } if !(gap.is_finite() && gap >= 0.0) => {
                 Err(invalid!("the backlash gap must be finite and >= 0 m, got {gap}"))
             }
@@ -366,51 +600,38 @@ impl Basis {
         }
     }
 
-    /// The basis function of an extra model term named by its kind (the names of
-    /// [`TERM_KINDS`]), its hyper-parameter (a Stribeck speed in m/s, a period in m, a spline
-    /// knot's position in m; unused otherwise), its width (a spline's knot spacing in m; unused
-    /// otherwise) and the dof it acts on (a `damper` always couples the motor and the load).
-    pub fn from_kind(kind: &str, hyper: f64, width: f64, dof: usize) -> Result<Basis> {
-        use std::f64::consts::FRAC_PI_2;
-        Ok(match kind {
-            "offset" => Basis::Offset { dof },
-            "viscous" => Basis::Viscous { dof },
-            "coulomb" => Basis::Coulomb { dof },
-            "abs_viscous" => Basis::AbsViscous { dof },
-            "abs_coulomb" => Basis::AbsCoulomb { dof },
-            "stribeck" => Basis::Stribeck { dof, vs: hyper },
-            "ripple_sin" | "ripple_cos" => Basis::Ripple {
-                dof,
-                period: hyper,
-                phase: if kind == "ripple_cos" { FRAC_PI_2 } else { 0.0 },
-            },
-            "coulomb_ripple_sin" | "coulomb_ripple_cos" => Basis::CoulombRipple {
-                dof,
-                period: hyper,
-                phase: if kind == "coulomb_ripple_cos" {
-                    FRAC_PI_2
-                } else {
-                    0.0
-                },
-            },
-            "coulomb_spline_fwd" | "coulomb_spline_bwd" | "coulomb_spline" => Basis::CoulombSpline {
-                dof,
-                center: hyper,
-                width,
-                side: match kind {
-                    "coulomb_spline_fwd" => 1,
-                    "coulomb_spline_bwd" => -1,
-                    _ => 0,
-                },
-            },
-            "damper" => Basis::Damper { a: MOTOR, b: LOAD },
-            other => {
-                return Err(invalid!(
-                    "unknown term kind {other:?}: use one of {} (damper: flexible model)",
-                    TERM_KINDS.join(", ")
-                ))
-            }
-        })
+    /// The basis function of an extra model term: its kind (a name of [`TERM_TABLE`] or of
+    /// [`TERM_ALIASES`]), its named hyper-parameters (in the units of the table; those with a
+    /// default may be left out) and the dof it acts on (a `damper` always couples the motor
+    /// and the load). The hyper-parameters' values are checked.
+    pub fn from_kind(kind: &str, hypers: &[(&str, f64)], dof: usize) -> Result<Basis> {
+        let (tk, values) = canonical_term(kind, hypers)?;
+        if tk.name == "coulomb_spline" && values[2].fract() != 0.0 {
+            return Err(invalid!(
+                "a friction spline's side is 1 (forward), -1 (backward) or 0 (both), got {}",
+                values[2]
+            ));
+        }
+        let b = (tk.build)(dof, &values);
+        b.check()?;
+        Ok(b)
+    }
+
+    /// What the parameter multiplying this basis function is, physically.
+    pub fn role(&self) -> Role {
+        match self {
+            Basis::Inertia { .. } => Role::Mass,
+            Basis::Spring { .. } | Basis::Backlash { .. } => Role::Stiffness,
+            Basis::Damper { .. } => Role::Damping,
+            Basis::Viscous { .. }
+            | Basis::Coulomb { .. }
+            | Basis::AbsViscous { .. }
+            | Basis::AbsCoulomb { .. }
+            | Basis::Stribeck { .. }
+            | Basis::CoulombRipple { .. }
+            | Basis::CoulombSpline { .. } => Role::Friction,
+            Basis::Offset { .. } | Basis::Ripple { .. } | Basis::Gravity { .. } => Role::Force,
+        }
     }
 
     /// The SI unit of the parameter that multiplies this basis function (load side).
@@ -425,7 +646,8 @@ impl Basis {
             | Basis::Stribeck { .. }
             | Basis::Ripple { .. }
             | Basis::CoulombRipple { .. }
-            | Basis::CoulombSpline { .. } => "N",
+            | Basis::CoulombSpline { .. }
+            | Basis::Gravity { .. } => "N",
         }
     }
 
@@ -483,6 +705,12 @@ impl Basis {
                 let (sn, cs) = (w * x + phase).sin_cos();
                 let (s, ds) = law.sign_and_derivative(xd);
                 (s * sn, s * w * cs, ds * sn)
+            }
+            Basis::Gravity {
+                angle_offset, phase, ..
+            } => {
+                let (sn, cs) = (x + angle_offset + phase).sin_cos();
+                (sn, cs, 0.0)
             }
             Basis::CoulombSpline {
                 center, width, side, ..
@@ -946,24 +1174,163 @@ mod tests {
     use super::*;
     use nalgebra::Vector2;
 
+    /// Values for every hyper-parameter of a kind: its default, or a value valid for its unit.
+    fn sample_hypers(tk: &TermKind) -> Vec<(&'static str, f64)> {
+        tk.hypers
+            .iter()
+            .map(|h| {
+                (
+                    h.name,
+                    h.default.unwrap_or(if h.name == "width" { 0.02 } else { 0.01 }),
+                )
+            })
+            .collect()
+    }
+
     #[test]
-    fn every_term_kind_builds_its_basis_and_knows_its_unit() {
-        for kind in TERM_KINDS {
-            let b = Basis::from_kind(kind, 0.01, 0.02, LOAD).unwrap();
+    fn every_term_kind_builds_its_basis_and_knows_its_unit_and_role() {
+        for tk in TERM_TABLE {
+            let b = Basis::from_kind(tk.name, &sample_hypers(tk), LOAD).unwrap();
             let unit = b.unit();
-            assert!(["N", "N/(m/s)"].contains(&unit), "{kind}: {unit}");
+            assert!(["N", "N/(m/s)"].contains(&unit), "{}: {unit}", tk.name);
+            assert_ne!(b.role(), Role::Mass, "{}", tk.name);
             // a load term acts on the load row only; the damper couples both
             let (a, other) = b.dofs();
-            if *kind == "damper" {
+            if tk.name == "damper" {
                 assert_eq!((a, other), (MOTOR, Some(LOAD)));
             } else {
-                assert_eq!((a, other), (LOAD, None), "{kind}");
+                assert_eq!((a, other), (LOAD, None), "{}", tk.name);
+            }
+            // its partial derivatives are those of its basis function (central differences)
+            let law = FrictionLaw::algebraic(1e-3);
+            for (x, v) in [(0.3, 0.02), (-1.2, -0.004), (2.5, 0.3)] {
+                let (_, px, pv) = b.local(x, v, law);
+                let (hx, hv) = (1e-6, 1e-7);
+                let fx = (b.local(x + hx, v, law).0 - b.local(x - hx, v, law).0) / (2.0 * hx);
+                let fv = (b.local(x, v + hv, law).0 - b.local(x, v - hv, law).0) / (2.0 * hv);
+                assert!(
+                    (fx - px).abs() < 1e-5 * (1.0 + px.abs()),
+                    "{}: {fx} vs {px}",
+                    tk.name
+                );
+                assert!(
+                    (fv - pv).abs() < 1e-4 * (1.0 + pv.abs()),
+                    "{}: {fv} vs {pv}",
+                    tk.name
+                );
             }
         }
-        let e = Basis::from_kind("stribek", 0.01, 0.0, MOTOR).unwrap_err();
+        let e = Basis::from_kind("stribek", &[("vs", 0.01)], MOTOR).unwrap_err();
         assert!(e.to_string().contains("unknown term kind \"stribek\""), "{e}");
         assert_eq!(Basis::Inertia { dof: 0 }.unit(), "kg");
+        assert_eq!(Basis::Inertia { dof: 0 }.role(), Role::Mass);
         assert_eq!(Basis::Spring { a: 0, b: 1 }.unit(), "N/m");
+        assert_eq!(Basis::Spring { a: 0, b: 1 }.role(), Role::Stiffness);
+    }
+
+    #[test]
+    fn hyper_parameters_are_named_and_every_mistake_in_them_is_named() {
+        // a Stribeck speed by name; a ripple's phase defaults to 0
+        assert_eq!(
+            Basis::from_kind("stribeck", &[("vs", 0.02)], MOTOR).unwrap(),
+            Basis::Stribeck { dof: MOTOR, vs: 0.02 }
+        );
+        assert_eq!(
+            Basis::from_kind("ripple", &[("period", 0.1)], MOTOR).unwrap(),
+            Basis::Ripple {
+                dof: MOTOR,
+                period: 0.1,
+                phase: 0.0
+            }
+        );
+        // the older names are their kind with the phase or the side fixed
+        assert_eq!(
+            Basis::from_kind("ripple_cos", &[("period", 0.1)], MOTOR).unwrap(),
+            Basis::from_kind(
+                "ripple",
+                &[("period", 0.1), ("phase", std::f64::consts::FRAC_PI_2)],
+                MOTOR
+            )
+            .unwrap()
+        );
+        assert_eq!(
+            Basis::from_kind("coulomb_spline_bwd", &[("center", 0.1), ("width", 0.05)], MOTOR).unwrap(),
+            Basis::CoulombSpline {
+                dof: MOTOR,
+                center: 0.1,
+                width: 0.05,
+                side: -1
+            }
+        );
+        for (kind, hypers, says) in [
+            ("stribeck", vec![], "needs its hyper-parameter vs (m/s)"),
+            (
+                "stribeck",
+                vec![("speed", 0.1)],
+                "hyper-parameters are vs, got \"speed\"",
+            ),
+            ("viscous", vec![("vs", 0.1)], "has no hyper-parameter"),
+            ("ripple", vec![("period", 0.1), ("period", 0.2)], "given twice"),
+            (
+                "ripple_sin",
+                vec![("period", 0.1), ("phase", 1.0)],
+                "has phase = 0",
+            ),
+            (
+                "coulomb_spline",
+                vec![("center", 0.0), ("width", 0.1), ("side", 2.0)],
+                "side is 1",
+            ),
+            (
+                "coulomb_spline",
+                vec![("center", 0.0), ("width", 0.0)],
+                "knot spacing width > 0",
+            ),
+            (
+                "stribeck",
+                vec![("vs", -1.0)],
+                "Stribeck speed vs must be finite and > 0",
+            ),
+            ("gravity", vec![("angle_offset", f64::NAN)], "finite angle offset"),
+        ] {
+            let e = Basis::from_kind(kind, &hypers, MOTOR).unwrap_err().to_string();
+            assert!(e.contains(says), "{kind} {hypers:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_gravity_pair_is_the_torque_of_a_pendulum_at_any_angle_offset() {
+        // m g l sin(q + θ0) as A sin(q + θ0) + B cos(q + θ0): A = m g l, B = 0, for any θ0; and a pendulum whose zero
+        // is off by δ is A' = m g l cos δ, B' = m g l sin δ at θ0 = 0
+        let law = FrictionLaw::algebraic(1e-3);
+        let (mgl, delta) = (3.7, 0.4);
+        for theta0 in [0.0, 0.3, -2.0] {
+            let s = Basis::from_kind("gravity", &[("angle_offset", theta0)], MOTOR).unwrap();
+            let c = Basis::from_kind(
+                "gravity",
+                &[("angle_offset", theta0), ("phase", std::f64::consts::FRAC_PI_2)],
+                MOTOR,
+            )
+            .unwrap();
+            for q in [-3.0, -0.5, 0.0, 1.1, 2.9] {
+                let truth = mgl * (q + theta0 + delta).sin();
+                let fit =
+                    mgl * delta.cos() * s.local(q, 0.0, law).0 + mgl * delta.sin() * c.local(q, 0.0, law).0;
+                assert!(
+                    (fit - truth).abs() < 1e-12 * mgl,
+                    "{theta0} {q}: {fit} vs {truth}"
+                );
+            }
+        }
+        assert_eq!(
+            Basis::Gravity {
+                dof: 0,
+                angle_offset: 0.0,
+                phase: 0.0
+            }
+            .role(),
+            Role::Force
+        );
     }
 
     #[test]
@@ -981,9 +1348,19 @@ mod tests {
         let eps = 1e-4;
         let law = FrictionLaw::algebraic(eps);
         let (fwd, bwd, both) = (
-            Basis::from_kind("coulomb_spline_fwd", 0.05, 0.03, MOTOR).unwrap(),
-            Basis::from_kind("coulomb_spline_bwd", 0.05, 0.03, MOTOR).unwrap(),
-            Basis::from_kind("coulomb_spline", 0.05, 0.03, MOTOR).unwrap(),
+            Basis::from_kind(
+                "coulomb_spline",
+                &[("center", 0.05), ("width", 0.03), ("side", 1.0)],
+                MOTOR,
+            )
+            .unwrap(),
+            Basis::from_kind(
+                "coulomb_spline",
+                &[("center", 0.05), ("width", 0.03), ("side", -1.0)],
+                MOTOR,
+            )
+            .unwrap(),
+            Basis::from_kind("coulomb_spline", &[("center", 0.05), ("width", 0.03)], MOTOR).unwrap(),
         );
         for (x, v) in [
             (0.05, 0.02),
@@ -1016,10 +1393,8 @@ mod tests {
                 assert!((fv - pv).abs() < 1e-4 * (1.0 + pv.abs()), "{x} {v}: {fv} vs {pv}");
             }
         }
-        let e = Basis::from_kind("coulomb_spline_fwd", 0.05, 0.0, MOTOR)
-            .unwrap()
-            .check()
-            .unwrap_err();
+        let e =
+            Basis::from_kind("coulomb_spline_fwd", &[("center", 0.05), ("width", 0.0)], MOTOR).unwrap_err();
         assert!(e.to_string().contains("knot spacing width > 0"), "{e}");
     }
 

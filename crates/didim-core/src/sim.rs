@@ -22,6 +22,7 @@ use crate::model::Model;
 mod driver;
 mod expint;
 mod rk4;
+pub use driver::applied_force;
 use driver::NoTangent;
 use expint::Exponential;
 pub use expint::StepStats;

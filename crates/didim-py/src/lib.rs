@@ -10,7 +10,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use didim_core::error::Error;
 use didim_core::filter as flt;
 use didim_core::lstsq::{LstsqOptions, SigmaConvention};
-use didim_core::model::{self, Basis, LawShape, Model, DEFAULT_COULOMB_EPS, LAW_SHAPES};
+use didim_core::model::{DEFAULT_COULOMB_EPS, LAW_SHAPES};
 use didim_core::{controller::TransferFunction, lstsq as ls, sim, Controller};
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -18,8 +18,10 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyType};
 
 mod convert;
+mod model;
 mod problem;
 use convert::*;
+pub(crate) use model::AnyModel;
 
 /// Runs a core computation without the interpreter lock on a thread of its own, while this
 /// thread answers signals, turning panics into errors. For the computations that take a
@@ -165,76 +167,6 @@ fn py_error(py: Python<'_>, name: &str, msg: String) -> PyErr {
     }
 }
 
-/// A model chosen by name: "rigid" (M, Fv, Fc[, OF]) or "flexible" (M1, Fv1, Fc1, M2, Fv2, Fc2, K12).
-enum AnyModel {
-    Rigid(Model<1>),
-    Flexible(Model<2>),
-}
-
-/// Extra terms of a model: (name, kind, hyper-parameter, dof "motor" or "load", width).
-pub(crate) type Terms = Vec<(String, String, f64, String, f64)>;
-
-fn extra_basis(kind: &str, hyper: f64, width: f64, dof: &str) -> Result<Basis, Error> {
-    let dof = match dof {
-        "motor" => model::MOTOR,
-        "load" => model::LOAD,
-        other => {
-            return Err(Error::InvalidInput(format!(
-                "unknown degree of freedom {other:?} of a term: use \"motor\" or \"load\""
-            )))
-        }
-    };
-    Basis::from_kind(kind, hyper, width, dof)
-}
-
-fn make_model(
-    kind: &str,
-    offset: bool,
-    coulomb_eps: f64,
-    coulomb_law: &str,
-    terms: &[(String, String, f64, String, f64)],
-    backlash_gap: Option<f64>,
-) -> Result<AnyModel, Error> {
-    let shape = LawShape::from_name(coulomb_law)?;
-    let extra = terms
-        .iter()
-        .map(|(n, k, h, d, w)| Ok((n.clone(), extra_basis(k, *h, *w, d)?)))
-        .collect::<Result<Vec<_>, Error>>()?;
-    match kind {
-        "rigid" => {
-            if backlash_gap.is_some() {
-                return Err(Error::InvalidInput(
-                    "backlash needs the flexible model (a coupling)".into(),
-                ));
-            }
-            Ok(AnyModel::Rigid(
-                model::rigid(offset, coulomb_eps)?
-                    .with_terms(extra)?
-                    .with_law_shape(shape),
-            ))
-        }
-        "flexible" => {
-            let mut m = model::flexible_with(offset, coulomb_eps)?
-                .with_terms(extra)?
-                .with_law_shape(shape);
-            if let Some(gap) = backlash_gap {
-                m = m.with_basis(
-                    "K12",
-                    Basis::Backlash {
-                        a: model::MOTOR,
-                        b: model::LOAD,
-                        gap,
-                    },
-                )?;
-            }
-            Ok(AnyModel::Flexible(m))
-        }
-        other => Err(Error::InvalidInput(format!(
-            "unknown model {other:?}: use \"rigid\" or \"flexible\""
-        ))),
-    }
-}
-
 fn make_controller(kind: &str, gains: &[f64]) -> Result<Controller, Error> {
     let c = match (kind, gains) {
         ("emps", [kp, kv, gtau, vsat]) => Controller::EmpsCascade {
@@ -329,79 +261,6 @@ fn sim_options(
         tol,
         lead,
     })
-}
-
-/// Parameter names of a model, in the order of the parameter vector.
-#[pyfunction]
-#[pyo3(signature = (model, offset=false, terms=None))]
-fn param_names(py: Python<'_>, model: &str, offset: bool, terms: Option<Terms>) -> PyResult<Vec<String>> {
-    let terms = terms.unwrap_or_default();
-    let m = quick(py, || {
-        make_model(model, offset, DEFAULT_COULOMB_EPS, "algebraic", &terms, None)
-    })?;
-    Ok(match m {
-        AnyModel::Rigid(m) => m.names().to_vec(),
-        AnyModel::Flexible(m) => m.names().to_vec(),
-    })
-}
-
-/// The SI unit of each parameter of a model, in the order of the parameter vector (the basis
-/// functions know them).
-#[pyfunction]
-#[pyo3(signature = (model, offset=false, terms=None, backlash_gap=None))]
-fn param_units(
-    py: Python<'_>,
-    model: &str,
-    offset: bool,
-    terms: Option<Terms>,
-    backlash_gap: Option<f64>,
-) -> PyResult<Vec<&'static str>> {
-    let terms = terms.unwrap_or_default();
-    let m = quick(py, || {
-        make_model(
-            model,
-            offset,
-            DEFAULT_COULOMB_EPS,
-            "algebraic",
-            &terms,
-            backlash_gap,
-        )
-    })?;
-    Ok(match m {
-        AnyModel::Rigid(m) => m.units(),
-        AnyModel::Flexible(m) => m.units(),
-    })
-}
-
-/// The IDM regressor of a trajectory: q, qd, qdd of shape (ndof, n) -> W of shape (ndof, n, p).
-#[pyfunction]
-#[pyo3(signature = (model, q, qd, qdd, *, coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, terms=None, backlash_gap=None, coulomb_law="algebraic"))]
-#[allow(clippy::too_many_arguments)]
-fn regressor<'py>(
-    py: Python<'py>,
-    model: &str,
-    q: PyReadonlyArray2<'py, f64>,
-    qd: PyReadonlyArray2<'py, f64>,
-    qdd: PyReadonlyArray2<'py, f64>,
-    coulomb_eps: Real,
-    offset: bool,
-    terms: Option<Terms>,
-    backlash_gap: Option<f64>,
-    coulomb_law: &str,
-) -> PyResult<Bound<'py, PyAny>> {
-    let terms = terms.unwrap_or_default();
-    let coulomb_eps = coulomb_eps.0;
-    let (q, qd, qdd) = (rows2(&q), rows2(&qd), rows2(&qdd));
-    let n = q.first().map_or(0, |r| r.len());
-    let (ndof, p, w) = run(py, || {
-        match make_model(model, offset, coulomb_eps, coulomb_law, &terms, backlash_gap)? {
-            AnyModel::Rigid(m) => Ok((1, m.n_params(), m.regressor(&q, &qd, &qdd)?)),
-            AnyModel::Flexible(m) => Ok((2, m.n_params(), m.regressor(&q, &qd, &qdd)?)),
-        }
-    })?;
-    // core layout [dof][param][sample] -> numpy (ndof, p, n) -> view (ndof, n, p)
-    let a = PyArray1::from_vec(py, w).reshape([ndof, p, n])?;
-    a.call_method1("transpose", ((0, 2, 1),))
 }
 
 /// QR least squares with covariance, paper eqs. (11)-(15). W is (r, n), y is (r,).
@@ -626,10 +485,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("COULOMB_LAWS", LAW_SHAPES.to_vec())?;
     m.add("DEFAULT_TOL", sim::DEFAULT_TOL)?;
     m.add("SIMULATOR_BUILD", sim::simulator_build())?;
-    m.add("TERM_KINDS", model::TERM_KINDS.to_vec())?;
-    m.add_function(wrap_pyfunction!(param_names, m)?)?;
-    m.add_function(wrap_pyfunction!(param_units, m)?)?;
-    m.add_function(wrap_pyfunction!(regressor, m)?)?;
+    m.add("TERM_TABLE", model::term_table())?;
+    m.add("TERM_ALIASES", model::term_aliases())?;
+    m.add_class::<model::PyModel>()?;
+    m.add_function(wrap_pyfunction!(model::coulomb_sign, m)?)?;
     m.add_function(wrap_pyfunction!(lstsq, m)?)?;
     m.add_function(wrap_pyfunction!(butter, m)?)?;
     m.add_function(wrap_pyfunction!(cheby1, m)?)?;

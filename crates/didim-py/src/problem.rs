@@ -4,7 +4,7 @@
 
 use didim_core::error::Error;
 use didim_core::filter::{Decimation as CoreDecimation, FilterForm};
-use didim_core::model::{Model, DEFAULT_COULOMB_EPS};
+use didim_core::model::Model;
 use didim_core::objective::{split_errors, Output, Problem as CoreProblem};
 use didim_core::sim::{self, SimOutput};
 use didim_core::Controller;
@@ -13,9 +13,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::convert::*;
-use crate::{
-    core_error, interrupted, make_controller, make_model, quick, run, sim_options, AnyModel, Decimated, Terms,
-};
+use crate::{core_error, interrupted, make_controller, quick, run, sim_options, AnyModel, Decimated};
 
 type Arr<'py> = Bound<'py, PyArray1<f64>>;
 type Costs<'py> = (Arr<'py>, Vec<Option<String>>);
@@ -163,17 +161,11 @@ impl Problem {
     }
 
     fn n_params_(&self) -> usize {
-        match &self.model {
-            AnyModel::Rigid(m) => m.n_params(),
-            AnyModel::Flexible(m) => m.n_params(),
-        }
+        self.model.n_params()
     }
 
     fn ndof_(&self) -> usize {
-        match &self.model {
-            AnyModel::Rigid(_) => 1,
-            AnyModel::Flexible(_) => 2,
-        }
+        self.model.ndof()
     }
 }
 
@@ -191,14 +183,14 @@ fn sim_dict<'py>(py: Python<'py>, out: SimOutput) -> PyResult<Bound<'py, PyDict>
 #[pymethods]
 impl Problem {
     #[new]
-    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), force_lag=Real(0.0), coulomb_eps=Real(DEFAULT_COULOMB_EPS), offset=false, integrator="exponential", tol=Real(sim::DEFAULT_TOL), terms=None, backlash_gap=None, lead=Whole::new(0), coulomb_law="algebraic"))]
+    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), force_lag=Real(0.0), integrator="exponential", tol=Real(sim::DEFAULT_TOL), lead=Whole::new(0)))]
     #[pyo3(
-        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, force_lag=0.0, coulomb_eps=..., offset=False, integrator='exponential', tol=..., terms=None, backlash_gap=None, lead=0, coulomb_law='algebraic')"
+        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, force_lag=0.0, integrator='exponential', tol=..., lead=0)"
     )]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
-        model: &str,
+        model: PyRef<'_, crate::model::PyModel>,
         qr: PyReadonlyArray1<'_, f64>,
         dt: Real,
         controller: &str,
@@ -208,16 +200,10 @@ impl Problem {
         quantization: Real,
         delay: Whole,
         force_lag: Real,
-        coulomb_eps: Real,
-        offset: bool,
         integrator: &str,
         tol: Real,
-        terms: Option<Terms>,
-        backlash_gap: Option<f64>,
         lead: Whole,
-        coulomb_law: &str,
     ) -> PyResult<Self> {
-        let terms = terms.unwrap_or_default();
         let gains = reals(gains);
         let whole = |w: Whole, name: &str| w.get(name).map_err(|e| core_error(py, e));
         let opts = sim_options(
@@ -231,15 +217,12 @@ impl Problem {
             tol.0,
             whole(lead, "lead")?,
         )?;
-        let coulomb_eps = coulomb_eps.0;
         let qr = slice1(&qr).into_owned();
         let u_ext = u_ext.as_ref().map(|u| slice1(u).into_owned());
-        let (model, controller) = quick(py, || {
+        let model = model.inner.clone();
+        let controller = quick(py, || {
             opts.validate()?;
-            Ok((
-                make_model(model, offset, coulomb_eps, coulomb_law, &terms, backlash_gap)?,
-                make_controller(controller, &gains)?,
-            ))
+            make_controller(controller, &gains)
         })?;
         Ok(Self {
             model,
@@ -248,6 +231,21 @@ impl Problem {
             u_ext,
             opts,
         })
+    }
+
+    /// The force the plant receives (mean over each sample period) under the logged commands
+    /// `force` (n,): through this loop's actuation delay and force lag, as the simulator applies
+    /// them. DIDIM regresses the simulated states against it.
+    fn applied_force<'py>(
+        &self,
+        py: Python<'py>,
+        force: PyReadonlyArray1<'py, f64>,
+    ) -> Bound<'py, PyArray1<f64>> {
+        let f = slice1(&force);
+        PyArray1::from_vec(
+            py,
+            sim::applied_force(&f, self.opts.delay, self.opts.force_lag, self.opts.dt),
+        )
     }
 
     /// Number of parameters of the model.

@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
@@ -38,7 +38,8 @@ from ..identification import a_priori_mass
 from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
-from ..simulation import SimResult, coulomb_eps_of, param_names, simulate
+from ..model import Model
+from ..simulation import SimResult, coulomb_eps_of, param_names
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect, _g, final_values,
                       params_text, separating_experiment)
@@ -155,9 +156,9 @@ class Diagnosis:
         on the training samples (``fit["train_force_after"]``)."""
         st = self.final_state
         return IdentificationResult(
-            model=st.model, method="doctor (DIDIM refit)", params=dict(st.params), std={}, rel_std_pct={},
+            model=st.kind, method="doctor (DIDIM refit)", params=dict(st.params), std={}, rel_std_pct={},
             relative_error=float("nan"), iterations=len(self.rounds), simulations=0, elapsed_s=self.elapsed_s,
-            frozen=dict(st.frozen), structure=st.structure(), force_error=self.fit["train_force_after"],
+            frozen=dict(st.frozen), structure=st.model, force_error=self.fit["train_force_after"],
             notes=[f"the doctor's final model: {', '.join(f.effect for f in self.findings) or 'the base model'}"])
 
     def to_html(self) -> str:
@@ -191,7 +192,7 @@ class Diagnosis:
                 lines.append(f"controller check ({name}): the law on the logged qr and qm gives the logged force "
                              f"within {100 * c['mismatch']:.3g} %" + ("" if c["passed"] else " (NOT within "
                                                                     f"{100 * c['tolerance']:g} %: {c['likely'] or 'no usual mistake explains it'})"))
-        law = self.final_state.structure() if self.final_state is not None else self.base.structure
+        law = self.final_state.model if self.final_state is not None else self.base.structure
         if law is not None and law.coulomb_eps is not None:
             how = {"fitted": "fitted in closed loop", "given": "given",
                    "default": "didim's default for the record"}[self.options.get("friction_law", "default")]
@@ -341,7 +342,7 @@ def _start(rec: Recording, state: State) -> Optional[Dict[str, Any]]:
     samples of the closed-loop simulation, which starts at rest on the reference (or before the record's lead-in),
     differ from it whatever the model:
     how long, how much of the residual energy that is, and the force error without those samples."""
-    sim = simulate(rec, state.all_params(), state.model, **state.sim_kwargs())
+    sim = state.simulate(rec)
     k, after = sim.settled(rec)
     if k == 0:
         return None
@@ -486,7 +487,7 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress,
         raise DataError(f"coulomb_eps must be 'fit', a speed or None, got {coulomb_eps!r}")
     eps = coulomb_eps_of(data.rec, None if fit else coulomb_eps)
     if model == "rigid":
-        st, r = refit(data, State("rigid", {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}, axis=axis, coulomb_eps=eps), {},
+        st, r = refit(data, State(Model("rigid", coulomb_eps=eps), {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}, axis=axis), {},
                       progress)
         return fit_friction_law(data, st, progress) if fit else (st, r)
     from ..identification import didim_flexible
@@ -507,7 +508,7 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress,
                            "shows it")
     # the flexible base keeps its law: on the truthbench's flexible records a law fitted beside the mode wandered
     # (shape and speed changing with each finding) and took the place of the coupling's damping (C12 20 % low)
-    return refit(data, State("flexible", dict(fl.params), dict(fl.frozen), axis=axis, coulomb_eps=eps), {}, progress)
+    return refit(data, State(Model("flexible", coulomb_eps=eps), dict(fl.params), dict(fl.frozen), axis=axis), {}, progress)
 
 
 class BaseFitError(DidimError):
@@ -560,7 +561,7 @@ class _Search:
         out = significant[:2]
         for lead in list(out):
             partner = REGISTRY[lead.effect].tried_with
-            if state.model == "rigid" and partner and partner not in self.done \
+            if state.kind == "rigid" and partner and partner not in self.done \
                     and not any(c.effect == partner for c in out):
                 out += [c for c in ranked if c.effect == partner]
         return out
@@ -625,10 +626,10 @@ class _Search:
         search fitted another law on a rigid model; computed once per state."""
         from ..simulation import default_coulomb_eps
 
-        if not self.law_fitted or state.model != "rigid":
+        if not self.law_fitted or state.kind != "rigid":
             return None
-        default = replace(state, coulomb_law="algebraic", coulomb_eps=default_coulomb_eps(self.data.rec))
-        if (default.coulomb_law, default.coulomb_eps) == (state.coulomb_law, state.coulomb_eps):
+        default = state.with_(coulomb_law="algebraic", coulomb_eps=default_coulomb_eps(self.data.rec))
+        if (default.model.coulomb_law, default.model.coulomb_eps) == (state.model.coulomb_law, state.model.coulomb_eps):
             return None
         if self._default_base[0] is not state:
             try:
@@ -668,17 +669,17 @@ class _Search:
         (a law far off, as the hard sign fitted beside a missing 2-sample delay, is left to :meth:`second_start`);
         kept when it lowers the training error by ``RETUNE_GAIN`` (training data only)."""
         try:
-            st, _ = fit_friction_law(self.data, cur[0], self.progress, around=cur[0].coulomb_eps,
-                                     shapes=(cur[0].coulomb_law,))
+            st, _ = fit_friction_law(self.data, cur[0], self.progress, around=cur[0].model.coulomb_eps,
+                                     shapes=(cur[0].model.coulomb_law,))
         except DidimError:
             return cur
-        if (st.coulomb_law, st.coulomb_eps) == (cur[0].coulomb_law, cur[0].coulomb_eps):
+        if (st.model.coulomb_law, st.model.coulomb_eps) == (cur[0].model.coulomb_law, cur[0].model.coulomb_eps):
             return cur
         again = (st, *self.data.errors(st))
         if self.data.rel(again[1], True) < (1 - RETUNE_GAIN) * self.data.rel(cur[1], True):
             self.force_now = self.data.force_errors(st)
-            self.say(f"friction law fitted again once {f.effect} was modelled: {st.coulomb_law}, smoothing speed "
-                     f"{st.coulomb_eps:.4g}")
+            self.say(f"friction law fitted again once {f.effect} was modelled: {st.model.coulomb_law}, smoothing speed "
+                     f"{st.model.coulomb_eps:.4g}")
             return again
         return cur
 
@@ -691,20 +692,20 @@ class _Search:
         from ..simulation import default_coulomb_eps
 
         try:
-            st, _ = refit(self.data, replace(cur[0], coulomb_law="algebraic",
+            st, _ = refit(self.data, cur[0].with_(coulomb_law="algebraic",
                                              coulomb_eps=default_coulomb_eps(self.data.rec)), {}, self.progress)
             chosen = {}
             for old in [x for x in self.findings if REGISTRY[x.effect].retune is not None]:
                 got = REGISTRY[old.effect].retune(st, self.data, self.progress)
                 if got is not None:
                     st, chosen[id(old)] = got[0], (got[2], got[3])
-            st, _ = fit_friction_law(self.data, st, self.progress, shapes=(st.coulomb_law,))
+            st, _ = fit_friction_law(self.data, st, self.progress, shapes=(st.model.coulomb_law,))
             alt = (st, *self.data.errors(st))
         except DidimError:
             return cur
         if self.data.rel(alt[1], True) < (1 - RETUNE_GAIN) * self.data.rel(cur[1], True):
-            self.say(f"a second start from the default friction law ends lower: {st.coulomb_law}, smoothing speed "
-                     f"{st.coulomb_eps:.4g}")
+            self.say(f"a second start from the default friction law ends lower: {st.model.coulomb_law}, smoothing speed "
+                     f"{st.model.coulomb_eps:.4g}")
             for old in self.findings:  # the hyper-parameters chosen again; the final values are read from st
                 if id(old) in chosen:
                     old.params, old.std = dict(chosen[id(old)][0]), dict(chosen[id(old)][1])
@@ -718,7 +719,7 @@ class _Search:
         out and the refitted law kept (the law's shape is part of the base model, not a finding)."""
         try:
             st_alt, _ = fit_friction_law(self.data, REGISTRY[old.effect].remove(cur[0]), self.progress,
-                                         around=cur[0].coulomb_eps)
+                                         around=cur[0].model.coulomb_eps)
             alt = (st_alt, *self.data.errors(st_alt))
         except DidimError:
             return cur
@@ -727,10 +728,10 @@ class _Search:
             return cur
         old.accepted = False
         old.evidence += (f"; the friction law's shape, not a separate effect: without it, the law through zero speed "
-                         f"fitted again ({st_alt.coulomb_law}, smoothing speed {st_alt.coulomb_eps:.4g}) predicts the "
+                         f"fitted again ({st_alt.model.coulomb_law}, smoothing speed {st_alt.model.coulomb_eps:.4g}) predicts the "
                          f"held-out data as well ({100 * self.data.rel(alt[2], False):.2f} %, Diebold-Mariano p = "
                          f"{p_keep:.2g})")
-        old.note = (f"the friction law's shape: the law refitted instead ({st_alt.coulomb_law}) explains it as well "
+        old.note = (f"the friction law's shape: the law refitted instead ({st_alt.model.coulomb_law}) explains it as well "
                     "on held-out data")
         self.findings.remove(old)
         self.rejected.append(old)
@@ -788,7 +789,7 @@ class _Search:
                 self.force_now = self.data.force_errors(cur[0])
                 self.say(f"removed {old.effect}: no longer improves the held-out fit")
         if self.law_fitted:
-            if cur[0].model == "rigid":  # a flexible model keeps its law (see _base_fit) unless a Stribeck term asks
+            if cur[0].kind == "rigid":  # a flexible model keeps its law (see _base_fit) unless a Stribeck term asks
                 cur = self.refit_law(cur, f)
             for old in [x for x in self.findings if x.effect == "stribeck"]:
                 cur = self.law_instead(old, cur)
@@ -876,7 +877,7 @@ def doctor(
         if not accepted and len(search.done) >= len(REGISTRY):
             break
 
-    if search.law_fitted and cur[0].model == "rigid":
+    if search.law_fitted and cur[0].kind == "rigid":
         cur = search.second_start(cur)
     state, rt, rv, sim = cur
     for f in search.findings:  # in words with the final model's values (later refits move them)

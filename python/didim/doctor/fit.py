@@ -10,52 +10,43 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .. import _core
 from ..identification import didim_iterate
+from ..model import Model
 from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
-from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, param_names, simulate
+from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, simulate
 
 
-@dataclass
+@dataclass(frozen=True)
 class State:
-    """The model as the doctor grows it."""
+    """The model as the doctor grows it: the structure (:class:`didim.Model`: kind, offset, terms, delay, force lag,
+    backlash, friction law), its parameters, the frozen ones, and the axis whose units the words use. The friction
+    law (``model.coulomb_eps``, ``model.coulomb_law``) is part of the base model, fitted before any effect is looked
+    for."""
 
-    model: str
+    model: Model
     params: Dict[str, float]
     frozen: Dict[str, float]
-    offset: bool = False
-    terms: Tuple[Term, ...] = ()
-    backlash_gap: Optional[float] = None
-    delay: int = 0
-    force_lag: float = 0.0
-    #: The Coulomb smoothing speed (m/s or rad/s): part of the base model, fitted before any effect is looked for.
-    coulomb_eps: Optional[float] = None
-    #: The shape of that law (one of ``didim.simulation.COULOMB_LAWS``), fitted with it.
-    coulomb_law: str = "algebraic"
     #: "linear" or "rotary": the units the words say.
     axis: str = "linear"
 
-    def sim_kwargs(self) -> Dict[str, Any]:
-        return dict(offset=self.offset, terms=self.terms, backlash_gap=self.backlash_gap, delay=self.delay,
-                    force_lag=self.force_lag, coulomb_eps=self.coulomb_eps, coulomb_law=self.coulomb_law)
+    @property
+    def kind(self) -> str:
+        return self.model.kind
+
+    def with_(self, **fields) -> "State":
+        """This state with some of its structure's fields (``terms=…``, ``force_lag=…``) or its own
+        (``params=…``, ``frozen=…``) replaced."""
+        own = {k: fields.pop(k) for k in ("params", "frozen", "axis") if k in fields}
+        return replace(self, model=replace(self.model, **fields), **own) if fields else replace(self, **own)
 
     def all_params(self) -> Dict[str, float]:
         return {**self.frozen, **self.params}
 
-    def structure(self):
-        """The :class:`didim.Model` of this state."""
-        from ..model import Model
-
-        return Model(self.model, offset=self.offset, terms=self.terms, delay=self.delay,
-                     backlash_gap=self.backlash_gap, force_lag=self.force_lag, coulomb_eps=self.coulomb_eps,
-                     coulomb_law=self.coulomb_law)
-
-    def law(self) -> Dict[str, Any]:
-        """The friction law's keywords for the core's regressor (the simulator's, so that both agree)."""
-        return dict(coulomb_eps=DEFAULT_COULOMB_EPS if self.coulomb_eps is None else self.coulomb_eps,
-                    coulomb_law=self.coulomb_law)
+    def simulate(self, rec: Recording) -> SimResult:
+        """The closed loop of ``rec`` with this state's model and parameters."""
+        return simulate(rec, self.all_params(), self.model)
 
     def coulomb(self) -> float:
         """The Coulomb friction on the motor side (Fc or Fc1)."""
@@ -86,10 +77,10 @@ class Data:
         (on the EMPS, 47-61 % of the residual energy in the first 33-56 ms)."""
         from ..identification import settled_row
 
-        sim = simulate(self.rec, state.all_params(), state.model, **state.sim_kwargs())
+        sim = state.simulate(self.rec)
         self.t0 = min(settled_row(self.rec, sim.q[0], self.dec), self.m_train // 2)
         if self.validate is not None:
-            simv = simulate(self.validate, state.all_params(), state.model, **state.sim_kwargs())
+            simv = state.simulate(self.validate)
             self.v0 = min(settled_row(self.validate, simv.q[0], self.dec), len(self.yv) // 2)
 
     @property
@@ -99,13 +90,13 @@ class Data:
     def errors(self, state: State) -> Tuple[np.ndarray, np.ndarray, SimResult]:
         """Decimated residuals on the training and validation rows past a record's start (see :meth:`settle`), and
         the training simulation."""
-        sim = simulate(self.rec, state.all_params(), state.model, **state.sim_kwargs())
+        sim = state.simulate(self.rec)
         ys = self.dec(sim.force)
         rt = self.y[self.train_rows] - ys[self.train_rows]
         if self.validate is None:
             rv = self.yv - ys[self.m_train:]
         else:
-            simv = simulate(self.validate, state.all_params(), state.model, **state.sim_kwargs())
+            simv = state.simulate(self.validate)
             rv = self.yv[self.v0:] - self.dec(simv.force)[self.v0:]
         return rt, rv, sim
 
@@ -115,21 +106,21 @@ class Data:
         def rel(y, ys):
             return float(np.linalg.norm(y - ys) / np.linalg.norm(y))
 
-        ys = simulate(self.rec, state.all_params(), state.model, **state.sim_kwargs()).force
+        ys = state.simulate(self.rec).force
         y, n = self.rec.force, self.n_train
         if self.validate is None:
             return rel(y[:n], ys[:n]), rel(y[n:], ys[n:])
-        yv = simulate(self.validate, state.all_params(), state.model, **state.sim_kwargs()).force
+        yv = state.simulate(self.validate).force
         return rel(y, ys), rel(self.validate.force, yv)
 
     def views(self, state: State) -> List[Tuple[SimResult, slice]]:
         """The simulations of ``state`` behind the training and the held-out residual, each with the decimated rows
         that residual covers (the held-out rows are the tail of the training record's simulation when no separate
         record validates)."""
-        sim = simulate(self.rec, state.all_params(), state.model, **state.sim_kwargs())
+        sim = state.simulate(self.rec)
         if self.validate is None:
             return [(sim, self.train_rows), (sim, slice(self.m_train, None))]
-        simv = simulate(self.validate, state.all_params(), state.model, **state.sim_kwargs())
+        simv = state.simulate(self.validate)
         return [(sim, self.train_rows), (simv, slice(self.v0, None))]
 
     def decimated_columns(self, columns: np.ndarray, rows: slice) -> np.ndarray:
@@ -160,7 +151,7 @@ def refit(data: Data, state: State, init: Dict[str, float], progress) -> Tuple[S
     free_init = {k: v for k, v in {**state.params, **init}.items() if k not in state.frozen}
     # every sample: the effects the doctor looks for (Stribeck, backlash, ...) live around reversals and stops
     r = didim_iterate(data.rec, state.model, free_init, frozen=state.frozen, decimation=data.dec, tol=1e-4,
-                      max_iter=30, fit_samples=data.n_train, reversals="keep", **state.sim_kwargs())
+                      max_iter=30, fit_samples=data.n_train, reversals="keep")
     r.set_axis(state.axis)
     return replace(state, params=dict(r.params)), r
 
@@ -193,10 +184,8 @@ def motor_columns(state: State, sim: SimResult, extra: Sequence[Term]) -> np.nda
 def motor_columns_many(state: State, sim: SimResult, groups: Sequence[Sequence[Term]]) -> List[np.ndarray]:
     """:func:`motor_columns` of each group of extra terms (the variants of a grid), from one core call: the columns
     of every group are computed together, each exactly as alone (a term's column depends on that term only)."""
-    extra = [Term(f"{t.name}_{i}", t.kind, t.hyper, t.dof, t.width) for i, g in enumerate(groups) for t in g]
-    w = _core.regressor(state.model, sim.q, sim.qd, sim.qdd, offset=state.offset,
-                        terms=[t.spec() for t in (*state.terms, *extra)], backlash_gap=state.backlash_gap,
-                        **state.law())
+    extra = [Term(f"{t.name}_{i}", t.kind, dof=t.dof, **t.hypers) for i, g in enumerate(groups) for t in g]
+    w = state.model.with_terms(*extra).core(DEFAULT_COULOMB_EPS).regressor(sim.q, sim.qd, sim.qdd)
     cols = w[0][:, w.shape[2] - len(extra):]
     ends = np.cumsum([len(g) for g in groups])
     return [cols[:, e - len(g):e] for g, e in zip(groups, ends)]
@@ -204,10 +193,9 @@ def motor_columns_many(state: State, sim: SimResult, groups: Sequence[Sequence[T
 
 def base_columns(state: State, sim: SimResult) -> np.ndarray:
     """Columns of the motor-row regressor of the state's free parameters."""
-    w = _core.regressor(state.model, sim.q, sim.qd, sim.qdd, offset=state.offset,
-                        terms=[t.spec() for t in state.terms] or None, backlash_gap=state.backlash_gap,
-                        **state.law())
-    names = param_names(state.model, state.offset, state.terms)
+    core = state.model.core(DEFAULT_COULOMB_EPS)
+    w = core.regressor(sim.q, sim.qd, sim.qdd)
+    names = list(core.names)
     keep = [i for i, n in enumerate(names) if n not in state.frozen]
     return w[0][:, keep]
 
@@ -252,7 +240,7 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
 
     def fit(st: State, law: str, rel: float):
         try:
-            got = refit(data, replace(st, coulomb_law=law, coulomb_eps=rel * scale), {}, progress)
+            got = refit(data, st.with_(coulomb_law=law, coulomb_eps=rel * scale), {}, progress)
         except DidimError:
             return None
         return got if np.isfinite(got[1].output_error) else None
@@ -264,7 +252,7 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
         lo, hi = around / scale / step, around / scale * step
     else:
         first = shapes[0] if shapes else "algebraic"
-        jobs = [(replace(state, coulomb_law=first, coulomb_eps=rel * scale), {}) for rel in EPS_GRID_REL]
+        jobs = [(state.with_(coulomb_law=first, coulomb_eps=rel * scale), {}) for rel in EPS_GRID_REL]
         grid = [(rel, g) for rel, g in zip(EPS_GRID_REL, refit_each(data, jobs, progress))
                 if not isinstance(g, DidimError) and np.isfinite(g[1].output_error)]
         if not grid:  # keep the law the base model came with

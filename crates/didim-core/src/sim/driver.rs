@@ -206,6 +206,30 @@ impl ForceLag {
     }
 }
 
+/// The force the plant receives, as the mean over each sample period, when the drive logs the
+/// commands `force`: the command of `delay` samples earlier (0 before the first), held over
+/// the period, through the first-order [`SimOptions::force_lag`] `lag` (s) started at its
+/// first value, as the simulator applies it; `dt` the sample period (s). With no delay and
+/// no lag, the commands themselves. DIDIM's regression target: the simulated states answer
+/// this force, not the logged command.
+pub fn applied_force(force: &[f64], delay: usize, lag: f64, dt: f64) -> Vec<f64> {
+    let n = force.len();
+    let delayed = (0..n).map(|k| if k < delay { 0.0 } else { force[k - delay] });
+    match ForceLag::new(lag, dt) {
+        None => delayed.collect(),
+        Some(fl) => {
+            let mut f: Option<f64> = None;
+            delayed
+                .map(|tau| {
+                    let (mean, end) = fl.period(*f.get_or_insert(tau), tau);
+                    f = Some(end);
+                    mean
+                })
+                .collect()
+        }
+    }
+}
+
 /// The closed-loop simulation of `model` with parameters `chi` (already checked, with
 /// the signals and options) integrated by `stepper`; `states`: record the positions,
 /// velocities and accelerations too (else only the force). Returns the stepper for its
