@@ -12,8 +12,8 @@ import numpy as np
 from . import _checks
 from ._errors import DataError, DidimWarning
 from .model import Model, as_model
-from .identification import (IDIM_LS_SUPPORTS, MODEL_FIELDS, SIMULATING_SUPPORTS, THREE_STEP_SUPPORTS, Progress,
-                             a_priori_mass, didim_flexible, didim_iterate, didim_rigid, idim_ls, supports)
+from .identification import (MODEL_FIELDS, Progress, a_priori_mass, didim_flexible, didim_iterate, didim_rigid, idim_ls,
+                             method_supports, supports)
 from .oe import CRITERIA, oe_lm, oe_nm, pseudo_regular_initial
 from .recording import Recording
 from .result import IdentificationResult
@@ -139,8 +139,8 @@ def identify(
     if progress is not None and not callable(progress):
         raise DataError(f"progress must be a function taking a message (or None), got {type(progress).__name__}")
     check_options(model, method, options)
-    supports(structure, {"idim-ls": IDIM_LS_SUPPORTS, "oe-lm": SIMULATING_SUPPORTS - {"force_lag"}}.get(
-        method, THREE_STEP_SUPPORTS if (method, model) == ("didim", "flexible") else SIMULATING_SUPPORTS), method)
+    # before any fit (oe-lm runs the three-step DIDIM first for its start); each method checks it again itself
+    supports(structure, method_supports(method, model), method)
     check_sampling(recording, model, method, options)
     _checks.excitation(recording.qr, recording.u_ext, Model(model, offset=offset).param_names())
     if not np.any(recording.force):

@@ -30,7 +30,7 @@ from . import _checks, _core
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .recording import Recording
 from .result import IdentificationResult, Iteration
-from .model import Model, Term, as_model
+from .model import Model, as_model, knot_weights
 from .signal import Decimation, diffcent, lowpass
 from .simulation import DEFAULT_TOL, coulomb_eps_of, params_vector, problem, settling_samples, simulate
 
@@ -42,6 +42,15 @@ IDIM_LS_SUPPORTS = frozenset({"terms", "coulomb_eps", "coulomb_law"})
 SIMULATING_SUPPORTS = frozenset({"terms", "delay", "force_lag", "backlash_gap", "coulomb_eps", "coulomb_law"})
 #: The three-step DIDIM builds its flexible model from the rigid one's: the friction law only.
 THREE_STEP_SUPPORTS = frozenset({"coulomb_eps", "coulomb_law"})
+#: oe-lm's exact sensitivities do not cover a force lag.
+OE_LM_SUPPORTS = SIMULATING_SUPPORTS - {"force_lag"}
+
+
+def method_supports(method: str, kind: str) -> frozenset:
+    """The structure fields ``method`` (a name of ``didim.METHODS``) supports for a model of ``kind``."""
+    if method == "didim" and kind == "flexible":
+        return THREE_STEP_SUPPORTS
+    return {"idim-ls": IDIM_LS_SUPPORTS, "oe-lm": OE_LM_SUPPORTS}.get(method, SIMULATING_SUPPORTS)
 
 
 #: The structure fields of :class:`didim.Model`, as keywords of the methods' entry points.
@@ -83,16 +92,11 @@ def _check_spline_cover(rec: Recording, terms, free: Sequence[str]) -> None:
     coulomb = [n for n in ("Fc", "Fc1") if n in free]
     if not coulomb:
         return
-    q = np.asarray(rec.qm, dtype=float)[None, :]
-    one = np.ones_like(q)
     for side, code in (("forward", 1), ("backward", -1), ("both-direction", 0)):
         spl = [t for t in terms or () if t.kind == "coulomb_spline" and t.hypers["side"] == code]
         if not spl:
             continue
-        # each spline's B((q − c)/w), the core's basis function moving forward (or backward) at full speed
-        both = [Term(t.name, t.kind, center=t.hypers["center"], width=t.hypers["width"]) for t in spl]
-        w = Model("rigid", terms=both, coulomb_eps=0.0).core().regressor(q, one, np.zeros_like(q))
-        total = w[0, :, 3:].sum(axis=1)
+        total = knot_weights(spl, rec.qm).sum(axis=1)
         if np.min(total) > 0.999:
             raise IdentifiabilityError(
                 f"the {side} friction splines ({', '.join(t.name for t in spl)}) "

@@ -267,6 +267,18 @@ class Model:
         return m if set(m.param_names()) >= set(params) else None
 
 
+def knot_weights(terms, q):
+    """``B((q − center)/width)`` of each ``coulomb_spline`` term at the positions ``q`` (n,): its weight along the
+    stroke, whatever its side, from the core's basis function (the term moving forward at full speed, hard sign).
+    Shape (n, len(terms))."""
+    import numpy as np
+
+    q = np.asarray(q, dtype=float)[None, :]
+    both = [Term(t.name, t.kind, center=t.hypers["center"], width=t.hypers["width"]) for t in terms]
+    w = Model("rigid", terms=both, coulomb_eps=0.0).core().regressor(q, np.ones_like(q), np.zeros_like(q))
+    return w[0, :, 3:]
+
+
 def as_model(model, **structure) -> Model:
     """A model given where it enters didim, once: a :class:`Model` as it is (giving a structure field again, set to
     anything but its default, is an error naming it), or a kind ("rigid", "flexible") with the structure fields
@@ -292,4 +304,4 @@ def as_model(model, **structure) -> Model:
     return Model(model, **given)
 
 
-__all__ = ["Model", "Term", "as_model", "MODELS", "TERM_KINDS", "TERM_HYPERS", "COULOMB_LAWS"]
+__all__ = ["Model", "Term", "as_model", "knot_weights", "MODELS", "TERM_KINDS", "TERM_HYPERS", "COULOMB_LAWS"]

@@ -12,7 +12,7 @@ import numpy as np
 
 from . import _checks, _core
 from ._errors import DataError, DidimError, SimulationError
-from .identification import (FLEXIBLE_CUTOFF_HZ, SIMULATING_SUPPORTS, Progress, _say, nelder_mead_simplex, prefetch,
+from .identification import (FLEXIBLE_CUTOFF_HZ, OE_LM_SUPPORTS, SIMULATING_SUPPORTS, Progress, _say, nelder_mead_simplex, prefetch,
                              start_notes, start_row_of, supports)
 from .model import Model
 from .recording import Recording
@@ -173,7 +173,7 @@ def oe_lm(
     full = {**initial, **frozen}
     model = entry_model(model, full, offset=offset, terms=tuple(terms), backlash_gap=backlash_gap, delay=delay,
                         coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
-    supports(model, SIMULATING_SUPPORTS - {"force_lag"}, "oe-lm (its sensitivities)")
+    supports(model, OE_LM_SUPPORTS, "oe-lm (its sensitivities)")
     model = replace(model, coulomb_eps=coulomb_eps_of(rec, model.coulomb_eps))
     names, chi = params_vector(model, full)
     free = [i for i, n in enumerate(names) if n not in frozen]

@@ -91,7 +91,6 @@ class IdentificationResult:
 
     def __post_init__(self):
         if self.structure is None:
-
             self.structure = Model.of_result(self.model, self.all_params, self.options)
 
     @property

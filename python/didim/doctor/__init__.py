@@ -39,7 +39,7 @@ from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
 from ..model import Model
-from ..simulation import SimResult, coulomb_eps_of, param_names
+from ..simulation import SimResult, coulomb_eps_of, default_coulomb_eps, param_names
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect, _g, final_values,
                       params_text, separating_experiment)
@@ -621,14 +621,16 @@ class _Search:
             return f, None
         return f, new
 
-    def default_law_base(self, state: State) -> Optional[Fitted]:
-        """``state`` refitted with didim's default friction law (algebraic, the record's default speed), when the
-        search fitted another law on a rigid model; computed once per state."""
-        from ..simulation import default_coulomb_eps
+    def with_default_law(self, state: State) -> State:
+        """``state`` with didim's default friction law: algebraic, at the record's default smoothing speed."""
+        return state.with_(coulomb_law="algebraic", coulomb_eps=default_coulomb_eps(self.data.rec))
 
+    def default_law_base(self, state: State) -> Optional[Fitted]:
+        """``state`` refitted with didim's default friction law (:meth:`with_default_law`), when the search fitted
+        another law on a rigid model; computed once per state."""
         if not self.law_fitted or state.kind != "rigid":
             return None
-        default = state.with_(coulomb_law="algebraic", coulomb_eps=default_coulomb_eps(self.data.rec))
+        default = self.with_default_law(state)
         if (default.model.coulomb_law, default.model.coulomb_eps) == (state.model.coulomb_law, state.model.coulomb_eps):
             return None
         if self._default_base[0] is not state:
@@ -689,11 +691,8 @@ class _Search:
         part of it). The final model is fitted again from didim's default law (algebraic, the record's default speed),
         its findings' hyper-parameters chosen again and then the law's speed; kept when it lowers the training error by
         ``RETUNE_GAIN`` (training data only)."""
-        from ..simulation import default_coulomb_eps
-
         try:
-            st, _ = refit(self.data, cur[0].with_(coulomb_law="algebraic",
-                                             coulomb_eps=default_coulomb_eps(self.data.rec)), {}, self.progress)
+            st, _ = refit(self.data, self.with_default_law(cur[0]), {}, self.progress)
             chosen = {}
             for old in [x for x in self.findings if REGISTRY[x.effect].retune is not None]:
                 got = REGISTRY[old.effect].retune(st, self.data, self.progress)

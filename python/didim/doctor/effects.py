@@ -15,7 +15,7 @@ from .._errors import DidimError, SimulationError
 from ..identification import fit_flexible_mode, flexible_from_mode
 from ..result import IdentificationResult
 from ..signal import diffcent
-from ..model import Model
+from ..model import knot_weights
 from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign
 from .. import units
 from ..stats import orthogonalize
@@ -379,10 +379,7 @@ def spline_profile(state: State, n: int = 201) -> Optional[Dict[str, np.ndarray]
     out = {"q": x}
     for d, side in (("fwd", 1.0), ("bwd", -1.0)):
         mine = [t for t in splines if t.hypers["side"] in (side, 0.0)]  # both-direction: each
-        # each spline's friction moving in direction d at full speed (hard sign), from the core's basis functions
-        v = np.full((1, n), side)
-        w_all = Model("rigid", terms=mine, coulomb_eps=0.0).core().regressor(x[None, :], v, np.zeros((1, n)))
-        out[d] = side * (w_all[0, :, 3:] @ np.array([state.params[t.name] for t in mine]))
+        out[d] = knot_weights(mine, x) @ np.array([state.params[t.name] for t in mine])
     return out
 
 
