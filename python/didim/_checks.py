@@ -245,19 +245,4 @@ def record_long_enough(dec, n: int, dt: float, n_params: int, blocks: int, what:
     )
 
 
-def decimation_matches(dec, fs: float) -> None:
-    """A Butterworth decimation designed for another sampling frequency than the record's is refused."""
-    from .signal import Decimation
-
-    if not isinstance(dec, Decimation):
-        raise DataError(f"decimation must be a didim.Decimation (e.g. Decimation.lowpass(5.0, recording.fs)), got "
-                        f"{type(dec).__name__}")
-    if dec.fs_hz is not None and abs(dec.fs_hz - fs) > 1e-9 * fs:
-        raise DataError(
-            f"the decimation was designed for a sampling frequency of {dec.fs_hz:g} Hz, but the record's sample "
-            f"period gives {fs:g} Hz: build it with Decimation.lowpass(cutoff_hz, recording.fs)"
-        )
-
-
-__all__ = ["real_array", "whole", "real", "flag", "one_of", "options", "known_options", "physical", "excitation", "measured_signal", "record_long_enough",
-           "decimation_matches"]
+__all__ = ["real_array", "whole", "real", "flag", "one_of", "options", "known_options", "physical", "excitation", "measured_signal", "record_long_enough"]

@@ -122,8 +122,6 @@ def check_outputs(inputs, outputs) -> None:
         raise DataError("an output path is empty: give a file name (or leave the option out)")
     ins = [os.fspath(x) for x in inputs if x]
     outs = [os.fspath(x) for x in outputs if x]
-    from .loaders import beside
-
     for src in list(ins):  # a record's controller file beside it (NAME_controller.json) is an input too
         side = beside(src)
         if side is not None:
@@ -296,4 +294,13 @@ def save_figure(fig, path, **kw) -> None:
         fig.savefig(tmp, format=fmt, **kw)
 
 
-__all__ = ["atomic_path", "check_writable", "check_input", "check_outputs", "write_text", "write_bytes", "save_figure"]
+def beside(path) -> "str | None":
+    """The controller file beside a record, ``NAME_controller.json`` (or ``.toml``), if there is one."""
+    stem = os.path.splitext(os.fspath(path))[0]
+    for ext in (".json", ".toml"):
+        if os.path.isfile(stem + "_controller" + ext):
+            return stem + "_controller" + ext
+    return None
+
+
+__all__ = ["atomic_path", "check_writable", "check_input", "check_outputs", "write_text", "write_bytes", "save_figure", "beside"]

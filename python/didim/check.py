@@ -21,14 +21,9 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 
 from ._errors import DataError
+from .controller_fit import CHECK_TOLERANCE, fit_controller, mismatch
 from .controllers import TransferFunction
 
-#: When no linear law can be fitted from the log to judge by (too short a record), a described controller is refused
-#: when its law misses the logged force by more than this share of it (RMS, on the unsaturated samples). It is also the
-#: most that a controller fitted from a log may miss (:func:`didim.fit_controller`). A right description replays the
-#: log to rounding (0.0 % on the truthbench's drive records, at most 0.3 % on the EMPS, whose force is the logged
-#: command); the usual mistakes miss it by 84–285 %.
-CHECK_TOLERANCE = 0.05
 #: A mismatch below this share is rounding (the logged force's digits, a command logged in drive units): no law is
 #: fitted to judge it.
 ROUNDING_LEVEL = 0.005
@@ -101,39 +96,6 @@ def _law(tf: TransferFunction, rec) -> np.ndarray:
         return tf.command(rec.qr, rec.qm, u_ext)
 
 
-def free_responses(tf: TransferFunction, n: int) -> np.ndarray:
-    """The law's free responses (n × order): what its state at the first sample adds to the command. A log that
-    begins with the loop already running starts the law in a state the log does not hold (an integrator's, a
-    filter's); the replay from rest differs from the log by a combination of these columns, which the comparison
-    takes out."""
-    from scipy.signal import lfilter
-
-    den = np.array(tf.a_r) if tf.a_r == tf.a_y else np.convolve(tf.a_r, tf.a_y)
-    k = len(den) - 1
-    out = np.zeros((n, k))
-    for i in range(k):
-        x = np.zeros(n)
-        x[i] = 1.0
-        out[:, i] = lfilter([1.0], den, x)
-    return out
-
-
-def mismatch(tf: TransferFunction, f: np.ndarray, c: np.ndarray, keep: np.ndarray) -> float:
-    """‖F − F_law‖/‖F‖ on ``keep``, the law's unknown state at the first sample taken out (:func:`free_responses`)."""
-    den = float(np.linalg.norm(f[keep]))
-    if not den > 0:
-        return math.inf
-    e = (f - c)[keep]
-    if not np.all(np.isfinite(e)):
-        return math.inf
-    with np.errstate(all="ignore"):
-        x = free_responses(tf, len(f))[keep]
-        if x.shape[1] and np.all(np.isfinite(x)):
-            coef, *_ = np.linalg.lstsq(x, e, rcond=None)
-            e = e - x @ coef
-    return float(np.linalg.norm(e) / den)
-
-
 def _variants(tf: TransferFunction) -> List[Tuple[str, TransferFunction]]:
     """The usual mistakes of a description, each as (what it was, the controller with it corrected)."""
     out: List[Tuple[str, TransferFunction]] = []
@@ -186,8 +148,6 @@ def check_controller(rec) -> ControllerCheck:
     out = ControllerCheck(mismatch(tf, f, c, keep), CHECK_TOLERANCE, int(np.count_nonzero(keep)))
     if out.mismatch > ROUNDING_LEVEL:
         # what noise explains: the best linear law fitted from this log replays it only so well
-        from .controller_fit import fit_controller
-
         try:
             out.best_linear = fit_controller(rec, tolerance=math.inf).error
         except DataError:

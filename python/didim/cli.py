@@ -19,7 +19,8 @@ def _progress(quiet: bool):
 
 def _load(args, path: str):
     """The record at ``path`` with the command's --controller, --columns and --force-scale."""
-    from .loaders import beside, load_record, parse_columns
+    from ._io import beside
+    from .loaders import load_record, parse_columns
 
     controller = getattr(args, "controller", None) or None  # a path: load_record reads its "units" too
     if controller is None and not path.lower().endswith(".mat") and beside(path) and not getattr(args, "quiet", False):

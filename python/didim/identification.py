@@ -31,7 +31,7 @@ from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, 
 from .recording import Recording
 from .result import IdentificationResult, Iteration
 from .model import Model, as_model, knot_weights
-from .signal import Decimation, diffcent, lowpass
+from .signal import Decimation, decimation_matches, diffcent, lowpass
 from .simulation import DEFAULT_TOL, coulomb_eps_of, params_vector, problem, settling_samples, simulate
 
 Progress = Optional[Callable[[str], None]]
@@ -220,7 +220,7 @@ def idim_ls(
     names = model.param_names()
     _check_spline_cover(rec, terms, names)
     dec = decimation or Decimation.matlab(10)
-    _checks.decimation_matches(dec, rec.fs)
+    decimation_matches(dec, rec.fs)
     _checks.record_long_enough(dec, rec.n - min(border, rec.n - 1), rec.dt, len(names),
                                2 if model.kind == "flexible" else 1, "IDIM-LS")
     y, wd = _idim_system(rec, model, lowpass_hz, lowpass_order, padding, border, dec, zoh_align)
@@ -389,7 +389,7 @@ def didim_iterate(
         cutoff = cutoff_hz if cutoff_hz is not None else (RIGID_CUTOFF_HZ if kind == "rigid" else FLEXIBLE_CUTOFF_HZ)
         decimation = Decimation.lowpass(cutoff, rec.fs)
     dec = decimation
-    _checks.decimation_matches(dec, rec.fs)
+    decimation_matches(dec, rec.fs)
     _checks.record_long_enough(dec, rec.n, rec.dt, len(free), 2 if kind == "flexible" else 1, f"{method} ({kind})")
     fi = [names.index(n) for n in free]
     if reversals == "exclude" and kind != "rigid":

@@ -17,6 +17,7 @@ import numpy as np
 
 from . import _checks
 from ._errors import DataError
+from ._io import beside, check_input
 from .controllers import Controller, controller_file_units, in_units, load_controller
 from .recording import Recording, _time_step, load_mat
 from .units import SI, Units, check_stroke, from_header, parse as parse_units
@@ -173,15 +174,6 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
         raise DataError(f"{where}: {e}") from None
 
 
-def beside(path: PathLike) -> Optional[str]:
-    """The controller file beside a record, ``NAME_controller.json`` (or ``.toml``), if there is one."""
-    stem = os.path.splitext(os.fspath(path))[0]
-    for ext in (".json", ".toml"):
-        if os.path.isfile(stem + "_controller" + ext):
-            return stem + "_controller" + ext
-    return None
-
-
 def _csv(path: str):
     import csv
 
@@ -281,8 +273,6 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
 
 def _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain,
                  units=None, beside_controller=True) -> Recording:
-    from ._io import check_input
-
     p = check_input(path, "record")
     ext = os.path.splitext(p)[1].lower()
     if ext not in EXTENSIONS:

@@ -11,12 +11,12 @@ from typing import Any, Dict
 import numpy as np
 
 from . import units
+from .doctor import lead_in_words, start_words
+from .doctor.effects import REGISTRY
 
 
 def _view(effect: str, where: Dict[str, Any], default: Any = "time") -> Any:
     """The residual view where an effect shows (its registry entry's), else where the finding says it lives."""
-    from .doctor.effects import REGISTRY
-
     e = REGISTRY.get(effect)
     if e is not None:
         return e.view
@@ -191,8 +191,6 @@ def diagnosis_html(diag) -> str:
         "<p>Full rate: ‖τ − τ_sim‖/‖τ‖ on every sample (the benchmark's measure); decimated: the force the tests work "
         "on, without a record's start (below).</p>",
     ]
-    from .doctor import lead_in_words, start_words
-
     # the summary's lines on the controller (checked against the log, or fitted from it) and the friction law
     parts += [f"<p><b>{e(line.split(':')[0].capitalize())}.</b>{e(line.split(':', 1)[1])}</p>"
               for line in diag.summary().splitlines()

@@ -139,4 +139,16 @@ class Decimation:
         return f"Butterworth order {self.order} at {self.cutoff_hz:g} Hz, zero phase, factor {self.factor}"
 
 
-__all__ = ["lowpass", "diffcent", "default_factor", "Decimation", "PADDINGS"]
+def decimation_matches(dec, fs: float) -> None:
+    """A Butterworth decimation designed for another sampling frequency than the record's is refused."""
+    if not isinstance(dec, Decimation):
+        raise DataError(f"decimation must be a didim.Decimation (e.g. Decimation.lowpass(5.0, recording.fs)), got "
+                        f"{type(dec).__name__}")
+    if dec.fs_hz is not None and abs(dec.fs_hz - fs) > 1e-9 * fs:
+        raise DataError(
+            f"the decimation was designed for a sampling frequency of {dec.fs_hz:g} Hz, but the record's sample "
+            f"period gives {fs:g} Hz: build it with Decimation.lowpass(cutoff_hz, recording.fs)"
+        )
+
+
+__all__ = ["lowpass", "diffcent", "default_factor", "Decimation", "PADDINGS", "decimation_matches"]
