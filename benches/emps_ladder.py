@@ -74,7 +74,7 @@ def main() -> None:
     raw = didim.load_mat(os.path.join(EMPS, "DATA_EMPS_PULSES.mat"), pulses_gain=1.0)
 
     def err(rec, params, st=None):
-        sim = didim.simulate(rec, params, st.model, **st.sim_kwargs()) if st else didim.simulate(rec, params)
+        sim = didim.simulate(rec, params, st.model) if st else didim.simulate(rec, params)
         return 100 * float(np.linalg.norm(rec.force - sim.force) / np.linalg.norm(rec.force))
 
     st = d.final_state
