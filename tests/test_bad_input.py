@@ -61,12 +61,12 @@ def test_unreadable_file_says_permission(tmp_path, emps_path):
 
 
 def test_unreadable_file_says_permission_even_as_root(tmp_path, emps_path, monkeypatch):
-    import didim.recording
+    import didim.loaders  # the MAT parser's module
 
     def denied(*a, **k):
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(didim.recording, "open", denied, raising=False)  # the module's `open` shadows the builtin
+    monkeypatch.setattr(didim.loaders, "open", denied, raising=False)  # the module's `open` shadows the builtin
     with pytest.raises(didim.DataError, match=r"DATA_EMPS\.mat: cannot be read \(Permission denied\): check its permissions"):
         didim.load_mat(emps_path)
 

@@ -214,7 +214,7 @@ def test_from_dataframe():
     pd = pytest.importorskip("pandas")
     n = 300
     df = pd.DataFrame({"time": np.arange(n) * 1e-3, "qr": np.zeros(n), "force": np.ones(n), "qm": np.zeros(n)})
-    rec = didim.Recording.from_dataframe(df, controller=didim.EmpsCascade(), columns={"t": "time"})
+    rec = didim.from_dataframe(df, controller=didim.EmpsCascade(), columns={"t": "time"})
     assert rec.n == n and rec.dt == pytest.approx(1e-3)
 
 
@@ -259,7 +259,7 @@ def test_pi_cascade_drive_record_through_the_cli_and_the_api(tmp_path):
 
     pd = pytest.importorskip("pandas")
     df = pd.read_csv(train)
-    rec = didim.Recording.from_dataframe(
+    rec = didim.from_dataframe(
         df, controller=didim.load_controller(os.path.join(DRIVE, "pi_cascade_train_controller.json")))
     api = didim.identify(rec, "rigid", "didim")
     for k, v in truth.items():

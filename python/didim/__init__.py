@@ -6,8 +6,8 @@ simulation, parallel decimation and QR least squares. SI units on the load side 
 
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .controllers import PD, EmpsCascade, TransferFunction, load_controller
-from .recording import Recording, load_mat
-from .loaders import load_record
+from .recording import Recording
+from .loaders import from_dataframe, load_mat, load_record
 from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, INTEGRATORS, BatchResult, SimResult, coulomb_sign, param_names,
                          simulate, simulate_batch)
 from .signal import Decimation
@@ -35,6 +35,7 @@ __all__ = [
     "load_controller",
     "Recording",
     "load_mat",
+    "from_dataframe",
     "load_record",
     "simulate",
     "simulate_batch",

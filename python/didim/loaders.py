@@ -9,8 +9,10 @@ not given, a controller file beside the record (``NAME_controller.json`` or ``.t
 
 from __future__ import annotations
 
+import math
 import os
 import warnings
+from dataclasses import replace
 from typing import Callable, Dict, List, Mapping, Optional, Union
 
 import numpy as np
@@ -18,8 +20,8 @@ import numpy as np
 from . import _checks
 from ._errors import DataError
 from ._io import beside, check_input
-from .controllers import Controller, controller_file_units, in_units, load_controller
-from .recording import Recording, _time_step, load_mat
+from .controllers import Controller, EmpsCascade, controller_file_units, in_units, load_controller
+from .recording import Recording, _check_expected_dt, _number, _signal, _time_step
 from .units import SI, Units, check_stroke, from_header, parse as parse_units
 
 #: The columns of a record: required, then optional.
@@ -332,4 +334,246 @@ def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str,
                          units=units)
 
 
-__all__ = ["load_record", "from_dataframe", "detect_resolution", "parse_columns", "REQUIRED", "OPTIONAL"]
+# ---------------------------------------------------------------------------------------------------- MAT (EMPS)
+
+#: :func:`load_mat` takes the pulses' gain from the log only within this distance of 1: further, the log and the
+#: pulses disagree on more than a calibration, and the record is loaded with gain 1 (``diagnose`` then says so).
+PULSES_GAIN_RANGE = 0.2
+
+
+def _scalar(d: dict, key: str, path: str) -> float:
+    a = np.asarray(d[key])
+    if a.size != 1 or not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a):
+        raise DataError(f"{path}: variable {key!r} must be a single number, got shape {a.shape} of {a.dtype}")
+    v = float(a.ravel()[0])
+    if not math.isfinite(v):
+        raise DataError(f"{path}: variable {key!r} is not finite ({v})")
+    return v
+
+
+def load_mat(
+    path, *, position_resolution: Optional[float] = None, name: Optional[str] = None, dt: Optional[float] = None,
+    pulses_gain: Union[float, str] = "log", lead_in: Union[str, None, np.ndarray] = "auto",
+) -> Recording:
+    """Loads a record in the EMPS benchmark layout (MATLAB v4/v5/v7 ``.mat``; not v7.3, which is HDF5).
+
+    Variables: ``t`` (s), ``qm`` (m), ``qg`` (the reference, m), ``vir`` (the drive command, V), ``gtau`` (N/V),
+    ``kp`` (1/s), ``kv`` (V/(m/s)); optional ``pulses_N``, the disturbance injected at the drive input (in V,
+    despite its name; ``vir`` already contains it, so the measured force is ``gtau·vir`` and the known external
+    force ``gtau·pulses_N``), optional ``ql``, the load position of an axis with a second encoder, and optional
+    ``vsat`` (V, 10 by default, the EMPS drive's limit). ``dt`` (s), when given, is the sample period the caller
+    expects: a file whose time step differs is refused.
+
+    ``pulses_gain``: the pulses enter ``vir`` with a gain of their own (DATA_EMPS_PULSES: ``vir`` = the controller's
+    output + 1.0138·``pulses_N``, to 0.005 V RMS), and the axis gets ``gtau·vir``: the known external force is
+    ``pulses_gain·gtau·pulses_N``. ``"log"`` (default) takes the gain from the log (:meth:`Recording.u_ext_gain`),
+    kept at 1 when the log cannot tell it from 1 (within 5 σ) or when it is more than 20 % from 1 (which
+    ``diagnose`` then reports); a number sets it (1: the benchmark's ``pulses_N`` as it is). Ignored for a file
+    without ``pulses_N``. With the gain of the log, the benchmark's published model simulates DATA_EMPS_PULSES to
+    5.13 % instead of 5.26 % (from rest on the first sample, ``lead_in=None``: 6.03 % instead of 6.14 %).
+
+    ``lead_in``: see :class:`Recording` (``"auto"``: both EMPS records begin 16 ms into the move and get one; None:
+    the simulation starts at rest on the first sample, as the paper).
+
+    Raises :class:`DataError` naming the file and the problem: missing, unreadable or truncated file, not a MAT
+    file, missing variable, wrong shape or type, time not increasing or not uniform, a period other than ``dt``.
+    The file is only read.
+    """
+    from scipy.io import loadmat, whosmat
+
+    from ._io import check_input
+
+    path = check_input(path, "MAT file")
+    try:
+        with open(path, "rb") as f:
+            head = f.read(128)
+    except OSError as e:
+        raise DataError(f"{path}: cannot be read ({e.strerror or e}): check its permissions") from None
+    size = os.path.getsize(path)
+    if size == 0:
+        raise DataError(f"{path}: the file is empty (0 bytes): copy it again from its source")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # scipy warns on odd headers before failing or succeeding
+            # only the variables a record needs are decompressed, after their sizes are read from their headers: an
+            # unused variable (or a decompression bomb) is never expanded
+            source = _mat5_needed(path, MAT_VARIABLES, MAX_MAT_SAMPLES)
+            d = loadmat(source if source is not None else path, variable_names=list(MAT_VARIABLES))
+    except PermissionError as e:
+        raise DataError(f"{path}: cannot be read ({e.strerror or e}): check its permissions") from None
+    except NotImplementedError:
+        raise DataError(
+            f"{path}: MATLAB v7.3 (HDF5) files are not supported: save it with save(..., '-v7') in MATLAB, or read "
+            "it with h5py and build a didim.Recording"
+        ) from None
+    except DataError:  # a variable's header says it is too large: the file is readable, the record too long
+        raise
+    except Exception as e:  # scipy raises several types for corrupt files
+        if head.startswith(b"MATLAB") or head[:4] in _MAT4_HEADS:
+            raise DataError(
+                f"{path}: truncated or corrupt MAT file ({size} bytes; {type(e).__name__}: {e}): copy it again from "
+                "its source"
+            ) from None
+        raise DataError(f"{path}: not a readable MATLAB .mat file ({type(e).__name__}: {e})") from None
+    required = ("t", "qm", "qg", "vir", "gtau", "kp", "kv")
+    missing = [k for k in required if k not in d]
+    if missing:
+        present = sorted(k for k in d if not k.startswith("__"))
+        if size < 50_000_000:  # name the file's other variables (scipy decompresses them to list them)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    present = sorted(name for name, _, _ in whosmat(path))
+            except Exception:
+                pass
+        hint = "; the file holds no variable at all: is it truncated?" if not present else ""
+        raise DataError(
+            f"{path}: missing variable(s) {', '.join(missing)}; the EMPS layout needs {', '.join(required)} "
+            f"(found: {', '.join(present) or 'none'}){hint}"
+        )
+
+    def vec(key: str) -> np.ndarray:
+        a = np.asarray(d[key])
+        if not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a):
+            raise DataError(f"{path}: variable {key!r} must be real numbers, got {_kind(d[key])}")
+        if a.ndim != 2 or min(a.shape) != 1:
+            raise DataError(f"{path}: variable {key!r} must be a vector (N x 1), got shape {a.shape}")
+        return a.astype(float).ravel()
+
+    try:
+        t = _signal(f"{path}: t", vec("t"))
+        n = t.shape[0]
+        step = _time_step(t, f"{path}: ")
+        if dt is not None:
+            _check_expected_dt(step, dt, f"{path}: ")
+        gtau = _scalar(d, "gtau", path)
+        ctrl = EmpsCascade(
+            kp=_scalar(d, "kp", path),
+            kv=_scalar(d, "kv", path),
+            gtau=gtau,
+            vsat=_scalar(d, "vsat", path) if "vsat" in d else 10.0,
+        )
+        force = gtau * _signal(f"{path}: vir", vec("vir"), n)
+        u_ext = gtau * _signal(f"{path}: pulses_N", vec("pulses_N"), n) if "pulses_N" in d else None
+        ql = _signal(f"{path}: ql", vec("ql"), n) if "ql" in d else None
+        rec = Recording(
+            dt=step,
+            qr=_signal(f"{path}: qg", vec("qg"), n),
+            force=force,
+            qm=_signal(f"{path}: qm", vec("qm"), n),
+            controller=ctrl,
+            ql=ql,
+            u_ext=u_ext,
+            position_resolution=position_resolution,
+            name=name if name is not None else os.path.splitext(os.path.basename(path))[0],
+            lead_in=lead_in,
+        )
+        if u_ext is None:
+            return rec
+        if isinstance(pulses_gain, str):
+            if pulses_gain != "log":
+                raise DataError(f"pulses_gain must be 'log' or a number, got {pulses_gain!r}")
+            g, se = rec.u_ext_gain()  # 1 where the log cannot tell it from 1
+            gain = g if math.isfinite(g) and 5 * se < abs(g - 1) <= PULSES_GAIN_RANGE else 1.0
+        else:
+            gain = _number("pulses_gain", pulses_gain, "a ratio")
+            if not (math.isfinite(gain) and gain > 0):
+                raise DataError(f"pulses_gain must be a finite number > 0 (or 'log'), got {pulses_gain!r}")
+        return rec if gain == 1.0 else replace(rec, u_ext=gain * u_ext)
+    except DataError as e:
+        msg = str(e)
+        raise DataError(msg if msg.startswith(path) else f"{path}: {msg}") from None
+
+
+#: The variables of the EMPS layout that load_mat reads (the others are never decompressed).
+MAT_VARIABLES = ("t", "qm", "qg", "vir", "gtau", "kp", "kv", "vsat", "pulses_N", "ql")
+#: Most samples of a record read from a MAT file (each signal then takes up to 400 MB in memory).
+MAX_MAT_SAMPLES = 50_000_000
+
+
+def _mat5_needed(path: str, names, max_values: int):
+    """A MATLAB v5 file reduced to the variables ``names`` (an in-memory copy of their raw, still compressed records
+    behind the file's header), after checking from each variable's header that it holds at most ``max_values``
+    values; None for another format (v4, which has no compression, is read as it is). Only the first bytes of each
+    compressed variable are decompressed, to read its name and dimensions."""
+    import io
+    import struct
+    import zlib
+
+    with open(path, "rb") as f:
+        raw = f.read()
+    if len(raw) < 128 or not raw.startswith(b"MATLAB 5.0") or raw[126:128] not in (b"IM", b"MI"):
+        return None
+    e = "<" if raw[126:128] == b"IM" else ">"
+    keep = [raw[:128]]
+    pos = 128
+    while pos + 8 <= len(raw):
+        mdtype, count = struct.unpack(e + "II", raw[pos:pos + 8])
+        end = pos + 8 + count
+        if count == 0 or end > len(raw):
+            return None  # truncated or odd: scipy reads it and says what is wrong
+        if mdtype == 15:  # miCOMPRESSED: decompress a bounded prefix only
+            head = zlib.decompressobj().decompress(raw[pos + 8:end], 4096)
+        elif mdtype == 14:  # miMATRIX
+            head = raw[pos:pos + 4096]
+        else:
+            return None
+        info = _mat5_header(head, e)
+        if info is None:
+            return None
+        name, dims = info
+        if name in names:
+            size = int(np.prod(dims, dtype=np.int64)) if dims else 1
+            if size > max_values:
+                raise DataError(f"{path}: variable {name!r} has {size} values (shape {tuple(dims)}); didim reads records "
+                                f"of at most {max_values} samples: split the record")
+            keep.append(raw[pos:end])
+        pos = end + ((-count) % 8 if mdtype == 14 else 0)
+    return io.BytesIO(b"".join(keep))
+
+
+def _mat5_header(head: bytes, e: str):
+    """(name, dims) of a v5 miMATRIX element from its first bytes, or None."""
+    import struct
+
+    if len(head) < 40:
+        return None
+    mdtype, _ = struct.unpack(e + "II", head[:8])
+    if mdtype != 14:
+        return None
+    p = 8 + 16  # array flags: an 8-byte tag and 8 bytes
+    dtype, count = struct.unpack(e + "II", head[p:p + 8])
+    if dtype != 5 or count % 4 or p + 8 + count > len(head):  # dimensions: miINT32
+        return None
+    dims = list(struct.unpack(e + f"{count // 4}i", head[p + 8:p + 8 + count]))
+    p += 8 + count + ((-count) % 8)
+    if p + 8 > len(head):
+        return None
+    first = struct.unpack(e + "I", head[p:p + 4])[0]
+    if first >> 16:  # small data element: type and length packed in the tag, name in its last 4 bytes
+        n = first >> 16  # the byte count is the upper half in either byte order (as scipy reads it)
+        name = head[p + 4:p + 4 + n]
+    else:
+        n = struct.unpack(e + "I", head[p + 4:p + 8])[0]
+        name = head[p + 8:p + 8 + n]
+    return name.decode("latin-1"), dims
+
+
+#: First bytes of MATLAB v4 files (no text header): the type code of a double matrix, either byte order.
+_MAT4_HEADS = (b"\x00\x00\x00\x00", b"\xe8\x03\x00\x00", b"\x00\x00\x03\xe8")
+
+
+def _kind(a) -> str:
+    if hasattr(a, "tocsc"):
+        return "a sparse matrix (save it with full(...) in MATLAB)"
+    a = np.asarray(a)
+    if a.dtype.kind == "U":
+        return "text"
+    if a.dtype.kind == "O":
+        return "a cell array"
+    if a.dtype.names:
+        return "a struct"
+    return str(a.dtype)
+
+
+__all__ = ["load_record", "load_mat", "from_dataframe", "detect_resolution", "parse_columns", "REQUIRED", "OPTIONAL"]
