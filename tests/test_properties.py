@@ -208,7 +208,8 @@ def test_core_param_names_never_panics(model, offset):
 def test_core_simulate_never_panics(data, sens):
     a = mutated(data, data.draw(sim_args()), SIM_HOSTILE)
     params = a.pop("params")
-    model = attempt(_core.Model, a.pop("model"), offset=a.pop("offset"), coulomb_eps=a.pop("coulomb_eps"))
+    model = attempt(_core.Model, a.pop("model"), offset=a.pop("offset"), coulomb_eps=a.pop("coulomb_eps"),
+                    actuation=[("delay", a.pop("delay"))])
     if model is None:
         return
     pos = [model] + [a.pop(k) for k in ("qr", "dt", "controller", "gains")]

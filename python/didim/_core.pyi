@@ -12,6 +12,8 @@ COULOMB_LAWS: List[str]
 DEFAULT_TOL: float
 #: "avx2+fma" or "baseline": the build of the closed loop this processor runs (same results, different speed).
 SIMULATOR_BUILD: str
+#: The actuation options a Model carries, by name ("delay" in samples, "force_lag" in s).
+ACTUATION: List[str]
 #: The term kinds: (kind, [(hyper-parameter, SI unit, default or None)], description).
 TERM_TABLE: List[Tuple[str, List[Tuple[str, str, Optional[float]]], str]]
 #: Older kind names: (alias, kind, [(hyper-parameter, fixed value)]).
@@ -26,6 +28,7 @@ __all__ = [
     "Decimation",
     "Problem",
     "SIMULATOR_BUILD",
+    "ACTUATION",
     "Model",
     "TERM_ALIASES",
     "TERM_TABLE",
@@ -53,6 +56,7 @@ class Model:
         backlash_gap: Optional[float] = None,
         coulomb_eps: float = ...,
         coulomb_law: str = "algebraic",
+        actuation: Optional[Sequence[Tuple[str, float]]] = None,
     ) -> "Model": ...
     @property
     def kind(self) -> str: ...
@@ -66,6 +70,8 @@ class Model:
     def ndof(self) -> int: ...
     @property
     def coulomb_eps(self) -> float: ...
+    @property
+    def actuation(self) -> List[Tuple[str, float]]: ...
     def regressor(self, q: _F64, qd: _F64, qdd: _F64) -> _F64: ...
 
 def coulomb_sign(v: _F64, eps: float = ..., law: str = "algebraic") -> _F64: ...
@@ -115,8 +121,6 @@ class Problem:
         u_ext: Optional[_F64] = None,
         substeps: int = 10,
         quantization: float = 0.0,
-        delay: int = 0,
-        force_lag: float = 0.0,
         integrator: str = "exponential",
         tol: float = ...,
         lead: int = 0,

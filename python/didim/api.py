@@ -11,8 +11,8 @@ import numpy as np
 
 from . import _checks
 from ._errors import DataError, DidimWarning
-from .model import Model, as_model
-from .identification import (MODEL_FIELDS, Progress, a_priori_mass, didim_flexible, didim_iterate, didim_rigid, idim_ls,
+from .model import STRUCTURE_FIELDS, Model, as_model
+from .identification import (Progress, a_priori_mass, didim_flexible, didim_iterate, didim_rigid, idim_ls,
                              method_supports, supports)
 from .oe import CRITERIA, oe_lm, oe_nm, pseudo_regular_initial
 from .recording import Recording
@@ -114,7 +114,7 @@ def identify(
     if offset is not None:
         offset = _checks.flag("offset", offset)
     # IDIM-LS's coulomb_eps is its own option (the benchmark's hard sign by default), not the simulator's
-    fields = [k for k in MODEL_FIELDS if not (k == "coulomb_eps" and ALIASES.get(method, method) == "idim-ls")]
+    fields = [k for k in STRUCTURE_FIELDS if not (k == "coulomb_eps" and ALIASES.get(method, method) == "idim-ls")]
     structure = as_model(model, offset=offset or None, **{k: options.pop(k) for k in fields if k in options})
     model, offset = structure.kind, structure.offset
     if not isinstance(method, str) or method not in METHODS:

@@ -30,7 +30,7 @@ from . import _checks, _core
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .recording import Recording
 from .result import IdentificationResult, Iteration
-from .model import Model, as_model, knot_weights
+from .model import STRUCTURE_FIELDS, Model, as_model, knot_weights
 from .signal import Decimation, decimation_matches, diffcent, lowpass
 from .simulation import DEFAULT_TOL, coulomb_eps_of, params_vector, problem, settling_samples, simulate
 
@@ -39,7 +39,7 @@ Progress = Optional[Callable[[str], None]]
 #: The structure fields of :class:`didim.Model` each method supports beyond the kind and the offset (the methods that
 #: simulate the closed loop take them all; IDIM-LS regresses measured states and has no simulator).
 IDIM_LS_SUPPORTS = frozenset({"terms", "coulomb_eps", "coulomb_law"})
-SIMULATING_SUPPORTS = frozenset({"terms", "delay", "force_lag", "backlash_gap", "coulomb_eps", "coulomb_law"})
+SIMULATING_SUPPORTS = frozenset(STRUCTURE_FIELDS) - {"offset"}
 #: The three-step DIDIM builds its flexible model from the rigid one's: the friction law only.
 THREE_STEP_SUPPORTS = frozenset({"coulomb_eps", "coulomb_law"})
 #: oe-lm's exact sensitivities do not cover a force lag.
@@ -53,15 +53,13 @@ def method_supports(method: str, kind: str) -> frozenset:
     return {"idim-ls": IDIM_LS_SUPPORTS, "oe-lm": OE_LM_SUPPORTS}.get(method, SIMULATING_SUPPORTS)
 
 
-#: The structure fields of :class:`didim.Model`, as keywords of the methods' entry points.
-MODEL_FIELDS = ("offset", "terms", "delay", "force_lag", "backlash_gap", "coulomb_eps", "coulomb_law")
 
 
 def supports(model: Model, fields, method: str) -> None:
     """Refuses a model whose structure uses a field ``method`` does not support, naming it."""
     default = Model(model.kind)
-    used = [f for f in ("terms", "delay", "force_lag", "backlash_gap", "coulomb_eps", "coulomb_law")
-            if getattr(model, f) != getattr(default, f) and f not in fields]
+    used = [f for f in STRUCTURE_FIELDS
+            if f != "offset" and getattr(model, f) != getattr(default, f) and f not in fields]
     if used:
         raise DataError(f"{method} cannot identify {model.describe()}: it does not support {', '.join(used)}; give a "
                         "didim.Model without those fields, or use method 'didim'")
@@ -720,7 +718,7 @@ def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: Optional
         warning = _check_apm(rec, apM)
         if warning:
             warnings.warn(f"{rec.name or 'record'}: {warning}", DidimWarning, stacklevel=3)
-    structure = {k: kw.pop(k) for k in list(kw) if k in MODEL_FIELDS}
+    structure = {k: kw.pop(k) for k in list(kw) if k in STRUCTURE_FIELDS}
     model = as_model(model, offset=offset, **structure)
     if model.kind != "rigid":
         raise DataError(f"didim_rigid fits the rigid model, got {model.describe()}")

@@ -10,7 +10,7 @@ model (:meth:`Model.core`), which also builds the simulator's and the regressor'
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Dict, Optional, Tuple
 
 from . import _checks, _core
@@ -19,6 +19,8 @@ from ._errors import DataError
 MODELS = ("rigid", "flexible")
 #: The shapes of the Coulomb sign through zero speed the core knows (``coulomb_law``).
 COULOMB_LAWS: Tuple[str, ...] = tuple(_core.COULOMB_LAWS)
+#: The actuation options (fields of :class:`Model` of the same names) the core's closed loop takes by name.
+ACTUATION: Tuple[str, ...] = tuple(_core.ACTUATION)
 #: Degrees of freedom a term can act on (the load only in the flexible model).
 TERM_DOFS = ("motor", "load")
 #: The core's table of term kinds: kind -> ((hyper-parameter, unit, default or None), ...), and its description.
@@ -140,10 +142,11 @@ class Term:
 
 @functools.lru_cache(maxsize=512)
 def _core_model(kind: str, offset: bool, specs: tuple, backlash_gap: Optional[float], coulomb_eps: float,
-                coulomb_law: str) -> "_core.Model":
+                coulomb_law: str, actuation: tuple = ()) -> "_core.Model":
     """The core's model of a structure, built once per structure (identification loops ask at every step)."""
     return _core.Model(kind, offset=offset, terms=[(n, k, d, list(h)) for n, k, d, h in specs] or None,
-                       backlash_gap=backlash_gap, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
+                       backlash_gap=backlash_gap, coulomb_eps=coulomb_eps, coulomb_law=coulomb_law,
+                       actuation=list(actuation))
 
 
 def _freeze(spec: tuple) -> tuple:
@@ -209,7 +212,8 @@ class Model:
         ``coulomb_eps`` for a structure whose smoothing is the record's (``self.coulomb_eps`` None)."""
         eps = self.coulomb_eps if self.coulomb_eps is not None else coulomb_eps
         return _core_model(self.kind, self.offset, tuple(_freeze(t.spec()) for t in self.terms), self.backlash_gap,
-                           _core.DEFAULT_COULOMB_EPS if eps is None else float(eps), self.coulomb_law)
+                           _core.DEFAULT_COULOMB_EPS if eps is None else float(eps), self.coulomb_law,
+                           tuple((a, float(getattr(self, a))) for a in ACTUATION))
 
     def param_names(self) -> list:
         """Parameter names in the order of the parameter vector."""
@@ -279,12 +283,16 @@ def knot_weights(terms, q):
     return w[0, :, 3:]
 
 
+#: The structure fields of a :class:`Model` beside its kind, as the methods' entry points take them by keyword.
+STRUCTURE_FIELDS: Tuple[str, ...] = tuple(f.name for f in fields(Model) if f.name != "kind")
+
+
 def as_model(model, **structure) -> Model:
     """A model given where it enters didim, once: a :class:`Model` as it is (giving a structure field again, set to
     anything but its default, is an error naming it), or a kind ("rigid", "flexible") with the structure fields
     (``offset``, ``terms``, ``delay``, ``force_lag``, ``backlash_gap``, ``coulomb_eps``, ``coulomb_law``)."""
-    defaults = {"offset": None, "terms": (), "delay": 0, "force_lag": 0.0, "backlash_gap": None, "coulomb_eps": None,
-                "coulomb_law": "algebraic"}
+    defaults = {**{f.name: f.default for f in fields(Model) if f.name not in ("kind", "terms")}, "offset": None,
+                "terms": ()}
     unknown = set(structure) - set(defaults)
     if unknown:
         raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
@@ -304,4 +312,4 @@ def as_model(model, **structure) -> Model:
     return Model(model, **given)
 
 
-__all__ = ["Model", "Term", "as_model", "knot_weights", "MODELS", "TERM_KINDS", "TERM_HYPERS", "COULOMB_LAWS"]
+__all__ = ["Model", "Term", "as_model", "knot_weights", "ACTUATION", "STRUCTURE_FIELDS", "MODELS", "TERM_KINDS", "TERM_HYPERS", "COULOMB_LAWS"]

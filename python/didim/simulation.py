@@ -253,8 +253,7 @@ def problem(recording: Recording, model: Model, **numerics) -> "_core.Problem":
     # a log that begins in motion is simulated from the rest before its lead-in, and output from its first sample
     qr, u_ext = recording.lead_in_signals()
     return _core.Problem(model.core(default_coulomb_eps(recording)), qr, recording.dt, recording.controller.kind,
-                         list(recording.controller.gains), u_ext=u_ext, delay=model.delay, force_lag=model.force_lag,
-                         lead=int(recording.qr_lead.size), **opts)
+                         list(recording.controller.gains), u_ext=u_ext, lead=int(recording.qr_lead.size), **opts)
 
 
 def simulate(

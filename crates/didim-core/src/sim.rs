@@ -47,6 +47,13 @@ pub enum Integrator {
 pub const DEFAULT_TOL: f64 = 1e-9;
 
 /// Options of the simulator.
+/// The actuation options a model carries, by name (the Python layer's `didim.Model`
+/// fields of the same names): how the commanded force reaches the plant. A new one is a
+/// field of [`SimOptions`] with its default, its check and its arm in
+/// [`SimOptions::set_actuation`], and its physics in the driver; the binding and the Python
+/// layer pass them through by name.
+pub const ACTUATION: &[&str] = &["delay", "force_lag"];
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SimOptions {
     /// Sample period of the controller and of the outputs (s).
@@ -90,6 +97,29 @@ impl SimOptions {
             tol: DEFAULT_TOL,
             lead: 0,
         }
+    }
+
+    /// Sets the actuation option `name` (one of [`ACTUATION`]) to `value`: a delay in whole
+    /// samples, a force lag in s. The value is checked by [`SimOptions::validate`].
+    pub fn set_actuation(&mut self, name: &str, value: f64) -> Result<()> {
+        match name {
+            "delay" => {
+                if !(value.is_finite() && value >= 0.0 && value.fract() == 0.0 && value <= 1e9) {
+                    return Err(invalid!(
+                        "delay must be a whole number of samples >= 0, got {value}"
+                    ));
+                }
+                self.delay = value as usize;
+            }
+            "force_lag" => self.force_lag = value,
+            other => {
+                return Err(invalid!(
+                    "unknown actuation option {other:?}: use one of {}",
+                    ACTUATION.join(", ")
+                ))
+            }
+        }
+        Ok(())
     }
 
     /// The number of output samples of a reference of `n` samples (its lead-in left out).

@@ -244,22 +244,18 @@ fn sim_options(
     dt: f64,
     substeps: usize,
     quantization: f64,
-    delay: usize,
-    force_lag: f64,
     integrator: &str,
     tol: f64,
     lead: usize,
 ) -> PyResult<sim::SimOptions> {
     let integrator = parse_integrator(integrator).map_err(|e| core_error(py, e))?;
     Ok(sim::SimOptions {
-        dt,
         substeps,
         quantization,
-        delay,
-        force_lag,
         integrator,
         tol,
         lead,
+        ..sim::SimOptions::new(dt)
     })
 }
 
@@ -487,6 +483,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SIMULATOR_BUILD", sim::simulator_build())?;
     m.add("TERM_TABLE", model::term_table())?;
     m.add("TERM_ALIASES", model::term_aliases())?;
+    m.add("ACTUATION", sim::ACTUATION.to_vec())?;
     m.add_class::<model::PyModel>()?;
     m.add_function(wrap_pyfunction!(model::coulomb_sign, m)?)?;
     m.add_function(wrap_pyfunction!(lstsq, m)?)?;

@@ -144,12 +144,15 @@ impl AnyModel {
 pub struct PyModel {
     pub inner: AnyModel,
     kind: String,
+    /// The actuation options by name (`didim_core::sim::ACTUATION`), applied to every closed loop of this model.
+    pub actuation: Vec<(String, f64)>,
 }
 
 #[pymethods]
 impl PyModel {
     #[new]
-    #[pyo3(signature = (kind, *, offset=false, terms=None, backlash_gap=None, coulomb_eps=Real(DEFAULT_COULOMB_EPS), coulomb_law="algebraic"))]
+    #[pyo3(signature = (kind, *, offset=false, terms=None, backlash_gap=None, coulomb_eps=Real(DEFAULT_COULOMB_EPS), coulomb_law="algebraic", actuation=None))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         kind: &str,
@@ -158,15 +161,34 @@ impl PyModel {
         backlash_gap: Option<f64>,
         coulomb_eps: Real,
         coulomb_law: &str,
+        actuation: Option<Vec<(String, Real)>>,
     ) -> PyResult<Self> {
         let terms = terms.unwrap_or_default();
+        let actuation: Vec<(String, f64)> = actuation
+            .unwrap_or_default()
+            .into_iter()
+            .map(|(n, v)| (n, v.0))
+            .collect();
         let inner = quick(py, || {
+            // each option checked as the closed loop will take it
+            let mut opts = didim_core::sim::SimOptions::new(1.0);
+            for (name, value) in &actuation {
+                opts.set_actuation(name, *value)?;
+            }
+            opts.validate()?;
             make_model(kind, offset, coulomb_eps.0, coulomb_law, &terms, backlash_gap)
         })?;
         Ok(Self {
             inner,
             kind: kind.to_string(),
+            actuation,
         })
+    }
+
+    /// The actuation options by name (delay in samples, force lag in s).
+    #[getter]
+    fn actuation(&self) -> Vec<(String, f64)> {
+        self.actuation.clone()
     }
 
     /// "rigid" or "flexible".

@@ -183,9 +183,9 @@ fn sim_dict<'py>(py: Python<'py>, out: SimOutput) -> PyResult<Bound<'py, PyDict>
 #[pymethods]
 impl Problem {
     #[new]
-    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), delay=Whole::new(0), force_lag=Real(0.0), integrator="exponential", tol=Real(sim::DEFAULT_TOL), lead=Whole::new(0)))]
+    #[pyo3(signature = (model, qr, dt, controller, gains, *, u_ext=None, substeps=Whole::new(10), quantization=Real(0.0), integrator="exponential", tol=Real(sim::DEFAULT_TOL), lead=Whole::new(0)))]
     #[pyo3(
-        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, delay=0, force_lag=0.0, integrator='exponential', tol=..., lead=0)"
+        text_signature = "(model, qr, dt, controller, gains, *, u_ext=None, substeps=10, quantization=0.0, integrator='exponential', tol=..., lead=0)"
     )]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -198,29 +198,29 @@ impl Problem {
         u_ext: Option<PyReadonlyArray1<'_, f64>>,
         substeps: Whole,
         quantization: Real,
-        delay: Whole,
-        force_lag: Real,
         integrator: &str,
         tol: Real,
         lead: Whole,
     ) -> PyResult<Self> {
         let gains = reals(gains);
         let whole = |w: Whole, name: &str| w.get(name).map_err(|e| core_error(py, e));
-        let opts = sim_options(
+        let mut opts = sim_options(
             py,
             dt.0,
             whole(substeps, "substeps")?,
             quantization.0,
-            whole(delay, "delay")?,
-            force_lag.0,
             integrator,
             tol.0,
             whole(lead, "lead")?,
         )?;
         let qr = slice1(&qr).into_owned();
         let u_ext = u_ext.as_ref().map(|u| slice1(u).into_owned());
+        let actuation = model.actuation.clone();
         let model = model.inner.clone();
         let controller = quick(py, || {
+            for (name, value) in &actuation {
+                opts.set_actuation(name, *value)?;
+            }
             opts.validate()?;
             make_controller(controller, &gains)
         })?;

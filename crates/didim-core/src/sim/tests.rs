@@ -638,3 +638,18 @@ fn a_lead_in_is_simulated_but_not_output() {
     let e = simulate(&model, &chi, &Controller::EMPS, &qr, None, &all).unwrap_err();
     assert!(e.to_string().contains("lead-in of 1500 samples"), "{e}");
 }
+
+#[test]
+fn actuation_options_are_set_by_name_and_checked() {
+    let mut o = SimOptions::new(1e-3);
+    for name in ACTUATION {
+        o.set_actuation(name, 2.0).unwrap();
+    }
+    assert_eq!((o.delay, o.force_lag), (2, 2.0));
+    let e = o.set_actuation("lag", 1.0).unwrap_err().to_string();
+    assert!(e.contains("unknown actuation option \"lag\": use one of delay, force_lag"), "{e}");
+    let e = o.set_actuation("delay", 1.5).unwrap_err().to_string();
+    assert!(e.contains("whole number of samples"), "{e}");
+    o.set_actuation("force_lag", -1.0).unwrap();
+    assert!(o.validate().unwrap_err().to_string().contains("force_lag must be"));
+}
