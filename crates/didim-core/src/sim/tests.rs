@@ -647,9 +647,16 @@ fn actuation_options_are_set_by_name_and_checked() {
     }
     assert_eq!((o.delay, o.force_lag), (2, 2.0));
     let e = o.set_actuation("lag", 1.0).unwrap_err().to_string();
-    assert!(e.contains("unknown actuation option \"lag\": use one of delay, force_lag"), "{e}");
+    assert!(
+        e.contains("unknown actuation option \"lag\": use one of delay, force_lag"),
+        "{e}"
+    );
     let e = o.set_actuation("delay", 1.5).unwrap_err().to_string();
     assert!(e.contains("whole number of samples"), "{e}");
     o.set_actuation("force_lag", -1.0).unwrap();
-    assert!(o.validate().unwrap_err().to_string().contains("force_lag must be"));
+    assert!(o
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("force_lag must be"));
 }
