@@ -83,3 +83,48 @@ def test_didim_identifies_the_gravity_torque_of_a_rotary_joint():
     # IDIM-LS has the same regressor
     ls = didim.identify(rec, MODEL, "idim-ls")
     assert math.hypot(ls.params["G_sin"], ls.params["G_cos"]) == pytest.approx(MGL, rel=0.03)
+
+
+def _independent_pendulum(mgl, seed=0):
+    """A pendulum record from a plant of this test's own: RK4 on 8 substeps per sample, a tanh Coulomb law (didim's
+    default is algebraic), torque noise inside the loop (the logged torque is the command), a 16-bit encoder, under
+    the PD of ``CONTROLLER`` held over each sample."""
+    rng = np.random.default_rng(seed)
+    dt, qr = 1e-3, _reference()
+    res, eps, h = 2 * math.pi / 2**16, 2e-3, 1e-3 / 8
+
+    def acc(q, v, tau):
+        return (tau - FV * v - FC * math.tanh(v / eps) - mgl * math.sin(q + DELTA)) / J
+
+    q, v, past = qr[0], 0.0, [qr[0], qr[0]]
+    tau_log, qm = np.empty(len(qr)), np.empty(len(qr))
+    for k in range(len(qr)):
+        qq = res * round(q / res)
+        tau = min(max(CONTROLLER.kp * (qr[k] - qq) - CONTROLLER.kd * (qq - past[0]) / (2 * dt), -CONTROLLER.tau_max),
+                  CONTROLLER.tau_max)
+        tau_log[k], qm[k], past = tau, qq, [past[1], qq]
+        tau_in = tau + 0.02 * rng.standard_normal()
+        for _ in range(8):
+            k1q, k1v = v, acc(q, v, tau_in)
+            k2q, k2v = v + h / 2 * k1v, acc(q + h / 2 * k1q, v + h / 2 * k1v, tau_in)
+            k3q, k3v = v + h / 2 * k2v, acc(q + h / 2 * k2q, v + h / 2 * k2v, tau_in)
+            k4q, k4v = v + h * k3v, acc(q + h * k3q, v + h * k3v, tau_in)
+            q, v = q + h / 6 * (k1q + 2 * k2q + 2 * k3q + k4q), v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+    return didim.Recording(dt, qr, tau_log, qm, controller=CONTROLLER, units=Units("rad", "N*m"), name="pendulum")
+
+
+@pytest.mark.parametrize("mgl", [0.3, 2.0])
+def test_the_doctor_names_gravity_on_an_independent_pendulum(mgl):
+    """The doctor, told nothing of gravity, names it on a rotary joint of an independent plant: as large as the
+    Coulomb friction, and 7 times larger (where the rigid model without it has no physical fit, so it is tried before
+    the friction law), with its amplitude and the angle where the arm hangs."""
+    d = didim.doctor(_independent_pendulum(mgl), "rigid")
+    names = [f.effect for f in d.findings]
+    assert "gravity" in names, d.summary()
+    assert not set(names) - {"gravity", "unnamed"}, d.summary()
+    g = d.final_params
+    assert math.hypot(g["G_sin"], g["G_cos"]) == pytest.approx(mgl, rel=0.03)
+    assert math.atan2(g["G_cos"], g["G_sin"]) == pytest.approx(DELTA, abs=0.03)
+    for k in ("M", "Fv", "Fc"):
+        assert g[k] == pytest.approx(TRUTH[k], rel=0.1), k
+    assert "hangs" in next(f.words for f in d.findings if f.effect == "gravity")

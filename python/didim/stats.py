@@ -113,10 +113,14 @@ def holm(p_values: Sequence[float]) -> np.ndarray:
     return adj
 
 
-def diebold_mariano(e_before: np.ndarray, e_after: np.ndarray) -> tuple:
-    """One-sided test that the squared errors ``e_after`` are smaller than ``e_before`` on the same samples
-    (HAC variance of the loss differential). Returns (statistic, p-value, mean relative improvement)."""
-    d = np.asarray(e_before, float) ** 2 - np.asarray(e_after, float) ** 2
+def diebold_mariano(e_before: np.ndarray, e_after: np.ndarray, loss: str = "squared") -> tuple:
+    """One-sided test that the squared (``loss="absolute"``: absolute) errors ``e_after`` are smaller than
+    ``e_before`` on the same samples (HAC variance of the loss differential). Returns (statistic, p-value, mean
+    relative improvement of the squared errors)."""
+    if loss not in ("squared", "absolute"):
+        raise ValueError(f"loss must be 'squared' or 'absolute', got {loss!r}")
+    power = 2 if loss == "squared" else 1
+    d = np.abs(np.asarray(e_before, float)) ** power - np.abs(np.asarray(e_after, float)) ** power
     n = len(d)
     lag = newey_west_lag(n)
     dc = d - d.mean()
@@ -128,7 +132,8 @@ def diebold_mariano(e_before: np.ndarray, e_after: np.ndarray) -> tuple:
     stat = d.mean() / math.sqrt(s / n)
     from scipy import stats as sst
 
-    return float(stat), float(sst.norm.sf(stat)), float(d.mean() / np.mean(np.asarray(e_before) ** 2))
+    gain = np.mean(np.asarray(e_before, float) ** 2 - np.asarray(e_after, float) ** 2)
+    return float(stat), float(sst.norm.sf(stat)), float(gain / np.mean(np.asarray(e_before, float) ** 2))
 
 
 def orthogonalize(x: np.ndarray, w: np.ndarray) -> np.ndarray:

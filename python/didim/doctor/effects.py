@@ -601,6 +601,48 @@ def _backlash_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted
     return st, r, {"gap": g}, {}
 
 
+# ---------------------------------------------------------------------------------------------------- gravity
+
+#: The gravity torque of a rotary joint, G·sin(q + δ) = G_sin·sin q + G_cos·cos q: the two terms of the core's table.
+GRAVITY_TERMS = (Term("G_sin", "gravity"), Term("G_cos", "gravity", phase=math.pi / 2))
+
+
+def _gravity_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
+    if state.axis != "rotary" or any(t.kind == "gravity" for t in state.model.terms):
+        return []
+    return [Candidate("gravity", motor_columns(state, sim, GRAVITY_TERMS), {}, 1)]
+
+
+def _gravity_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    """The model with the gravity pair, refitted by DIDIM from IDIM-LS's estimates of that model on the training
+    samples: a torque this large is one the model without it could not carry, and its fit (inertia and friction bent
+    to stand in for a sine of the angle: on a pendulum whose m·g·l is 40 times its Coulomb friction, an inertia 600
+    times too small and a negative Coulomb friction) is no start for the refit. The model's own parameters are the
+    start where IDIM-LS cannot fit it."""
+    from ..identification import idim_ls
+
+    st = state.with_(terms=state.model.terms + GRAVITY_TERMS)
+    names = [t.name for t in GRAVITY_TERMS]
+    init = {n: float(b) for n, b in zip(names, c.test.beta)}
+    try:
+        r0 = idim_ls(data.train_record(), st.model, decimation=data.dec)
+        if r0.params.get("M", r0.params.get("M1", 0.0)) > 0:
+            init = {k: v for k, v in r0.params.items() if k not in st.frozen}
+    except DidimError:
+        pass
+    st, r = refit(data, st, init, progress)
+    amp = math.hypot(st.params["G_sin"], st.params["G_cos"])
+    return st, r, {"amplitude": amp, "angle_offset": math.atan2(st.params["G_cos"], st.params["G_sin"]),
+                   **{k: st.params[k] for k in names}}, _std(r, names)
+
+
+def _gravity_words(p: Dict[str, float], st: State) -> str:
+    hang = math.remainder(-p["angle_offset"] if p["amplitude"] >= 0 else math.pi - p["angle_offset"], 2 * math.pi)
+    return (f"a gravity torque G·sin(q + δ) of amplitude G = {units.force(p['amplitude'], st.axis)} (m·g·l: the "
+            f"torque with the arm horizontal), δ = {units.length(p['angle_offset'], st.axis)}: the arm hangs (the "
+            f"torque vanishes, the joint at rest is stable) at q = {units.length(hang, st.axis)}")
+
+
 # ---------------------------------------------------------------------------------------------------- in words
 
 #: Units of the quantities a finding reports (its ``params``).
@@ -610,7 +652,7 @@ UNITS = {"OF": "N", "dFv": "N/(m/s)", "dFc": "N", "Fs": "N", "vs": "m/s", "ampli
          "Fv2": "N/(m/s)", "Fc2": "N", "C12": "N/(m/s)", "gap": "m", "spacing": "m", "spread_forward": "N",
          "spread_backward": "N", "peak_forward": "N", "peak_backward": "N", "peak_forward_at": "m",
          "level_forward": "N", "level_backward": "N",
-         "peak_backward_at": "m"}
+         "peak_backward_at": "m", "angle_offset": "m", "G_sin": "N", "G_cos": "N"}
 
 
 def params_text(params: Dict[str, float], axis: str) -> str:
@@ -709,6 +751,7 @@ _WORDS = {
     "load_friction": lambda p, st: (f"load-side friction: viscous {_g(p['Fv2'])} N/(m/s), Coulomb {_g(p['Fc2'])} N "
                                     f"(motor side: {_g(st.params['Fv1'])} N/(m/s), {_g(st.params['Fc1'])} N)"),
     "coupling_damping": lambda p, st: f"a damper of {_g(p['C12'])} N/(m/s) in parallel with the coupling",
+    "gravity": _gravity_words,
     "backlash": lambda p, st: f"a dead zone of {_g(1e6 * p['gap'])} µm in the coupling",
 }
 
@@ -748,7 +791,9 @@ REGISTRY: Dict[str, Effect] = _registry(
     Effect("offset", "A constant force acts on the axis whatever it does: an amplifier or current-sensor offset, a "
            "cable chain or a gravity component along the axis.", "velocity",
            _offset_candidates, _offset_adopt, _offset_remove,
-           confusable={"asymmetric_friction": "record rests (stops) and moves in both directions: an offset acts at "
+           confusable={"gravity": "move the joint over a wider range of angles: gravity varies as the sine of the "
+                       "angle, an offset does not",
+                       "asymmetric_friction": "record rests (stops) and moves in both directions: an offset acts at "
                        "rest, direction-dependent friction only while moving"}),
     Effect("asymmetric_friction", "Friction depends on the direction of motion: preload, seal or wiper drag, or a "
            "lubricant film that differs going forward and backward.", "velocity",
@@ -785,6 +830,9 @@ REGISTRY: Dict[str, Effect] = _registry(
            "elastomer, belt or joint friction that depends on the deflection rate): the flexible mode is more damped "
            "than load friction alone would make it.", "spectrum",
            _damping_candidates, _damping_adopt, _remove_terms(("C12",))),
+    Effect("gravity", "The weight of the arm acts on the joint as a torque that varies as the sine of the angle "
+           "(m·g·l·sin(q + δ)): a rotary joint whose axis is not vertical, with its centre of mass off the axis and no "
+           "counterweight.", "position", _gravity_candidates, _gravity_adopt, _remove_terms(("G_sin", "G_cos"))),
     Effect("backlash", "The coupling has a dead zone: the load is free over a small gap each time the force "
            "reverses.", "spectrum", _backlash_candidates, _backlash_adopt,
            lambda state: state.with_(backlash_gap=None)),
