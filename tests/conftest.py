@@ -99,3 +99,15 @@ def resolved(model, rec, coulomb_eps=None):
     if model.coulomb_eps is not None:
         return model
     return dataclasses.replace(model, coulomb_eps=default_coulomb_eps(rec) if coulomb_eps is None else coulomb_eps)
+
+
+#: Robot records with known truth from a simulator built on Pinocchio (../shared/data/robots, see its README).
+ROBOTS_DIR = pathlib.Path(
+    os.environ.get("DIDIM_ROBOTS_DIR", pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "robots"))
+
+
+@pytest.fixture(scope="session")
+def robots_dir():
+    if not (ROBOTS_DIR / "truth.json").exists():
+        pytest.skip(f"robot records {ROBOTS_DIR} not available (set DIDIM_ROBOTS_DIR)")
+    return ROBOTS_DIR

@@ -16,6 +16,7 @@ from .api import METHODS, identify
 from . import scenarios
 from .doctor import Diagnosis, Finding, doctor
 from .model import Model, Term
+from .robot import Robot
 from .result import load_result
 from .check import check_controller
 from .controller_fit import fit_controller
@@ -34,6 +35,7 @@ __all__ = [
     "TransferFunction",
     "load_controller",
     "Recording",
+    "Robot",
     "load_mat",
     "from_dataframe",
     "load_record",

@@ -24,6 +24,7 @@ pub mod interrupt;
 pub mod lstsq;
 pub mod model;
 pub mod objective;
+pub mod robot;
 pub mod sim;
 
 pub use controller::Controller;

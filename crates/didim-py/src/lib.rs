@@ -20,6 +20,7 @@ use pyo3::types::{PyDict, PyType};
 mod convert;
 mod model;
 mod problem;
+mod robot;
 use convert::*;
 pub(crate) use model::AnyModel;
 
@@ -485,6 +486,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("TERM_ALIASES", model::term_aliases())?;
     m.add("ACTUATION", sim::ACTUATION.to_vec())?;
     m.add_class::<model::PyModel>()?;
+    m.add_class::<robot::PyRobot>()?;
     m.add_function(wrap_pyfunction!(model::coulomb_sign, m)?)?;
     m.add_function(wrap_pyfunction!(lstsq, m)?)?;
     m.add_function(wrap_pyfunction!(butter, m)?)?;

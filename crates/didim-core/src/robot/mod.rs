@@ -1,0 +1,367 @@
+//! Serial manipulators: a chain of revolute and prismatic joints, each moving one rigid body with
+//! the 10 standard inertial parameters, under gravity.
+//!
+//! - [`Robot`]: the chain, built from a URDF ([`Robot::from_urdf`], fixed joints merged) or by hand;
+//! - [`Robot::rnea`]: inverse dynamics (recursive Newton–Euler) and [`Robot::regressor`], the
+//!   same torques as a matrix linear in the inertial parameters;
+//! - [`Robot::mass_matrix`], [`Robot::gravity`], [`Robot::aba`] (forward dynamics).
+//!
+//! Conventions are Pinocchio's, against which every function is tested: joint `i`'s frame is its
+//! placement in the frame of joint `i − 1` (the world for the first) composed with the joint's own
+//! motion (a rotation about, or a translation along, its unit axis); a body's parameters
+//! `[m, m·cx, m·cy, m·cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]` are expressed in its joint's frame, the
+//! inertia about that frame's origin. SI units: m, kg, rad, N, N·m.
+
+mod spatial;
+mod urdf;
+
+use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, Vector3};
+
+use crate::error::{invalid, Result};
+use spatial::{Force, Motion, Pose};
+
+/// Number of standard inertial parameters of one body.
+pub const BODY_PARAMS: usize = 10;
+
+/// The names of a body's inertial parameters, in their order (suffixed by the joint's name).
+pub const BODY_PARAM_NAMES: [&str; BODY_PARAMS] =
+    ["m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz"];
+
+/// How a joint moves its body.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JointKind {
+    /// A rotation about the axis (rad).
+    Revolute,
+    /// A translation along the axis (m).
+    Prismatic,
+}
+
+/// One actuated joint of the chain and the body it moves.
+#[derive(Clone, Debug)]
+pub struct Joint {
+    pub name: String,
+    pub kind: JointKind,
+    /// Unit axis in the joint's frame.
+    pub axis: Vector3<f64>,
+    /// Pose of the joint's frame at zero position in the previous joint's frame (the world's
+    /// for the first joint).
+    pub placement_rotation: Matrix3<f64>,
+    pub placement_translation: Vector3<f64>,
+    /// The moved body's inertial parameters ([`BODY_PARAM_NAMES`]), in the joint's frame.
+    pub inertia: [f64; BODY_PARAMS],
+    /// Position limits (rad or m; infinite when the URDF gives none), speed and effort limits.
+    pub lower: f64,
+    pub upper: f64,
+    pub velocity_limit: f64,
+    pub effort_limit: f64,
+}
+
+/// A serial chain of joints under gravity.
+#[derive(Clone, Debug)]
+pub struct Robot {
+    pub name: String,
+    pub joints: Vec<Joint>,
+    /// Gravity's acceleration in the world frame (m/s²), (0, 0, −9.81) by default.
+    pub gravity: Vector3<f64>,
+}
+
+/// Standard gravity's acceleration (m/s²): Pinocchio's default.
+pub const STANDARD_GRAVITY: f64 = 9.81;
+
+impl Robot {
+    /// The chain of `joints` (in order, each moving after the one before it), with standard gravity
+    /// along −z.
+    pub fn new(name: &str, joints: Vec<Joint>) -> Result<Self> {
+        if joints.is_empty() {
+            return Err(invalid!("a robot needs at least one actuated joint"));
+        }
+        for j in &joints {
+            let n = j.axis.norm();
+            if !(n > 0.0 && n.is_finite()) {
+                return Err(invalid!(
+                    "joint {}: its axis must be a non-zero finite vector",
+                    j.name
+                ));
+            }
+            if j.inertia.iter().any(|x| !x.is_finite()) {
+                return Err(invalid!(
+                    "joint {}: its body's inertial parameters must be finite",
+                    j.name
+                ));
+            }
+        }
+        Ok(Robot {
+            name: name.to_string(),
+            joints,
+            gravity: Vector3::new(0.0, 0.0, -STANDARD_GRAVITY),
+        })
+    }
+
+    /// The chain of a URDF document: its actuated joints (revolute, continuous as revolute, or
+    /// prismatic) from the root, fixed joints merged into the body before them. `joints` picks
+    /// the actuated ones by name (the others are locked at zero and merged too); by default all.
+    pub fn from_urdf(text: &str, joints: Option<&[String]>) -> Result<Self> {
+        urdf::parse(text, joints)
+    }
+
+    /// Number of actuated joints.
+    pub fn ndof(&self) -> usize {
+        self.joints.len()
+    }
+
+    /// The names of the inertial parameters, `<param>_<joint>` body after body.
+    pub fn param_names(&self) -> Vec<String> {
+        self.joints
+            .iter()
+            .flat_map(|j| BODY_PARAM_NAMES.iter().map(move |p| format!("{p}_{}", j.name)))
+            .collect()
+    }
+
+    /// Every body's inertial parameters, body after body (length 10·n).
+    pub fn inertial_params(&self) -> Vec<f64> {
+        self.joints.iter().flat_map(|j| j.inertia).collect()
+    }
+
+    /// This robot with other inertial parameters (length 10·n, as [`Robot::inertial_params`]).
+    pub fn with_inertial_params(&self, pi: &[f64]) -> Result<Self> {
+        if pi.len() != BODY_PARAMS * self.ndof() {
+            return Err(invalid!(
+                "expected {} inertial parameters (10 per joint), got {}",
+                BODY_PARAMS * self.ndof(),
+                pi.len()
+            ));
+        }
+        let mut out = self.clone();
+        for (j, chunk) in out.joints.iter_mut().zip(pi.chunks(BODY_PARAMS)) {
+            j.inertia.copy_from_slice(chunk);
+        }
+        Ok(out)
+    }
+
+    fn check(&self, what: &str, x: &[f64]) -> Result<()> {
+        if x.len() != self.ndof() {
+            return Err(invalid!(
+                "{what} has {} values; the robot has {} joints",
+                x.len(),
+                self.ndof()
+            ));
+        }
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(invalid!("{what} holds a non-finite value"));
+        }
+        Ok(())
+    }
+
+    /// Each joint's pose in the previous joint's frame at positions `q`.
+    fn poses(&self, q: &[f64]) -> Vec<Pose> {
+        self.joints
+            .iter()
+            .zip(q)
+            .map(|(j, &qi)| match j.kind {
+                JointKind::Revolute => Pose {
+                    rotation: j.placement_rotation * spatial::rotation_about(&j.axis, qi),
+                    translation: j.placement_translation,
+                },
+                JointKind::Prismatic => Pose {
+                    rotation: j.placement_rotation,
+                    translation: j.placement_translation + j.placement_rotation * (j.axis * qi),
+                },
+            })
+            .collect()
+    }
+
+    /// The joint's motion subspace: its unit axis as a spatial motion.
+    fn subspace(j: &Joint) -> Motion {
+        let a = j.axis.normalize();
+        match j.kind {
+            JointKind::Revolute => Motion::new(a, Vector3::zeros()),
+            JointKind::Prismatic => Motion::new(Vector3::zeros(), a),
+        }
+    }
+
+    /// The forward pass of Newton–Euler: each body's pose, velocity and acceleration (gravity as
+    /// an acceleration of the base when `with_gravity`).
+    fn forward(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        a: &[f64],
+        with_gravity: bool,
+    ) -> (Vec<Pose>, Vec<Motion>, Vec<Motion>) {
+        let poses = self.poses(q);
+        let n = self.ndof();
+        let (mut vel, mut acc) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        let mut vp = Motion::zero();
+        let mut ap = if with_gravity {
+            Motion::new(Vector3::zeros(), -self.gravity)
+        } else {
+            Motion::zero()
+        };
+        for i in 0..n {
+            let s = Self::subspace(&self.joints[i]);
+            let vi = poses[i].motion_to_child(&vp) + s.scale(v[i]);
+            let ai = poses[i].motion_to_child(&ap) + s.scale(a[i]) + vi.cross(&s.scale(v[i]));
+            vel.push(vi);
+            acc.push(ai);
+            vp = vi;
+            ap = ai;
+        }
+        (poses, vel, acc)
+    }
+
+    /// Inverse dynamics (recursive Newton–Euler): the joint torques (N·m) or forces (N) that give
+    /// accelerations `a` at positions `q` and speeds `v`, gravity included.
+    pub fn rnea(&self, q: &[f64], v: &[f64], a: &[f64]) -> Result<Vec<f64>> {
+        self.check("q", q)?;
+        self.check("v", v)?;
+        self.check("a", a)?;
+        Ok(self.rnea_unchecked(q, v, a, true))
+    }
+
+    fn rnea_unchecked(&self, q: &[f64], v: &[f64], a: &[f64], with_gravity: bool) -> Vec<f64> {
+        let (poses, vel, acc) = self.forward(q, v, a, with_gravity);
+        let n = self.ndof();
+        let mut f: Vec<Force> = (0..n)
+            .map(|i| {
+                let pi = &self.joints[i].inertia;
+                spatial::inertia_apply(pi, &acc[i]) + vel[i].cross_force(&spatial::inertia_apply(pi, &vel[i]))
+            })
+            .collect();
+        let mut tau = vec![0.0; n];
+        for i in (0..n).rev() {
+            tau[i] = Self::subspace(&self.joints[i]).dot(&f[i]);
+            if i > 0 {
+                let fp = poses[i].force_to_parent(&f[i]);
+                f[i - 1] = f[i - 1] + fp;
+            }
+        }
+        tau
+    }
+
+    /// The joint torques of gravity alone at positions `q`.
+    pub fn gravity_torque(&self, q: &[f64]) -> Result<Vec<f64>> {
+        self.check("q", q)?;
+        let z = vec![0.0; self.ndof()];
+        Ok(self.rnea_unchecked(q, &z, &z, true))
+    }
+
+    /// Coriolis, centrifugal and gravity torques at positions `q` and speeds `v`.
+    pub fn nonlinear_effects(&self, q: &[f64], v: &[f64]) -> Result<Vec<f64>> {
+        self.check("q", q)?;
+        self.check("v", v)?;
+        Ok(self.rnea_unchecked(q, v, &vec![0.0; self.ndof()], true))
+    }
+
+    /// The joint-space mass matrix at positions `q` (n × n, symmetric positive definite for a
+    /// physical robot), column by column from Newton–Euler without speed nor gravity.
+    pub fn mass_matrix(&self, q: &[f64]) -> Result<DMatrix<f64>> {
+        self.check("q", q)?;
+        let n = self.ndof();
+        let z = vec![0.0; n];
+        let mut m = DMatrix::zeros(n, n);
+        let mut e = vec![0.0; n];
+        for k in 0..n {
+            e[k] = 1.0;
+            let col = self.rnea_unchecked(q, &z, &e, false);
+            for (r, c) in col.iter().enumerate() {
+                m[(r, k)] = *c;
+            }
+            e[k] = 0.0;
+        }
+        // exact symmetry (each column's rounding differs)
+        let mt = m.transpose();
+        Ok((m + mt) * 0.5)
+    }
+
+    /// Forward dynamics: the accelerations that torques `tau` give at positions `q` and speeds
+    /// `v`, M(q)⁻¹ (τ − C(q, v) v − g(q)), with `armature` (rotor inertias reflected to each joint,
+    /// kg·m² or kg, added to M's diagonal) when given.
+    pub fn aba(&self, q: &[f64], v: &[f64], tau: &[f64], armature: Option<&[f64]>) -> Result<Vec<f64>> {
+        self.check("tau", tau)?;
+        let nle = self.nonlinear_effects(q, v)?;
+        let mut m = self.mass_matrix(q)?;
+        if let Some(ia) = armature {
+            self.check("armature", ia)?;
+            for (i, x) in ia.iter().enumerate() {
+                m[(i, i)] += x;
+            }
+        }
+        let rhs = DVector::from_iterator(tau.len(), tau.iter().zip(&nle).map(|(t, c)| t - c));
+        let chol = Cholesky::new(m).ok_or_else(|| {
+            invalid!("the mass matrix is not positive definite at this configuration: the inertial parameters are not those of physical bodies")
+        })?;
+        Ok(chol.solve(&rhs).iter().copied().collect())
+    }
+
+    /// The inverse-dynamics regressor at one state: `Y` (n × 10n, row-major) with
+    /// `rnea(q, v, a) = Y · inertial_params()`, gravity included.
+    pub fn regressor(&self, q: &[f64], v: &[f64], a: &[f64]) -> Result<Vec<f64>> {
+        self.check("q", q)?;
+        self.check("v", v)?;
+        self.check("a", a)?;
+        let n = self.ndof();
+        let p = BODY_PARAMS * n;
+        let (poses, vel, acc) = self.forward(q, v, a, true);
+        let mut y = vec![0.0; n * p];
+        for i in 0..n {
+            // the body's spatial force is linear in its parameters: one column per unit parameter
+            let mut cols: Vec<Force> = (0..BODY_PARAMS)
+                .map(|k| {
+                    let mut e = [0.0; BODY_PARAMS];
+                    e[k] = 1.0;
+                    spatial::inertia_apply(&e, &acc[i])
+                        + vel[i].cross_force(&spatial::inertia_apply(&e, &vel[i]))
+                })
+                .collect();
+            for j in (0..=i).rev() {
+                let s = Self::subspace(&self.joints[j]);
+                for (k, c) in cols.iter().enumerate() {
+                    y[j * p + BODY_PARAMS * i + k] = s.dot(c);
+                }
+                if j > 0 {
+                    for c in cols.iter_mut() {
+                        *c = poses[j].force_to_parent(c);
+                    }
+                }
+            }
+        }
+        Ok(y)
+    }
+}
+
+/// One function of a robot evaluated on many states: `inputs` are row-major arrays of `rows × n`
+/// values (n = the robot's joints), `f` maps one row of each to `width` outputs; the rows are
+/// computed in parallel and returned concatenated (`rows × width`).
+pub fn map_rows(
+    robot: &Robot,
+    inputs: &[&[f64]],
+    width: usize,
+    f: impl Fn(&[&[f64]]) -> Result<Vec<f64>> + Sync,
+) -> Result<Vec<f64>> {
+    use rayon::prelude::*;
+    let n = robot.ndof();
+    let rows = inputs.first().map_or(0, |x| x.len() / n);
+    for x in inputs {
+        if x.len() != rows * n {
+            return Err(invalid!(
+                "every state array must have {n} columns (the robot's joints) and the same number of rows"
+            ));
+        }
+    }
+    let mut out = crate::error::filled(rows * width, 0.0, "the robot's outputs")?;
+    out.par_chunks_mut(width.max(1))
+        .enumerate()
+        .try_for_each(|(r, dst)| {
+            let row: Vec<&[f64]> = inputs.iter().map(|x| &x[r * n..(r + 1) * n]).collect();
+            let got = f(&row).map_err(|e| match e {
+                crate::Error::InvalidInput(m) => invalid!("row {r}: {m}"),
+                other => other,
+            })?;
+            dst.copy_from_slice(&got);
+            Ok(())
+        })?;
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests;

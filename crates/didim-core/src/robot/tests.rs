@@ -1,0 +1,157 @@
+use super::*;
+
+/// A pendulum: one revolute joint about y, a point-like body of mass `m` at `l` along x with its own
+/// inertia `iyy` about its centre.
+fn pendulum(m: f64, l: f64, iyy: f64) -> Robot {
+    let body = spatial::params_of(
+        m,
+        &Vector3::new(l, 0.0, 0.0),
+        &Matrix3::from_diagonal(&Vector3::new(iyy, iyy, iyy)),
+    );
+    Robot::new(
+        "pendulum",
+        vec![Joint {
+            name: "j".into(),
+            kind: JointKind::Revolute,
+            axis: Vector3::y(),
+            placement_rotation: Matrix3::identity(),
+            placement_translation: Vector3::zeros(),
+            inertia: body,
+            lower: f64::NEG_INFINITY,
+            upper: f64::INFINITY,
+            velocity_limit: f64::INFINITY,
+            effort_limit: f64::INFINITY,
+        }],
+    )
+    .unwrap()
+}
+
+const CHAIN: &str = r#"<robot name="chain">
+  <link name="base"/>
+  <link name="l1"><inertial><origin xyz="0.1 0.02 0.3" rpy="0.1 0.2 0.3"/><mass value="3.0"/>
+    <inertia ixx="0.05" ixy="0.001" ixz="0.002" iyy="0.04" iyz="0.003" izz="0.03"/></inertial></link>
+  <link name="l2"><inertial><origin xyz="0.2 0.0 0.05" rpy="0 0.4 0"/><mass value="2.0"/>
+    <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.01"/></inertial></link>
+  <link name="tool"><inertial><origin xyz="0 0 0.1"/><mass value="0.5"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial></link>
+  <link name="l3"><inertial><origin xyz="0 0.1 0"/><mass value="1.0"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.1"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="100" velocity="2"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.1 0 0.4" rpy="1.5707963 0 0"/>
+    <axis xyz="0 0.6 0.8"/><limit lower="-2" upper="2" effort="50" velocity="2"/></joint>
+  <joint name="fix" type="fixed"><parent link="l2"/><child link="tool"/><origin xyz="0.3 0 0" rpy="0 0 0.5"/></joint>
+  <joint name="j3" type="prismatic"><parent link="tool"/><child link="l3"/><origin xyz="0 0 0.2"/>
+    <axis xyz="1 0 0"/><limit lower="-0.1" upper="0.5" effort="20" velocity="1"/></joint>
+</robot>"#;
+
+fn state(n: usize, seed: u64) -> Vec<f64> {
+    // a small deterministic generator: values in [-1, 1)
+    let mut s = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        })
+        .collect()
+}
+
+#[test]
+fn a_pendulum_has_its_textbook_dynamics() {
+    let (m, l, iyy, g) = (2.0, 0.5, 0.01, STANDARD_GRAVITY);
+    let r = pendulum(m, l, iyy);
+    for &q in &[-1.0, 0.0, 0.3, 2.0] {
+        // V = m g z = -m g l sin q: g(q) = dV/dq
+        let grav = r.gravity_torque(&[q]).unwrap()[0];
+        assert!((grav - (-m * g * l * q.cos())).abs() < 1e-12);
+        let mm = r.mass_matrix(&[q]).unwrap()[(0, 0)];
+        assert!((mm - (m * l * l + iyy)).abs() < 1e-12);
+        let tau = r.rnea(&[q], &[0.7], &[1.3]).unwrap()[0];
+        assert!((tau - ((m * l * l + iyy) * 1.3 - m * g * l * q.cos())).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn the_regressor_times_the_parameters_is_newton_euler() {
+    let r = Robot::from_urdf(CHAIN, None).unwrap();
+    assert_eq!(r.ndof(), 3);
+    let pi = r.inertial_params();
+    for seed in 0..20 {
+        let (q, v, a) = (state(3, seed), state(3, seed + 100), state(3, seed + 200));
+        let tau = r.rnea(&q, &v, &a).unwrap();
+        let y = r.regressor(&q, &v, &a).unwrap();
+        let scale = tau.iter().fold(1.0f64, |s, t| s.max(t.abs()));
+        for i in 0..3 {
+            let yt: f64 = (0..30).map(|k| y[i * 30 + k] * pi[k]).sum();
+            assert!(
+                (yt - tau[i]).abs() < 1e-12 * scale,
+                "joint {i}: {yt} vs {}",
+                tau[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn forward_dynamics_inverts_inverse_dynamics() {
+    let r = Robot::from_urdf(CHAIN, None).unwrap();
+    for seed in 0..20 {
+        let (q, v, a) = (state(3, seed), state(3, seed + 100), state(3, seed + 200));
+        let tau = r.rnea(&q, &v, &a).unwrap();
+        let back = r.aba(&q, &v, &tau, None).unwrap();
+        for i in 0..3 {
+            assert!((back[i] - a[i]).abs() < 1e-10, "{back:?} vs {a:?}");
+        }
+        // the armature adds to the diagonal
+        let ia = [0.1, 0.2, 0.3];
+        let tau_ia: Vec<f64> = tau.iter().zip(&ia).zip(&a).map(|((t, i), x)| t + i * x).collect();
+        let back = r.aba(&q, &v, &tau_ia, Some(&ia)).unwrap();
+        for i in 0..3 {
+            assert!((back[i] - a[i]).abs() < 1e-10);
+        }
+    }
+}
+
+#[test]
+fn fixed_joints_merge_and_picked_joints_lock_the_others() {
+    let r = Robot::from_urdf(CHAIN, None).unwrap();
+    let names: Vec<&str> = r.joints.iter().map(|j| j.name.as_str()).collect();
+    assert_eq!(names, ["j1", "j2", "j3"]);
+    // l2 and the tool: 2.5 kg on joint 2
+    assert!((r.joints[1].inertia[0] - 2.5).abs() < 1e-15);
+    let two = Robot::from_urdf(CHAIN, Some(&["j1".to_string(), "j3".to_string()])).unwrap();
+    assert_eq!(two.ndof(), 2);
+    assert!((two.joints[0].inertia[0] - 5.5).abs() < 1e-15);
+    // j2 locked at zero: the same torques as the full robot with q2 = v2 = a2 = 0
+    let full = r
+        .rnea(&[0.3, 0.0, 0.1], &[0.2, 0.0, -0.4], &[0.5, 0.0, 0.7])
+        .unwrap();
+    let locked = two.rnea(&[0.3, 0.1], &[0.2, -0.4], &[0.5, 0.7]).unwrap();
+    assert!((full[0] - locked[0]).abs() < 1e-12 && (full[2] - locked[1]).abs() < 1e-12);
+}
+
+#[test]
+fn bad_urdfs_and_inputs_are_refused_by_name() {
+    let e = |r: Result<Robot>| r.unwrap_err().to_string();
+    assert!(e(Robot::from_urdf("<robot", None)).contains("not a URDF"));
+    assert!(e(Robot::from_urdf(CHAIN, Some(&["j9".to_string()]))).contains("no joint j9"));
+    assert!(e(Robot::from_urdf(CHAIN, Some(&["fix".to_string()]))).contains("fixed"));
+    assert!(e(Robot::from_urdf(
+        CHAIN,
+        Some(&["j3".to_string(), "j1".to_string()])
+    ))
+    .contains("chain's order"));
+    let tree = CHAIN.replace(r#"<parent link="tool"/>"#, r#"<parent link="l1"/>"#);
+    assert!(e(Robot::from_urdf(&tree, None)).contains("not a serial chain"));
+    let r = Robot::from_urdf(CHAIN, None).unwrap();
+    assert!(r
+        .rnea(&[0.0; 2], &[0.0; 3], &[0.0; 3])
+        .unwrap_err()
+        .to_string()
+        .contains("3 joints"));
+    assert!(r.gravity_torque(&[f64::NAN, 0.0, 0.0]).is_err());
+}

@@ -1,0 +1,195 @@
+//! A [`Robot`] from a URDF document, parsed by `urdf-rs`: the actuated joints from the root link
+//! down, fixed joints (and joints not picked) merged into the body before them, each link's
+//! inertia moved into its body's joint frame.
+
+use std::collections::HashMap;
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::spatial::{self, Pose};
+use super::{Joint, JointKind, Robot, BODY_PARAMS};
+use crate::error::{invalid, Result};
+
+fn pose_of(p: &urdf_rs::Pose) -> Pose {
+    Pose {
+        rotation: spatial::rpy(p.rpy[0], p.rpy[1], p.rpy[2]),
+        translation: Vector3::new(p.xyz[0], p.xyz[1], p.xyz[2]),
+    }
+}
+
+/// The inertial parameters of `link` placed at `at` in the body's frame.
+fn link_params(link: &urdf_rs::Link, at: &Pose) -> [f64; BODY_PARAMS] {
+    let inertial = &link.inertial;
+    let local = at.compose(&pose_of(&inertial.origin));
+    let i = &inertial.inertia;
+    let ic = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
+    let ic_body = local.rotation * ic * local.rotation.transpose();
+    spatial::params_of(inertial.mass.value, &local.translation, &ic_body)
+}
+
+struct Walk<'a> {
+    links: HashMap<&'a str, &'a urdf_rs::Link>,
+    children: HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+    picked: Option<&'a [String]>,
+    out: Vec<Joint>,
+    /// The body each actuated joint follows (None: the fixed base).
+    parents: Vec<Option<usize>>,
+}
+
+impl<'a> Walk<'a> {
+    fn actuated(&self, j: &urdf_rs::Joint) -> Result<Option<JointKind>> {
+        let kind = match j.joint_type {
+            urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => JointKind::Revolute,
+            urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+            urdf_rs::JointType::Fixed => return Ok(None),
+            ref other => {
+                if self.picked.is_some_and(|p| !p.contains(&j.name)) {
+                    return Ok(None);
+                }
+                return Err(invalid!(
+                    "joint {} is {:?}: didim models chains of revolute and prismatic joints; leave it out with joints=[...]",
+                    j.name,
+                    other
+                ));
+            }
+        };
+        Ok(match self.picked {
+            Some(p) if !p.contains(&j.name) => None, // locked at zero
+            _ => Some(kind),
+        })
+    }
+
+    /// Walks the subtree of `link`, placed at `at` in the frame of `body`.
+    fn visit(&mut self, link: &'a str, at: Pose, body: Option<usize>) -> Result<()> {
+        let l = self
+            .links
+            .get(link)
+            .ok_or_else(|| invalid!("the URDF names link {link} but does not define it"))?;
+        if let Some(b) = body {
+            let p = link_params(l, &at);
+            for (x, y) in self.out[b].inertia.iter_mut().zip(p) {
+                *x += y;
+            }
+        }
+        let joints = self.children.get(link).cloned().unwrap_or_default();
+        for j in joints {
+            let placed = at.compose(&pose_of(&j.origin));
+            match self.actuated(j)? {
+                // fixed, or not picked: locked at zero, where a joint's own motion is the identity
+                None => self.visit(&j.child.link, placed, body)?,
+                Some(kind) => {
+                    let axis = Vector3::new(j.axis.xyz[0], j.axis.xyz[1], j.axis.xyz[2]);
+                    if axis.norm() <= 0.0 || !axis.norm().is_finite() {
+                        return Err(invalid!("joint {}: its axis is zero", j.name));
+                    }
+                    let lim = &j.limit;
+                    let (lower, upper) =
+                        if j.joint_type == urdf_rs::JointType::Continuous || lim.lower >= lim.upper {
+                            (f64::NEG_INFINITY, f64::INFINITY)
+                        } else {
+                            (lim.lower, lim.upper)
+                        };
+                    self.out.push(Joint {
+                        name: j.name.clone(),
+                        kind,
+                        axis: axis.normalize(),
+                        placement_rotation: placed.rotation,
+                        placement_translation: placed.translation,
+                        inertia: [0.0; BODY_PARAMS],
+                        lower,
+                        upper,
+                        velocity_limit: if lim.velocity > 0.0 {
+                            lim.velocity
+                        } else {
+                            f64::INFINITY
+                        },
+                        effort_limit: if lim.effort > 0.0 {
+                            lim.effort
+                        } else {
+                            f64::INFINITY
+                        },
+                    });
+                    self.parents.push(body);
+                    let me = self.out.len() - 1;
+                    self.visit(&j.child.link, Pose::identity(), Some(me))?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+pub fn parse(text: &str, picked: Option<&[String]>) -> Result<Robot> {
+    let doc = urdf_rs::read_from_string(text).map_err(|e| invalid!("not a URDF robot description: {e}"))?;
+    let links: HashMap<&str, &urdf_rs::Link> = doc.links.iter().map(|l| (l.name.as_str(), l)).collect();
+    let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
+    for j in &doc.joints {
+        children.entry(j.parent.link.as_str()).or_default().push(j);
+    }
+    let is_child: std::collections::HashSet<&str> =
+        doc.joints.iter().map(|j| j.child.link.as_str()).collect();
+    let roots: Vec<&str> = doc
+        .links
+        .iter()
+        .map(|l| l.name.as_str())
+        .filter(|l| !is_child.contains(l))
+        .collect();
+    let root = match roots.as_slice() {
+        [r] => *r,
+        [] => return Err(invalid!("the URDF has no root link (its joints form a loop)")),
+        _ => {
+            return Err(invalid!(
+                "the URDF has several root links ({}): one tree is expected",
+                roots.join(", ")
+            ))
+        }
+    };
+    if let Some(p) = picked {
+        let known: Vec<&str> = doc.joints.iter().map(|j| j.name.as_str()).collect();
+        for name in p {
+            if !known.contains(&name.as_str()) {
+                return Err(invalid!(
+                    "the URDF has no joint {name}; its joints: {}",
+                    known.join(", ")
+                ));
+            }
+        }
+    }
+    let mut walk = Walk {
+        links,
+        children,
+        picked,
+        out: Vec::new(),
+        parents: Vec::new(),
+    };
+    walk.visit(root, Pose::identity(), None)?;
+    // a serial chain: each actuated joint follows the one before it
+    for (i, p) in walk.parents.iter().enumerate() {
+        let expected = if i == 0 { None } else { Some(i - 1) };
+        if *p != expected {
+            let after = p.map_or("the base".to_string(), |b| walk.out[b].name.clone());
+            return Err(invalid!(
+                "the URDF is a tree, not a serial chain: joint {} follows {after}, not {}; pick one branch with joints=[...]",
+                walk.out[i].name,
+                if i == 0 { "the base".to_string() } else { walk.out[i - 1].name.clone() }
+            ));
+        }
+    }
+    if let Some(p) = picked {
+        let order: Vec<&str> = walk.out.iter().map(|j| j.name.as_str()).collect();
+        for name in p {
+            if !order.contains(&name.as_str()) {
+                return Err(invalid!(
+                    "joint {name} is fixed in the URDF: it cannot be actuated"
+                ));
+            }
+        }
+        if order.iter().zip(p).any(|(a, b)| *a != b.as_str()) {
+            return Err(invalid!(
+                "list the joints in the chain's order, from the base: {}",
+                order.join(", ")
+            ));
+        }
+    }
+    Robot::new(&doc.name, walk.out)
+}

@@ -1,0 +1,193 @@
+//! `Robot`: a serial manipulator built once from a URDF and frozen; its rigid-body dynamics on
+//! one state or many (arrays of shape (N, n)).
+
+use didim_core::error::Error;
+use didim_core::robot::{map_rows, JointKind, Robot as CoreRobot, BODY_PARAMS};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+
+use crate::run;
+
+/// A row-major copy of an (N, n) array.
+fn flat(a: &PyReadonlyArray2<'_, f64>) -> Vec<f64> {
+    a.as_array().iter().copied().collect()
+}
+
+/// A serial chain of revolute and prismatic joints under gravity, with each moving body's 10
+/// inertial parameters: rigid-body dynamics as Pinocchio computes them.
+#[pyclass(frozen, module = "didim._core", name = "Robot")]
+pub struct PyRobot {
+    pub inner: CoreRobot,
+}
+
+impl PyRobot {
+    fn batch<'py>(
+        &self,
+        py: Python<'py>,
+        inputs: Vec<Vec<f64>>,
+        width: usize,
+        shape: Vec<usize>,
+        f: impl Fn(&CoreRobot, &[&[f64]]) -> Result<Vec<f64>, Error> + Sync + Send,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let robot = &self.inner;
+        let out = run(py, || {
+            let refs: Vec<&[f64]> = inputs.iter().map(|v| v.as_slice()).collect();
+            map_rows(robot, &refs, width, |row| f(robot, row))
+        })?;
+        Ok(PyArray1::from_vec(py, out).reshape(shape)?.into_any())
+    }
+}
+
+#[pymethods]
+impl PyRobot {
+    /// The chain of a URDF document (its text): actuated joints from the root, fixed joints merged;
+    /// `joints` picks the actuated ones (the others are locked at zero).
+    #[staticmethod]
+    #[pyo3(signature = (text, joints=None))]
+    fn from_urdf(py: Python<'_>, text: String, joints: Option<Vec<String>>) -> PyResult<Self> {
+        let inner = run(py, || CoreRobot::from_urdf(&text, joints.as_deref()))?;
+        Ok(PyRobot { inner })
+    }
+
+    /// This robot with other inertial parameters (10 per joint, body after body).
+    fn with_inertial_params(&self, py: Python<'_>, params: PyReadonlyArray1<'_, f64>) -> PyResult<Self> {
+        let pi: Vec<f64> = params.as_array().iter().copied().collect();
+        let inner = run(py, || self.inner.with_inertial_params(&pi))?;
+        Ok(PyRobot { inner })
+    }
+
+    #[getter]
+    fn name(&self) -> String {
+        self.inner.name.clone()
+    }
+
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.inner.joints.iter().map(|j| j.name.clone()).collect()
+    }
+
+    /// "revolute" or "prismatic", per joint.
+    #[getter]
+    fn joint_kinds(&self) -> Vec<&'static str> {
+        self.inner
+            .joints
+            .iter()
+            .map(|j| match j.kind {
+                JointKind::Revolute => "revolute",
+                JointKind::Prismatic => "prismatic",
+            })
+            .collect()
+    }
+
+    #[getter]
+    fn ndof(&self) -> usize {
+        self.inner.ndof()
+    }
+
+    /// `<param>_<joint>`: m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz per body.
+    #[getter]
+    fn param_names(&self) -> Vec<String> {
+        self.inner.param_names()
+    }
+
+    #[getter]
+    fn inertial_params<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.inertial_params())
+    }
+
+    /// Per joint: (lower, upper, velocity, effort) limits from the URDF (infinite where it gives none).
+    #[getter]
+    fn limits(&self) -> Vec<(f64, f64, f64, f64)> {
+        self.inner
+            .joints
+            .iter()
+            .map(|j| (j.lower, j.upper, j.velocity_limit, j.effort_limit))
+            .collect()
+    }
+
+    #[getter]
+    fn gravity_vector(&self) -> (f64, f64, f64) {
+        let g = self.inner.gravity;
+        (g.x, g.y, g.z)
+    }
+
+    /// Inverse dynamics of N states: q, v, a of shape (N, n) -> torques (N, n).
+    fn rnea<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+        v: PyReadonlyArray2<'py, f64>,
+        a: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
+        self.batch(
+            py,
+            vec![flat(&q), flat(&v), flat(&a)],
+            n,
+            vec![rows, n],
+            |r, x| r.rnea(x[0], x[1], x[2]),
+        )
+    }
+
+    /// Forward dynamics of N states: q, v, tau (N, n) -> accelerations (N, n); `armature` (n,)
+    /// added to the mass matrix's diagonal.
+    #[pyo3(signature = (q, v, tau, armature=None))]
+    fn aba<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+        v: PyReadonlyArray2<'py, f64>,
+        tau: PyReadonlyArray2<'py, f64>,
+        armature: Option<Vec<f64>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
+        self.batch(
+            py,
+            vec![flat(&q), flat(&v), flat(&tau)],
+            n,
+            vec![rows, n],
+            move |r, x| r.aba(x[0], x[1], x[2], armature.as_deref()),
+        )
+    }
+
+    /// Gravity torques of N positions (N, n) -> (N, n).
+    fn gravity<'py>(&self, py: Python<'py>, q: PyReadonlyArray2<'py, f64>) -> PyResult<Bound<'py, PyAny>> {
+        let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
+        self.batch(py, vec![flat(&q)], n, vec![rows, n], |r, x| {
+            r.gravity_torque(x[0])
+        })
+    }
+
+    /// Mass matrices of N positions (N, n) -> (N, n, n).
+    fn mass_matrix<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
+        self.batch(py, vec![flat(&q)], n * n, vec![rows, n, n], |r, x| {
+            // nalgebra is column-major; the matrix is symmetric
+            r.mass_matrix(x[0]).map(|m| m.as_slice().to_vec())
+        })
+    }
+
+    /// The inverse-dynamics regressor of N states (N, n) -> (N, n, 10 n), linear in
+    /// `inertial_params`.
+    fn regressor<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+        v: PyReadonlyArray2<'py, f64>,
+        a: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
+        let p = BODY_PARAMS * n;
+        self.batch(
+            py,
+            vec![flat(&q), flat(&v), flat(&a)],
+            n * p,
+            vec![rows, n, p],
+            |r, x| r.regressor(x[0], x[1], x[2]),
+        )
+    }
+}

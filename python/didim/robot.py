@@ -1,0 +1,165 @@
+"""Serial manipulators: :class:`Robot`, a chain of revolute and prismatic joints read from a URDF, with the
+rigid-body dynamics of its bodies' inertial parameters (the core's recursive Newton–Euler, its regressor, the mass
+matrix, gravity and forward dynamics), as Pinocchio computes them. SI units: rad, m, kg, N·m, N."""
+
+from __future__ import annotations
+
+import os
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from . import _checks, _core
+from ._errors import DataError
+
+
+class Robot:
+    """A serial chain of actuated joints under gravity, (0, 0, −9.81) m/s² in the URDF's world frame.
+
+    Built by :meth:`from_urdf`: the URDF's revolute (and continuous) and prismatic joints from its root link down,
+    fixed joints merged into the body before them; ``joints`` picks the actuated ones by name, in the chain's order
+    (the others are locked at zero). Each body carries the 10 standard inertial parameters of the URDF
+    (``inertial_params``, named ``m_<joint>``, ``mx_<joint>``, … ``Izz_<joint>``: mass, first moments m·c and the
+    inertia about the joint frame's origin, in the joint's frame: Pinocchio's dynamic parameters).
+
+    The dynamics take arrays of shape (n,) for one state or (N, n) for N states and return the same leading shape:
+    :meth:`rnea` (inverse dynamics), :meth:`aba` (forward dynamics), :meth:`gravity`, :meth:`mass_matrix`,
+    :meth:`regressor` (``rnea(q, v, a) = regressor(q, v, a) @ inertial_params``). Rotor inertia and friction are
+    not part of these (they belong to the drive: see the identification)."""
+
+    def __init__(self, core: "_core.Robot", urdf: str, source: Optional[str] = None):
+        self._core = core
+        #: The URDF text the robot was read from (kept with saved results, so that they carry their robot).
+        self.urdf = urdf
+        #: Where it was read from (a path), if from a file.
+        self.source = source
+
+    @classmethod
+    def from_urdf(cls, path, joints: Optional[Sequence[str]] = None) -> "Robot":
+        """The robot of the URDF file at ``path``; ``joints``: the actuated joints' names (default: every revolute,
+        continuous and prismatic joint of the chain)."""
+        from ._io import check_input
+
+        shown = check_input(path, "URDF file")
+        try:
+            with open(shown, encoding="utf-8") as f:
+                text = f.read()
+        except UnicodeDecodeError as e:
+            raise DataError(f"{shown}: not a UTF-8 text file, so not a URDF ({e.reason})") from None
+        except OSError as e:
+            raise DataError(f"{shown}: cannot be read ({e.strerror or e})") from None
+        return cls.from_urdf_string(text, joints, source=os.fspath(shown))
+
+    @classmethod
+    def from_urdf_string(cls, text: str, joints: Optional[Sequence[str]] = None,
+                         source: Optional[str] = None) -> "Robot":
+        """The robot of a URDF document given as text."""
+        if not isinstance(text, str):
+            raise DataError(f"the URDF must be text, got {type(text).__name__}")
+        if joints is not None:
+            if isinstance(joints, str) or not all(isinstance(j, str) for j in joints):
+                raise DataError("joints must be a list of joint names")
+            joints = list(joints)
+        return cls(_core.Robot.from_urdf(text, joints), text, source)
+
+    # ------------------------------------------------------------------------------------------------ description
+
+    @property
+    def name(self) -> str:
+        return self._core.name
+
+    @property
+    def joint_names(self) -> List[str]:
+        return list(self._core.joint_names)
+
+    @property
+    def joint_kinds(self) -> List[str]:
+        """"revolute" or "prismatic", per joint."""
+        return list(self._core.joint_kinds)
+
+    @property
+    def ndof(self) -> int:
+        return self._core.ndof
+
+    @property
+    def param_names(self) -> List[str]:
+        return list(self._core.param_names)
+
+    @property
+    def inertial_params(self) -> np.ndarray:
+        """The bodies' inertial parameters (10 per joint, in the order of :attr:`param_names`)."""
+        return np.asarray(self._core.inertial_params)
+
+    @property
+    def limits(self) -> List[Tuple[float, float, float, float]]:
+        """Per joint (lower, upper, velocity, effort) from the URDF, infinite where it gives none."""
+        return list(self._core.limits)
+
+    def with_inertial_params(self, params) -> "Robot":
+        """The same chain with other inertial parameters (as :attr:`inertial_params`)."""
+        p = _checks.real_array("params", params, (1,))
+        return Robot(self._core.with_inertial_params(np.ascontiguousarray(p)), self.urdf, self.source)
+
+    def __repr__(self) -> str:
+        return f"Robot({self.name!r}, joints={self.joint_names})"
+
+    # ------------------------------------------------------------------------------------------------ dynamics
+
+    def _states(self, **arrays) -> Tuple[List[np.ndarray], bool]:
+        """The arrays as (N, n) float64, and whether they were given as one state (n,)."""
+        n, out, single = self.ndof, [], None
+        for name, x in arrays.items():
+            a = _checks.real_array(name, x, (1, 2))
+            if a.shape[-1] != n:
+                raise DataError(f"{name} has {a.shape[-1]} columns, the robot {n} joints ({', '.join(self.joint_names)})"
+                                f": give shape ({n},) or (N, {n})")
+            one = a.ndim == 1
+            if single is not None and one != single:
+                raise DataError(f"{', '.join(arrays)} must all be one state (n,) or all (N, n)")
+            single = one
+            out.append(np.ascontiguousarray(np.atleast_2d(a)))
+        if len({len(a) for a in out}) > 1:
+            raise DataError(f"{', '.join(arrays)} must have the same number of rows, got "
+                            + ", ".join(str(len(a)) for a in out))
+        return out, bool(single)
+
+    def rnea(self, q, v, a) -> np.ndarray:
+        """Inverse dynamics: the joint torques (forces on prismatic joints) that give accelerations ``a`` at
+        positions ``q`` and speeds ``v``, gravity included."""
+        (q, v, a), one = self._states(q=q, v=v, a=a)
+        out = self._core.rnea(q, v, a)
+        return out[0] if one else out
+
+    def aba(self, q, v, tau, armature=None) -> np.ndarray:
+        """Forward dynamics: the accelerations that torques ``tau`` give at ``q``, ``v``; ``armature`` (n,): rotor
+        inertias reflected to the joints, added to the mass matrix's diagonal."""
+        (q, v, tau), one = self._states(q=q, v=v, tau=tau)
+        arm = None
+        if armature is not None:
+            arm = [float(x) for x in _checks.real_array("armature", armature, (1,))]
+            if len(arm) != self.ndof:
+                raise DataError(f"armature has {len(arm)} values, the robot {self.ndof} joints")
+        out = self._core.aba(q, v, tau, arm)
+        return out[0] if one else out
+
+    def gravity(self, q) -> np.ndarray:
+        """The joint torques that hold the robot still against gravity at positions ``q``."""
+        (q,), one = self._states(q=q)
+        out = self._core.gravity(q)
+        return out[0] if one else out
+
+    def mass_matrix(self, q) -> np.ndarray:
+        """The joint-space mass matrix at ``q``: (n, n), or (N, n, n)."""
+        (q,), one = self._states(q=q)
+        out = self._core.mass_matrix(q)
+        return out[0] if one else out
+
+    def regressor(self, q, v, a) -> np.ndarray:
+        """The inverse-dynamics regressor: (n, 10 n), or (N, n, 10 n), with
+        ``rnea(q, v, a) = regressor(q, v, a) @ inertial_params``."""
+        (q, v, a), one = self._states(q=q, v=v, a=a)
+        out = self._core.regressor(q, v, a)
+        return out[0] if one else out
+
+
+__all__ = ["Robot"]

@@ -1,0 +1,128 @@
+"""didim.Robot against Pinocchio (a test-only dependency): the chain read from a URDF, its inertial parameters, and
+rnea, aba, gravity, mass_matrix and the joint-torque regressor on random states of the UR5 (the data folder's and
+example-robot-data's), the Panda (7 joints, its fingers locked) and the double pendulum."""
+
+import importlib.metadata
+import os
+
+import numpy as np
+import pytest
+
+import didim
+
+pin = pytest.importorskip("pinocchio")
+
+#: The issue's bound: every function within 1e-9 of Pinocchio's, relative to the largest entry of what is compared
+#: (both sum the same terms in another order: rounding is a few units of 1e-16 times the terms' size).
+RTOL = 1e-9
+
+
+def _example_robot(name):
+    try:
+        files = importlib.metadata.files("example-robot-data") or []
+    except importlib.metadata.PackageNotFoundError:
+        pytest.skip("example-robot-data is not installed")
+    for f in files:
+        if str(f).endswith(f"/{name}"):
+            return str(f.locate())
+    pytest.skip(f"example-robot-data has no {name}")
+
+
+PANDA_ARM = [f"panda_joint{i}" for i in range(1, 8)]
+
+
+def _cases(robots_dir):
+    return {
+        "ur5 (data folder)": (str(robots_dir / "ur5_cad.urdf"), None),
+        "pendulum (data folder)": (str(robots_dir / "pendulum_cad.urdf"), None),
+        "ur5 (example-robot-data)": (_example_robot("ur5_robot.urdf"), None),
+        "panda (example-robot-data)": (_example_robot("panda.urdf"), PANDA_ARM),
+    }
+
+
+def _pin_model(path, joints):
+    m = pin.buildModelFromUrdf(path)
+    if joints is not None:
+        lock = [m.getJointId(n) for n in m.names[1:] if n not in joints]
+        m = pin.buildReducedModel(m, lock, pin.neutral(m))
+    return m
+
+
+def _close(got, want, what):
+    scale = np.max(np.abs(want))
+    err = np.max(np.abs(np.asarray(got) - want)) / scale
+    assert err < RTOL, f"{what}: relative difference {err:.2e}"
+
+
+@pytest.mark.parametrize("case", ["ur5 (data folder)", "pendulum (data folder)", "ur5 (example-robot-data)",
+                                  "panda (example-robot-data)"])
+def test_the_dynamics_agree_with_pinocchio(robots_dir, case):
+    path, joints = _cases(robots_dir)[case]
+    robot = didim.Robot.from_urdf(path, joints)
+    m = _pin_model(path, joints)
+    d = m.createData()
+    assert robot.joint_names == list(m.names[1:])
+    pi = np.concatenate([m.inertias[i].toDynamicParameters() for i in range(1, m.njoints)])
+    _close(robot.inertial_params, pi, "inertial parameters")
+    rng = np.random.default_rng(7)
+    lo = np.where(np.isfinite(m.lowerPositionLimit), m.lowerPositionLimit, -np.pi)
+    hi = np.where(np.isfinite(m.upperPositionLimit), m.upperPositionLimit, np.pi)
+    qs, vs, as_, taus = [], [], [], []
+    for _ in range(40):
+        q = rng.uniform(lo, hi)
+        v, a, tau = rng.normal(size=m.nv), rng.normal(size=m.nv), 10 * rng.normal(size=m.nv)
+        _close(robot.rnea(q, v, a), pin.rnea(m, d, q, v, a), "rnea")
+        _close(robot.gravity(q), pin.computeGeneralizedGravity(m, d, q), "gravity")
+        mm = pin.crba(m, d, q)
+        _close(robot.mass_matrix(q), np.triu(mm) + np.triu(mm, 1).T, "mass matrix")
+        _close(robot.aba(q, v, tau), pin.aba(m, d, q, v, tau), "aba")
+        _close(robot.regressor(q, v, a), pin.computeJointTorqueRegressor(m, d, q, v, a), "regressor")
+        qs.append(q), vs.append(v), as_.append(a), taus.append(tau)
+    # many states at once: the same as one by one
+    q, v, a = np.array(qs), np.array(vs), np.array(as_)
+    many = robot.rnea(q, v, a)
+    assert many.shape == (40, robot.ndof)
+    _close(many, np.array([pin.rnea(m, d, *x).copy() for x in zip(q, v, a)]), "rnea of many states")
+    assert robot.mass_matrix(q).shape == (40, robot.ndof, robot.ndof)
+    assert robot.regressor(q, v, a).shape == (40, robot.ndof, 10 * robot.ndof)
+    # rotor inertia on the diagonal, as Pinocchio's armature
+    arm = np.linspace(0.1, 0.3, m.nv)
+    m.armature = arm
+    d = m.createData()
+    _close(robot.aba(q[0], v[0], np.array(taus[0]), armature=arm), pin.aba(m, d, q[0], v[0], taus[0]), "aba with armature")
+
+
+def test_a_robot_describes_itself(robots_dir):
+    robot = didim.Robot.from_urdf(robots_dir / "ur5_cad.urdf")
+    assert robot.ndof == 6 and robot.joint_kinds == ["revolute"] * 6
+    assert robot.param_names[:3] == ["m_shoulder_pan_joint", "mx_shoulder_pan_joint", "my_shoulder_pan_joint"]
+    lower, upper, vel, effort = robot.limits[0]
+    assert lower < 0 < upper and vel > 0 and effort > 0
+    heavier = robot.with_inertial_params(robot.inertial_params * 2)
+    q = np.zeros(6) + 0.3
+    np.testing.assert_allclose(heavier.gravity(q), 2 * robot.gravity(q), rtol=1e-12)
+
+
+def test_bad_robots_and_states_are_refused_by_name(robots_dir, tmp_path):
+    ur5 = robots_dir / "ur5_cad.urdf"
+    with pytest.raises(didim.DataError, match="no such file"):
+        didim.Robot.from_urdf(tmp_path / "missing.urdf")
+    fifo = tmp_path / "robot.urdf"
+    os.mkfifo(fifo)
+    with pytest.raises(didim.DataError, match="FIFO|special|not a regular file"):
+        didim.Robot.from_urdf(fifo)
+    bad = tmp_path / "bad.urdf"
+    bad.write_text("<robot name='x'><link name='a'/>")
+    with pytest.raises(didim.DataError, match="not a URDF"):
+        didim.Robot.from_urdf(bad)
+    with pytest.raises(didim.DataError, match="no joint elbow"):
+        didim.Robot.from_urdf(ur5, ["elbow"])
+    with pytest.raises(didim.DataError, match="not a serial chain"):
+        didim.Robot.from_urdf(_example_robot("panda.urdf"))
+    robot = didim.Robot.from_urdf(ur5)
+    with pytest.raises(didim.DataError, match="6 joints"):
+        robot.rnea(np.zeros(5), np.zeros(5), np.zeros(5))
+    with pytest.raises(didim.DataError, match="same number of rows"):
+        robot.rnea(np.zeros((3, 6)), np.zeros((2, 6)), np.zeros((3, 6)))
+    with pytest.raises(didim.DataError, match="non-finite"):
+        robot.gravity(np.full(6, np.nan))
