@@ -16,7 +16,7 @@ from .api import METHODS, identify
 from . import scenarios
 from .doctor import Diagnosis, Finding, doctor
 from .model import Model, Term
-from .robot import Robot
+from .robots import Robot, RobotRecording, load_joint_controllers
 from .result import load_result
 from .check import check_controller
 from .controller_fit import fit_controller

@@ -168,7 +168,7 @@ fn py_error(py: Python<'_>, name: &str, msg: String) -> PyErr {
     }
 }
 
-fn make_controller(kind: &str, gains: &[f64]) -> Result<Controller, Error> {
+pub(crate) fn make_controller(kind: &str, gains: &[f64]) -> Result<Controller, Error> {
     let c = match (kind, gains) {
         ("emps", [kp, kv, gtau, vsat]) => Controller::EmpsCascade {
             kp: *kp,
@@ -487,6 +487,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ACTUATION", sim::ACTUATION.to_vec())?;
     m.add_class::<model::PyModel>()?;
     m.add_class::<robot::PyRobot>()?;
+    m.add_function(wrap_pyfunction!(robot::simulate_robot, m)?)?;
     m.add_function(wrap_pyfunction!(model::coulomb_sign, m)?)?;
     m.add_function(wrap_pyfunction!(lstsq, m)?)?;
     m.add_function(wrap_pyfunction!(butter, m)?)?;

@@ -2,7 +2,11 @@
 //! one state or many (arrays of shape (N, n)).
 
 use didim_core::error::Error;
-use didim_core::robot::{map_rows, JointKind, Robot as CoreRobot, BODY_PARAMS};
+use didim_core::model::{FrictionLaw, LawShape};
+use didim_core::robot::{
+    map_rows, simulate_robot as simulate_robot_core, Drives, JointKind, Robot as CoreRobot, RobotLoopOptions,
+    BODY_PARAMS,
+};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 
@@ -190,4 +194,65 @@ impl PyRobot {
             |r, x| r.regressor(x[0], x[1], x[2]),
         )
     }
+}
+
+/// The closed loop of `robot` (its inertial parameters) with the drives (per joint: rotor
+/// inertia, viscous and Coulomb friction, offset; the friction law), one controller per joint
+/// (`(kind, gains)` as `Problem` takes them), following `qr` (N, n) from rest at `qr[0]`, the
+/// controllers' output starting at `force0`: a dict of q, qd, qdd, force (N, n).
+#[pyfunction]
+#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps=0.01, coulomb_law="algebraic"))]
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_robot<'py>(
+    py: Python<'py>,
+    robot: &PyRobot,
+    armature: Vec<f64>,
+    viscous: Vec<f64>,
+    coulomb: Vec<f64>,
+    offset: Vec<f64>,
+    controllers: Vec<(String, Vec<f64>)>,
+    qr: PyReadonlyArray2<'py, f64>,
+    dt: f64,
+    quantization: Vec<f64>,
+    force0: Vec<f64>,
+    substeps: usize,
+    coulomb_eps: f64,
+    coulomb_law: &str,
+) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let (rows, n) = (qr.as_array().nrows(), robot.inner.ndof());
+    let qr = flat(&qr);
+    let out = run(py, || {
+        let law = FrictionLaw {
+            shape: LawShape::from_name(coulomb_law)?,
+            eps: coulomb_eps,
+        };
+        let drives = Drives {
+            armature,
+            viscous,
+            coulomb,
+            offset,
+            law,
+        };
+        let laws = controllers
+            .iter()
+            .map(|(kind, gains)| crate::make_controller(kind, gains).and_then(|c| c.law(dt)))
+            .collect::<Result<Vec<_>, Error>>()?;
+        let opts = RobotLoopOptions {
+            dt,
+            substeps,
+            quantization,
+            force0,
+        };
+        simulate_robot_core(&robot.inner, &drives, &laws, &qr, &opts)
+    })?;
+    let d = pyo3::types::PyDict::new(py);
+    for (name, x) in [
+        ("q", out.q),
+        ("qd", out.qd),
+        ("qdd", out.qdd),
+        ("force", out.force),
+    ] {
+        d.set_item(name, PyArray1::from_vec(py, x).reshape([rows, n])?)?;
+    }
+    Ok(d)
 }

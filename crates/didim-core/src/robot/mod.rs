@@ -12,10 +12,13 @@
 //! `[m, m·cx, m·cy, m·cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]` are expressed in its joint's frame, the
 //! inertia about that frame's origin. SI units: m, kg, rad, N, N·m.
 
+pub mod closed_loop;
 mod spatial;
 mod urdf;
 
-use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, Vector3};
+pub use closed_loop::{simulate_robot, Drives, RobotLoopOptions, RobotLoopOutput};
+
+use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, Matrix6, Vector3, Vector6};
 
 use crate::error::{invalid, Result};
 use spatial::{Force, Motion, Pose};
@@ -275,8 +278,100 @@ impl Robot {
 
     /// Forward dynamics: the accelerations that torques `tau` give at positions `q` and speeds
     /// `v`, M(q)⁻¹ (τ − C(q, v) v − g(q)), with `armature` (rotor inertias reflected to each joint,
-    /// kg·m² or kg, added to M's diagonal) when given.
+    /// kg·m² or kg, added to M's diagonal) when given. Featherstone's articulated-body algorithm:
+    /// O(n), no mass matrix formed.
     pub fn aba(&self, q: &[f64], v: &[f64], tau: &[f64], armature: Option<&[f64]>) -> Result<Vec<f64>> {
+        self.check("q", q)?;
+        self.check("v", v)?;
+        self.check("tau", tau)?;
+        if let Some(ia) = armature {
+            self.check("armature", ia)?;
+        }
+        let mut ws = AbaWork::new(self.ndof());
+        let mut out = vec![0.0; self.ndof()];
+        self.aba_into(q, v, tau, armature, &mut ws, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Robot::aba`] without the checks, in a reusable workspace (the simulator's inner loop).
+    pub fn aba_into(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        tau: &[f64],
+        armature: Option<&[f64]>,
+        ws: &mut AbaWork,
+        out: &mut [f64],
+    ) -> Result<()> {
+        let n = self.ndof();
+        // forward: poses, velocities, velocity-product accelerations, bias forces
+        let mut vp = Motion::zero();
+        for i in 0..n {
+            let j = &self.joints[i];
+            let pose = match j.kind {
+                JointKind::Revolute => Pose {
+                    rotation: j.placement_rotation * spatial::rotation_about(&j.axis, q[i]),
+                    translation: j.placement_translation,
+                },
+                JointKind::Prismatic => Pose {
+                    rotation: j.placement_rotation,
+                    translation: j.placement_translation + j.placement_rotation * (j.axis * q[i]),
+                },
+            };
+            let s = Self::subspace(j);
+            let vj = s.scale(v[i]);
+            let vi = pose.motion_to_child(&vp) + vj;
+            ws.x[i] = spatial::motion_matrix(&pose);
+            ws.s[i] = s.to_vector();
+            ws.c[i] = vi.cross(&vj).to_vector();
+            ws.ia[i] = spatial::inertia_matrix6(&j.inertia);
+            ws.pa[i] = vi
+                .cross_force(&spatial::inertia_apply(&j.inertia, &vi))
+                .to_vector();
+            vp = vi;
+        }
+        // backward: articulated inertias and bias forces
+        for i in (0..n).rev() {
+            let u_vec = ws.ia[i] * ws.s[i];
+            let d = ws.s[i].dot(&u_vec) + armature.map_or(0.0, |a| a[i]);
+            if !(d > 0.0) {
+                return Err(invalid!(
+                    "joint {}: its articulated inertia is not positive ({d}): the inertial parameters are not those of physical bodies",
+                    self.joints[i].name
+                ));
+            }
+            let u = tau[i] - ws.s[i].dot(&ws.pa[i]);
+            ws.u[i] = u_vec;
+            ws.d[i] = d;
+            ws.uu[i] = u;
+            if i > 0 {
+                let ia = ws.ia[i] - u_vec * u_vec.transpose() / d;
+                let pa = ws.pa[i] + ia * ws.c[i] + u_vec * (u / d);
+                let xt = ws.x[i].transpose();
+                ws.ia[i - 1] += xt * ia * ws.x[i];
+                ws.pa[i - 1] += xt * pa;
+            }
+        }
+        // forward: accelerations (gravity as an acceleration of the base)
+        let mut ap = Vector6::new(0.0, 0.0, 0.0, -self.gravity.x, -self.gravity.y, -self.gravity.z);
+        for i in 0..n {
+            let a = ws.x[i] * ap + ws.c[i];
+            let qdd = (ws.uu[i] - ws.u[i].dot(&a)) / ws.d[i];
+            out[i] = qdd;
+            ap = a + ws.s[i] * qdd;
+        }
+        Ok(())
+    }
+
+    /// Forward dynamics through the mass matrix and its Cholesky factor (the reference that
+    /// [`Robot::aba`] is tested against).
+    pub fn forward_dynamics_crba(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        tau: &[f64],
+        armature: Option<&[f64]>,
+    ) -> Result<Vec<f64>> {
         self.check("tau", tau)?;
         let nle = self.nonlinear_effects(q, v)?;
         let mut m = self.mass_matrix(q)?;
@@ -326,6 +421,34 @@ impl Robot {
             }
         }
         Ok(y)
+    }
+}
+
+/// The articulated-body algorithm's workspace for a robot of `n` joints.
+#[derive(Clone, Debug)]
+pub struct AbaWork {
+    x: Vec<Matrix6<f64>>,
+    s: Vec<Vector6<f64>>,
+    c: Vec<Vector6<f64>>,
+    ia: Vec<Matrix6<f64>>,
+    pa: Vec<Vector6<f64>>,
+    u: Vec<Vector6<f64>>,
+    d: Vec<f64>,
+    uu: Vec<f64>,
+}
+
+impl AbaWork {
+    pub fn new(n: usize) -> Self {
+        AbaWork {
+            x: vec![Matrix6::zeros(); n],
+            s: vec![Vector6::zeros(); n],
+            c: vec![Vector6::zeros(); n],
+            ia: vec![Matrix6::zeros(); n],
+            pa: vec![Vector6::zeros(); n],
+            u: vec![Vector6::zeros(); n],
+            d: vec![0.0; n],
+            uu: vec![0.0; n],
+        }
     }
 }
 

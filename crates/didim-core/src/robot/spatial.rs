@@ -4,7 +4,7 @@
 
 use std::ops::Add;
 
-use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
+use nalgebra::{Matrix3, Matrix6, Rotation3, Unit, Vector3, Vector6};
 
 use super::BODY_PARAMS;
 
@@ -46,9 +46,21 @@ impl Motion {
         }
     }
 
+    /// As a 6-vector (ω, v).
+    pub fn to_vector(self) -> Vector6<f64> {
+        Vector6::new(self.w.x, self.w.y, self.w.z, self.v.x, self.v.y, self.v.z)
+    }
+
     /// The power pairing with a force.
     pub fn dot(&self, f: &Force) -> f64 {
         self.w.dot(&f.n) + self.v.dot(&f.f)
+    }
+}
+
+impl Force {
+    /// As a 6-vector (n, f).
+    pub fn to_vector(self) -> Vector6<f64> {
+        Vector6::new(self.n.x, self.n.y, self.n.z, self.f.x, self.f.y, self.f.z)
     }
 }
 
@@ -151,4 +163,33 @@ pub fn params_of(mass: f64, com: &Vector3<f64>, inertia_com: &Matrix3<f64>) -> [
         io[(1, 2)],
         io[(2, 2)],
     ]
+}
+
+fn skew(x: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -x.z, x.y, x.z, 0.0, -x.x, -x.y, x.x, 0.0)
+}
+
+/// The 6 × 6 matrix of [`Pose::motion_to_child`]: `[Rᵀ, 0; −Rᵀ[p]×, Rᵀ]` (its transpose carries
+/// forces from the child to the parent).
+pub fn motion_matrix(pose: &Pose) -> Matrix6<f64> {
+    let rt = pose.rotation.transpose();
+    let mut x = Matrix6::zeros();
+    x.fixed_view_mut::<3, 3>(0, 0).copy_from(&rt);
+    x.fixed_view_mut::<3, 3>(3, 3).copy_from(&rt);
+    x.fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&(-rt * skew(&pose.translation)));
+    x
+}
+
+/// The 6 × 6 spatial inertia of a body's parameters: `[I_O, [h]×; −[h]×, m·1]`.
+pub fn inertia_matrix6(p: &[f64; BODY_PARAMS]) -> Matrix6<f64> {
+    let h = skew(&Vector3::new(p[1], p[2], p[3]));
+    let mut m = Matrix6::zeros();
+    m.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&inertia_matrix(&p[4..10]));
+    m.fixed_view_mut::<3, 3>(0, 3).copy_from(&h);
+    m.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-h));
+    m.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(Matrix3::identity() * p[0]));
+    m
 }

@@ -110,8 +110,10 @@ fn forward_dynamics_inverts_inverse_dynamics() {
         let ia = [0.1, 0.2, 0.3];
         let tau_ia: Vec<f64> = tau.iter().zip(&ia).zip(&a).map(|((t, i), x)| t + i * x).collect();
         let back = r.aba(&q, &v, &tau_ia, Some(&ia)).unwrap();
+        let crba = r.forward_dynamics_crba(&q, &v, &tau_ia, Some(&ia)).unwrap();
         for i in 0..3 {
             assert!((back[i] - a[i]).abs() < 1e-10);
+            assert!((crba[i] - a[i]).abs() < 1e-10);
         }
     }
 }

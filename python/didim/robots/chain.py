@@ -9,8 +9,8 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from . import _checks, _core
-from ._errors import DataError
+from .. import _checks, _core
+from .._errors import DataError
 
 
 class Robot:
@@ -38,7 +38,7 @@ class Robot:
     def from_urdf(cls, path, joints: Optional[Sequence[str]] = None) -> "Robot":
         """The robot of the URDF file at ``path``; ``joints``: the actuated joints' names (default: every revolute,
         continuous and prismatic joint of the chain)."""
-        from ._io import check_input
+        from .._io import check_input
 
         shown = check_input(path, "URDF file")
         try:

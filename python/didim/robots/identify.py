@@ -1,0 +1,428 @@
+"""Identification of a robot's dynamics from its record: the base parameters of its rigid bodies (with each joint's
+rotor inertia), each joint's viscous and Coulomb friction (and offset), by IDIM-LS on the measured positions or by
+DIDIM on the closed loop simulated with the current estimate, weighted per joint.
+
+Base parameters (Gautier's numerical method): the inverse-dynamics regressor of the rotor inertias and the bodies'
+standard parameters at random states, its columns scaled to unit norm and taken in order (rotor inertias first, then
+the bodies from the base out), is reduced by QR: a column whose diagonal of R is negligible against the largest is a
+combination of the columns before it and is regrouped into them. The base parameters are the independent ones plus
+those combinations, β = K·π; their names say what each combines."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .. import _core
+from .._errors import DataError, SimulationError
+from .chain import Robot
+from .record import RobotRecording
+
+#: A regressor column is independent when its R diagonal, after the columns are scaled to unit norm, is above this
+#: share of the largest (combinations cancel to rounding, ~1e-15; the weakest independent column of the UR5 is ~1e-3).
+BASE_RANK_TOL = 1e-8
+
+#: Coefficients of a regrouping below this share of the largest are rounding.
+COEF_TOL = 1e-9
+
+#: Rows where a joint moves slower than this share of its top speed are left out of its least squares: there the
+#: friction's shape through zero speed (unknown, and not the model's) sets the force.
+SLOW_SHARE = 0.05
+
+#: The friction law of the simulated loop: algebraic, with a smoothing speed of this share of the slowest joint's top
+#: speed (its shape only matters in the rows left out).
+EPS_SHARE = 0.01
+
+
+@dataclass(frozen=True)
+class BaseParameters:
+    """The map β = K·π from the standard parameters π (rotor inertias, then 10 per body) to the base parameters."""
+
+    standard_names: Tuple[str, ...]
+    names: Tuple[str, ...]
+    K: np.ndarray
+    independent: Tuple[int, ...]
+
+    def of(self, pi: np.ndarray) -> np.ndarray:
+        return self.K @ pi
+
+    def standard_from(self, beta: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+        """The standard parameters closest to ``anchor`` (the URDF's, say) whose base parameters are ``beta``: every
+        such set gives the same dynamics."""
+        return anchor + np.linalg.lstsq(self.K, beta - self.K @ anchor, rcond=None)[0]
+
+
+def _standard_names(robot: Robot) -> List[str]:
+    return [f"Ia_{j}" for j in robot.joint_names] + robot.param_names
+
+
+def _full_regressor(robot: Robot, q, v, a) -> np.ndarray:
+    """Rows (N·n) × columns (rotor inertias, then the bodies' parameters)."""
+    y = robot.regressor(q, v, a)  # (N, n, 10 n)
+    n = robot.ndof
+    arm = np.zeros((len(q), n, n))
+    idx = np.arange(n)
+    arm[:, idx, idx] = a
+    return np.concatenate([arm, y], axis=2).reshape(len(q) * n, -1)
+
+
+def base_parameters(robot: Robot, samples: int = 400, seed: int = 0) -> BaseParameters:
+    """The base parameters of ``robot`` from its regressor at ``samples`` random states (positions within the joint
+    limits, or a turn for unlimited joints; speeds and accelerations of unit spread)."""
+    rng = np.random.default_rng(seed)
+    n = robot.ndof
+    lim = np.array([lt[:2] for lt in robot.limits], dtype=float)
+    lo = np.where(np.isfinite(lim[:, 0]), lim[:, 0], -math.pi)
+    hi = np.where(np.isfinite(lim[:, 1]), lim[:, 1], math.pi)
+    q = rng.uniform(lo, hi, (samples, n))
+    v, a = rng.normal(size=(samples, n)), rng.normal(size=(samples, n))
+    w = _full_regressor(robot, q, v, a)
+    norms = np.linalg.norm(w, axis=0)
+    alive = norms > 0
+    ws = w[:, alive] / norms[alive]
+    r = np.linalg.qr(ws, mode="r")
+    d = np.abs(np.diag(r))
+    keep_local = d > BASE_RANK_TOL * d.max()
+    cols = np.flatnonzero(alive)
+    ind, dep = cols[keep_local], cols[~keep_local]
+    names = _standard_names(robot)
+    p = w.shape[1]
+    # dependent columns as combinations of the independent ones: W_dep = W_ind · C
+    c, *_ = np.linalg.lstsq(w[:, ind], w[:, dep], rcond=None)
+    k = np.zeros((len(ind), p))
+    k[np.arange(len(ind)), ind] = 1.0
+    for jj, col in enumerate(dep):
+        k[:, col] = c[:, jj]
+    k[np.abs(k) < COEF_TOL * np.max(np.abs(k), axis=1, keepdims=True)] = 0.0
+    base_names = []
+    for i, col in enumerate(ind):
+        parts = [names[col]] + [f"{k[i, j]:+.4g}*{names[j]}" if abs(k[i, j] - 1) > 1e-9 else f"+{names[j]}"
+                                for j in dep if k[i, j] != 0.0]
+        base_names.append(" ".join(parts) if len(parts) > 1 else parts[0])
+    return BaseParameters(tuple(names), tuple(base_names), k, tuple(int(x) for x in ind))
+
+
+@dataclass
+class RobotResult:
+    """A robot's identified dynamics: ``params`` (each joint's ``Ia_``, ``Fv_``, ``Fc_`` (and ``OF_``) under its
+    name, and the base parameters under names that say what they combine), their standard deviations ``std`` and
+    relative ``std_pct``, the closed-loop force error on the training record (``force_error``, and per joint),
+    the robot (its URDF text) and the base map, the method and what it did."""
+
+    method: str
+    params: Dict[str, float]
+    std: Dict[str, float]
+    robot: Robot
+    base: BaseParameters
+    offset: bool
+    force_error: float = math.nan
+    force_error_per_joint: Dict[str, float] = field(default_factory=dict)
+    converged: bool = True
+    iterations: int = 0
+    message: str = ""
+    elapsed_s: float = 0.0
+    notes: List[str] = field(default_factory=list)
+    history: List[float] = field(default_factory=list)
+
+    @property
+    def std_pct(self) -> Dict[str, float]:
+        return {k: 100 * self.std[k] / abs(v) if v else math.inf for k, v in self.params.items() if k in self.std}
+
+    def theta(self) -> np.ndarray:
+        return np.array([self.params[k] for k in _theta_names(self.robot, self.base, self.offset)])
+
+    def drives(self) -> Dict[str, List[float]]:
+        names = self.robot.joint_names
+        return {"armature": [self.params[f"Ia_{j}"] for j in names], "viscous": [self.params[f"Fv_{j}"] for j in names],
+                "coulomb": [self.params[f"Fc_{j}"] for j in names],
+                "offset": [self.params.get(f"OF_{j}", 0.0) for j in names]}
+
+    def standard(self) -> np.ndarray:
+        """Standard parameters (rotor inertias, bodies) with this result's base parameters, closest to the URDF's."""
+        anchor = np.concatenate([np.zeros(self.robot.ndof), self.robot.inertial_params])
+        beta = np.array([self.params[b] for b in self.base.names])
+        return self.base.standard_from(beta, anchor)
+
+    def to_dict(self) -> Dict[str, Any]:
+        from .._io import jsonable
+
+        return jsonable({"kind": "robot", "method": self.method, "params": self.params, "std": self.std,
+                         "std_pct": self.std_pct, "offset": self.offset, "force_error": self.force_error,
+                         "force_error_per_joint": self.force_error_per_joint, "converged": self.converged,
+                         "iterations": self.iterations, "message": self.message, "elapsed_s": self.elapsed_s,
+                         "notes": self.notes, "history": self.history,
+                         "robot": {"name": self.robot.name, "joints": self.robot.joint_names, "urdf": self.robot.urdf},
+                         "base": {"names": list(self.base.names), "standard_names": list(self.base.standard_names),
+                                  "K": self.base.K.tolist(), "independent": list(self.base.independent)}})
+
+    def summary(self) -> str:
+        lines = [f"{self.method} on a {self.robot.ndof}-joint robot ({self.robot.name}): "
+                 + ("converged" if self.converged else "NOT converged") + f" in {self.iterations} iteration(s), "
+                 f"{self.elapsed_s:.1f} s; closed-loop force error {100 * self.force_error:.2f} %"]
+        lines += [f"  {j}: force error {100 * e:.2f} %" for j, e in self.force_error_per_joint.items()]
+        pct = self.std_pct
+        for k, v in self.params.items():
+            lines.append(f"  {k} = {v:.6g} (±{pct.get(k, math.nan):.2g} %)")
+        lines += [f"note: {x}" for x in self.notes]
+        return "\n".join(lines)
+
+
+def result_from_dict(d: Dict[str, Any]) -> RobotResult:
+    r = d["robot"]
+    robot = Robot.from_urdf_string(r["urdf"], r["joints"])
+    b = d["base"]
+    base = BaseParameters(tuple(b["standard_names"]), tuple(b["names"]), np.array(b["K"], dtype=float),
+                          tuple(b["independent"]))
+    return RobotResult(method=d["method"], params=dict(d["params"]), std=dict(d["std"]), robot=robot, base=base,
+                       offset=bool(d["offset"]), force_error=d.get("force_error", math.nan),
+                       force_error_per_joint=dict(d.get("force_error_per_joint", {})),
+                       converged=bool(d.get("converged", True)), iterations=int(d.get("iterations", 0)),
+                       message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
+                       notes=list(d.get("notes", [])), history=list(d.get("history", [])))
+
+
+def _theta_names(robot: Robot, base: BaseParameters, offset: bool) -> List[str]:
+    names = list(base.names)
+    names += [f"Fv_{j}" for j in robot.joint_names] + [f"Fc_{j}" for j in robot.joint_names]
+    if offset:
+        names += [f"OF_{j}" for j in robot.joint_names]
+    return names
+
+
+def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, eps: float) -> np.ndarray:
+    """(N, n, p): the base parameters' columns, then each joint's friction (and offset) on its own row."""
+    n = robot.ndof
+    # the dependent columns are combinations of the independent ones: W·π = W[:, independent]·β
+    wb = _full_regressor(robot, q, v, a)[:, list(base.independent)].reshape(len(q), n, -1)
+    idx = np.arange(n)
+    fv = np.zeros((len(q), n, n))
+    fv[:, idx, idx] = v
+    fc = np.zeros((len(q), n, n))
+    fc[:, idx, idx] = _core.coulomb_sign(np.ascontiguousarray(v.ravel()), eps, "algebraic").reshape(v.shape) \
+        if eps > 0 else np.sign(v)
+    parts = [wb, fv, fc]
+    if offset:
+        of = np.zeros((len(q), n, n))
+        of[:, idx, idx] = 1.0
+        parts.append(of)
+    return np.concatenate(parts, axis=2)
+
+
+def _decimation(rec: RobotRecording):
+    """The parallel decimation of a robot record: a zero-phase low-pass at ten times the reference's bandwidth (the
+    frequency below which 99.9 % of its motion's power lies), within a tenth of the sample rate."""
+    from ..signal import Decimation
+
+    fs = 1 / rec.dt
+    x = rec.qr - rec.qr.mean(axis=0)
+    p = np.sum(np.abs(np.fft.rfft(x, axis=0)) ** 2, axis=1)
+    f = np.fft.rfftfreq(rec.n, rec.dt)
+    c = np.cumsum(p[1:]) / max(np.sum(p[1:]), 1e-300)
+    band = float(f[1:][np.searchsorted(c, 0.999)]) if len(c) else fs / 100
+    return Decimation.lowpass(min(max(10 * band, 5 * f[1] if len(f) > 1 else 1.0), fs / 10), fs)
+
+
+def _stack(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray, weights: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Each joint's force and regressor rows decimated, the rows where it moves slowly left out, weighted."""
+    ys, ws = [], []
+    vmax = np.max(np.abs(v), axis=0)
+    for j in range(y.shape[1]):
+        yd, wd = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, :]))
+        vd = dec(np.ascontiguousarray(v[:, j]))
+        keep = np.abs(vd) > SLOW_SHARE * vmax[j]
+        ys.append(yd[keep] / weights[j])
+        ws.append(wd[keep] / weights[j])
+    return np.concatenate(ys), np.concatenate(ws)
+
+
+def _solve(y: np.ndarray, w: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least squares by the core's QR: estimate, covariance (eq. (13): σ² (WᵀW)⁻¹, σ² from the residual) and
+    residual."""
+    out = _core.lstsq(np.ascontiguousarray(w), np.ascontiguousarray(y))
+    theta = np.asarray(out["params"], dtype=float)
+    return theta, np.asarray(out["covariance"], dtype=float), np.asarray(out["residual"], dtype=float)
+
+
+def _measured_states(rec: RobotRecording, dec) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions, speeds and accelerations from the measured positions: the decimation's zero-phase low-pass, then
+    central differences."""
+    from ..signal import diffcent, lowpass
+
+    q = np.column_stack([lowpass(rec.qm[:, j], dec.cutoff_hz, 1 / rec.dt) for j in range(rec.ndof)])
+    v = np.column_stack([diffcent(q[:, j], rec.dt) for j in range(rec.ndof)])
+    a = np.column_stack([diffcent(v[:, j], rec.dt) for j in range(rec.ndof)])
+    return q, v, a
+
+
+def _fit(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, eps: float, dec,
+         y: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Weighted least squares on the states: ordinary first, then each joint's rows divided by its residual's σ."""
+    w = _model_regressor(robot, base, q, v, a, offset, eps)
+    ones = np.ones(rec.ndof)
+    yy, ww = _stack(dec, y, w, v, ones)
+    theta, _, r = _solve(yy, ww)
+    # σ per joint from the unweighted fit's residual
+    sig = []
+    at = 0
+    for j in range(rec.ndof):
+        yd, wd = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, :]))
+        vd = dec(np.ascontiguousarray(v[:, j]))
+        keep = np.abs(vd) > SLOW_SHARE * np.max(np.abs(v[:, j]))
+        rj = yd[keep] - wd[keep] @ theta
+        sig.append(max(float(np.std(rj)), 1e-12 * max(float(np.std(yd)), 1e-300)))
+        at += int(keep.sum())
+    yy, ww = _stack(dec, y, w, v, np.array(sig))
+    theta, cov, _ = _solve(yy, ww)
+    return theta, cov
+
+
+def _eps(rec: RobotRecording) -> float:
+    vmax = np.max(np.abs(np.diff(rec.qr, axis=0)), axis=0) / rec.dt
+    return float(EPS_SHARE * np.min(vmax[vmax > 0])) if np.any(vmax > 0) else 1e-3
+
+
+def simulate_robot(rec: RobotRecording, result: RobotResult, substeps: int = 0) -> Dict[str, np.ndarray]:
+    """The closed loop of ``rec`` (its references, controllers, encoders, first force) with the model of ``result``."""
+    robot = result.robot.with_inertial_params(result.standard()[result.robot.ndof:])
+    d = result.drives()
+    d["armature"] = list(result.standard()[:result.robot.ndof])
+    return _simulate(rec, robot, d, _eps(rec), substeps)
+
+
+def _simulate(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]], eps: float, substeps: int = 0):
+    try:
+        return _core.simulate_robot(robot._core, d["armature"], d["viscous"], d["coulomb"], d["offset"],
+                                    rec.core_controllers(), rec.qr, rec.dt, quantization=list(rec.encoder_step),
+                                    force0=list(rec.force[0]), substeps=substeps, coulomb_eps=eps)
+    except DataError as e:
+        raise SimulationError(f"the robot's closed loop cannot be simulated with these parameters: {e}") from None
+
+
+def force_errors(rec: RobotRecording, force_sim: np.ndarray) -> Tuple[float, Dict[str, float]]:
+    """‖τ − τ_sim‖/‖τ‖ over all joints, and per joint."""
+    total = float(np.linalg.norm(rec.force - force_sim) / np.linalg.norm(rec.force))
+    per = {j: float(np.linalg.norm(rec.force[:, i] - force_sim[:, i]) / np.linalg.norm(rec.force[:, i]))
+           for i, j in enumerate(rec.joint_names)}
+    return total, per
+
+
+def _result(method: str, rec: RobotRecording, robot: Robot, base: BaseParameters, offset: bool, theta, cov,
+            **kw) -> RobotResult:
+    names = _theta_names(robot, base, offset)
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    params = dict(zip(names, map(float, theta)))
+    stds = dict(zip(names, map(float, std)))
+    # each joint's rotor inertia: its own base parameter, or (regrouped with link inertias) the base value minus the
+    # URDF's values of what it combines
+    notes = list(kw.pop("notes", []))
+    pi0 = np.concatenate([np.zeros(robot.ndof), robot.inertial_params])
+    for j, jn in enumerate(robot.joint_names):
+        i = base.independent.index(j) if j in base.independent else None
+        if i is None:
+            notes.append(f"Ia_{jn} is not identifiable on its own (no base parameter holds it)")
+            continue
+        bname = base.names[i]
+        if bname == f"Ia_{jn}":
+            continue
+        others = base.K[i].copy()
+        others[j] = 0.0
+        params[f"Ia_{jn}"] = params[bname] - float(others @ pi0)
+        stds[f"Ia_{jn}"] = stds[bname]
+        notes.append(f"Ia_{jn} is regrouped with body parameters ({bname}): its value takes the URDF's values of "
+                     "those")
+    ordered = {k: params[k] for k in [f"{p}_{j}" for p in ("Ia", "Fv", "Fc") + (("OF",) if offset else ())
+                                      for j in robot.joint_names]}
+    ordered.update({k: v for k, v in params.items() if k not in ordered})
+    return RobotResult(method=method, params=ordered, std=stds, robot=robot, base=base, offset=offset, notes=notes,
+                       **kw)
+
+
+def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> RobotResult:
+    """IDIM-LS: the inverse dynamic model on the measured positions (zero-phase low-passed, differentiated twice),
+    weighted least squares per joint, the rows where a joint moves slowly left out."""
+    t0 = time.perf_counter()
+    _check(rec, robot)
+    base = base_parameters(robot)
+    dec = _decimation(rec)
+    q, v, a = _measured_states(rec, dec)
+    theta, cov = _fit(rec, robot, base, q, v, a, offset, 0.0, dec, rec.force)
+    res = _result("idim-ls", rec, robot, base, offset, theta, cov)
+    try:
+        sim = simulate_robot(rec, res)
+        res.force_error, res.force_error_per_joint = force_errors(rec, sim["force"])
+    except SimulationError as e:
+        res.notes.append(f"its closed loop cannot be simulated: {e}")
+    res.elapsed_s = time.perf_counter() - t0
+    return res
+
+
+def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: int = 30, tol: float = 1e-3,
+          progress: Optional[Callable[[str], None]] = None) -> RobotResult:
+    """DIDIM from the URDF's values (rotor inertias and friction 0): the closed loop simulated with the current
+    estimate, weighted least squares of the measured force on the simulated states, until the output error changes
+    by less than ``tol`` of itself between iterations (the paper's criterion)."""
+    t0 = time.perf_counter()
+    _check(rec, robot)
+    say = progress or (lambda s: None)
+    base = base_parameters(robot)
+    dec = _decimation(rec)
+    eps = _eps(rec)
+    pi0 = np.concatenate([np.zeros(robot.ndof), robot.inertial_params])
+    n = robot.ndof
+    theta = np.concatenate([base.of(pi0), np.zeros(2 * n + (n if offset else 0))])
+    names = _theta_names(robot, base, offset)
+    history: List[float] = []
+    best = None
+    converged, message = False, ""
+    cov = np.zeros((len(theta), len(theta)))
+    for it in range(max_iter):
+        pi = base.standard_from(theta[:len(base.names)], pi0)
+        d = {"armature": list(pi[:n]), "viscous": list(theta[len(base.names):len(base.names) + n]),
+             "coulomb": list(theta[len(base.names) + n:len(base.names) + 2 * n]),
+             "offset": list(theta[len(base.names) + 2 * n:]) if offset else [0.0] * n}
+        try:
+            sim = _simulate(rec, robot.with_inertial_params(pi[n:]), d, eps)
+        except (SimulationError, DataError) as e:
+            message = f"iteration {it}: {e}"
+            break
+        err = float(np.linalg.norm(rec.force - sim["force"]) / np.linalg.norm(rec.force))
+        history.append(err)
+        say(f"DIDIM iteration {it}: closed-loop force error {100 * err:.3f} %")
+        if best is None or err < best[0]:
+            best = (err, theta.copy(), cov.copy(), sim)
+        if it >= 1 and abs(history[-2] - err) <= tol * err:
+            converged = True
+            break
+        theta, cov = _fit(rec, robot, base, sim["q"], sim["qd"], sim["qdd"], offset, eps, dec, rec.force)
+    if best is None:
+        raise SimulationError(f"DIDIM could not simulate the robot's closed loop from the URDF's values: {message}")
+    err, theta, cov, sim = best
+    if not converged and not message:
+        message = f"no convergence in {max_iter} iterations"
+    res = _result("didim", rec, robot, base, offset, theta, cov, converged=converged, iterations=len(history),
+                  message=message, history=history)
+    res.force_error, res.force_error_per_joint = force_errors(rec, sim["force"])
+    res.elapsed_s = time.perf_counter() - t0
+    del names
+    return res
+
+
+def _check(rec: RobotRecording, robot: Robot) -> None:
+    if list(rec.joint_names) != robot.joint_names:
+        raise DataError(f"the record's joints ({', '.join(rec.joint_names)}) are not the robot's "
+                        f"({', '.join(robot.joint_names)}), in the same order")
+
+
+def save_result(result: RobotResult, path) -> None:
+    from .._io import write_text
+
+    write_text(path, json.dumps(result.to_dict(), indent=1))
+
+
+__all__ = ["BaseParameters", "RobotResult", "base_parameters", "idim_ls", "didim", "simulate_robot", "force_errors",
+           "result_from_dict", "save_result"]
