@@ -30,6 +30,8 @@ __all__ = [
     "SIMULATOR_BUILD",
     "ACTUATION",
     "Model",
+    "Robot",
+    "simulate_robot",
     "TERM_ALIASES",
     "TERM_TABLE",
     "butter",
@@ -100,6 +102,23 @@ class Robot:
     def gravity(self, q: _F64) -> _F64: ...
     def mass_matrix(self, q: _F64) -> _F64: ...
     def regressor(self, q: _F64, v: _F64, a: _F64) -> _F64: ...
+
+def simulate_robot(
+    robot: Robot,
+    armature: Sequence[float],
+    viscous: Sequence[float],
+    coulomb: Sequence[float],
+    offset: Sequence[float],
+    controllers: Sequence[Tuple[str, Sequence[float]]],
+    qr: _F64,
+    dt: float,
+    *,
+    quantization: Sequence[float],
+    force0: Sequence[float],
+    substeps: int = 0,
+    coulomb_eps: float = 0.01,
+    coulomb_law: str = "algebraic",
+) -> Dict[str, _F64]: ...
 
 def coulomb_sign(v: _F64, eps: float = ..., law: str = "algebraic") -> _F64: ...
 def lstsq(w: _F64, y: _F64, *, rank_tol: Optional[float] = None, sigma: str = "paper") -> Dict[str, Any]: ...

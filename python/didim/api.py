@@ -108,6 +108,11 @@ def identify(
     not, naming the likely mistake, "warn" goes on with a :class:`DidimWarning`, "off" skips the check. The check is
     in the result's ``options["controller_check"]``.
     """
+    from .robots import Robot, RobotRecording
+
+    if isinstance(model, Robot) or isinstance(recording, RobotRecording):
+        return _identify_robot(recording, model, method, offset=offset, apM=apM, initial=initial, criterion=criterion,
+                               progress=progress, **options)
     if not isinstance(model, Model) and (not isinstance(model, str) or model not in MODELS):
         raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)} or a didim.Model")
     # the model, converted once: a didim.Model, or a kind with its structure fields as options
@@ -260,3 +265,34 @@ POOR_FORCE_ERROR = 0.5
 
 
 __all__ = ["identify", "METHODS"]
+
+
+def _identify_robot(recording, robot, method: str, *, offset, apM, initial, criterion, progress, **options):
+    """:func:`identify` of a robot's record (:class:`didim.RobotRecording`) with its :class:`didim.Robot`: "didim"
+    (from the URDF's values) or "idim-ls"; ``offset`` adds a constant torque per joint; ``max_iter`` and ``tol`` go to
+    DIDIM."""
+    from .robots import Robot, RobotRecording, didim as robot_didim, idim_ls as robot_idim_ls
+
+    if not isinstance(recording, RobotRecording):
+        raise DataError(f"a robot is identified on a robot's record (didim.load_record(path, robot=robot)), got "
+                        f"{type(recording).__name__}")
+    if not isinstance(robot, Robot):
+        raise DataError(f"a robot's record is identified with its didim.Robot (didim.Robot.from_urdf(path)), got "
+                        f"{type(robot).__name__}")
+    for name, value, why in (("apM", apM, "starts from the URDF's values"), ("initial", initial, "starts from the "
+                             "URDF's values"), ("criterion", None if criterion == "force" else criterion, "fits the force")):
+        if value is not None:
+            raise DataError(f"{name} does not apply to a robot: DIDIM on a robot {why}")
+    offset = bool(_checks.flag("offset", offset)) if offset is not None else False
+    if method == "didim":
+        allowed = {"max_iter", "tol"}
+        unknown = sorted(set(options) - allowed)
+        if unknown:
+            raise DataError(f"unknown option(s) {', '.join(unknown)} for a robot's DIDIM; it takes "
+                            f"{', '.join(sorted(allowed))}")
+        return robot_didim(recording, robot, offset=offset, progress=progress, **options)
+    if method == "idim-ls":
+        if options:
+            raise DataError(f"unknown option(s) {', '.join(sorted(options))} for a robot's IDIM-LS: it takes none")
+        return robot_idim_ls(recording, robot, offset=offset)
+    raise DataError(f"method {method!r} is not available for robots: use 'didim' or 'idim-ls'")

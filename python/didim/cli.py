@@ -68,11 +68,70 @@ def _record_options(p) -> None:
                         "on the first reference sample, as the paper")
 
 
+def _robot_record(args, path: str, robot):
+    """A robot's record at ``path`` with the command's --controller (default: NAME_controller.json beside it)."""
+    from ._errors import DataError
+    from .loaders import load_record
+
+    for flag, value, default in (("--columns", getattr(args, "columns", None), None),
+                                 ("--units", getattr(args, "units", None), None),
+                                 ("--force-scale", getattr(args, "force_scale", 1.0), 1.0)):
+        if value != default:
+            raise DataError(f"{flag} applies to one axis's record; a robot's record is read in SI with columns t, "
+                            "qr_1..qr_n, force_1..force_n, qm_1..qm_n")
+    return load_record(path, robot=robot, controller=getattr(args, "controller", None) or None)
+
+
+def cmd_identify_robot(args) -> int:
+    from ._errors import DataError
+    from ._io import save_figure, write_text
+    from .api import identify
+    from .robots import Robot
+
+    for flag, value in (("--model", args.model != "rigid"), ("--variant", args.variant), ("--apm", args.apm),
+                        ("--criterion", args.criterion != "force"), ("--set", args.set)):
+        if value:
+            raise DataError(f"{flag} does not apply to a robot (--urdf): DIDIM starts from the URDF's values")
+    _check_outputs([args.file, args.controller, args.urdf], [args.json, args.plot])
+    if args.plot:
+        _check_figure_format(args.plot)
+    joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
+    robot = Robot.from_urdf(args.urdf, joints)
+    rec = _robot_record(args, args.file, robot)
+    opts = {k: v for k, v in (("max_iter", args.max_iter), ("tol", args.tol)) if v is not None}
+    if opts and args.method != "didim":
+        raise DataError("--max-iter and --tol apply to DIDIM")
+    res = identify(rec, robot, args.method, offset=args.offset, progress=_progress(args.quiet), **opts)
+    print(res.summary())
+    if args.json:
+        import json
+
+        write_text(args.json, json.dumps(res.to_dict(), indent=1) + "\n")
+        print(f"wrote {args.json}")
+    if args.plot:
+        from .plots import plot_robot_forces
+        from .robots.identify import simulate_robot
+
+        save_figure(plot_robot_forces(rec, simulate_robot(rec, res)["force"], title=f"{res.method}: {rec.name}"),
+                    args.plot, dpi=110)
+        print(f"wrote {args.plot}")
+    if not res.converged:
+        print(f"didim: not converged: {_one_line(res.message)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def cmd_identify(args) -> int:
     from ._io import save_figure, write_text
     from .api import identify
     from .plots import plot_fit
 
+    if args.urdf:
+        return cmd_identify_robot(args)
+    if args.joints:
+        from ._errors import DataError
+
+        raise DataError("--joints picks a robot's actuated joints: give the robot with --urdf")
     _check_outputs([args.file, args.controller], [args.json, args.plot])
     if args.plot:
         _check_figure_format(args.plot)
@@ -130,6 +189,10 @@ def cmd_simulate(args) -> int:
     from .check import enforce
 
     result = load_result(args.result)
+    from .robots import RobotResult
+
+    if isinstance(result, RobotResult):
+        return _simulate_robot(args, result)
     rec = _load(args, args.file)
     chk = enforce(rec, args.controller_check)
     sim = simulate(rec, result)
@@ -160,6 +223,58 @@ def cmd_simulate(args) -> int:
         print(f"didim: no fit: the result does not describe {args.file}: its simulated force misses the measured "
               f"one by {100 * err:.0f} % (more than {100 * ABSURD_FORCE_ERROR:.0f} % is worse than predicting no force); "
               "check that the record, its controller and the result belong to the same axis and units", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _simulate_robot(args, result) -> int:
+    """``didim simulate`` of a robot's result: its closed loop on the record, the force error over all joints and per
+    joint."""
+    import json
+
+    from ._io import save_figure, write_text
+    from .robots.identify import force_errors, simulate_robot
+
+    rec = _robot_record(args, args.file, result.robot)
+    sim = simulate_robot(rec, result)
+    err, per = force_errors(rec, sim["force"])
+    print(f"{args.file}: closed-loop force error of {args.result} ({result.method}, {rec.ndof}-joint robot "
+          f"{result.robot.name}): {100 * err:.2f} %")
+    for j, e in per.items():
+        print(f"  {j}: {100 * e:.2f} %")
+    if args.json:
+        write_text(args.json, json.dumps({"record": args.file, "result": args.result, "force_error": err,
+                                          "force_error_per_joint": per, "params": result.params}, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    if args.plot:
+        from .plots import plot_robot_forces
+
+        save_figure(plot_robot_forces(rec, sim["force"], title=f"{args.result} on {rec.name}"), args.plot, dpi=110)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def cmd_payload(args) -> int:
+    """The payload on a robot's last link from a record made with it, the robot's parameters from a saved result."""
+    import json
+
+    from ._errors import DataError
+    from ._io import write_text
+    from .result import load_result
+    from .robots import RobotResult, payload
+
+    _check_outputs([args.file, args.result, args.controller], [args.json])
+    result = load_result(args.result)
+    if not isinstance(result, RobotResult):
+        raise DataError(f"{args.result}: not a robot's result (didim identify --urdf ... --json OUT.json)")
+    rec = _robot_record(args, args.file, result.robot)
+    p = payload(rec, result, progress=_progress(args.quiet))
+    print(p.summary())
+    if args.json:
+        write_text(args.json, json.dumps(p.to_dict(), indent=2) + "\n")
+        print(f"wrote {args.json}")
+    if not p.converged:
+        print("didim: the payload fit did not converge", file=sys.stderr)
         return 1
     return 0
 
@@ -394,6 +509,11 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--tol", type=float, default=None, help="stopping tolerance of didim (eq. (21)) and oe-lm")
     i.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="another option of the method, e.g. cutoff_hz=2 or substeps=20 (the Python function's keywords)")
+    i.add_argument("--urdf", metavar="URDF", help="a robot: its URDF (the record then has columns t, qr_1..qr_n, "
+                   "force_1..force_n, qm_1..qm_n in the URDF's joint order, and --controller a {\"type\": \"joints\"} "
+                   "file); --method didim or idim-ls")
+    i.add_argument("--joints", metavar="NAMES", help="with --urdf: the actuated joints, comma-separated (default: all "
+                   "revolute and prismatic joints of the chain)")
     i.add_argument("--json", metavar="OUT", help="write the result as JSON")
     i.add_argument("--plot", metavar="PNG", help="write measured vs simulated force and the iterations")
     i.add_argument("--quiet", action="store_true", help="no progress messages")
@@ -420,6 +540,16 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--plot", metavar="PNG", help="measured and simulated force and their difference")
     m.add_argument("--quiet", action="store_true", help="no progress messages")
     m.set_defaults(func=cmd_simulate)
+
+    y = sub.add_parser("payload", help="a robot's payload on its last link (mass, centre of mass) from a record made "
+                                       "with it, the robot's parameters from a saved result")
+    y.add_argument("file", help="the record with the payload (CSV, Parquet or HDF5: t, qr_1.., force_1.., qm_1..)")
+    y.add_argument("result", help="the robot's result without the payload (didim identify --urdf ... --json)")
+    y.add_argument("--controller", metavar="FILE", help="the joints' controllers ({\"type\": \"joints\", ...}); "
+                   "default: NAME_controller.json beside the record")
+    y.add_argument("--json", metavar="OUT", help="write mass, mass_sigma, com, com_sigma and the fit")
+    y.add_argument("--quiet", action="store_true", help="no progress messages")
+    y.set_defaults(func=cmd_payload)
 
     c = sub.add_parser("controller", help="the drive's controller from the log: fit the linear law u = C_r·qr − C_y·qm, "
                                           "or check a described one against the log")

@@ -13,7 +13,7 @@ import math
 import os
 import warnings
 from dataclasses import replace
-from typing import Callable, Dict, List, Mapping, Optional, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
@@ -21,6 +21,8 @@ from . import _checks
 from ._errors import DataError
 from ._io import beside, check_input
 from .controllers import Controller, EmpsCascade, controller_file_units, in_units, load_controller
+from .robots.chain import Robot
+from .robots.record import RobotRecording, load_joint_controllers
 from .recording import Recording, _check_expected_dt, _number, _signal, _time_step
 from .units import SI, Units, check_stroke, from_header, parse as parse_units
 
@@ -243,8 +245,13 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
                 columns: Optional[Mapping[str, str]] = None, force_scale: float = 1.0, dt: Optional[float] = None,
                 position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None,
                 pulses_gain: Union[float, str] = "log", lead_in: Union[str, None, np.ndarray] = "auto",
-                units: Union[None, str, Units] = None, beside_controller: bool = True) -> Recording:
+                units: Union[None, str, Units] = None, beside_controller: bool = True,
+                robot: Optional["Robot"] = None) -> Union[Recording, "RobotRecording"]:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
+
+    With ``robot`` (a :class:`didim.Robot`): a robot's record (:class:`didim.RobotRecording`), columns ``t,
+    qr_1..qr_n, force_1..force_n, qm_1..qm_n`` in the robot's joint order (or ``qr_<joint name>``…), in rad (m)
+    and N·m (N), the controller a ``{"type": "joints", ...}`` file (by default ``NAME_controller.json`` beside it).
 
     CSV: a header line naming the columns, then one row of numbers per sample (comma, semicolon, tab or spaces).
     Parquet: one column per signal. HDF5: one dataset per signal (``columns`` may name ``group/dataset``). MAT: the
@@ -264,6 +271,11 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     file beside the record unless ``beside_controller=False``), the controller is fitted from the log
     (:func:`didim.fit_controller`) and ``Recording.controller_origin`` says so.
     """
+    if robot is not None:
+        if columns is not None or force_scale != 1.0 or units is not None:
+            raise DataError("a robot record is read in SI (rad or m, N·m or N) with columns t, qr_1..qr_n, force_1.., "
+                            "qm_1..; columns, force_scale and units apply to one axis's record")
+        return load_robot_record(path, robot, controller=controller, name=name)
     rec = _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain, units,
                        beside_controller)
     if isinstance(lead_in, str) and lead_in == "auto":
@@ -310,6 +322,66 @@ def _load_record(path, controller, columns, force_scale, dt, position_resolution
         raise DataError(f"{p}: not a text file: a {EXTENSIONS[ext]} record was expected from its extension") from None
     return _from_columns(get, names, p, controller=controller, columns=columns, force_scale=force_scale, dt=dt,
                          position_resolution=position_resolution, name=label, units=units, file_units=file_units)
+
+
+# ---------------------------------------------------------------------------------------------------- robots
+
+
+def _encoder_step(qm: np.ndarray) -> float:
+    step = detect_resolution(qm) if np.all(np.isfinite(qm)) else None
+    return float(step) if step else 0.0
+
+
+def _columns(available: Sequence[str], names: Sequence[str], key: str, where: str) -> List[str]:
+    """The file's columns of signal ``key`` for each joint: ``key_1 … key_n`` or ``key_<joint name>``."""
+    for form in ([f"{key}_{i + 1}" for i in range(len(names))], [f"{key}_{j}" for j in names]):
+        if all(c in available for c in form):
+            return form
+    raise DataError(f"{where}: no columns {key}_1 … {key}_{len(names)} (or {key}_<joint name>) for the robot's "
+                    f"{len(names)} joints ({', '.join(names)}); the file has {', '.join(available)}")
+
+
+def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Optional[str] = None) -> RobotRecording:
+    """A robot record from a CSV, Parquet or HDF5 file with columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``
+    in ``robot``'s joint order (or ``qr_<joint name>``…), positions in rad (prismatic joints: m), forces in N·m (N).
+    ``controller``: the joints' controllers (a sequence, one per joint) or the path of their file; by default
+    ``NAME_controller.json`` beside the record."""
+    p = check_input(path, "robot record")
+    ext = os.path.splitext(p)[1].lower()
+    kind = EXTENSIONS.get(ext)
+    if kind not in ("CSV", "Parquet", "HDF5"):
+        raise DataError(f"{p}: a robot record is a CSV, Parquet or HDF5 file, got {ext or 'no extension'!r}")
+    if os.path.getsize(p) == 0:
+        raise DataError(f"{p}: the file is empty (0 bytes)")
+    if controller is None:
+        side = beside(p)
+        if side is None:
+            raise DataError(f"{p}: no controller given and no {os.path.splitext(p)[0]}_controller.json beside it: give "
+                            "the joints' controller file (CLI: --controller CTL.json)")
+        controller = side
+    if isinstance(controller, (str, os.PathLike)):
+        controller = load_joint_controllers(controller)
+    controllers = tuple(controller)
+    try:
+        get, available = {"CSV": _csv, "Parquet": _parquet, "HDF5": _hdf5}[kind](p)
+    except UnicodeDecodeError:
+        raise DataError(f"{p}: not a text file: a {kind} record was expected from its extension") from None
+    names = robot.joint_names
+    if "t" not in available:
+        raise DataError(f"{p}: no time column t; the file has {', '.join(available)}")
+    dt = _time_step(np.asarray(get("t"), dtype=float), f"{p}: ")
+    signals = {key: np.column_stack([np.asarray(get(c), dtype=float).ravel() for c in _columns(available, names, key, p)])
+               for key in ("qr", "force", "qm")}
+    if len(controllers) != len(names):
+        raise DataError(f"{p}: {len(controllers)} controllers for the robot's {len(names)} joints")
+    steps = tuple(_encoder_step(signals["qm"][:, j]) for j in range(len(names)))
+    label = name if name is not None else os.path.splitext(os.path.basename(p))[0]
+    try:
+        return RobotRecording(dt=dt, joint_names=tuple(names), controllers=controllers, encoder_step=steps, name=label,
+                              joint_kinds=tuple(robot.joint_kinds), **signals)
+    except DataError as e:
+        raise DataError(f"{p}: {e}") from None
+
 
 
 def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str, str]] = None,

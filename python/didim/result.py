@@ -425,6 +425,13 @@ def load_result(path) -> "IdentificationResult":  # noqa: F821
         raise DataError(f"{os.fspath(path)}: not a JSON result ({e})") from None
     except RecursionError:
         raise DataError(f"{os.fspath(path)}: not a didim result (its JSON is nested too deeply)") from None
+    if isinstance(d, dict) and d.get("kind") == "robot":  # a robot's result carries its robot
+        from .robots.identify import result_from_dict
+
+        try:
+            return result_from_dict(d)  # type: ignore[return-value]
+        except (KeyError, TypeError, ValueError) as e:
+            raise DataError(f"{os.fspath(path)}: not a readable robot result ({type(e).__name__}: {e})") from None
     if not isinstance(d, dict) or "params" not in d or "model" not in d:
         raise DataError(f"{os.fspath(path)}: not a didim result (needs 'model' and 'params'; save one with "
                         "result.save('r.json') or didim identify --json)")

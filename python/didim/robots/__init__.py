@@ -2,8 +2,8 @@
 loop and its identification (IDIM-LS and DIDIM on base parameters, :mod:`didim.robots.identify`)."""
 
 from .chain import Robot
-from .record import RobotRecording, load_joint_controllers, load_robot_record
-from .identify import BaseParameters, RobotResult, base_parameters, didim, idim_ls, simulate_robot
+from .record import RobotRecording, load_joint_controllers
+from .identify import BaseParameters, PayloadResult, RobotResult, base_parameters, didim, idim_ls, payload, simulate_robot
 
-__all__ = ["Robot", "RobotRecording", "load_joint_controllers", "load_robot_record", "BaseParameters", "RobotResult",
-           "base_parameters", "didim", "idim_ls", "simulate_robot"]
+__all__ = ["Robot", "RobotRecording", "load_joint_controllers", "BaseParameters", "PayloadResult", "RobotResult",
+           "base_parameters", "didim", "idim_ls", "payload", "simulate_robot"]

@@ -338,8 +338,55 @@ def _result(method: str, rec: RobotRecording, robot: Robot, base: BaseParameters
     ordered = {k: params[k] for k in [f"{p}_{j}" for p in ("Ia", "Fv", "Fc") + (("OF",) if offset else ())
                                       for j in robot.joint_names]}
     ordered.update({k: v for k, v in params.items() if k not in ordered})
-    return RobotResult(method=method, params=ordered, std=stds, robot=robot, base=base, offset=offset, notes=notes,
-                       **kw)
+    res = RobotResult(method=method, params=ordered, std=stds, robot=robot, base=base, offset=offset, notes=notes, **kw)
+    res.notes += plausibility(res)
+    return res
+
+
+#: A base parameter whose standard deviation exceeds this share of its value is reported as poorly excited
+#: (Gautier's rule of thumb: a relative standard deviation above 10 %).
+POOR_EXCITATION = 0.1
+
+
+def plausibility(res: RobotResult) -> List[str]:
+    """What a robotics engineer checks before trusting the estimate: the base parameters the record excites poorly
+    (relative standard deviation above :data:`POOR_EXCITATION`), and whether the standard parameters closest to the
+    URDF's that give these base parameters are those of physical bodies (mass > 0, pseudo-inertia positive definite:
+    a density can have them) and of physical drives (rotor inertia, friction ≥ 0)."""
+    out = []
+    poor = sorted(((res.std[b] / abs(res.params[b]), b) for b in res.base.names
+                   if res.params[b] != 0 and res.std.get(b, 0) > POOR_EXCITATION * abs(res.params[b])), reverse=True)
+    if poor:
+        out.append(f"{len(poor)} of {len(res.base.names)} base parameters are poorly excited (relative standard "
+                   "deviation): " + "; ".join(f"{b} ±{100 * r:.0f} %" for r, b in poor[:8])
+                   + ("; …" if len(poor) > 8 else "") + " (they change the torques little: another trajectory "
+                   "would pin them down)")
+    n = res.robot.ndof
+    pi = res.standard()
+    bad = []
+    for j, name in enumerate(res.robot.joint_names):
+        p = pi[n + 10 * j:n + 10 * j + 10]
+        m, h = p[0], p[1:4]
+        inertia = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]])
+        pseudo = np.zeros((4, 4))
+        pseudo[:3, :3] = 0.5 * np.trace(inertia) * np.eye(3) - inertia
+        pseudo[:3, 3] = pseudo[3, :3] = h
+        pseudo[3, 3] = m
+        if m <= 0 or np.min(np.linalg.eigvalsh(pseudo)) <= 0:
+            bad.append(name)
+    if bad:
+        out.append("the standard parameters closest to the URDF's with these base parameters are not those of "
+                   f"physical bodies for {', '.join(bad)} (mass or pseudo-inertia not positive): the base parameters "
+                   "may still be right (they are what the torques fix), the URDF's split of them is not")
+    for kind in ("Ia", "Fv", "Fc"):
+        neg = [f"{kind}_{j} = {res.params[f'{kind}_{j}']:.4g}" for j in res.robot.joint_names
+               if res.params.get(f"{kind}_{j}", 0.0) < 0]
+        if neg:
+            what = {"Ia": "rotor inertia", "Fv": "viscous friction", "Fc": "Coulomb friction"}[kind]
+            more = (" (a regrouped rotor inertia takes the URDF's values of the body parameters it is regrouped with: "
+                    "those are off by at least this much)") if kind == "Ia" else ""
+            out.append(f"negative {what}: {', '.join(neg)}{more}")
+    return out
 
 
 def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> RobotResult:
@@ -412,6 +459,140 @@ def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: 
     return res
 
 
+@dataclass
+class PayloadResult:
+    """A payload on the last link, identified with the robot's parameters of ``base_result``: its mass (kg), centre
+    of mass (m, in the last joint's frame) and their standard deviations; the inertial parameters it adds to the last
+    body (``delta``, with ``delta_std``; NaN where the joints' torques do not depend on one), and the fit."""
+
+    mass: float
+    mass_sigma: float
+    com: List[float]
+    com_sigma: List[float]
+    delta: Dict[str, float]
+    delta_std: Dict[str, float]
+    force_error: float
+    force_error_without: float
+    converged: bool
+    iterations: int
+    elapsed_s: float
+    notes: List[str] = field(default_factory=list)
+
+    def to_dict(self) -> Dict[str, Any]:
+        from .._io import jsonable
+
+        return jsonable(dict(self.__dict__))
+
+    def summary(self) -> str:
+        com = ", ".join(f"{1e3 * c:.1f} ± {1e3 * s:.1f}" for c, s in zip(self.com, self.com_sigma))
+        lines = [f"payload: mass {self.mass:.4g} ± {self.mass_sigma:.2g} kg, centre of mass ({com}) mm in the last "
+                 f"joint's frame; closed-loop force error {100 * self.force_error_without:.2f} % without it -> "
+                 f"{100 * self.force_error:.2f} % with it ({'converged' if self.converged else 'NOT converged'} in "
+                 f"{self.iterations} iterations, {self.elapsed_s:.1f} s)"]
+        return "\n".join(lines + [f"note: {x}" for x in self.notes])
+
+
+def payload(rec: RobotRecording, result: RobotResult, *, max_iter: int = 30, tol: float = 1e-3,
+            progress: Optional[Callable[[str], None]] = None) -> PayloadResult:
+    """The payload on the last link of the robot of ``result`` (identified without it) from ``rec`` (recorded with
+    it): DIDIM on the parameters the payload adds to the last body, the rest of the model kept; the parameters the
+    joints' torques do not depend on (the regressor's columns of the last body, at random states, that are zero or
+    combinations of the others) are left out and reported as NaN."""
+    t0 = time.perf_counter()
+    robot, n = result.robot, result.robot.ndof
+    _check(rec, robot)
+    say = progress or (lambda s: None)
+    pi = result.standard()
+    drives = result.drives()
+    drives["armature"] = list(pi[:n])
+    theta = result.theta()
+    dec = _decimation(rec)
+    eps = _eps(rec)
+    # the last body's identifiable parameters (the rest of the robot known)
+    rng = np.random.default_rng(0)
+    lim = np.array([lt[:2] for lt in robot.limits], dtype=float)
+    lo = np.where(np.isfinite(lim[:, 0]), lim[:, 0], -math.pi)
+    hi = np.where(np.isfinite(lim[:, 1]), lim[:, 1], math.pi)
+    qx = rng.uniform(lo, hi, (400, n))
+    yl = robot.regressor(qx, rng.normal(size=(400, n)), rng.normal(size=(400, n)))[:, :, -10:].reshape(-1, 10)
+    norms = np.linalg.norm(yl, axis=0)
+    free: List[int] = []
+    for k in range(10):
+        if norms[k] <= BASE_RANK_TOL * norms.max():
+            continue
+        cols = yl[:, free + [k]] / norms[free + [k]]
+        d = np.abs(np.diag(np.linalg.qr(cols, mode="r")))
+        if d[-1] > BASE_RANK_TOL * d.max():
+            free.append(k)
+    last = robot.joint_names[-1]
+    pnames = [f"{x}_{last}" for x in ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")]
+    delta = np.zeros(10)
+    history: List[float] = []
+    best = None
+    converged = False
+    cov = np.full((len(free), len(free)), np.nan)
+    for it in range(max_iter):
+        bodies = pi[n:].copy()
+        bodies[-10:] += delta
+        sim = _simulate(rec, robot.with_inertial_params(bodies), drives, eps)
+        err = float(np.linalg.norm(rec.force - sim["force"]) / np.linalg.norm(rec.force))
+        history.append(err)
+        say(f"payload iteration {it}: closed-loop force error {100 * err:.3f} %")
+        if best is None or err < best[0]:
+            best = (err, delta.copy(), cov.copy())
+        if it >= 1 and abs(history[-2] - err) <= tol * err:
+            converged = True
+            break
+        q, v, a = sim["q"], sim["qd"], sim["qdd"]
+        known = np.einsum("kjp,p->kj", _model_regressor(robot, result.base, q, v, a, result.offset, eps), theta)
+        w = robot.regressor(q, v, a)[:, :, -10:][:, :, free]
+        y = rec.force - known
+        yy, ww = _stack(dec, y, w, v, np.ones(n))
+        est, _, r = _solve(yy, ww)
+        sig = []
+        for j in range(n):
+            yd, wd = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, :]))
+            vd = dec(np.ascontiguousarray(v[:, j]))
+            keep = np.abs(vd) > SLOW_SHARE * np.max(np.abs(v[:, j]))
+            sig.append(max(float(np.std(yd[keep] - wd[keep] @ est)), 1e-12 * max(float(np.std(yd)), 1e-300)))
+        yy, ww = _stack(dec, y, w, v, np.array(sig))
+        est, cov, _ = _solve(yy, ww)
+        delta = np.zeros(10)
+        delta[free] = est
+    assert best is not None
+    err, delta, cov = best
+    bodies = pi[n:]
+    sim0 = _simulate(rec, robot.with_inertial_params(bodies), drives, eps)
+    err0 = float(np.linalg.norm(rec.force - sim0["force"]) / np.linalg.norm(rec.force))
+    std = np.full(10, np.nan)
+    std[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    full_cov = np.full((10, 10), np.nan)
+    full_cov[np.ix_(free, free)] = cov
+    notes = []
+    fixed = [pnames[k] for k in range(10) if k not in free]
+    if fixed:
+        notes.append("not identifiable from the joints' torques (left at 0, reported as NaN): " + ", ".join(fixed))
+    m = delta[0] if 0 in free else math.nan
+    com, com_sigma = [], []
+    for i in (1, 2, 3):
+        if 0 in free and i in free and m > 0:
+            c = delta[i] / m
+            g = np.zeros(10)
+            g[0], g[i] = -delta[i] / m**2, 1 / m
+            idx = [0, i]
+            var = float(g[idx] @ full_cov[np.ix_(idx, idx)] @ g[idx])
+            com.append(c)
+            com_sigma.append(math.sqrt(max(var, 0.0)))
+        else:
+            com.append(math.nan)
+            com_sigma.append(math.nan)
+    return PayloadResult(mass=m, mass_sigma=float(std[0]), com=com, com_sigma=com_sigma,
+                         delta={k: (float(delta[i]) if i in free else math.nan) for i, k in enumerate(pnames)},
+                         delta_std={k: float(std[i]) for i, k in enumerate(pnames)}, force_error=err,
+                         force_error_without=err0, converged=converged, iterations=len(history),
+                         elapsed_s=time.perf_counter() - t0, notes=notes)
+
+
 def _check(rec: RobotRecording, robot: Robot) -> None:
     if list(rec.joint_names) != robot.joint_names:
         raise DataError(f"the record's joints ({', '.join(rec.joint_names)}) are not the robot's "
@@ -424,5 +605,5 @@ def save_result(result: RobotResult, path) -> None:
     write_text(path, json.dumps(result.to_dict(), indent=1))
 
 
-__all__ = ["BaseParameters", "RobotResult", "base_parameters", "idim_ls", "didim", "simulate_robot", "force_errors",
+__all__ = ["BaseParameters", "RobotResult", "PayloadResult", "payload", "base_parameters", "idim_ls", "didim", "simulate_robot", "force_errors",
            "result_from_dict", "save_result"]

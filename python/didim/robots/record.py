@@ -1,19 +1,17 @@
 """A robot's record (:class:`RobotRecording`): the references, the controllers' forces and the measured positions of
 every joint, sampled together, with one controller per joint; read from CSV, Parquet or HDF5
-(:func:`load_robot_record`), the controllers from a ``{"type": "joints", "joints": [...]}`` file
+(:func:`didim.load_record` with ``robot=``), the controllers from a ``{"type": "joints", "joints": [...]}`` file
 (:func:`load_joint_controllers`)."""
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import List, Tuple
 
 import numpy as np
 
 from .._errors import DataError
-from ..controllers import Controller, _spec, controller_from_dict, in_units
-from .chain import Robot
+from ..controllers import Controller, _spec, controller_from_dict
 
 
 def load_joint_controllers(path) -> Tuple[Controller, ...]:
@@ -42,6 +40,8 @@ class RobotRecording:
     controllers: Tuple[Controller, ...]
     encoder_step: Tuple[float, ...]
     name: str = ""
+    #: "revolute" or "prismatic" per joint (the units: rad and N·m, or m and N).
+    joint_kinds: Tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -59,6 +59,8 @@ class RobotRecording:
             object.__setattr__(self, key, a)
         if not (len(self.qr) == len(self.force) == len(self.qm)):
             raise DataError("qr, force and qm must have the same number of samples")
+        if not self.joint_kinds:
+            object.__setattr__(self, "joint_kinds", ("revolute",) * n)
         if len(self.controllers) != n:
             raise DataError(f"{len(self.controllers)} controllers for {n} joints: give one per joint")
         for c in self.controllers:
@@ -86,66 +88,4 @@ class RobotRecording:
                 f"{', '.join(self.joint_names)})")
 
 
-def _encoder_step(qm: np.ndarray) -> float:
-    from ..loaders import detect_resolution
-
-    step = detect_resolution(qm) if np.all(np.isfinite(qm)) else None
-    return float(step) if step else 0.0
-
-
-def _columns(available: Sequence[str], names: Sequence[str], key: str, where: str) -> List[str]:
-    """The file's columns of signal ``key`` for each joint: ``key_1 … key_n`` or ``key_<joint name>``."""
-    for form in ([f"{key}_{i + 1}" for i in range(len(names))], [f"{key}_{j}" for j in names]):
-        if all(c in available for c in form):
-            return form
-    raise DataError(f"{where}: no columns {key}_1 … {key}_{len(names)} (or {key}_<joint name>) for the robot's "
-                    f"{len(names)} joints ({', '.join(names)}); the file has {', '.join(available)}")
-
-
-def load_robot_record(path, robot: Robot, *, controller: Any = None, name: Optional[str] = None) -> RobotRecording:
-    """A robot record from a CSV, Parquet or HDF5 file with columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``
-    in ``robot``'s joint order (or ``qr_<joint name>``…), positions in rad (prismatic joints: m), forces in N·m (N).
-    ``controller``: the joints' controllers (a sequence, one per joint) or the path of their file; by default
-    ``NAME_controller.json`` beside the record."""
-    from .._io import beside, check_input
-    from ..loaders import EXTENSIONS, _csv, _hdf5, _parquet, _time_step
-
-    p = check_input(path, "robot record")
-    ext = os.path.splitext(p)[1].lower()
-    kind = EXTENSIONS.get(ext)
-    if kind not in ("CSV", "Parquet", "HDF5"):
-        raise DataError(f"{p}: a robot record is a CSV, Parquet or HDF5 file, got {ext or 'no extension'!r}")
-    if os.path.getsize(p) == 0:
-        raise DataError(f"{p}: the file is empty (0 bytes)")
-    if controller is None:
-        side = beside(p)
-        if side is None:
-            raise DataError(f"{p}: no controller given and no {os.path.splitext(p)[0]}_controller.json beside it: give "
-                            "the joints' controller file (CLI: --controller CTL.json)")
-        controller = side
-    if isinstance(controller, (str, os.PathLike)):
-        controller = load_joint_controllers(controller)
-    controllers = tuple(controller)
-    try:
-        get, available = {"CSV": _csv, "Parquet": _parquet, "HDF5": _hdf5}[kind](p)
-    except UnicodeDecodeError:
-        raise DataError(f"{p}: not a text file: a {kind} record was expected from its extension") from None
-    names = robot.joint_names
-    if "t" not in available:
-        raise DataError(f"{p}: no time column t; the file has {', '.join(available)}")
-    dt = _time_step(np.asarray(get("t"), dtype=float), f"{p}: ")
-    signals = {key: np.column_stack([np.asarray(get(c), dtype=float).ravel() for c in _columns(available, names, key, p)])
-               for key in ("qr", "force", "qm")}
-    if len(controllers) != len(names):
-        raise DataError(f"{p}: {len(controllers)} controllers for the robot's {len(names)} joints")
-    controllers = tuple(in_units(c, dt, 1.0, 1.0) for c in controllers)
-    steps = tuple(_encoder_step(signals["qm"][:, j]) for j in range(len(names)))
-    label = name if name is not None else os.path.splitext(os.path.basename(p))[0]
-    try:
-        return RobotRecording(dt=dt, joint_names=tuple(names), controllers=controllers, encoder_step=steps, name=label,
-                              **signals)
-    except DataError as e:
-        raise DataError(f"{p}: {e}") from None
-
-
-__all__ = ["RobotRecording", "load_robot_record", "load_joint_controllers"]
+__all__ = ["RobotRecording", "load_joint_controllers"]

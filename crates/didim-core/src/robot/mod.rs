@@ -334,7 +334,7 @@ impl Robot {
         for i in (0..n).rev() {
             let u_vec = ws.ia[i] * ws.s[i];
             let d = ws.s[i].dot(&u_vec) + armature.map_or(0.0, |a| a[i]);
-            if !(d > 0.0) {
+            if d.is_nan() || d <= 0.0 {
                 return Err(invalid!(
                     "joint {}: its articulated inertia is not positive ({d}): the inertial parameters are not those of physical bodies",
                     self.joints[i].name

@@ -1,0 +1,164 @@
+"""Robots on the data folder's records (an independent simulator built on Pinocchio: RK4 on 10 substeps, tanh
+friction, torque noise inside the loop, quantized encoders, one P + PI cascade with feedforward per joint): the closed
+loop reproduces its truth floor with the true parameters; IDIM-LS and DIDIM (from the URDF's CAD values) give each
+joint's viscous and Coulomb friction within 5 % of the truth and predict the validation record within 1.2 times its
+floor; the payload's mass comes out within 3 %; the command line does the same from files."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import didim
+from didim.robots import base_parameters, payload
+from didim.robots.identify import force_errors, simulate_robot
+
+ROBOTS = ("pendulum", "ur5")
+
+
+@pytest.fixture(scope="module")
+def data(robots_dir):
+    truth = json.loads((robots_dir / "truth.json").read_text())["robots"]
+
+    def load(name, record):
+        robot = didim.Robot.from_urdf(robots_dir / truth[name]["cad_urdf"])
+        rec = didim.load_record(robots_dir / f"{name}_{record}.csv", robot=robot,
+                                controller=robots_dir / f"{name}_controller.json")
+        return robot, rec
+
+    return load, truth
+
+
+@pytest.fixture(scope="module")
+def fits(data):
+    load, _ = data
+    out = {}
+    for name in ROBOTS:
+        robot, rec = load(name, "train")
+        out[name] = {m: didim.identify(rec, robot, m, offset=True) for m in ("didim", "idim-ls")}
+    return out
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_the_closed_loop_with_the_truth_reproduces_the_records_floor(data, name):
+    """The same closed loop with the true parameters and no noise: its force error against the record is the floor
+    truth.json gives (the independent simulator's), to the noise's chance (measured: 0.992 and 0.993 of it)."""
+    load, truth = data
+    t = truth[name]
+    robot, rec = load(name, "train")
+    pi = np.concatenate([t["links_truth"][j]["dyn10"] for j in t["joint_names"]])
+    true = robot.with_inertial_params(pi)
+    from didim import _core
+
+    out = _core.simulate_robot(true._core, t["Ia"], t["Fv"], t["Fc"], t["offset"], rec.core_controllers(), rec.qr,
+                               rec.dt, quantization=list(rec.encoder_step), force0=list(rec.force[0]),
+                               coulomb_eps=t["vs"], coulomb_law="tanh")
+    err, _ = force_errors(rec, out["force"])
+    assert err == pytest.approx(t["records"]["train"]["truth_floor_total"], rel=0.05)
+    # the integrator: the substeps chosen from the friction's stiffness against a fine reference (32 substeps), well
+    # below the floor (the loop amplifies the difference as it does an encoder count)
+    kw = dict(quantization=[0.0] * rec.ndof, force0=list(rec.force[0]), coulomb_eps=t["vs"], coulomb_law="tanh")
+    fine = _core.simulate_robot(true._core, t["Ia"], t["Fv"], t["Fc"], t["offset"], rec.core_controllers(), rec.qr,
+                                rec.dt, substeps=32, **kw)
+    auto = _core.simulate_robot(true._core, t["Ia"], t["Fv"], t["Fc"], t["offset"], rec.core_controllers(), rec.qr,
+                                rec.dt, **kw)
+    assert np.linalg.norm(auto["force"] - fine["force"]) / np.linalg.norm(fine["force"]) < 1e-3 * err
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize("method", ["didim", "idim-ls"])
+def test_friction_within_5_percent_and_validation_near_the_floor(data, fits, name, method):
+    load, truth = data
+    t = truth[name]
+    res = fits[name][method]
+    assert res.converged, res.message
+    for i, j in enumerate(t["joint_names"]):
+        assert res.params[f"Fv_{j}"] == pytest.approx(t["Fv"][i], rel=0.05), (j, res.summary())
+        assert res.params[f"Fc_{j}"] == pytest.approx(t["Fc"][i], rel=0.05), (j, res.summary())
+    _, val = load(name, "valid")
+    err, per = force_errors(val, simulate_robot(val, res)["force"])
+    assert err < 1.2 * t["records"]["valid"]["truth_floor_total"], per
+    assert set(per) == set(t["joint_names"])
+
+
+def test_didim_starts_from_the_urdfs_values_and_converges(fits):
+    for name in ROBOTS:
+        r = fits[name]["didim"]
+        assert r.converged and r.iterations <= 15
+        assert r.history[0] > 10 * r.history[-1]  # the CAD model (no rotor inertia nor friction) is far off
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_the_payloads_mass_within_3_percent(data, fits, name):
+    load, truth = data
+    _, rec = load(name, "payload")
+    p = payload(rec, fits[name]["didim"])
+    want = truth[name]["payload"]
+    assert p.converged
+    assert p.mass == pytest.approx(want["mass"], rel=0.03)
+    assert 0 < p.mass_sigma < 0.03 * want["mass"]
+    for c, cs, w in zip(p.com, p.com_sigma, want["com"]):
+        if not math.isnan(c):  # the pendulum's torques do not depend on the centre's offset along its axes
+            assert abs(c - w) < 0.01 + 5 * cs
+    assert p.force_error < 0.2 * p.force_error_without
+
+
+def test_base_parameters_reproduce_the_torques_and_say_what_they_combine(data):
+    load, _ = data
+    robot, _ = load("pendulum", "train")
+    b = base_parameters(robot)
+    assert len(b.names) == 7  # with the friction's 4: the 11 base columns of the data folder's README
+    assert "Ia_joint1 +Iyy_joint1 +0.25*m_joint2" in b.names
+    ur5, _ = load("ur5", "train")
+    assert len(base_parameters(ur5).names) == 40  # 52 with the friction, as the README counts
+    # W·π = W[:, independent]·(K·π) at other random states, for any π
+    from didim.robots.identify import _full_regressor
+
+    rng = np.random.default_rng(3)
+    q, v, a = rng.uniform(-2, 2, (50, 2)), rng.normal(size=(50, 2)), rng.normal(size=(50, 2))
+    w = _full_regressor(robot, q, v, a)
+    pi = rng.normal(size=w.shape[1])
+    assert np.allclose(w[:, list(b.independent)] @ b.of(pi), w @ pi, rtol=1e-10, atol=1e-10 * np.abs(w @ pi).max())
+
+
+def test_the_command_line_identifies_simulates_and_weighs_the_payload(robots_dir, tmp_path):
+    from didim.cli import main
+
+    d = robots_dir
+    out, sim, pay = tmp_path / "out.json", tmp_path / "sim.json", tmp_path / "p.json"
+    ctl = str(d / "pendulum_controller.json")
+    assert main(["identify", str(d / "pendulum_train.csv"), "--urdf", str(d / "pendulum_cad.urdf"), "--controller", ctl,
+                 "--method", "didim", "--json", str(out), "--quiet"]) == 0
+    r = json.loads(out.read_text())
+    assert {"Ia_joint1", "Fv_joint2", "Fc_joint1"} <= set(r["params"])
+    assert "Ia_joint1 +Iyy_joint1 +0.25*m_joint2" in r["params"]
+    # the saved result carries its robot: no --urdf
+    assert main(["simulate", str(d / "pendulum_valid.csv"), str(out), "--controller", ctl, "--json", str(sim)]) == 0
+    s = json.loads(sim.read_text())
+    assert s["force_error"] < 0.05 and set(s["force_error_per_joint"]) == {"joint1", "joint2"}
+    assert main(["payload", str(d / "pendulum_payload.csv"), str(out), "--controller", ctl, "--json", str(pay),
+                 "--quiet"]) == 0
+    p = json.loads(pay.read_text())
+    assert p["mass"] == pytest.approx(1.0, rel=0.03) and len(p["com"]) == 3 and "mass_sigma" in p
+    # a one-axis option with a robot is refused by name
+    assert main(["identify", str(d / "pendulum_train.csv"), "--urdf", str(d / "pendulum_cad.urdf"), "--controller", ctl,
+                 "--model", "flexible"]) == 2
+
+
+def test_bad_robot_inputs_are_refused_by_name(data, robots_dir, tmp_path):
+    load, _ = data
+    robot, rec = load("pendulum", "train")
+    ur5, _ = load("ur5", "train")
+    with pytest.raises(didim.DataError, match="joints"):
+        didim.identify(rec, ur5, "didim")
+    with pytest.raises(didim.DataError, match="not available for robots"):
+        didim.identify(rec, robot, "oe-nm")
+    with pytest.raises(didim.DataError, match="apM"):
+        didim.identify(rec, robot, "didim", apM=3.0)
+    with pytest.raises(didim.DataError, match="no columns qr_1"):
+        didim.load_record(robots_dir / "pendulum_train.csv", robot=ur5, controller=robots_dir / "ur5_controller.json")
+    bad = tmp_path / "c.json"
+    bad.write_text('{"type": "transfer_function"}')
+    with pytest.raises(didim.DataError, match="joints"):
+        didim.load_record(robots_dir / "pendulum_train.csv", robot=robot, controller=bad)
