@@ -34,6 +34,9 @@ COEF_TOL = 1e-9
 #: friction's shape through zero speed (unknown, and not the model's) sets the force.
 SLOW_SHARE = 0.05
 
+#: DIDIM has settled when its output error has not bettered its best by ``tol`` of itself in this many iterations.
+STALL = 3
+
 #: The friction law of the simulated loop: algebraic, with a smoothing speed of this share of the slowest joint's top
 #: speed (its shape only matters in the rows left out).
 EPS_SHARE = 0.01
@@ -128,6 +131,8 @@ class RobotResult:
     elapsed_s: float = 0.0
     notes: List[str] = field(default_factory=list)
     history: List[float] = field(default_factory=list)
+    #: The friction law through zero speed, (shape, ε), fitted with the model (:func:`fit_law`).
+    law: Optional[Law] = None
 
     @property
     def std_pct(self) -> Dict[str, float]:
@@ -156,6 +161,7 @@ class RobotResult:
                          "force_error_per_joint": self.force_error_per_joint, "converged": self.converged,
                          "iterations": self.iterations, "message": self.message, "elapsed_s": self.elapsed_s,
                          "notes": self.notes, "history": self.history,
+                         "friction_law": None if self.law is None else {"shape": self.law[0], "eps": self.law[1]},
                          "robot": {"name": self.robot.name, "joints": self.robot.joint_names, "urdf": self.robot.urdf},
                          "base": {"names": list(self.base.names), "standard_names": list(self.base.standard_names),
                                   "K": self.base.K.tolist(), "independent": list(self.base.independent)}})
@@ -165,6 +171,8 @@ class RobotResult:
                  + ("converged" if self.converged else "NOT converged") + f" in {self.iterations} iteration(s), "
                  f"{self.elapsed_s:.1f} s; closed-loop force error {100 * self.force_error:.2f} %"]
         lines += [f"  {j}: force error {100 * e:.2f} %" for j, e in self.force_error_per_joint.items()]
+        if self.law is not None:
+            lines.append(f"  friction law through zero speed: {self.law[0]}, ε = {self.law[1]:.4g} (rad/s or m/s)")
         pct = self.std_pct
         for k, v in self.params.items():
             lines.append(f"  {k} = {v:.6g} (±{pct.get(k, math.nan):.2g} %)")
@@ -183,7 +191,9 @@ def result_from_dict(d: Dict[str, Any]) -> RobotResult:
                        force_error_per_joint=dict(d.get("force_error_per_joint", {})),
                        converged=bool(d.get("converged", True)), iterations=int(d.get("iterations", 0)),
                        message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
-                       notes=list(d.get("notes", [])), history=list(d.get("history", [])))
+                       notes=list(d.get("notes", [])), history=list(d.get("history", [])),
+                       law=None if not d.get("friction_law") else (str(d["friction_law"]["shape"]),
+                                                                   float(d["friction_law"]["eps"])))
 
 
 def _theta_names(robot: Robot, base: BaseParameters, offset: bool) -> List[str]:
@@ -194,7 +204,18 @@ def _theta_names(robot: Robot, base: BaseParameters, offset: bool) -> List[str]:
     return names
 
 
-def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, eps: float) -> np.ndarray:
+#: A friction law through zero speed: (shape, smoothing speed ε in rad/s or m/s), the shapes of the core's
+#: ``COULOMB_LAWS``; ε = 0 is the hard sign.
+Law = Tuple[str, float]
+
+
+def _coulomb(v: np.ndarray, law: Law) -> np.ndarray:
+    if law[1] <= 0:
+        return np.sign(v)
+    return _core.coulomb_sign(np.ascontiguousarray(v.ravel()), law[1], law[0]).reshape(v.shape)
+
+
+def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, law: Law) -> np.ndarray:
     """(N, n, p): the base parameters' columns, then each joint's friction (and offset) on its own row."""
     n = robot.ndof
     # the dependent columns are combinations of the independent ones: W·π = W[:, independent]·β
@@ -203,8 +224,7 @@ def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, 
     fv = np.zeros((len(q), n, n))
     fv[:, idx, idx] = v
     fc = np.zeros((len(q), n, n))
-    fc[:, idx, idx] = _core.coulomb_sign(np.ascontiguousarray(v.ravel()), eps, "algebraic").reshape(v.shape) \
-        if eps > 0 else np.sign(v)
+    fc[:, idx, idx] = _coulomb(v, law)
     parts = [wb, fv, fc]
     if offset:
         of = np.zeros((len(q), n, n))
@@ -227,17 +247,26 @@ def _decimation(rec: RobotRecording):
     return Decimation.lowpass(min(max(10 * band, 5 * f[1] if len(f) > 1 else 1.0), fs / 10), fs)
 
 
-def _stack(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray, weights: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Each joint's force and regressor rows decimated, the rows where it moves slowly left out, weighted."""
-    ys, ws = [], []
+def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray) -> List[Tuple[np.ndarray, np.ndarray]]:
+    """Each joint's force and regressor rows decimated, the rows where it moves slowly (below :data:`SLOW_SHARE` of
+    its top speed) left out."""
+    out = []
     vmax = np.max(np.abs(v), axis=0)
     for j in range(y.shape[1]):
         yd, wd = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, :]))
-        vd = dec(np.ascontiguousarray(v[:, j]))
-        keep = np.abs(vd) > SLOW_SHARE * vmax[j]
-        ys.append(yd[keep] / weights[j])
-        ws.append(wd[keep] / weights[j])
-    return np.concatenate(ys), np.concatenate(ws)
+        keep = np.abs(dec(np.ascontiguousarray(v[:, j]))) > SLOW_SHARE * vmax[j]
+        out.append((yd[keep], wd[keep]))
+    return out
+
+
+def _weighted(parts: List[Tuple[np.ndarray, np.ndarray]]) -> Tuple[np.ndarray, np.ndarray]:
+    """Least squares of the joints' rows, ordinary first, then each joint's rows divided by its residual's σ: the
+    estimate and its covariance."""
+    theta, _, _ = _solve(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+    sig = [max(float(np.std(yd - wd @ theta)), 1e-12 * max(float(np.std(yd)), 1e-300)) for yd, wd in parts]
+    theta, cov, _ = _solve(np.concatenate([yd / s_ for (yd, _), s_ in zip(parts, sig)]),
+                           np.concatenate([wd / s_ for (_, wd), s_ in zip(parts, sig)]))
+    return theta, cov
 
 
 def _solve(y: np.ndarray, w: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -259,46 +288,141 @@ def _measured_states(rec: RobotRecording, dec) -> Tuple[np.ndarray, np.ndarray, 
     return q, v, a
 
 
-def _fit(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, eps: float, dec,
+def _fit(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, law: Law, dec,
          y: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Weighted least squares on the states: ordinary first, then each joint's rows divided by its residual's σ."""
-    w = _model_regressor(robot, base, q, v, a, offset, eps)
-    ones = np.ones(rec.ndof)
-    yy, ww = _stack(dec, y, w, v, ones)
-    theta, _, r = _solve(yy, ww)
-    # σ per joint from the unweighted fit's residual
-    sig = []
-    at = 0
-    for j in range(rec.ndof):
-        yd, wd = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, :]))
-        vd = dec(np.ascontiguousarray(v[:, j]))
-        keep = np.abs(vd) > SLOW_SHARE * np.max(np.abs(v[:, j]))
-        rj = yd[keep] - wd[keep] @ theta
-        sig.append(max(float(np.std(rj)), 1e-12 * max(float(np.std(yd)), 1e-300)))
-        at += int(keep.sum())
-    yy, ww = _stack(dec, y, w, v, np.array(sig))
-    theta, cov, _ = _solve(yy, ww)
-    return theta, cov
+    """Weighted least squares (:func:`_weighted`) of the force ``y`` on the model's regressor at the states."""
+    return _weighted(_rows(dec, y, _model_regressor(robot, base, q, v, a, offset, law), v))
 
 
-def _eps(rec: RobotRecording) -> float:
+def _default_law(rec: RobotRecording) -> Law:
+    """didim's law for a robot's loop when none is fitted: algebraic, ε a share (:data:`EPS_SHARE`) of the slowest
+    joint's top speed."""
     vmax = np.max(np.abs(np.diff(rec.qr, axis=0)), axis=0) / rec.dt
-    return float(EPS_SHARE * np.min(vmax[vmax > 0])) if np.any(vmax > 0) else 1e-3
+    return ("algebraic", float(EPS_SHARE * np.min(vmax[vmax > 0])) if np.any(vmax > 0) else 1e-3)
+
+
+#: The friction laws :func:`fit_law` chooses among: the core's shapes, ε from 1/300 to 1/3 of the joints' median top
+#: speed (a factor of √10 apart, then refined); sharper ones are the hard sign on the rows the fits keep.
+LAW_SHAPES = ("algebraic", "tanh", "atan", "exp")
+LAW_EPS_REL = tuple(float(x) for x in np.geomspace(1 / 300, 1 / 3, 9))
+
+#: Laws that fit the kept rows within this share of the best are equivalent there: the smoothest (largest ε) is kept,
+#: the cheapest to simulate.
+LAW_TIE = 1e-3
+
+
+def fit_law(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, dec,
+            per_shape: Optional[Dict[str, float]] = None) -> Law:
+    """The friction law through zero speed that best explains the force, shared by the joints: each shape and ε of
+    the grid in the weighted least squares of the inverse model on the states ``q, v, a`` (the rows where a joint
+    moves slowly are left out, as in every fit: what is chosen is the law's tail, where a slow law such as the atan
+    one is still several percent below its Coulomb level at ten times ε and would bend the viscous friction)."""
+    n = robot.ndof
+    vmax = np.max(np.abs(v), axis=0)
+    scale = float(np.median(vmax[vmax > 0])) if np.any(vmax > 0) else 1.0
+    w = _model_regressor(robot, base, q, v, a, offset, ("algebraic", 0.0))
+    nb = len(base.names)
+    fc_cols = [nb + n + j for j in range(n)]
+    keep = [None] * n
+    parts = []
+    for j in range(n):
+        yd, wd = dec.apply(np.ascontiguousarray(rec.force[:, j]), np.ascontiguousarray(w[:, j, :]))
+        vd = dec(np.ascontiguousarray(v[:, j]))
+        keep[j] = np.abs(vd) > SLOW_SHARE * vmax[j]
+        parts.append((yd[keep[j]], wd[keep[j]]))
+    # per-joint weights from the hard sign's fit
+    y0 = np.concatenate([p[0] for p in parts])
+    w0 = np.concatenate([p[1] for p in parts])
+    th = np.linalg.lstsq(w0, y0, rcond=None)[0]
+    sig = [max(float(np.std(p[0] - p[1] @ th)), 1e-300) for p in parts]
+
+    def cost(law: Law) -> float:
+        ys, ws = [], []
+        for j in range(n):
+            c = dec(np.ascontiguousarray(_coulomb(v[:, j], law)))[keep[j]]
+            wj = parts[j][1].copy()
+            wj[:, fc_cols[j]] = c
+            ys.append(parts[j][0] / sig[j])
+            ws.append(wj / sig[j])
+        yy, ww = np.concatenate(ys), np.concatenate(ws)
+        r = yy - ww @ np.linalg.lstsq(ww, yy, rcond=None)[0]
+        return float(r @ r)
+
+    table = [((shape, rel * scale), cost((shape, rel * scale))) for shape in LAW_SHAPES for rel in LAW_EPS_REL]
+    (shape, eps), best = min(table, key=lambda t: t[1])
+    if per_shape is not None:  # each shape's best ε on the grid
+        for sh in LAW_SHAPES:
+            per_shape[sh] = min(((law, c) for law, c in table if law[0] == sh), key=lambda t: t[1])[0][1]
+    # refine ε of the best shape between its neighbours
+    from scipy.optimize import minimize_scalar
+
+    step = math.log(LAW_EPS_REL[1] / LAW_EPS_REL[0])
+    got = minimize_scalar(lambda x: cost((shape, math.exp(x))), bounds=(math.log(eps) - step, math.log(eps) + step),
+                          method="bounded", options={"xatol": 0.02})
+    if got.fun < best:
+        eps, best = float(math.exp(got.x)), float(got.fun)
+    ties = [(law, c) for law, c in table if c <= (1 + LAW_TIE) * best]
+    if ties:
+        law, c = max(ties, key=lambda t: t[0][1])
+        if law[1] > eps:
+            shape, eps = law
+    return (shape, eps)
+
+
+def _first_half(rec: RobotRecording) -> RobotRecording:
+    import dataclasses
+
+    m = max(rec.n // 2, 2)
+    return dataclasses.replace(rec, qr=rec.qr[:m], force=rec.force[:m], qm=rec.qm[:m])
+
+
+def closed_loop_law(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]], law: Law,
+                    per_shape: Dict[str, float], progress=None) -> Law:
+    """The friction law through zero speed that the closed loop follows best, the model's other parameters kept: each
+    shape at the smoothing speed the inverse model chose for it, then ε of the best shape refined (a factor of 10
+    either way), by the closed-loop force error on the first half of the record. The inverse model cannot choose it:
+    it leaves out the rows where the law acts, and on the rows it keeps every sharp law is alike (on the data folder's
+    pendulum, a tanh law of ε = 0.01 rad/s and an exp law of 0.015 fit them equally, and the second simulates the
+    validation record at 1.23 times its floor, the first at 1.01)."""
+    from scipy.optimize import minimize_scalar
+
+    part = _first_half(rec)
+    say = progress or (lambda s: None)
+
+    def err(lw: Law) -> float:
+        try:
+            sim = _simulate(part, robot, d, lw)
+        except (SimulationError, DataError):
+            return math.inf
+        return float(np.linalg.norm(part.force - sim["force"]) / np.linalg.norm(part.force))
+
+    tried = {(sh, eps): err((sh, eps)) for sh, eps in per_shape.items()}
+    tried[law] = err(law)
+    (shape, eps), best = min(tried.items(), key=lambda t: t[1])
+    got = minimize_scalar(lambda x: err((shape, math.exp(x))), bounds=(math.log(eps / 10), math.log(eps * 10)),
+                          method="bounded", options={"xatol": 0.05})
+    if got.fun < best:
+        eps, best = float(math.exp(got.x)), float(got.fun)
+    say(f"friction law through zero speed, in closed loop: {shape}, ε = {eps:.4g} (force error on the first half "
+        f"{100 * best:.3f} %)")
+    return (shape, eps)
 
 
 def simulate_robot(rec: RobotRecording, result: RobotResult, substeps: int = 0) -> Dict[str, np.ndarray]:
-    """The closed loop of ``rec`` (its references, controllers, encoders, first force) with the model of ``result``."""
+    """The closed loop of ``rec`` (its references, controllers, encoders, first force) with the model of ``result``
+    (its friction law)."""
     robot = result.robot.with_inertial_params(result.standard()[result.robot.ndof:])
     d = result.drives()
     d["armature"] = list(result.standard()[:result.robot.ndof])
-    return _simulate(rec, robot, d, _eps(rec), substeps)
+    return _simulate(rec, robot, d, result.law if result.law is not None else _default_law(rec), substeps)
 
 
-def _simulate(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]], eps: float, substeps: int = 0):
+def _simulate(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]], law: Law, substeps: int = 0):
     try:
         return _core.simulate_robot(robot._core, d["armature"], d["viscous"], d["coulomb"], d["offset"],
                                     rec.core_controllers(), rec.qr, rec.dt, quantization=list(rec.encoder_step),
-                                    force0=list(rec.force[0]), substeps=substeps, coulomb_eps=eps)
+                                    force0=list(rec.force[0]), substeps=substeps, coulomb_eps=law[1],
+                                    coulomb_law=law[0])
     except DataError as e:
         raise SimulationError(f"the robot's closed loop cannot be simulated with these parameters: {e}") from None
 
@@ -391,14 +515,26 @@ def plausibility(res: RobotResult) -> List[str]:
 
 def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> RobotResult:
     """IDIM-LS: the inverse dynamic model on the measured positions (zero-phase low-passed, differentiated twice),
-    weighted least squares per joint, the rows where a joint moves slowly left out."""
+    weighted least squares per joint, the rows where a joint moves slowly left out; the friction law's tail fitted
+    with it (:func:`fit_law`), its shape through zero speed chosen in closed loop (:func:`closed_loop_law`) for the
+    simulations of the result."""
     t0 = time.perf_counter()
     _check(rec, robot)
     base = base_parameters(robot)
     dec = _decimation(rec)
     q, v, a = _measured_states(rec, dec)
-    theta, cov = _fit(rec, robot, base, q, v, a, offset, 0.0, dec, rec.force)
-    res = _result("idim-ls", rec, robot, base, offset, theta, cov)
+    per_shape: Dict[str, float] = {}
+    law = fit_law(rec, robot, base, q, v, a, offset, dec, per_shape)
+    theta, cov = _fit(rec, robot, base, q, v, a, offset, law, dec, rec.force)
+    res = _result("idim-ls", rec, robot, base, offset, theta, cov, law=law)
+    # the law through zero speed is the closed loop's to choose (the inverse model leaves out where it acts)
+    try:
+        pi = res.standard()
+        d = res.drives()
+        d["armature"] = list(pi[:robot.ndof])
+        res.law = closed_loop_law(rec, robot.with_inertial_params(pi[robot.ndof:]), d, law, per_shape)
+    except SimulationError:
+        pass
     try:
         sim = simulate_robot(rec, res)
         res.force_error, res.force_error_per_joint = force_errors(rec, sim["force"])
@@ -412,50 +548,81 @@ def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: 
           progress: Optional[Callable[[str], None]] = None) -> RobotResult:
     """DIDIM from the URDF's values (rotor inertias and friction 0): the closed loop simulated with the current
     estimate, weighted least squares of the measured force on the simulated states, until the output error changes
-    by less than ``tol`` of itself between iterations (the paper's criterion)."""
+    by less than ``tol`` of itself between iterations (the paper's criterion). When the loop with the URDF's values
+    cannot be simulated (a joint whose rotor inertia the controller was tuned for is far lighter without it, and its
+    loop unstable), DIDIM starts from IDIM-LS's estimate instead and the result says so."""
     t0 = time.perf_counter()
     _check(rec, robot)
     say = progress or (lambda s: None)
     base = base_parameters(robot)
     dec = _decimation(rec)
-    eps = _eps(rec)
+    qm, vm, am = _measured_states(rec, dec)
+    per_shape: Dict[str, float] = {}
+    law = fit_law(rec, robot, base, qm, vm, am, offset, dec, per_shape)
+    say(f"friction law through zero speed, by the inverse model: {law[0]}, ε = {law[1]:.4g}")
+    law_chosen = False
     pi0 = np.concatenate([np.zeros(robot.ndof), robot.inertial_params])
     n = robot.ndof
     theta = np.concatenate([base.of(pi0), np.zeros(2 * n + (n if offset else 0))])
-    names = _theta_names(robot, base, offset)
     history: List[float] = []
     best = None
     converged, message = False, ""
     cov = np.zeros((len(theta), len(theta)))
+    notes: List[str] = []
     for it in range(max_iter):
         pi = base.standard_from(theta[:len(base.names)], pi0)
         d = {"armature": list(pi[:n]), "viscous": list(theta[len(base.names):len(base.names) + n]),
              "coulomb": list(theta[len(base.names) + n:len(base.names) + 2 * n]),
              "offset": list(theta[len(base.names) + 2 * n:]) if offset else [0.0] * n}
         try:
-            sim = _simulate(rec, robot.with_inertial_params(pi[n:]), d, eps)
+            sim = _simulate(rec, robot.with_inertial_params(pi[n:]), d, law)
         except (SimulationError, DataError) as e:
-            message = f"iteration {it}: {e}"
-            break
+            if it == 0 and not notes:  # the URDF's values: start again from IDIM-LS's
+                notes.append(f"the closed loop with the URDF's values could not be simulated ({e}); DIDIM started "
+                             "from IDIM-LS's estimate")
+                say(notes[-1])
+                theta, cov = _fit(rec, robot, base, qm, vm, am, offset, law, dec, rec.force)
+                pi = base.standard_from(theta[:len(base.names)], pi0)
+                try:
+                    sim = _simulate(rec, robot.with_inertial_params(pi[n:]), {
+                        "armature": list(pi[:n]), "viscous": list(theta[len(base.names):len(base.names) + n]),
+                        "coulomb": list(theta[len(base.names) + n:len(base.names) + 2 * n]),
+                        "offset": list(theta[len(base.names) + 2 * n:]) if offset else [0.0] * n}, law)
+                except (SimulationError, DataError) as e2:
+                    message = f"iteration {it}: {e2}"
+                    break
+            else:
+                message = f"iteration {it}: {e}"
+                break
         err = float(np.linalg.norm(rec.force - sim["force"]) / np.linalg.norm(rec.force))
         history.append(err)
         say(f"DIDIM iteration {it}: closed-loop force error {100 * err:.3f} %")
         if best is None or err < best[0]:
             best = (err, theta.copy(), cov.copy(), sim)
-        if it >= 1 and abs(history[-2] - err) <= tol * err:
-            converged = True
-            break
-        theta, cov = _fit(rec, robot, base, sim["q"], sim["qd"], sim["qdd"], offset, eps, dec, rec.force)
+        # settled: the error changed by less than tol of itself, or it has not bettered the best by that much in
+        # STALL iterations (it wanders at the level the encoder's rounding in the loop sets)
+        stalled = len(history) > STALL and min(history[-STALL:]) > (1 - tol) * min(history[:-STALL])
+        if it >= 1 and (abs(history[-2] - err) <= tol * err or stalled):
+            if law_chosen:
+                converged = True
+                break
+            # the parameters have settled: the law through zero speed chosen in closed loop, then on
+            law_chosen = True
+            new_law = closed_loop_law(rec, robot.with_inertial_params(pi[n:]), d, law, per_shape, say)
+            if new_law != law:
+                law, best, history_before = new_law, None, len(history)
+                del history_before
+                sim = _simulate(rec, robot.with_inertial_params(pi[n:]), d, law)
+        theta, cov = _fit(rec, robot, base, sim["q"], sim["qd"], sim["qdd"], offset, law, dec, rec.force)
     if best is None:
         raise SimulationError(f"DIDIM could not simulate the robot's closed loop from the URDF's values: {message}")
     err, theta, cov, sim = best
     if not converged and not message:
         message = f"no convergence in {max_iter} iterations"
     res = _result("didim", rec, robot, base, offset, theta, cov, converged=converged, iterations=len(history),
-                  message=message, history=history)
+                  message=message, history=history, notes=notes, law=law)
     res.force_error, res.force_error_per_joint = force_errors(rec, sim["force"])
     res.elapsed_s = time.perf_counter() - t0
-    del names
     return res
 
 
@@ -507,7 +674,7 @@ def payload(rec: RobotRecording, result: RobotResult, *, max_iter: int = 30, tol
     drives["armature"] = list(pi[:n])
     theta = result.theta()
     dec = _decimation(rec)
-    eps = _eps(rec)
+    law = result.law if result.law is not None else _default_law(rec)
     # the last body's identifiable parameters (the rest of the robot known)
     rng = np.random.default_rng(0)
     lim = np.array([lt[:2] for lt in robot.limits], dtype=float)
@@ -534,7 +701,7 @@ def payload(rec: RobotRecording, result: RobotResult, *, max_iter: int = 30, tol
     for it in range(max_iter):
         bodies = pi[n:].copy()
         bodies[-10:] += delta
-        sim = _simulate(rec, robot.with_inertial_params(bodies), drives, eps)
+        sim = _simulate(rec, robot.with_inertial_params(bodies), drives, law)
         err = float(np.linalg.norm(rec.force - sim["force"]) / np.linalg.norm(rec.force))
         history.append(err)
         say(f"payload iteration {it}: closed-loop force error {100 * err:.3f} %")
@@ -544,25 +711,15 @@ def payload(rec: RobotRecording, result: RobotResult, *, max_iter: int = 30, tol
             converged = True
             break
         q, v, a = sim["q"], sim["qd"], sim["qdd"]
-        known = np.einsum("kjp,p->kj", _model_regressor(robot, result.base, q, v, a, result.offset, eps), theta)
+        known = np.einsum("kjp,p->kj", _model_regressor(robot, result.base, q, v, a, result.offset, law), theta)
         w = robot.regressor(q, v, a)[:, :, -10:][:, :, free]
-        y = rec.force - known
-        yy, ww = _stack(dec, y, w, v, np.ones(n))
-        est, _, r = _solve(yy, ww)
-        sig = []
-        for j in range(n):
-            yd, wd = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, :]))
-            vd = dec(np.ascontiguousarray(v[:, j]))
-            keep = np.abs(vd) > SLOW_SHARE * np.max(np.abs(v[:, j]))
-            sig.append(max(float(np.std(yd[keep] - wd[keep] @ est)), 1e-12 * max(float(np.std(yd)), 1e-300)))
-        yy, ww = _stack(dec, y, w, v, np.array(sig))
-        est, cov, _ = _solve(yy, ww)
+        est, cov = _weighted(_rows(dec, rec.force - known, w, v))
         delta = np.zeros(10)
         delta[free] = est
     assert best is not None
     err, delta, cov = best
     bodies = pi[n:]
-    sim0 = _simulate(rec, robot.with_inertial_params(bodies), drives, eps)
+    sim0 = _simulate(rec, robot.with_inertial_params(bodies), drives, law)
     err0 = float(np.linalg.norm(rec.force - sim0["force"]) / np.linalg.norm(rec.force))
     std = np.full(10, np.nan)
     std[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))

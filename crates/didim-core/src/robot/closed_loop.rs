@@ -168,7 +168,7 @@ pub fn simulate_robot(
     let mut plant = Plant {
         robot,
         drives,
-        ws: AbaWork::new(n),
+        ws: AbaWork::new(robot),
         tau: vec![0.0; n],
     };
     let qr0 = &qr[..n];

@@ -18,7 +18,7 @@ mod urdf;
 
 pub use closed_loop::{simulate_robot, Drives, RobotLoopOptions, RobotLoopOutput};
 
-use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, Vector3};
 
 use crate::error::{invalid, Result};
 use spatial::{Force, Motion, Pose};
@@ -287,13 +287,15 @@ impl Robot {
         if let Some(ia) = armature {
             self.check("armature", ia)?;
         }
-        let mut ws = AbaWork::new(self.ndof());
+        let mut ws = AbaWork::new(self);
         let mut out = vec![0.0; self.ndof()];
         self.aba_into(q, v, tau, armature, &mut ws, &mut out)?;
         Ok(out)
     }
 
     /// [`Robot::aba`] without the checks, in a reusable workspace (the simulator's inner loop).
+    /// Spatial quantities are kept as 3 × 3 blocks: the articulated inertias' transform to the
+    /// parent costs about a third of a 6 × 6 congruence.
     pub fn aba_into(
         &self,
         q: &[f64],
@@ -304,15 +306,20 @@ impl Robot {
         out: &mut [f64],
     ) -> Result<()> {
         let n = self.ndof();
+        debug_assert_eq!(ws.k.len(), n, "the workspace of another robot");
         // forward: poses, velocities, velocity-product accelerations, bias forces
         let mut vp = Motion::zero();
         for i in 0..n {
             let j = &self.joints[i];
             let pose = match j.kind {
-                JointKind::Revolute => Pose {
-                    rotation: j.placement_rotation * spatial::rotation_about(&j.axis, q[i]),
-                    translation: j.placement_translation,
-                },
+                JointKind::Revolute => {
+                    let (sn, cs) = q[i].sin_cos();
+                    let k = &ws.k[i];
+                    Pose {
+                        rotation: k[0] + k[1] * cs + k[2] * sn,
+                        translation: j.placement_translation,
+                    }
+                }
                 JointKind::Prismatic => Pose {
                     rotation: j.placement_rotation,
                     translation: j.placement_translation + j.placement_rotation * (j.axis * q[i]),
@@ -321,44 +328,58 @@ impl Robot {
             let s = Self::subspace(j);
             let vj = s.scale(v[i]);
             let vi = pose.motion_to_child(&vp) + vj;
-            ws.x[i] = spatial::motion_matrix(&pose);
-            ws.s[i] = s.to_vector();
-            ws.c[i] = vi.cross(&vj).to_vector();
-            ws.ia[i] = spatial::inertia_matrix6(&j.inertia);
-            ws.pa[i] = vi
-                .cross_force(&spatial::inertia_apply(&j.inertia, &vi))
-                .to_vector();
+            ws.pose[i] = pose;
+            ws.c[i] = vi.cross(&vj);
+            ws.ia[i] = ws.body[i];
+            ws.pa[i] = vi.cross_force(&ws.body[i].apply(&vi));
             vp = vi;
         }
         // backward: articulated inertias and bias forces
         for i in (0..n).rev() {
-            let u_vec = ws.ia[i] * ws.s[i];
-            let d = ws.s[i].dot(&u_vec) + armature.map_or(0.0, |a| a[i]);
+            let j = &self.joints[i];
+            let revolute = j.kind == JointKind::Revolute;
+            let u_vec = ws.ia[i].times_axis(&j.axis, revolute);
+            let d = if revolute {
+                j.axis.dot(&u_vec.n)
+            } else {
+                j.axis.dot(&u_vec.f)
+            } + armature.map_or(0.0, |a| a[i]);
             if d.is_nan() || d <= 0.0 {
                 return Err(invalid!(
                     "joint {}: its articulated inertia is not positive ({d}): the inertial parameters are not those of physical bodies",
-                    self.joints[i].name
+                    j.name
                 ));
             }
-            let u = tau[i] - ws.s[i].dot(&ws.pa[i]);
+            let u = tau[i]
+                - if revolute {
+                    j.axis.dot(&ws.pa[i].n)
+                } else {
+                    j.axis.dot(&ws.pa[i].f)
+                };
             ws.u[i] = u_vec;
             ws.d[i] = d;
             ws.uu[i] = u;
             if i > 0 {
-                let ia = ws.ia[i] - u_vec * u_vec.transpose() / d;
-                let pa = ws.pa[i] + ia * ws.c[i] + u_vec * (u / d);
-                let xt = ws.x[i].transpose();
-                ws.ia[i - 1] += xt * ia * ws.x[i];
-                ws.pa[i - 1] += xt * pa;
+                let mut ia = ws.ia[i];
+                ia.subtract_outer(&u_vec, 1.0 / d);
+                let ic = ia.apply(&ws.c[i]);
+                let pa = Force {
+                    n: ws.pa[i].n + ic.n + u_vec.n * (u / d),
+                    f: ws.pa[i].f + ic.f + u_vec.f * (u / d),
+                };
+                let to_parent = ia.in_parent(&ws.pose[i]);
+                ws.ia[i - 1].add(&to_parent);
+                let fp = ws.pose[i].force_to_parent(&pa);
+                ws.pa[i - 1] = ws.pa[i - 1] + fp;
             }
         }
         // forward: accelerations (gravity as an acceleration of the base)
-        let mut ap = Vector6::new(0.0, 0.0, 0.0, -self.gravity.x, -self.gravity.y, -self.gravity.z);
+        let mut ap = Motion::new(Vector3::zeros(), -self.gravity);
         for i in 0..n {
-            let a = ws.x[i] * ap + ws.c[i];
-            let qdd = (ws.uu[i] - ws.u[i].dot(&a)) / ws.d[i];
+            let a = ws.pose[i].motion_to_child(&ap) + ws.c[i];
+            let qdd = (ws.uu[i] - (ws.u[i].n.dot(&a.w) + ws.u[i].f.dot(&a.v))) / ws.d[i];
             out[i] = qdd;
-            ap = a + ws.s[i] * qdd;
+            ap = a + Self::subspace(&self.joints[i]).scale(qdd);
         }
         Ok(())
     }
@@ -427,25 +448,46 @@ impl Robot {
 /// The articulated-body algorithm's workspace for a robot of `n` joints.
 #[derive(Clone, Debug)]
 pub struct AbaWork {
-    x: Vec<Matrix6<f64>>,
-    s: Vec<Vector6<f64>>,
-    c: Vec<Vector6<f64>>,
-    ia: Vec<Matrix6<f64>>,
-    pa: Vec<Vector6<f64>>,
-    u: Vec<Vector6<f64>>,
+    /// Per joint: its rotation as `k0 + cos q·k1 + sin q·k2` (revolute; the placement's rotation
+    /// times Rodrigues' terms), and its body's spatial inertia.
+    k: Vec<[Matrix3<f64>; 3]>,
+    body: Vec<spatial::Articulated>,
+    pose: Vec<Pose>,
+    c: Vec<Motion>,
+    ia: Vec<spatial::Articulated>,
+    pa: Vec<Force>,
+    u: Vec<Force>,
     d: Vec<f64>,
     uu: Vec<f64>,
 }
 
 impl AbaWork {
-    pub fn new(n: usize) -> Self {
+    /// The workspace of `robot` (its joints' constant terms computed once).
+    pub fn new(robot: &Robot) -> Self {
+        let n = robot.ndof();
+        let k = robot
+            .joints
+            .iter()
+            .map(|j| {
+                let a = j.axis;
+                let aat = a * a.transpose();
+                let ax = Matrix3::new(0.0, -a.z, a.y, a.z, 0.0, -a.x, -a.y, a.x, 0.0);
+                let r = j.placement_rotation;
+                [r * aat, r * (Matrix3::identity() - aat), r * ax]
+            })
+            .collect();
         AbaWork {
-            x: vec![Matrix6::zeros(); n],
-            s: vec![Vector6::zeros(); n],
-            c: vec![Vector6::zeros(); n],
-            ia: vec![Matrix6::zeros(); n],
-            pa: vec![Vector6::zeros(); n],
-            u: vec![Vector6::zeros(); n],
+            k,
+            body: robot
+                .joints
+                .iter()
+                .map(|j| spatial::Articulated::of_body(&j.inertia))
+                .collect(),
+            pose: vec![Pose::identity(); n],
+            c: vec![Motion::zero(); n],
+            ia: vec![spatial::Articulated::zero(); n],
+            pa: vec![Force::zero(); n],
+            u: vec![Force::zero(); n],
             d: vec![0.0; n],
             uu: vec![0.0; n],
         }

@@ -4,7 +4,7 @@
 
 use std::ops::Add;
 
-use nalgebra::{Matrix3, Matrix6, Rotation3, Unit, Vector3, Vector6};
+use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
 use super::BODY_PARAMS;
 
@@ -46,11 +46,6 @@ impl Motion {
         }
     }
 
-    /// As a 6-vector (ω, v).
-    pub fn to_vector(self) -> Vector6<f64> {
-        Vector6::new(self.w.x, self.w.y, self.w.z, self.v.x, self.v.y, self.v.z)
-    }
-
     /// The power pairing with a force.
     pub fn dot(&self, f: &Force) -> f64 {
         self.w.dot(&f.n) + self.v.dot(&f.f)
@@ -58,9 +53,11 @@ impl Motion {
 }
 
 impl Force {
-    /// As a 6-vector (n, f).
-    pub fn to_vector(self) -> Vector6<f64> {
-        Vector6::new(self.n.x, self.n.y, self.n.z, self.f.x, self.f.y, self.f.z)
+    pub fn zero() -> Self {
+        Force {
+            n: Vector3::zeros(),
+            f: Vector3::zeros(),
+        }
     }
 }
 
@@ -169,27 +166,99 @@ fn skew(x: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -x.z, x.y, x.z, 0.0, -x.x, -x.y, x.x, 0.0)
 }
 
-/// The 6 × 6 matrix of [`Pose::motion_to_child`]: `[Rᵀ, 0; −Rᵀ[p]×, Rᵀ]` (its transpose carries
-/// forces from the child to the parent).
-pub fn motion_matrix(pose: &Pose) -> Matrix6<f64> {
-    let rt = pose.rotation.transpose();
-    let mut x = Matrix6::zeros();
-    x.fixed_view_mut::<3, 3>(0, 0).copy_from(&rt);
-    x.fixed_view_mut::<3, 3>(3, 3).copy_from(&rt);
-    x.fixed_view_mut::<3, 3>(3, 0)
-        .copy_from(&(-rt * skew(&pose.translation)));
-    x
+/// A spatial (articulated) inertia as 3 × 3 blocks `[A, B; Bᵀ, C]` (A, C symmetric): the force of
+/// a motion (ω, v) is (A ω + B v, Bᵀ ω + C v).
+#[derive(Clone, Copy, Debug)]
+pub struct Articulated {
+    a: Matrix3<f64>,
+    b: Matrix3<f64>,
+    c: Matrix3<f64>,
 }
 
-/// The 6 × 6 spatial inertia of a body's parameters: `[I_O, [h]×; −[h]×, m·1]`.
-pub fn inertia_matrix6(p: &[f64; BODY_PARAMS]) -> Matrix6<f64> {
-    let h = skew(&Vector3::new(p[1], p[2], p[3]));
-    let mut m = Matrix6::zeros();
-    m.fixed_view_mut::<3, 3>(0, 0)
-        .copy_from(&inertia_matrix(&p[4..10]));
-    m.fixed_view_mut::<3, 3>(0, 3).copy_from(&h);
-    m.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-h));
-    m.fixed_view_mut::<3, 3>(3, 3)
-        .copy_from(&(Matrix3::identity() * p[0]));
-    m
+impl Articulated {
+    pub fn zero() -> Self {
+        Articulated {
+            a: Matrix3::zeros(),
+            b: Matrix3::zeros(),
+            c: Matrix3::zeros(),
+        }
+    }
+
+    /// A rigid body's: `[I_O, [h]×; −[h]×, m·1]`.
+    pub fn of_body(p: &[f64; BODY_PARAMS]) -> Self {
+        Articulated {
+            a: inertia_matrix(&p[4..10]),
+            b: skew(&Vector3::new(p[1], p[2], p[3])),
+            c: Matrix3::identity() * p[0],
+        }
+    }
+
+    #[inline]
+    pub fn apply(&self, m: &Motion) -> Force {
+        Force {
+            n: self.a * m.w + self.b * m.v,
+            f: self.b.tr_mul(&m.w) + self.c * m.v,
+        }
+    }
+
+    /// The force of the joint's unit motion: about the axis (`revolute`) or along it.
+    #[inline]
+    pub fn times_axis(&self, axis: &Vector3<f64>, revolute: bool) -> Force {
+        if revolute {
+            Force {
+                n: self.a * axis,
+                f: self.b.tr_mul(axis),
+            }
+        } else {
+            Force {
+                n: self.b * axis,
+                f: self.c * axis,
+            }
+        }
+    }
+
+    /// `self − k·u·uᵀ` for a force `u` (the articulated inertia less what the joint takes up).
+    #[inline]
+    pub fn subtract_outer(&mut self, u: &Force, k: f64) {
+        self.a -= u.n * u.n.transpose() * k;
+        self.b -= u.n * u.f.transpose() * k;
+        self.c -= u.f * u.f.transpose() * k;
+    }
+
+    pub fn add(&mut self, o: &Articulated) {
+        self.a += o.a;
+        self.b += o.b;
+        self.c += o.c;
+    }
+
+    /// The same inertia seen from the parent's frame, the child's pose being `pose`: rotated into the
+    /// parent's axes, then moved from the child's origin to the parent's (`Xᵀ·I·X`):
+    /// `A' + S + Sᵀ − P·C'·P`, `B' + P·C'`, `C'` with `P = [p]×`, `S = P·B'ᵀ`, the skew products
+    /// as cross products.
+    #[inline]
+    pub fn in_parent(&self, pose: &Pose) -> Articulated {
+        let r = &pose.rotation;
+        let rt = r.transpose();
+        let a = r * self.a * rt;
+        let b = r * self.b * rt;
+        let c = r * self.c * rt;
+        let p = &pose.translation;
+        // P·X column by column
+        let px = |x: &Matrix3<f64>| {
+            Matrix3::from_columns(&[
+                p.cross(&x.column(0).into_owned()),
+                p.cross(&x.column(1).into_owned()),
+                p.cross(&x.column(2).into_owned()),
+            ])
+        };
+        let s = px(&b.transpose());
+        let q = px(&c);
+        // P·C'·P = Q·P = −(P·Qᵀ)ᵀ
+        let qp = -px(&q.transpose()).transpose();
+        Articulated {
+            a: a + s + s.transpose() - qp,
+            b: b + q,
+            c,
+        }
+    }
 }
