@@ -27,6 +27,11 @@ def test_readme_python_blocks_run_as_written(tmp_path, monkeypatch, emps_path):
     if not (TRUTHBENCH_DIR / "drive").is_dir():
         pytest.skip(f"the README's drive example reads {TRUTHBENCH_DIR / 'drive'}, not available")
     os.symlink(TRUTHBENCH_DIR, tmp_path / "shared" / "data" / "truthbench")
+    from conftest import ROBOTS_DIR
+
+    if not (ROBOTS_DIR / "truth.json").exists():
+        pytest.skip(f"the README's robot example reads {ROBOTS_DIR}, not available")
+    os.symlink(ROBOTS_DIR, tmp_path / "shared" / "data" / "robots")
     monkeypatch.chdir(work)
     namespace = {}
     with warnings.catch_warnings():

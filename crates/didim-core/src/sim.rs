@@ -19,7 +19,7 @@ use crate::controller::Controller;
 use crate::error::{invalid, Error, Result};
 use crate::model::Model;
 
-mod driver;
+pub(crate) mod driver;
 mod expint;
 mod rk4;
 pub use driver::applied_force;

@@ -86,6 +86,7 @@ struct Plant<'a> {
 }
 
 impl Plant<'_> {
+    #[inline(always)]
     fn accel(&mut self, q: &[f64], v: &[f64], u: &[f64], out: &mut [f64]) -> Result<()> {
         self.drives.resist(v, &mut self.tau);
         for i in 0..u.len() {
@@ -193,66 +194,71 @@ pub fn simulate_robot(
         });
         span[j] = (hi - lo) + 1.0;
     }
-    for k in 0..samples {
-        if k % interrupt::EVERY == 0 {
-            interrupt::check()?;
-        }
-        let row = k * n;
-        for j in 0..n {
-            let step = opts.quantization[j];
-            let qm = if step > 0.0 {
-                (q[j] / step).round() * step
-            } else {
-                q[j]
-            };
-            let (f, _) = controllers[j].step(&mut z[j], qr[row + j] - qr0[j], qm - qr0[j], opts.force0[j]);
-            u[j] = f;
-            if (q[j] - qr[row + j]).abs() > span[j] || !q[j].is_finite() || !v[j].is_finite() {
-                return Err(Error::Simulation(format!(
+    // the loop in the processor's widest build (as the one-axis loop: the same operations, the same results)
+    crate::sim::driver::simd(|| -> Result<()> {
+        for k in 0..samples {
+            if k % interrupt::EVERY == 0 {
+                interrupt::check()?;
+            }
+            let row = k * n;
+            for j in 0..n {
+                let step = opts.quantization[j];
+                let qm = if step > 0.0 {
+                    (q[j] / step).round() * step
+                } else {
+                    q[j]
+                };
+                let (f, _) =
+                    controllers[j].step(&mut z[j], qr[row + j] - qr0[j], qm - qr0[j], opts.force0[j]);
+                u[j] = f;
+                if (q[j] - qr[row + j]).abs() > span[j] || !q[j].is_finite() || !v[j].is_finite() {
+                    return Err(Error::Simulation(format!(
                     "the robot's closed loop diverged at sample {k} (t = {:.6} s): joint {} ({}) is {:.3e} away from its reference",
                     k as f64 * opts.dt,
                     j + 1,
                     robot.joints[j].name,
                     q[j] - qr[row + j]
                 )));
+                }
+            }
+            plant.accel(&q, &v, &u, &mut a)?;
+            out.q[row..row + n].copy_from_slice(&q);
+            out.qd[row..row + n].copy_from_slice(&v);
+            out.qdd[row..row + n].copy_from_slice(&a);
+            out.force[row..row + n].copy_from_slice(&u);
+            for s in 0..substeps {
+                // the first stage of the first substep is the acceleration just computed
+                if s == 0 {
+                    k1v.copy_from_slice(&a);
+                } else {
+                    plant.accel(&q, &v, &u, &mut k1v)?;
+                }
+                k1q.copy_from_slice(&v);
+                for j in 0..n {
+                    qs[j] = q[j] + 0.5 * h * k1q[j];
+                    vs[j] = v[j] + 0.5 * h * k1v[j];
+                }
+                k2q.copy_from_slice(&vs);
+                plant.accel(&qs, &vs, &u, &mut k2v)?;
+                for j in 0..n {
+                    qs[j] = q[j] + 0.5 * h * k2q[j];
+                    vs[j] = v[j] + 0.5 * h * k2v[j];
+                }
+                k3q.copy_from_slice(&vs);
+                plant.accel(&qs, &vs, &u, &mut k3v)?;
+                for j in 0..n {
+                    qs[j] = q[j] + h * k3q[j];
+                    vs[j] = v[j] + h * k3v[j];
+                }
+                k4q.copy_from_slice(&vs);
+                plant.accel(&qs, &vs, &u, &mut k4v)?;
+                for j in 0..n {
+                    q[j] += h / 6.0 * (k1q[j] + 2.0 * k2q[j] + 2.0 * k3q[j] + k4q[j]);
+                    v[j] += h / 6.0 * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j]);
+                }
             }
         }
-        plant.accel(&q, &v, &u, &mut a)?;
-        out.q[row..row + n].copy_from_slice(&q);
-        out.qd[row..row + n].copy_from_slice(&v);
-        out.qdd[row..row + n].copy_from_slice(&a);
-        out.force[row..row + n].copy_from_slice(&u);
-        for s in 0..substeps {
-            // the first stage of the first substep is the acceleration just computed
-            if s == 0 {
-                k1v.copy_from_slice(&a);
-            } else {
-                plant.accel(&q, &v, &u, &mut k1v)?;
-            }
-            k1q.copy_from_slice(&v);
-            for j in 0..n {
-                qs[j] = q[j] + 0.5 * h * k1q[j];
-                vs[j] = v[j] + 0.5 * h * k1v[j];
-            }
-            k2q.copy_from_slice(&vs);
-            plant.accel(&qs, &vs, &u, &mut k2v)?;
-            for j in 0..n {
-                qs[j] = q[j] + 0.5 * h * k2q[j];
-                vs[j] = v[j] + 0.5 * h * k2v[j];
-            }
-            k3q.copy_from_slice(&vs);
-            plant.accel(&qs, &vs, &u, &mut k3v)?;
-            for j in 0..n {
-                qs[j] = q[j] + h * k3q[j];
-                vs[j] = v[j] + h * k3v[j];
-            }
-            k4q.copy_from_slice(&vs);
-            plant.accel(&qs, &vs, &u, &mut k4v)?;
-            for j in 0..n {
-                q[j] += h / 6.0 * (k1q[j] + 2.0 * k2q[j] + 2.0 * k3q[j] + k4q[j]);
-                v[j] += h / 6.0 * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j]);
-            }
-        }
-    }
+        Ok(())
+    })?;
     Ok(out)
 }

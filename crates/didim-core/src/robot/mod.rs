@@ -293,9 +293,11 @@ impl Robot {
         Ok(out)
     }
 
-    /// [`Robot::aba`] without the checks, in a reusable workspace (the simulator's inner loop).
+    /// [`Robot::aba`] without the checks, in a reusable workspace (the simulator's inner loop;
+    /// inlined into it, so that its wide build covers this too).
     /// Spatial quantities are kept as 3 × 3 blocks: the articulated inertias' transform to the
     /// parent costs about a third of a 6 × 6 congruence.
+    #[inline(always)]
     pub fn aba_into(
         &self,
         q: &[f64],

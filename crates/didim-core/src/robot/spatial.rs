@@ -21,24 +21,29 @@ pub struct Force {
 }
 
 impl Motion {
+    #[inline(always)]
     pub fn new(w: Vector3<f64>, v: Vector3<f64>) -> Self {
         Motion { w, v }
     }
 
+    #[inline(always)]
     pub fn zero() -> Self {
         Motion::new(Vector3::zeros(), Vector3::zeros())
     }
 
+    #[inline(always)]
     pub fn scale(&self, s: f64) -> Self {
         Motion::new(self.w * s, self.v * s)
     }
 
     /// The motion cross product `self × m` (the rate of change of `m` carried by this motion).
+    #[inline(always)]
     pub fn cross(&self, m: &Motion) -> Motion {
         Motion::new(self.w.cross(&m.w), self.w.cross(&m.v) + self.v.cross(&m.w))
     }
 
     /// The force cross product `self ×* f`.
+    #[inline(always)]
     pub fn cross_force(&self, f: &Force) -> Force {
         Force {
             n: self.w.cross(&f.n) + self.v.cross(&f.f),
@@ -47,12 +52,14 @@ impl Motion {
     }
 
     /// The power pairing with a force.
+    #[inline(always)]
     pub fn dot(&self, f: &Force) -> f64 {
         self.w.dot(&f.n) + self.v.dot(&f.f)
     }
 }
 
 impl Force {
+    #[inline(always)]
     pub fn zero() -> Self {
         Force {
             n: Vector3::zeros(),
@@ -63,6 +70,7 @@ impl Force {
 
 impl Add for Motion {
     type Output = Motion;
+    #[inline(always)]
     fn add(self, o: Motion) -> Motion {
         Motion::new(self.w + o.w, self.v + o.v)
     }
@@ -70,6 +78,7 @@ impl Add for Motion {
 
 impl Add for Force {
     type Output = Force;
+    #[inline(always)]
     fn add(self, o: Force) -> Force {
         Force {
             n: self.n + o.n,
@@ -95,6 +104,7 @@ impl Pose {
     }
 
     /// This pose followed by `other` (a pose in this one's frame).
+    #[inline(always)]
     pub fn compose(&self, other: &Pose) -> Pose {
         Pose {
             rotation: self.rotation * other.rotation,
@@ -103,12 +113,14 @@ impl Pose {
     }
 
     /// A motion of the parent's frame, in the child's coordinates at the child's origin.
+    #[inline(always)]
     pub fn motion_to_child(&self, m: &Motion) -> Motion {
         let rt = self.rotation.transpose();
         Motion::new(rt * m.w, rt * (m.v + m.w.cross(&self.translation)))
     }
 
     /// A force in the child's coordinates about its origin, in the parent's about the parent's.
+    #[inline(always)]
     pub fn force_to_parent(&self, f: &Force) -> Force {
         let fr = self.rotation * f.f;
         Force {
@@ -176,6 +188,7 @@ pub struct Articulated {
 }
 
 impl Articulated {
+    #[inline(always)]
     pub fn zero() -> Self {
         Articulated {
             a: Matrix3::zeros(),
@@ -193,7 +206,7 @@ impl Articulated {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     pub fn apply(&self, m: &Motion) -> Force {
         Force {
             n: self.a * m.w + self.b * m.v,
@@ -202,7 +215,7 @@ impl Articulated {
     }
 
     /// The force of the joint's unit motion: about the axis (`revolute`) or along it.
-    #[inline]
+    #[inline(always)]
     pub fn times_axis(&self, axis: &Vector3<f64>, revolute: bool) -> Force {
         if revolute {
             Force {
@@ -218,13 +231,14 @@ impl Articulated {
     }
 
     /// `self − k·u·uᵀ` for a force `u` (the articulated inertia less what the joint takes up).
-    #[inline]
+    #[inline(always)]
     pub fn subtract_outer(&mut self, u: &Force, k: f64) {
         self.a -= u.n * u.n.transpose() * k;
         self.b -= u.n * u.f.transpose() * k;
         self.c -= u.f * u.f.transpose() * k;
     }
 
+    #[inline(always)]
     pub fn add(&mut self, o: &Articulated) {
         self.a += o.a;
         self.b += o.b;
@@ -235,7 +249,7 @@ impl Articulated {
     /// parent's axes, then moved from the child's origin to the parent's (`Xᵀ·I·X`):
     /// `A' + S + Sᵀ − P·C'·P`, `B' + P·C'`, `C'` with `P = [p]×`, `S = P·B'ᵀ`, the skew products
     /// as cross products.
-    #[inline]
+    #[inline(always)]
     pub fn in_parent(&self, pose: &Pose) -> Articulated {
         let r = &pose.rotation;
         let rt = r.transpose();
