@@ -162,3 +162,21 @@ def test_bad_robot_inputs_are_refused_by_name(data, robots_dir, tmp_path):
     bad.write_text('{"type": "transfer_function"}')
     with pytest.raises(didim.DataError, match="joints"):
         didim.load_record(robots_dir / "pendulum_train.csv", robot=robot, controller=bad)
+
+
+def test_a_parquet_robot_record_reads_as_its_csv(data, robots_dir, tmp_path):
+    pa = pytest.importorskip("pyarrow")
+    import pyarrow.parquet as pq
+
+    load, _ = data
+    robot, rec = load("pendulum", "valid")
+    cols = {"t": rec.t}
+    for key in ("qr", "force", "qm"):
+        for j in range(rec.ndof):
+            cols[f"{key}_{robot.joint_names[j]}"] = getattr(rec, key)[:, j]  # the joints by name this time
+    path = tmp_path / "pendulum_valid.parquet"
+    pq.write_table(pa.table(cols), path)
+    back = didim.load_record(path, robot=robot, controller=robots_dir / "pendulum_controller.json")
+    for key in ("qr", "force", "qm"):
+        np.testing.assert_array_equal(getattr(back, key), getattr(rec, key))
+    assert back.encoder_step == rec.encoder_step and back.dt == rec.dt

@@ -642,6 +642,8 @@ class _Search:
             and all(v >= 0 for k, v in base.params.items() if k in ("Fv", "Fc", "Fv1", "Fc1"))
         try:
             for name, rivals in BEFORE_LAW.items():
+                if not REGISTRY[name].candidates(cur[0], cur[3], self.data):  # it does not apply to this axis
+                    continue
                 ranked, wb = self.rank(cur, only=(name, *rivals))
                 significant = [c for c in ranked if c.p_adj < self.alpha]
                 if physical:
