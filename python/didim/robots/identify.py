@@ -247,11 +247,16 @@ def _decimation(rec: RobotRecording):
     return Decimation.lowpass(min(max(10 * band, 5 * f[1] if len(f) > 1 else 1.0), fs / 10), fs)
 
 
-def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray) -> List[Tuple[np.ndarray, np.ndarray]]:
+def top_speeds(rec: RobotRecording) -> np.ndarray:
+    """Each joint's top reference speed: the scale of the speeds below which the fits leave rows out (the reference's,
+    not the states': a simulated state that swings far off would move the threshold with it)."""
+    return np.max(np.abs(np.diff(rec.qr, axis=0)), axis=0) / rec.dt
+
+
+def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray, vmax: np.ndarray) -> List[Tuple[np.ndarray, np.ndarray]]:
     """Each joint's force and regressor rows decimated, the rows where it moves slowly (below :data:`SLOW_SHARE` of
-    its top speed) left out."""
+    its top reference speed ``vmax``) left out."""
     out = []
-    vmax = np.max(np.abs(v), axis=0)
     for j in range(y.shape[1]):
         yd, wd = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, :]))
         keep = np.abs(dec(np.ascontiguousarray(v[:, j]))) > SLOW_SHARE * vmax[j]
@@ -261,7 +266,12 @@ def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray) -> List[Tuple[np.nda
 
 def _weighted(parts: List[Tuple[np.ndarray, np.ndarray]]) -> Tuple[np.ndarray, np.ndarray]:
     """Least squares of the joints' rows, ordinary first, then each joint's rows divided by its residual's σ: the
-    estimate and its covariance."""
+    estimate and its covariance. A joint without two rows to weigh (it never moved above the threshold) is left out."""
+    parts = [p for p in parts if len(p[0]) >= 2]
+    if not parts:
+        from .._errors import IdentifiabilityError
+
+        raise IdentifiabilityError("no joint moves above the slow-speed threshold on this record: nothing to fit")
     theta, _, _ = _solve(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
     sig = [max(float(np.std(yd - wd @ theta)), 1e-12 * max(float(np.std(yd)), 1e-300)) for yd, wd in parts]
     theta, cov, _ = _solve(np.concatenate([yd / s_ for (yd, _), s_ in zip(parts, sig)]),
@@ -291,13 +301,13 @@ def _measured_states(rec: RobotRecording, dec) -> Tuple[np.ndarray, np.ndarray, 
 def _fit(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, law: Law, dec,
          y: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """Weighted least squares (:func:`_weighted`) of the force ``y`` on the model's regressor at the states."""
-    return _weighted(_rows(dec, y, _model_regressor(robot, base, q, v, a, offset, law), v))
+    return _weighted(_rows(dec, y, _model_regressor(robot, base, q, v, a, offset, law), v, top_speeds(rec)))
 
 
 def _default_law(rec: RobotRecording) -> Law:
     """didim's law for a robot's loop when none is fitted: algebraic, ε a share (:data:`EPS_SHARE`) of the slowest
     joint's top speed."""
-    vmax = np.max(np.abs(np.diff(rec.qr, axis=0)), axis=0) / rec.dt
+    vmax = top_speeds(rec)
     return ("algebraic", float(EPS_SHARE * np.min(vmax[vmax > 0])) if np.any(vmax > 0) else 1e-3)
 
 
@@ -318,7 +328,7 @@ def fit_law(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, of
     moves slowly are left out, as in every fit: what is chosen is the law's tail, where a slow law such as the atan
     one is still several percent below its Coulomb level at ten times ε and would bend the viscous friction)."""
     n = robot.ndof
-    vmax = np.max(np.abs(v), axis=0)
+    vmax = top_speeds(rec)
     scale = float(np.median(vmax[vmax > 0])) if np.any(vmax > 0) else 1.0
     w = _model_regressor(robot, base, q, v, a, offset, ("algebraic", 0.0))
     nb = len(base.names)
@@ -544,13 +554,75 @@ def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> Robot
     return res
 
 
+#: A closed-loop force error above this (100 %: worse than predicting no force at all) is no start for DIDIM.
+ABSURD_ERROR = 1.0
+
+
+@dataclass
+class _Run:
+    """One DIDIM run: its best iterate (error, θ, covariance, simulation), history, law and how it ended."""
+
+    best: Optional[Tuple[float, np.ndarray, np.ndarray, Dict[str, np.ndarray]]] = None
+    history: List[float] = field(default_factory=list)
+    law: Law = ("algebraic", 0.0)
+    converged: bool = False
+    message: str = ""
+
+
+def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, tol, say) -> _Run:
+    """DIDIM's iterations from ``theta``: simulate, refit on the simulated states, until settled; the law through
+    zero speed chosen in closed loop once the parameters settle, then on until they settle again."""
+    n, nb = robot.ndof, len(base.names)
+    pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
+    run = _Run(law=law)
+    law_chosen = False
+    cov = np.zeros((len(theta), len(theta)))
+    for it in range(max_iter):
+        pi = base.standard_from(theta[:nb], pi0)
+        d = {"armature": list(pi[:n]), "viscous": list(theta[nb:nb + n]), "coulomb": list(theta[nb + n:nb + 2 * n]),
+             "offset": list(theta[nb + 2 * n:]) if offset else [0.0] * n}
+        try:
+            sim = _simulate(rec, robot.with_inertial_params(pi[n:]), d, run.law)
+        except (SimulationError, DataError) as e:
+            run.message = f"iteration {it}: {e}"
+            return run
+        err = float(np.linalg.norm(rec.force - sim["force"]) / np.linalg.norm(rec.force))
+        run.history.append(err)
+        say(f"DIDIM iteration {it}: closed-loop force error {100 * err:.3f} %")
+        if run.best is None or err < run.best[0]:
+            run.best = (err, theta.copy(), cov.copy(), sim)
+        # settled: the error changed by less than tol of itself, or it has not bettered the best by that much in
+        # STALL iterations (it wanders at the level the encoder's rounding in the loop sets)
+        h = run.history
+        stalled = len(h) > STALL and min(h[-STALL:]) > (1 - tol) * min(h[:-STALL])
+        if it >= 1 and (abs(h[-2] - err) <= tol * err or stalled):
+            if law_chosen:
+                run.converged = True
+                return run
+            law_chosen = True
+            new_law = closed_loop_law(rec, robot.with_inertial_params(pi[n:]), d, run.law, per_shape, say)
+            if new_law != run.law:
+                run.law, run.best = new_law, None
+                try:
+                    sim = _simulate(rec, robot.with_inertial_params(pi[n:]), d, run.law)
+                except (SimulationError, DataError) as e:
+                    run.message = f"iteration {it}: {e}"
+                    return run
+        theta, cov = _fit(rec, robot, base, sim["q"], sim["qd"], sim["qdd"], offset, run.law, dec, rec.force)
+    run.message = f"no convergence in {max_iter} iterations"
+    return run
+
+
 def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: int = 30, tol: float = 1e-3,
           progress: Optional[Callable[[str], None]] = None) -> RobotResult:
     """DIDIM from the URDF's values (rotor inertias and friction 0): the closed loop simulated with the current
     estimate, weighted least squares of the measured force on the simulated states, until the output error changes
-    by less than ``tol`` of itself between iterations (the paper's criterion). When the loop with the URDF's values
-    cannot be simulated (a joint whose rotor inertia the controller was tuned for is far lighter without it, and its
-    loop unstable), DIDIM starts from IDIM-LS's estimate instead and the result says so."""
+    by less than ``tol`` of itself between iterations (the paper's criterion) or stalls at the loop's noise.
+
+    When the run from the URDF's values fails (its loop cannot be simulated or is worse than predicting no force:
+    a joint whose rotor inertia the controller was tuned for is far lighter without it, and its loop unstable; or
+    an iterate that is not physical) DIDIM runs again from IDIM-LS's estimate and keeps the run that fits the
+    training record better; the result says so."""
     t0 = time.perf_counter()
     _check(rec, robot)
     say = progress or (lambda s: None)
@@ -560,67 +632,28 @@ def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: 
     per_shape: Dict[str, float] = {}
     law = fit_law(rec, robot, base, qm, vm, am, offset, dec, per_shape)
     say(f"friction law through zero speed, by the inverse model: {law[0]}, ε = {law[1]:.4g}")
-    law_chosen = False
-    pi0 = np.concatenate([np.zeros(robot.ndof), robot.inertial_params])
     n = robot.ndof
-    theta = np.concatenate([base.of(pi0), np.zeros(2 * n + (n if offset else 0))])
-    history: List[float] = []
-    best = None
-    converged, message = False, ""
-    cov = np.zeros((len(theta), len(theta)))
+    pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
+    theta0 = np.concatenate([base.of(pi0), np.zeros(2 * n + (n if offset else 0))])
     notes: List[str] = []
-    for it in range(max_iter):
-        pi = base.standard_from(theta[:len(base.names)], pi0)
-        d = {"armature": list(pi[:n]), "viscous": list(theta[len(base.names):len(base.names) + n]),
-             "coulomb": list(theta[len(base.names) + n:len(base.names) + 2 * n]),
-             "offset": list(theta[len(base.names) + 2 * n:]) if offset else [0.0] * n}
-        try:
-            sim = _simulate(rec, robot.with_inertial_params(pi[n:]), d, law)
-        except (SimulationError, DataError) as e:
-            if it == 0 and not notes:  # the URDF's values: start again from IDIM-LS's
-                notes.append(f"the closed loop with the URDF's values could not be simulated ({e}); DIDIM started "
-                             "from IDIM-LS's estimate")
-                say(notes[-1])
-                theta, cov = _fit(rec, robot, base, qm, vm, am, offset, law, dec, rec.force)
-                pi = base.standard_from(theta[:len(base.names)], pi0)
-                try:
-                    sim = _simulate(rec, robot.with_inertial_params(pi[n:]), {
-                        "armature": list(pi[:n]), "viscous": list(theta[len(base.names):len(base.names) + n]),
-                        "coulomb": list(theta[len(base.names) + n:len(base.names) + 2 * n]),
-                        "offset": list(theta[len(base.names) + 2 * n:]) if offset else [0.0] * n}, law)
-                except (SimulationError, DataError) as e2:
-                    message = f"iteration {it}: {e2}"
-                    break
-            else:
-                message = f"iteration {it}: {e}"
-                break
-        err = float(np.linalg.norm(rec.force - sim["force"]) / np.linalg.norm(rec.force))
-        history.append(err)
-        say(f"DIDIM iteration {it}: closed-loop force error {100 * err:.3f} %")
-        if best is None or err < best[0]:
-            best = (err, theta.copy(), cov.copy(), sim)
-        # settled: the error changed by less than tol of itself, or it has not bettered the best by that much in
-        # STALL iterations (it wanders at the level the encoder's rounding in the loop sets)
-        stalled = len(history) > STALL and min(history[-STALL:]) > (1 - tol) * min(history[:-STALL])
-        if it >= 1 and (abs(history[-2] - err) <= tol * err or stalled):
-            if law_chosen:
-                converged = True
-                break
-            # the parameters have settled: the law through zero speed chosen in closed loop, then on
-            law_chosen = True
-            new_law = closed_loop_law(rec, robot.with_inertial_params(pi[n:]), d, law, per_shape, say)
-            if new_law != law:
-                law, best, history_before = new_law, None, len(history)
-                del history_before
-                sim = _simulate(rec, robot.with_inertial_params(pi[n:]), d, law)
-        theta, cov = _fit(rec, robot, base, sim["q"], sim["qd"], sim["qdd"], offset, law, dec, rec.force)
-    if best is None:
-        raise SimulationError(f"DIDIM could not simulate the robot's closed loop from the URDF's values: {message}")
-    err, theta, cov, sim = best
-    if not converged and not message:
-        message = f"no convergence in {max_iter} iterations"
-    res = _result("didim", rec, robot, base, offset, theta, cov, converged=converged, iterations=len(history),
-                  message=message, history=history, notes=notes, law=law)
+    run = _didim_run(rec, robot, base, dec, offset, theta0, law, per_shape, max_iter, tol, say)
+    failed = run.best is None or run.history[0] > ABSURD_ERROR or (not run.converged and "iteration" in run.message)
+    if failed:
+        why = (run.message if run.best is None or not run.history else
+               f"its first closed-loop force error was {100 * run.history[0]:.0f} %" if run.history[0] > ABSURD_ERROR
+               else run.message)
+        say(f"DIDIM from the URDF's values failed ({why}): again from IDIM-LS's estimate")
+        theta_ls, _ = _fit(rec, robot, base, qm, vm, am, offset, law, dec, rec.force)
+        again = _didim_run(rec, robot, base, dec, offset, theta_ls, law, per_shape, max_iter, tol, say)
+        if again.best is not None and (run.best is None or again.best[0] < run.best[0]):
+            notes.append(f"DIDIM from the URDF's values failed ({why}); it started from IDIM-LS's estimate")
+            run = again
+    if run.best is None:
+        raise SimulationError(f"DIDIM could not simulate the robot's closed loop: {run.message}")
+    err, theta, cov, sim = run.best
+    res = _result("didim", rec, robot, base, offset, theta, cov, converged=run.converged,
+                  iterations=len(run.history), message="" if run.converged else run.message, history=run.history,
+                  notes=notes, law=run.law)
     res.force_error, res.force_error_per_joint = force_errors(rec, sim["force"])
     res.elapsed_s = time.perf_counter() - t0
     return res
@@ -713,7 +746,7 @@ def payload(rec: RobotRecording, result: RobotResult, *, max_iter: int = 30, tol
         q, v, a = sim["q"], sim["qd"], sim["qdd"]
         known = np.einsum("kjp,p->kj", _model_regressor(robot, result.base, q, v, a, result.offset, law), theta)
         w = robot.regressor(q, v, a)[:, :, -10:][:, :, free]
-        est, cov = _weighted(_rows(dec, rec.force - known, w, v))
+        est, cov = _weighted(_rows(dec, rec.force - known, w, v, top_speeds(rec)))
         delta = np.zeros(10)
         delta[free] = est
     assert best is not None
