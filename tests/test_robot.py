@@ -118,7 +118,10 @@ def test_bad_robots_and_states_are_refused_by_name(robots_dir, tmp_path):
     with pytest.raises(didim.DataError, match="no joint elbow"):
         didim.Robot.from_urdf(ur5, ["elbow"])
     with pytest.raises(didim.DataError, match="not a serial chain"):
-        didim.Robot.from_urdf(_example_robot("panda.urdf"))
+        didim.Robot.from_urdf(_example_robot("baxter.urdf"))  # two arms and a head on a torso
+    # the Panda's fingers are a short branch at the end of its arm: the arm by default, the fingers locked
+    panda = didim.Robot.from_urdf(_example_robot("panda.urdf"))
+    assert panda.joint_names == PANDA_ARM and panda.locked_joints == ["panda_finger_joint1", "panda_finger_joint2"]
     robot = didim.Robot.from_urdf(ur5)
     with pytest.raises(didim.DataError, match="6 joints"):
         robot.rnea(np.zeros(5), np.zeros(5), np.zeros(5))

@@ -97,6 +97,9 @@ def cmd_identify_robot(args) -> int:
         _check_figure_format(args.plot)
     joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
     robot = Robot.from_urdf(args.urdf, joints)
+    if robot.locked_joints and not args.quiet:
+        print(f"  … {', '.join(robot.locked_joints)} locked at zero (not actuated); --joints picks others",
+              file=sys.stderr, flush=True)
     rec = _robot_record(args, args.file, robot)
     opts = {k: v for k, v in (("max_iter", args.max_iter), ("tol", args.tol)) if v is not None}
     if opts and args.method != "didim":

@@ -83,6 +83,12 @@ impl PyRobot {
             .collect()
     }
 
+    /// The URDF's movable joints left out (locked at zero): a gripper's fingers by default.
+    #[getter]
+    fn locked_joints(&self) -> Vec<String> {
+        self.inner.locked.clone()
+    }
+
     #[getter]
     fn ndof(&self) -> usize {
         self.inner.ndof()

@@ -18,7 +18,8 @@ class Robot:
 
     Built by :meth:`from_urdf`: the URDF's revolute (and continuous) and prismatic joints from its root link down,
     fixed joints merged into the body before them; ``joints`` picks the actuated ones by name, in the chain's order
-    (the others are locked at zero). Each body carries the 10 standard inertial parameters of the URDF
+    (the others are locked at zero). By default every movable joint, or, when the tree splits at the end of a chain
+    into shorter branches (a gripper's fingers), the chain with the branches locked (``locked_joints``). Each body carries the 10 standard inertial parameters of the URDF
     (``inertial_params``, named ``m_<joint>``, ``mx_<joint>``, … ``Izz_<joint>``: mass, first moments m·c and the
     inertia about the joint frame's origin, in the joint's frame: Pinocchio's dynamic parameters).
 
@@ -78,6 +79,13 @@ class Robot:
         return list(self._core.joint_kinds)
 
     @property
+    def locked_joints(self) -> List[str]:
+        """The URDF's movable joints that are not actuated (locked at zero, their bodies merged into the body before
+        them): those left out of ``joints``, or by default the short branches at the end of the chain (a gripper's
+        fingers)."""
+        return list(self._core.locked_joints)
+
+    @property
     def ndof(self) -> int:
         return self._core.ndof
 
@@ -101,7 +109,8 @@ class Robot:
         return Robot(self._core.with_inertial_params(np.ascontiguousarray(p)), self.urdf, self.source)
 
     def __repr__(self) -> str:
-        return f"Robot({self.name!r}, joints={self.joint_names})"
+        locked = f", locked={self.locked_joints}" if self.locked_joints else ""
+        return f"Robot({self.name!r}, joints={self.joint_names}{locked})"
 
     # ------------------------------------------------------------------------------------------------ dynamics
 

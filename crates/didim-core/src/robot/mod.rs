@@ -66,6 +66,9 @@ pub struct Robot {
     pub joints: Vec<Joint>,
     /// Gravity's acceleration in the world frame (m/s²), (0, 0, −9.81) by default.
     pub gravity: Vector3<f64>,
+    /// The URDF's movable joints that are not actuated (locked at zero, their bodies merged):
+    /// the branches left out of a chain by default (a gripper's fingers).
+    pub locked: Vec<String>,
 }
 
 /// Standard gravity's acceleration (m/s²): Pinocchio's default.
@@ -97,6 +100,7 @@ impl Robot {
             name: name.to_string(),
             joints,
             gravity: Vector3::new(0.0, 0.0, -STANDARD_GRAVITY),
+            locked: Vec::new(),
         })
     }
 

@@ -149,6 +149,20 @@ fn bad_urdfs_and_inputs_are_refused_by_name() {
     .contains("chain's order"));
     let tree = CHAIN.replace(r#"<parent link="tool"/>"#, r#"<parent link="l1"/>"#);
     assert!(e(Robot::from_urdf(&tree, None)).contains("not a serial chain"));
+    // a short branch at the end (a finger): the chain by default, the finger locked
+    let finger = CHAIN.replace(
+        "</robot>",
+        r#"<link name="f"><inertial><mass value="0.1"/><inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial></link>
+  <joint name="finger" type="prismatic"><parent link="l2"/><child link="f"/><axis xyz="0 1 0"/>
+    <limit lower="0" upper="0.04" effort="20" velocity="0.2"/></joint>
+</robot>"#,
+    );
+    let r = Robot::from_urdf(&finger, None).unwrap();
+    assert_eq!(
+        r.joints.iter().map(|j| j.name.as_str()).collect::<Vec<_>>(),
+        ["j1", "j2"]
+    );
+    assert_eq!(r.locked, ["j3", "finger"]);
     let r = Robot::from_urdf(CHAIN, None).unwrap();
     assert!(r
         .rnea(&[0.0; 2], &[0.0; 3], &[0.0; 3])

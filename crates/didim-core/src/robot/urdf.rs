@@ -163,6 +163,19 @@ pub fn parse(text: &str, picked: Option<&[String]>) -> Result<Robot> {
         parents: Vec::new(),
     };
     walk.visit(root, Pose::identity(), None)?;
+    if picked.is_none() {
+        if let Some(trunk) = trunk(&walk.out, &walk.parents) {
+            // a chain whose end splits into short branches (a gripper's fingers): the chain, the branches locked
+            let mut robot = parse(text, Some(&trunk))?;
+            robot.locked = walk
+                .out
+                .iter()
+                .map(|j| j.name.clone())
+                .filter(|n| !trunk.contains(n))
+                .collect();
+            return Ok(robot);
+        }
+    }
     // a serial chain: each actuated joint follows the one before it
     for (i, p) in walk.parents.iter().enumerate() {
         let expected = if i == 0 { None } else { Some(i - 1) };
@@ -192,4 +205,37 @@ pub fn parse(text: &str, picked: Option<&[String]>) -> Result<Robot> {
         }
     }
     Robot::new(&doc.name, walk.out)
+}
+
+/// The chain from the base up to the first joint with several actuated joints after it, when the
+/// tree splits there into branches no longer than that chain (a gripper's fingers at the end of an
+/// arm); None for a serial chain, or a tree that splits earlier (two arms on a torso, legs).
+fn trunk(out: &[Joint], parents: &[Option<usize>]) -> Option<Vec<String>> {
+    let children = |b: Option<usize>| (0..out.len()).filter(move |&i| parents[i] == b);
+    let mut chain = Vec::new();
+    let mut at: Option<usize> = None;
+    loop {
+        let next: Vec<usize> = children(at).collect();
+        match next.as_slice() {
+            [] => return None, // the tree is a chain
+            [one] => {
+                chain.push(*one);
+                at = Some(*one);
+            }
+            _ => break,
+        }
+    }
+    // the longest branch after the split
+    fn depth(i: usize, parents: &[Option<usize>]) -> usize {
+        1 + (0..parents.len())
+            .filter(|&k| parents[k] == Some(i))
+            .map(|k| depth(k, parents))
+            .max()
+            .unwrap_or(0)
+    }
+    let longest = children(at).map(|k| depth(k, parents)).max().unwrap_or(0);
+    if chain.is_empty() || longest > chain.len() / 2 {
+        return None;
+    }
+    Some(chain.iter().map(|&i| out[i].name.clone()).collect())
 }
