@@ -131,7 +131,8 @@ def test_the_command_line_identifies_simulates_and_weighs_the_payload(robots_dir
     assert main(["identify", str(d / "pendulum_train.csv"), "--urdf", str(d / "pendulum_cad.urdf"), "--controller", ctl,
                  "--method", "didim", "--json", str(out), "--quiet"]) == 0
     r = json.loads(out.read_text())
-    assert {"Ia_joint1", "Fv_joint2", "Fc_joint1"} <= set(r["params"])
+    assert {"Ia_joint1", "Fv_joint2", "Fc_joint1", "OF_joint2"} <= set(r["params"])  # offsets by default
+    assert r["params"]["OF_joint2"] == pytest.approx(0.0819, rel=0.05)
     assert "Ia_joint1 +Iyy_joint1 +0.25*m_joint2" in r["params"]
     # the saved result carries its robot: no --urdf
     assert main(["simulate", str(d / "pendulum_valid.csv"), str(out), "--controller", ctl, "--json", str(sim)]) == 0

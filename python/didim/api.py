@@ -73,7 +73,7 @@ def identify(
     model: Union[str, Model] = "rigid",
     method: str = "didim",
     *,
-    offset: bool = False,
+    offset: Optional[bool] = None,
     apM: Optional[float] = None,
     initial: Optional[Dict[str, float]] = None,
     criterion: str = "force",
@@ -269,8 +269,8 @@ __all__ = ["identify", "METHODS"]
 
 def _identify_robot(recording, robot, method: str, *, offset, apM, initial, criterion, progress, **options):
     """:func:`identify` of a robot's record (:class:`didim.RobotRecording`) with its :class:`didim.Robot`: "didim"
-    (from the URDF's values) or "idim-ls"; ``offset`` adds a constant torque per joint; ``max_iter`` and ``tol`` go to
-    DIDIM."""
+    (from the URDF's values) or "idim-ls"; ``offset`` (default True) fits a constant torque per joint; ``max_iter``
+    and ``tol`` go to DIDIM."""
     from .robots import Robot, RobotRecording, didim as robot_didim, idim_ls as robot_idim_ls
 
     if not isinstance(recording, RobotRecording):
@@ -283,7 +283,9 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
                              "URDF's values"), ("criterion", None if criterion == "force" else criterion, "fits the force")):
         if value is not None:
             raise DataError(f"{name} does not apply to a robot: DIDIM on a robot {why}")
-    offset = bool(_checks.flag("offset", offset)) if offset is not None else False
+    # a robot's joints carry a constant torque (a cable, what gravity compensation leaves): fitted unless refused,
+    # since without it the friction takes it (on the data folder's UR5, Fv 7.8 % off instead of 0.24 %)
+    offset = bool(_checks.flag("offset", offset)) if offset is not None else True
     if method == "didim":
         allowed = {"max_iter", "tol"}
         unknown = sorted(set(options) - allowed)

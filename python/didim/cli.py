@@ -162,7 +162,7 @@ def cmd_identify(args) -> int:
 
             raise DataError(f"--set {k}=…: {k} has its own option (see didim identify --help)")
         opts[k] = v[0] if len(v) == 1 else v
-    res = identify(rec, args.model, args.method, offset=args.offset, progress=_progress(args.quiet),
+    res = identify(rec, args.model, args.method, offset=bool(args.offset), progress=_progress(args.quiet),
                    controller_check=args.controller_check, **opts)
     print(res.summary())
     if args.json:
@@ -505,7 +505,10 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--variant", choices=["auto", "paper", "friction-split"],
                    help="three-step DIDIM (flexible): the paper's procedure, the friction split (beyond the paper), "
                         "or auto (default: the split when it explains the record clearly better)")
-    i.add_argument("--offset", action="store_true", help="add a constant force OF (N)")
+    i.add_argument("--offset", action="store_true", default=None,
+                   help="add a constant force OF (N); a robot (--urdf) has one per joint by default")
+    i.add_argument("--no-offset", dest="offset", action="store_false",
+                   help="a robot (--urdf): no constant torque per joint")
     i.add_argument("--apm", type=float, default=None, help="a priori total mass (kg) to start from")
     i.add_argument("--criterion", choices=["force", "position"], default="force", help="output-error criterion (eq. (32))")
     i.add_argument("--max-iter", type=int, default=None, help="iteration limit of didim, oe-nm and oe-lm")
