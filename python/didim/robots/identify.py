@@ -685,7 +685,7 @@ class PayloadResult:
 
     def summary(self) -> str:
         com = ", ".join(f"{1e3 * c:.1f} ± {1e3 * s:.1f}" for c, s in zip(self.com, self.com_sigma))
-        lines = [f"payload: mass {self.mass:.4g} ± {self.mass_sigma:.2g} kg, centre of mass ({com}) mm in the last "
+        lines = [f"payload: mass {self.mass:.5f} ± {self.mass_sigma:.2g} kg, centre of mass ({com}) mm in the last "
                  f"joint's frame; closed-loop force error {100 * self.force_error_without:.2f} % without it -> "
                  f"{100 * self.force_error:.2f} % with it ({'converged' if self.converged else 'NOT converged'} in "
                  f"{self.iterations} iterations, {self.elapsed_s:.1f} s)"]
