@@ -145,7 +145,13 @@ def test_a_findings_details_carry_the_axis_units():
     """The doctor's details lines (each finding's params) in the record's units: N·m and rad/s on a rotary axis."""
     from didim.doctor.effects import params_text
 
-    p = {"Fs": -5e-4, "vs": 0.15, "f_n_flex": 30.0, "M1": 2e-3, "K12": 40.0}
-    assert params_text(p, "rotary") == ("Fs = -0.0005 N·m, vs = 0.15 rad/s, f_n_flex = 30 Hz, M1 = 0.002 kg·m², "
-                                        "K12 = 40 N·m/rad")
-    assert params_text(p, "linear") == "Fs = -0.0005 N, vs = 0.15 m/s, f_n_flex = 30 Hz, M1 = 0.002 kg, K12 = 40 N/m"
+    s, f = {"Fs": -5e-4, "vs": 0.15}, {"f_n_flex": 30.0, "M1": 2e-3, "K12": 40.0}
+    assert params_text("stribeck", s, "rotary") == "Fs = -0.0005 N·m, vs = 0.15 rad/s"
+    assert params_text("flexibility", f, "rotary") == "f_n_flex = 30 Hz, M1 = 0.002 kg·m², K12 = 40 N·m/rad"
+    assert params_text("stribeck", s, "linear") == "Fs = -0.0005 N, vs = 0.15 m/s"
+    assert params_text("flexibility", f, "linear") == "f_n_flex = 30 Hz, M1 = 0.002 kg, K12 = 40 N/m"
+    # each effect carries the units of what it reports: every quantity its findings name has one, or none on purpose
+    from didim.doctor.effects import REGISTRY
+
+    assert REGISTRY["gravity"].units["angle_offset"] == "m"  # rad on a rotary axis
+    assert params_text("unnamed", {"x": 1.0}, "linear") == "x = 1"

@@ -231,7 +231,7 @@ class Diagnosis:
                      f"{100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, validation "
                      f"{100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %):")
         for x in self.findings + self.rejected:
-            ps = params_text(x.params, self.base.axis)
+            ps = params_text(x.effect, x.params, self.base.axis)
             rnd = f" (round {x.where['round']})" if "round" in x.where else ""
             lines.append(f"  {x.effect}{rnd}: {ps + '; ' if ps else ''}{x.evidence}")
         return "\n".join(lines)

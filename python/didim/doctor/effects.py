@@ -68,6 +68,8 @@ class Effect:
     tried_with: Optional[str] = None
     baseline: Optional[Callable[[State, Data, Any], Optional[State]]] = None
     words: Optional[Callable[[Dict[str, float], State], str]] = None
+    #: The SI unit (on a linear axis) of each quantity a finding of this effect reports in its ``params``.
+    units: Dict[str, str] = field(default_factory=dict)
     retune: Optional[Callable[[State, Data, Any], Optional[Adopted]]] = None
     held_out_note: Optional[Callable[[Candidate, State, Data, np.ndarray, np.ndarray], str]] = None
 
@@ -80,6 +82,12 @@ class Effect:
             except (KeyError, ZeroDivisionError, ValueError):
                 pass
         return ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
+
+    def params_text(self, params: Dict[str, float], axis: str) -> str:
+        """A finding's ``params`` as ``name = value unit`` pairs, in the units of a ``"linear"`` or ``"rotary"``
+        axis."""
+        return ", ".join(f"{k} = {v:.4g}{(' ' + units.label(self.units[k], axis)) if self.units.get(k) else ''}"
+                         for k, v in params.items())
 
     def describe(self, params: Dict[str, float], state: State) -> str:
         return self.physics_of(params, state) if self.physics_of else self.physics
@@ -645,20 +653,13 @@ def _gravity_words(p: Dict[str, float], st: State) -> str:
 
 # ---------------------------------------------------------------------------------------------------- in words
 
-#: Units of the quantities a finding reports (its ``params``).
-UNITS = {"OF": "N", "dFv": "N/(m/s)", "dFc": "N", "Fs": "N", "vs": "m/s", "amplitude": "N", "period": "m",
-         "Ar_sin": "N", "Ar_cos": "N", "Aq_sin": "N", "Aq_cos": "N", "force_lag_s": "s", "bandwidth_hz": "Hz",
-         "delay_samples": "samples", "delay_s": "s", "f_n_flex": "Hz", "M1": "kg", "M2": "kg", "K12": "N/m",
-         "Fv2": "N/(m/s)", "Fc2": "N", "C12": "N/(m/s)", "gap": "m", "spacing": "m", "spread_forward": "N",
-         "spread_backward": "N", "peak_forward": "N", "peak_backward": "N", "peak_forward_at": "m",
-         "level_forward": "N", "level_backward": "N",
-         "peak_backward_at": "m", "angle_offset": "m", "G_sin": "N", "G_cos": "N"}
-
-
-def params_text(params: Dict[str, float], axis: str) -> str:
-    """A finding's ``params`` as ``name = value unit`` pairs, in the units of a ``"linear"`` or ``"rotary"`` axis."""
-    return ", ".join(f"{k} = {v:.4g}{(' ' + units.label(UNITS[k], axis)) if UNITS.get(k) else ''}"
-                     for k, v in params.items())
+def params_text(effect: str, params: Dict[str, float], axis: str) -> str:
+    """A finding's ``params`` in words and units, by its effect's name (an effect the registry does not hold, as
+    ``unnamed``, says its numbers without units)."""
+    e = REGISTRY.get(effect)
+    if e is not None:
+        return e.params_text(params, axis)
+    return ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
 
 
 def final_values(effect: str, params: Dict[str, float], state: State) -> Dict[str, float]:
@@ -740,27 +741,20 @@ def _flex_words(p: Dict[str, float], st: State) -> str:
             f"{_g(p['K12'])} {k} (λ = {p['lambda']:.3f})")
 
 
-_WORDS = {
-    "offset": lambda p, st: f"a constant {'torque' if st.axis == 'rotary' else 'force'} of {units.force(p['OF'], st.axis)}",
-    "asymmetric_friction": _asym_words,
-    "stribeck": _stribeck_words,
-    "position_ripple": _ripple_words,
-    "position_dependent_coulomb": _pdc_words,
-    "delay": _delay_words,
-    "flexibility": _flex_words,
-    "load_friction": lambda p, st: (f"load-side friction: viscous {_g(p['Fv2'])} N/(m/s), Coulomb {_g(p['Fc2'])} N "
-                                    f"(motor side: {_g(st.params['Fv1'])} N/(m/s), {_g(st.params['Fc1'])} N)"),
-    "coupling_damping": lambda p, st: f"a damper of {_g(p['C12'])} N/(m/s) in parallel with the coupling",
-    "gravity": _gravity_words,
-    "backlash": lambda p, st: f"a dead zone of {_g(1e6 * p['gap'])} µm in the coupling",
-}
+def _offset_words(p: Dict[str, float], st: State) -> str:
+    return f"a constant {'torque' if st.axis == 'rotary' else 'force'} of {units.force(p['OF'], st.axis)}"
+
+
+def _load_friction_words(p: Dict[str, float], st: State) -> str:
+    return (f"load-side friction: viscous {_g(p['Fv2'])} N/(m/s), Coulomb {_g(p['Fc2'])} N (motor side: "
+            f"{_g(st.params['Fv1'])} N/(m/s), {_g(st.params['Fc1'])} N)")
 
 
 # ---------------------------------------------------------------------------------------------------- registry
 
 
 def _registry(*effects: Effect) -> Dict[str, Effect]:
-    return {e.name: replace(e, words=_WORDS.get(e.name)) for e in effects}
+    return {e.name: e for e in effects}
 
 
 _asym = _with_terms("asymmetric_friction", ("dFv", "abs_viscous"), ("dFc", "abs_coulomb"))
@@ -790,52 +784,62 @@ _pdc = (_pdc_candidates, _pdc_adopt, _pdc_remove)
 REGISTRY: Dict[str, Effect] = _registry(
     Effect("offset", "A constant force acts on the axis whatever it does: an amplifier or current-sensor offset, a "
            "cable chain or a gravity component along the axis.", "velocity",
-           _offset_candidates, _offset_adopt, _offset_remove,
+           _offset_candidates, _offset_adopt, _offset_remove, words=_offset_words, units={"OF": "N"},
            confusable={"gravity": "move the joint over a wider range of angles: gravity varies as the sine of the "
                        "angle, an offset does not",
                        "asymmetric_friction": "record rests (stops) and moves in both directions: an offset acts at "
                        "rest, direction-dependent friction only while moving"}),
     Effect("asymmetric_friction", "Friction depends on the direction of motion: preload, seal or wiper drag, or a "
            "lubricant film that differs going forward and backward.", "velocity",
-           _asym[0], _asym[1], _asym[2],
+           _asym[0], _asym[1], _asym[2], words=_asym_words, units={"dFv": "N/(m/s)", "dFc": "N"},
            confusable={"stribeck": "move at several low constant speeds in both directions"}),
     Effect("stribeck", "Friction is higher at low speed and decays as the speed grows (Stribeck effect): boundary "
            "lubrication before a fluid film forms.", "velocity",
            _stribeck_candidates, _stribeck_adopt, _remove_terms(("Fs",)), physics_of=_stribeck_physics,
-           retune=_stribeck_retune),
+           retune=_stribeck_retune, words=_stribeck_words, units={"Fs": "N", "vs": "m/s"}),
     Effect("position_ripple", "A force periodic in position: motor cogging, ball-screw lead error or "
            "position-dependent friction, with the period found in the spatial spectrum of the residual.", "position",
            _ripple[0], _ripple[1], _ripple[2], held_out_note=_periodic_note(("ripple_sin", "ripple_cos")),
+           words=_ripple_words, units={"amplitude": "N", "period": "m", "Ar_sin": "N", "Ar_cos": "N"},
            confusable={"position_dependent_coulomb": "move over the same positions in both directions: a ripple keeps "
                        "its sign, position-dependent friction flips it with the direction"}),
     Effect("position_dependent_coulomb", "The Coulomb friction level varies along the stroke, always against the "
            "motion (a preload or lubrication that changes along the screw, a worn or tight zone of a guide): the force "
            "flips sign with the direction, unlike a position ripple.", "position", _pdc[0], _pdc[1], _pdc[2],
-           held_out_note=_periodic_note(("coulomb_ripple_sin", "coulomb_ripple_cos"))),
+           held_out_note=_periodic_note(("coulomb_ripple_sin", "coulomb_ripple_cos")), words=_pdc_words,
+           units={"amplitude": "N", "period": "m", "Aq_sin": "N", "Aq_cos": "N", "spacing": "m",
+                  **{f"{q}_{d}": "N" for q in ("spread", "peak", "level") for d in ("forward", "backward")},
+                  "peak_forward_at": "m", "peak_backward_at": "m"}),
     Effect("delay", "The force is applied later than commanded: a current loop's lag (a first-order lag below a "
            "sample period) or a communication or computation delay (whole samples).", "spectrum", _delay_candidates,
            _delay_adopt, lambda state: state.with_(delay=0, force_lag=0.0),
-           tried_with="flexibility", retune=_delay_retune),
+           tried_with="flexibility", retune=_delay_retune, words=_delay_words,
+           units={"force_lag_s": "s", "bandwidth_hz": "Hz", "delay_samples": "samples", "delay_s": "s"}),
     Effect("flexibility", "The drive is not rigid: a flexible coupling (a two-mass model) shows as a resonance that the "
            "rigid model cannot follow.", "spectrum", _flexibility_candidates, _flexibility_adopt,
            confusable={"delay": "excite with a chirp through the expected mode and measure the load position",
                        "load_friction": "add a load encoder or move at several constant speeds"},
-           tried_with="delay"),
+           tried_with="delay", words=_flex_words, units={"f_n_flex": "Hz", "M1": "kg", "M2": "kg", "K12": "N/m"}),
     Effect("load_friction", "Part of the friction acts on the load side of the coupling, so it reaches the motor "
            "through the spring, delayed and filtered by the flexible mode.", "velocity",
            _load_friction_candidates, _load_friction_adopt, baseline=_load_friction_baseline,
+           words=_load_friction_words, units={"Fv2": "N/(m/s)", "Fc2": "N"},
            confusable={"coupling_damping": "move at several constant speeds (load friction acts at every speed, "
                        "coupling damping only while the coupling deflects) or add a load encoder"}),
     Effect("coupling_damping", "The coupling dissipates energy as it deflects (a damper in parallel with the spring: "
            "elastomer, belt or joint friction that depends on the deflection rate): the flexible mode is more damped "
            "than load friction alone would make it.", "spectrum",
-           _damping_candidates, _damping_adopt, _remove_terms(("C12",))),
+           _damping_candidates, _damping_adopt, _remove_terms(("C12",)),
+           words=lambda p, st: f"a damper of {_g(p['C12'])} N/(m/s) in parallel with the coupling",
+           units={"C12": "N/(m/s)"}),
     Effect("gravity", "The weight of the arm acts on the joint as a torque that varies as the sine of the angle "
            "(m·g·l·sin(q + δ)): a rotary joint whose axis is not vertical, with its centre of mass off the axis and no "
-           "counterweight.", "position", _gravity_candidates, _gravity_adopt, _remove_terms(("G_sin", "G_cos"))),
+           "counterweight.", "position", _gravity_candidates, _gravity_adopt, _remove_terms(("G_sin", "G_cos")),
+           words=_gravity_words, units={"amplitude": "N", "angle_offset": "m", "G_sin": "N", "G_cos": "N"}),
     Effect("backlash", "The coupling has a dead zone: the load is free over a small gap each time the force "
            "reverses.", "spectrum", _backlash_candidates, _backlash_adopt,
-           lambda state: state.with_(backlash_gap=None)),
+           lambda state: state.with_(backlash_gap=None),
+           words=lambda p, st: f"a dead zone of {_g(1e6 * p['gap'])} µm in the coupling", units={"gap": "m"}),
 )
 
 UNNAMED = "Structure remains in the residual that none of the candidate effects explains."
