@@ -129,3 +129,46 @@ def test_bad_robots_and_states_are_refused_by_name(robots_dir, tmp_path):
         robot.rnea(np.zeros((3, 6)), np.zeros((2, 6)), np.zeros((3, 6)))
     with pytest.raises(didim.DataError, match="non-finite"):
         robot.gravity(np.full(6, np.nan))
+
+
+#: A chain of this test's own: a prismatic joint (a linear axis carrying the arm), revolute joints about tilted axes,
+#: rotated placements and a fixed tool, inertias off their principal axes.
+MIXED = """<robot name="mixed">
+  <link name="base"/>
+  <link name="carriage"><inertial><origin xyz="0.05 -0.02 0.1" rpy="0.3 -0.2 0.1"/><mass value="12.0"/>
+    <inertia ixx="0.4" ixy="0.01" ixz="-0.02" iyy="0.5" iyz="0.03" izz="0.3"/></inertial></link>
+  <link name="upper"><inertial><origin xyz="0.2 0.01 0.03" rpy="0 0.4 0.2"/><mass value="4.0"/>
+    <inertia ixx="0.02" ixy="0.001" ixz="0.002" iyy="0.08" iyz="-0.001" izz="0.07"/></inertial></link>
+  <link name="fore"><inertial><origin xyz="0.15 0 -0.02"/><mass value="2.5"/>
+    <inertia ixx="0.01" ixy="0" ixz="0.001" iyy="0.03" iyz="0" izz="0.025"/></inertial></link>
+  <link name="tool"><inertial><origin xyz="0 0 0.05"/><mass value="0.7"/>
+    <inertia ixx="0.002" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.001"/></inertial></link>
+  <joint name="slide" type="prismatic"><parent link="base"/><child link="carriage"/><origin xyz="0 0 0.3" rpy="0 0 0.4"/>
+    <axis xyz="1 0 0"/><limit lower="-0.5" upper="0.5" effort="800" velocity="1"/></joint>
+  <joint name="shoulder" type="revolute"><parent link="carriage"/><child link="upper"/><origin xyz="0.1 0 0.2" rpy="1.5707963267948966 0 0"/>
+    <axis xyz="0 0.6 0.8"/><limit lower="-2" upper="2" effort="200" velocity="2"/></joint>
+  <joint name="elbow" type="revolute"><parent link="upper"/><child link="fore"/><origin xyz="0.4 0.02 0" rpy="0.1 0.2 -0.3"/>
+    <axis xyz="0 0 1"/><limit lower="-2.5" upper="2.5" effort="100" velocity="2"/></joint>
+  <joint name="tool_mount" type="fixed"><parent link="fore"/><child link="tool"/><origin xyz="0.3 0 0" rpy="0 -1.5707963267948966 0"/></joint>
+</robot>"""
+
+
+def test_a_prismatic_joint_and_tilted_axes_agree_with_pinocchio(tmp_path):
+    path = tmp_path / "mixed.urdf"
+    path.write_text(MIXED)
+    robot = didim.Robot.from_urdf(path)
+    assert robot.joint_kinds == ["prismatic", "revolute", "revolute"]
+    m = pin.buildModelFromUrdf(str(path))
+    d = m.createData()
+    pi = np.concatenate([m.inertias[i].toDynamicParameters() for i in range(1, m.njoints)])
+    _close(robot.inertial_params, pi, "inertial parameters")
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        q = rng.uniform(m.lowerPositionLimit, m.upperPositionLimit)
+        v, a, tau = rng.normal(size=3), rng.normal(size=3), 20 * rng.normal(size=3)
+        _close(robot.rnea(q, v, a), pin.rnea(m, d, q, v, a), "rnea")
+        _close(robot.gravity(q), pin.computeGeneralizedGravity(m, d, q), "gravity")
+        mm = pin.crba(m, d, q)
+        _close(robot.mass_matrix(q), np.triu(mm) + np.triu(mm, 1).T, "mass matrix")
+        _close(robot.aba(q, v, tau), pin.aba(m, d, q, v, tau), "aba")
+        _close(robot.regressor(q, v, a), pin.computeJointTorqueRegressor(m, d, q, v, a), "regressor")
