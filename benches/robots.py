@@ -183,7 +183,6 @@ def own_robot(lines, seed=11):
         ev, evec = np.linalg.eigh(I.inertia)
         Ic = evec @ np.diag(ev * (1 + rng.uniform(-0.2, 0.2, 3))) @ evec.T
         model.inertias[i] = pin.Inertia(m, c, Ic)
-    pi_true = np.concatenate([model.inertias[i].toDynamicParameters() for i in range(1, model.njoints)])
     Ia = rng.uniform(0.05, 0.3, n) * np.array([1, 1, 1, 1, 0.3, 0.3, 0.3])
     Fv = rng.uniform(0.5, 3.0, n) * np.array([1, 1, 1, 1, 0.4, 0.4, 0.4])
     Fc = rng.uniform(1.0, 5.0, n) * np.array([1, 1, 1, 1, 0.4, 0.4, 0.4])
@@ -263,7 +262,7 @@ def main():
              f"Measured by `python benches/robots.py` on {platform.machine()} with {os.cpu_count()} cores "
              f"(load average {os.getloadavg()[0]:.1f} at the start), one core (RAYON_NUM_THREADS=1), "
              f"{time.strftime('%Y-%m-%d')}.", ""]
-    t_ours, t_pin, t_did = speed(lines) if not os.environ.get("SKIP_SPEED") else (1, 1, 1)
+    t_ours, t_pin, t_did = speed(lines)
     print(f"UR5 20 s: didim {1e3 * t_ours:.0f} ms, Pinocchio loop {t_pin:.2f} s ({t_pin / t_ours:.0f}x); DIDIM {t_did:.1f} s")
     own = own_robot(lines)
     for m, (ev, ec, ratio) in own.items():
