@@ -74,16 +74,22 @@ def _full_regressor(robot: Robot, q, v, a) -> np.ndarray:
     return np.concatenate([arm, y], axis=2).reshape(len(q) * n, -1)
 
 
-def base_parameters(robot: Robot, samples: int = 400, seed: int = 0) -> BaseParameters:
-    """The base parameters of ``robot`` from its regressor at ``samples`` random states (positions within the joint
-    limits, or a turn for unlimited joints; speeds and accelerations of unit spread)."""
+def random_states(robot: Robot, samples: int, seed: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions within the joint limits (a turn either way for unlimited joints), speeds and accelerations of unit
+    spread: the states at which the regressor's column structure (which parameters it can tell apart) is read."""
     rng = np.random.default_rng(seed)
     n = robot.ndof
     lim = np.array([lt[:2] for lt in robot.limits], dtype=float)
     lo = np.where(np.isfinite(lim[:, 0]), lim[:, 0], -math.pi)
     hi = np.where(np.isfinite(lim[:, 1]), lim[:, 1], math.pi)
     q = rng.uniform(lo, hi, (samples, n))
-    v, a = rng.normal(size=(samples, n)), rng.normal(size=(samples, n))
+    return q, rng.normal(size=(samples, n)), rng.normal(size=(samples, n))
+
+
+def base_parameters(robot: Robot, samples: int = 400, seed: int = 0) -> BaseParameters:
+    """The base parameters of ``robot`` from its regressor at ``samples`` random states (positions within the joint
+    limits, or a turn for unlimited joints; speeds and accelerations of unit spread)."""
+    q, v, a = random_states(robot, samples, seed)
     w = _full_regressor(robot, q, v, a)
     norms = np.linalg.norm(w, axis=0)
     alive = norms > 0
@@ -709,12 +715,7 @@ def payload(rec: RobotRecording, result: RobotResult, *, max_iter: int = 30, tol
     dec = _decimation(rec)
     law = result.law if result.law is not None else _default_law(rec)
     # the last body's identifiable parameters (the rest of the robot known)
-    rng = np.random.default_rng(0)
-    lim = np.array([lt[:2] for lt in robot.limits], dtype=float)
-    lo = np.where(np.isfinite(lim[:, 0]), lim[:, 0], -math.pi)
-    hi = np.where(np.isfinite(lim[:, 1]), lim[:, 1], math.pi)
-    qx = rng.uniform(lo, hi, (400, n))
-    yl = robot.regressor(qx, rng.normal(size=(400, n)), rng.normal(size=(400, n)))[:, :, -10:].reshape(-1, 10)
+    yl = robot.regressor(*random_states(robot, 400, 0))[:, :, -10:].reshape(-1, 10)
     norms = np.linalg.norm(yl, axis=0)
     free: List[int] = []
     for k in range(10):
