@@ -25,11 +25,11 @@ const UR5: &str = r#"<robot name="ur5">
   <joint name="shoulder_pan_joint" type="revolute"><parent link="base_link"/><child link="shoulder_link"/>
     <origin xyz="0 0 0.089159"/><axis xyz="0 0 1"/><limit lower="-6.28" upper="6.28" effort="150" velocity="3.15"/></joint>
   <joint name="shoulder_lift_joint" type="revolute"><parent link="shoulder_link"/><child link="upper_arm_link"/>
-    <origin xyz="0 0.13585 0" rpy="0 1.570796 0"/><axis xyz="0 1 0"/><limit lower="-6.28" upper="6.28" effort="150" velocity="3.15"/></joint>
+    <origin xyz="0 0.13585 0" rpy="0 1.5707963267949 0"/><axis xyz="0 1 0"/><limit lower="-6.28" upper="6.28" effort="150" velocity="3.15"/></joint>
   <joint name="elbow_joint" type="revolute"><parent link="upper_arm_link"/><child link="forearm_link"/>
     <origin xyz="0 -0.1197 0.425"/><axis xyz="0 1 0"/><limit lower="-3.14" upper="3.14" effort="150" velocity="3.15"/></joint>
   <joint name="wrist_1_joint" type="revolute"><parent link="forearm_link"/><child link="wrist_1_link"/>
-    <origin xyz="0 0 0.39225" rpy="0 1.570796 0"/><axis xyz="0 1 0"/><limit lower="-6.28" upper="6.28" effort="28" velocity="3.2"/></joint>
+    <origin xyz="0 0 0.39225" rpy="0 1.5707963267949 0"/><axis xyz="0 1 0"/><limit lower="-6.28" upper="6.28" effort="28" velocity="3.2"/></joint>
   <joint name="wrist_2_joint" type="revolute"><parent link="wrist_1_link"/><child link="wrist_2_link"/>
     <origin xyz="0 0.093 0"/><axis xyz="0 0 1"/><limit lower="-6.28" upper="6.28" effort="28" velocity="3.2"/></joint>
   <joint name="wrist_3_joint" type="revolute"><parent link="wrist_2_link"/><child link="wrist_3_link"/>

@@ -93,7 +93,7 @@ impl Plant<'_> {
             self.tau[i] = u[i] - self.tau[i];
         }
         self.robot
-            .aba_into(q, v, &self.tau, Some(&self.drives.armature), &mut self.ws, out)
+            .aba_kernel(q, v, &self.tau, Some(&self.drives.armature), &mut self.ws, out)
     }
 }
 
@@ -172,20 +172,11 @@ pub fn simulate_robot(
         ws: AbaWork::new(robot),
         tau: vec![0.0; n],
     };
-    let qr0 = &qr[..n];
-    let mut z: Vec<FilterState> = controllers.iter().map(|c| c.rest_state(0.0, 0.0)).collect();
-    let (mut q, mut v): (Vec<f64>, Vec<f64>) = (qr0.to_vec(), vec![0.0; n]);
-    let (mut u, mut a) = (vec![0.0; n], vec![0.0; n]);
-    // RK4 stages
-    let (mut k1q, mut k1v, mut k2q, mut k2v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    let (mut k3q, mut k3v, mut k4q, mut k4v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    let (mut qs, mut vs) = (vec![0.0; n], vec![0.0; n]);
     let substeps = if opts.substeps == 0 {
-        auto_substeps(robot, drives, qr0, opts.dt)?
+        auto_substeps(robot, drives, &qr[..n], opts.dt)?
     } else {
         opts.substeps
     };
-    let h = opts.dt / substeps as f64;
     // a loop that left the references by more than their whole range (and a radian or metre) diverged
     let mut span = vec![0.0f64; n];
     for j in 0..n {
@@ -195,70 +186,118 @@ pub fn simulate_robot(
         span[j] = (hi - lo) + 1.0;
     }
     // the loop in the processor's widest build (as the one-axis loop: the same operations, the same results)
-    crate::sim::driver::simd(|| -> Result<()> {
-        for k in 0..samples {
-            if k % interrupt::EVERY == 0 {
-                interrupt::check()?;
-            }
-            let row = k * n;
-            for j in 0..n {
-                let step = opts.quantization[j];
-                let qm = if step > 0.0 {
-                    (q[j] / step).round() * step
-                } else {
-                    q[j]
-                };
-                let (f, _) =
-                    controllers[j].step(&mut z[j], qr[row + j] - qr0[j], qm - qr0[j], opts.force0[j]);
-                u[j] = f;
-                if (q[j] - qr[row + j]).abs() > span[j] || !q[j].is_finite() || !v[j].is_finite() {
-                    return Err(Error::Simulation(format!(
-                    "the robot's closed loop diverged at sample {k} (t = {:.6} s): joint {} ({}) is {:.3e} away from its reference",
-                    k as f64 * opts.dt,
-                    j + 1,
-                    robot.joints[j].name,
-                    q[j] - qr[row + j]
-                )));
-                }
-            }
-            plant.accel(&q, &v, &u, &mut a)?;
-            out.q[row..row + n].copy_from_slice(&q);
-            out.qd[row..row + n].copy_from_slice(&v);
-            out.qdd[row..row + n].copy_from_slice(&a);
-            out.force[row..row + n].copy_from_slice(&u);
-            for s in 0..substeps {
-                // the first stage of the first substep is the acceleration just computed
-                if s == 0 {
-                    k1v.copy_from_slice(&a);
-                } else {
-                    plant.accel(&q, &v, &u, &mut k1v)?;
-                }
-                k1q.copy_from_slice(&v);
-                for j in 0..n {
-                    qs[j] = q[j] + 0.5 * h * k1q[j];
-                    vs[j] = v[j] + 0.5 * h * k1v[j];
-                }
-                k2q.copy_from_slice(&vs);
-                plant.accel(&qs, &vs, &u, &mut k2v)?;
-                for j in 0..n {
-                    qs[j] = q[j] + 0.5 * h * k2q[j];
-                    vs[j] = v[j] + 0.5 * h * k2v[j];
-                }
-                k3q.copy_from_slice(&vs);
-                plant.accel(&qs, &vs, &u, &mut k3v)?;
-                for j in 0..n {
-                    qs[j] = q[j] + h * k3q[j];
-                    vs[j] = v[j] + h * k3v[j];
-                }
-                k4q.copy_from_slice(&vs);
-                plant.accel(&qs, &vs, &u, &mut k4v)?;
-                for j in 0..n {
-                    q[j] += h / 6.0 * (k1q[j] + 2.0 * k2q[j] + 2.0 * k3q[j] + k4q[j]);
-                    v[j] += h / 6.0 * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j]);
-                }
+    #[cfg(target_arch = "x86_64")]
+    if crate::sim::driver::wide_simd() {
+        // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
+        unsafe { run_wide(&mut plant, controllers, qr, opts, substeps, &span, &mut out)? };
+        return Ok(out);
+    }
+    run(&mut plant, controllers, qr, opts, substeps, &span, &mut out)?;
+    Ok(out)
+}
+
+/// [`run`] compiled with AVX2 and FMA.
+///
+/// # Safety
+/// The processor must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn run_wide(
+    plant: &mut Plant,
+    controllers: &[TransferFunction],
+    qr: &[f64],
+    opts: &RobotLoopOptions,
+    substeps: usize,
+    span: &[f64],
+    out: &mut RobotLoopOutput,
+) -> Result<()> {
+    run(plant, controllers, qr, opts, substeps, span, out)
+}
+
+/// The closed loop from rest at the first reference: the controllers on the quantized positions
+/// once per sample, then `substeps` RK4 steps with their torques held (inlined into each build).
+#[inline(always)]
+fn run(
+    plant: &mut Plant,
+    controllers: &[TransferFunction],
+    qr: &[f64],
+    opts: &RobotLoopOptions,
+    substeps: usize,
+    span: &[f64],
+    out: &mut RobotLoopOutput,
+) -> Result<()> {
+    let robot = plant.robot;
+    let n = robot.ndof();
+    let samples = qr.len() / n;
+    let qr0 = &qr[..n];
+    let mut z: Vec<FilterState> = controllers.iter().map(|c| c.rest_state(0.0, 0.0)).collect();
+    let (mut q, mut v): (Vec<f64>, Vec<f64>) = (qr0.to_vec(), vec![0.0; n]);
+    let (mut u, mut a) = (vec![0.0; n], vec![0.0; n]);
+    // RK4 stages
+    let (mut k1q, mut k1v, mut k2q, mut k2v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let (mut k3q, mut k3v, mut k4q, mut k4v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let (mut qs, mut vs) = (vec![0.0; n], vec![0.0; n]);
+    let h = opts.dt / substeps as f64;
+    for k in 0..samples {
+        if k % interrupt::EVERY == 0 {
+            interrupt::check()?;
+        }
+        let row = k * n;
+        for j in 0..n {
+            let step = opts.quantization[j];
+            let qm = if step > 0.0 {
+                (q[j] / step).round() * step
+            } else {
+                q[j]
+            };
+            let (f, _) = controllers[j].step(&mut z[j], qr[row + j] - qr0[j], qm - qr0[j], opts.force0[j]);
+            u[j] = f;
+            if (q[j] - qr[row + j]).abs() > span[j] || !q[j].is_finite() || !v[j].is_finite() {
+                return Err(Error::Simulation(format!(
+                "the robot's closed loop diverged at sample {k} (t = {:.6} s): joint {} ({}) is {:.3e} away from its reference",
+                k as f64 * opts.dt,
+                j + 1,
+                robot.joints[j].name,
+                q[j] - qr[row + j]
+            )));
             }
         }
-        Ok(())
-    })?;
-    Ok(out)
+        plant.accel(&q, &v, &u, &mut a)?;
+        out.q[row..row + n].copy_from_slice(&q);
+        out.qd[row..row + n].copy_from_slice(&v);
+        out.qdd[row..row + n].copy_from_slice(&a);
+        out.force[row..row + n].copy_from_slice(&u);
+        for s in 0..substeps {
+            // the first stage of the first substep is the acceleration just computed
+            if s == 0 {
+                k1v.copy_from_slice(&a);
+            } else {
+                plant.accel(&q, &v, &u, &mut k1v)?;
+            }
+            k1q.copy_from_slice(&v);
+            for j in 0..n {
+                qs[j] = q[j] + 0.5 * h * k1q[j];
+                vs[j] = v[j] + 0.5 * h * k1v[j];
+            }
+            k2q.copy_from_slice(&vs);
+            plant.accel(&qs, &vs, &u, &mut k2v)?;
+            for j in 0..n {
+                qs[j] = q[j] + 0.5 * h * k2q[j];
+                vs[j] = v[j] + 0.5 * h * k2v[j];
+            }
+            k3q.copy_from_slice(&vs);
+            plant.accel(&qs, &vs, &u, &mut k3v)?;
+            for j in 0..n {
+                qs[j] = q[j] + h * k3q[j];
+                vs[j] = v[j] + h * k3v[j];
+            }
+            k4q.copy_from_slice(&vs);
+            plant.accel(&qs, &vs, &u, &mut k4v)?;
+            for j in 0..n {
+                q[j] += h / 6.0 * (k1q[j] + 2.0 * k2q[j] + 2.0 * k3q[j] + k4q[j]);
+                v[j] += h / 6.0 * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j]);
+            }
+        }
+    }
+    Ok(())
 }

@@ -12,10 +12,12 @@
 //! `[m, m·cx, m·cy, m·cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]` are expressed in its joint's frame, the
 //! inertia about that frame's origin. SI units: m, kg, rad, N, N·m.
 
+mod aba;
 pub mod closed_loop;
 mod spatial;
 mod urdf;
 
+pub use aba::AbaWork;
 pub use closed_loop::{simulate_robot, Drives, RobotLoopOptions, RobotLoopOutput};
 
 use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, Vector3};
@@ -280,116 +282,6 @@ impl Robot {
         Ok((m + mt) * 0.5)
     }
 
-    /// Forward dynamics: the accelerations that torques `tau` give at positions `q` and speeds
-    /// `v`, M(q)⁻¹ (τ − C(q, v) v − g(q)), with `armature` (rotor inertias reflected to each joint,
-    /// kg·m² or kg, added to M's diagonal) when given. Featherstone's articulated-body algorithm:
-    /// O(n), no mass matrix formed.
-    pub fn aba(&self, q: &[f64], v: &[f64], tau: &[f64], armature: Option<&[f64]>) -> Result<Vec<f64>> {
-        self.check("q", q)?;
-        self.check("v", v)?;
-        self.check("tau", tau)?;
-        if let Some(ia) = armature {
-            self.check("armature", ia)?;
-        }
-        let mut ws = AbaWork::new(self);
-        let mut out = vec![0.0; self.ndof()];
-        self.aba_into(q, v, tau, armature, &mut ws, &mut out)?;
-        Ok(out)
-    }
-
-    /// [`Robot::aba`] without the checks, in a reusable workspace (the simulator's inner loop;
-    /// inlined into it, so that its wide build covers this too).
-    /// Spatial quantities are kept as 3 × 3 blocks: the articulated inertias' transform to the
-    /// parent costs about a third of a 6 × 6 congruence.
-    #[inline(always)]
-    pub fn aba_into(
-        &self,
-        q: &[f64],
-        v: &[f64],
-        tau: &[f64],
-        armature: Option<&[f64]>,
-        ws: &mut AbaWork,
-        out: &mut [f64],
-    ) -> Result<()> {
-        let n = self.ndof();
-        debug_assert_eq!(ws.k.len(), n, "the workspace of another robot");
-        // forward: poses, velocities, velocity-product accelerations, bias forces
-        let mut vp = Motion::zero();
-        for i in 0..n {
-            let j = &self.joints[i];
-            let pose = match j.kind {
-                JointKind::Revolute => {
-                    let (sn, cs) = q[i].sin_cos();
-                    let k = &ws.k[i];
-                    Pose {
-                        rotation: k[0] + k[1] * cs + k[2] * sn,
-                        translation: j.placement_translation,
-                    }
-                }
-                JointKind::Prismatic => Pose {
-                    rotation: j.placement_rotation,
-                    translation: j.placement_translation + j.placement_rotation * (j.axis * q[i]),
-                },
-            };
-            let s = Self::subspace(j);
-            let vj = s.scale(v[i]);
-            let vi = pose.motion_to_child(&vp) + vj;
-            ws.pose[i] = pose;
-            ws.c[i] = vi.cross(&vj);
-            ws.ia[i] = ws.body[i];
-            ws.pa[i] = vi.cross_force(&ws.body[i].apply(&vi));
-            vp = vi;
-        }
-        // backward: articulated inertias and bias forces
-        for i in (0..n).rev() {
-            let j = &self.joints[i];
-            let revolute = j.kind == JointKind::Revolute;
-            let u_vec = ws.ia[i].times_axis(&j.axis, revolute);
-            let d = if revolute {
-                j.axis.dot(&u_vec.n)
-            } else {
-                j.axis.dot(&u_vec.f)
-            } + armature.map_or(0.0, |a| a[i]);
-            if d.is_nan() || d <= 0.0 {
-                return Err(invalid!(
-                    "joint {}: its articulated inertia is not positive ({d}): the inertial parameters are not those of physical bodies",
-                    j.name
-                ));
-            }
-            let u = tau[i]
-                - if revolute {
-                    j.axis.dot(&ws.pa[i].n)
-                } else {
-                    j.axis.dot(&ws.pa[i].f)
-                };
-            ws.u[i] = u_vec;
-            ws.d[i] = d;
-            ws.uu[i] = u;
-            if i > 0 {
-                let mut ia = ws.ia[i];
-                ia.subtract_outer(&u_vec, 1.0 / d);
-                let ic = ia.apply(&ws.c[i]);
-                let pa = Force {
-                    n: ws.pa[i].n + ic.n + u_vec.n * (u / d),
-                    f: ws.pa[i].f + ic.f + u_vec.f * (u / d),
-                };
-                let to_parent = ia.in_parent(&ws.pose[i]);
-                ws.ia[i - 1].add(&to_parent);
-                let fp = ws.pose[i].force_to_parent(&pa);
-                ws.pa[i - 1] = ws.pa[i - 1] + fp;
-            }
-        }
-        // forward: accelerations (gravity as an acceleration of the base)
-        let mut ap = Motion::new(Vector3::zeros(), -self.gravity);
-        for i in 0..n {
-            let a = ws.pose[i].motion_to_child(&ap) + ws.c[i];
-            let qdd = (ws.uu[i] - (ws.u[i].n.dot(&a.w) + ws.u[i].f.dot(&a.v))) / ws.d[i];
-            out[i] = qdd;
-            ap = a + Self::subspace(&self.joints[i]).scale(qdd);
-        }
-        Ok(())
-    }
-
     /// Forward dynamics through the mass matrix and its Cholesky factor (the reference that
     /// [`Robot::aba`] is tested against).
     pub fn forward_dynamics_crba(
@@ -448,55 +340,6 @@ impl Robot {
             }
         }
         Ok(y)
-    }
-}
-
-/// The articulated-body algorithm's workspace for a robot of `n` joints.
-#[derive(Clone, Debug)]
-pub struct AbaWork {
-    /// Per joint: its rotation as `k0 + cos q·k1 + sin q·k2` (revolute; the placement's rotation
-    /// times Rodrigues' terms), and its body's spatial inertia.
-    k: Vec<[Matrix3<f64>; 3]>,
-    body: Vec<spatial::Articulated>,
-    pose: Vec<Pose>,
-    c: Vec<Motion>,
-    ia: Vec<spatial::Articulated>,
-    pa: Vec<Force>,
-    u: Vec<Force>,
-    d: Vec<f64>,
-    uu: Vec<f64>,
-}
-
-impl AbaWork {
-    /// The workspace of `robot` (its joints' constant terms computed once).
-    pub fn new(robot: &Robot) -> Self {
-        let n = robot.ndof();
-        let k = robot
-            .joints
-            .iter()
-            .map(|j| {
-                let a = j.axis;
-                let aat = a * a.transpose();
-                let ax = Matrix3::new(0.0, -a.z, a.y, a.z, 0.0, -a.x, -a.y, a.x, 0.0);
-                let r = j.placement_rotation;
-                [r * aat, r * (Matrix3::identity() - aat), r * ax]
-            })
-            .collect();
-        AbaWork {
-            k,
-            body: robot
-                .joints
-                .iter()
-                .map(|j| spatial::Articulated::of_body(&j.inertia))
-                .collect(),
-            pose: vec![Pose::identity(); n],
-            c: vec![Motion::zero(); n],
-            ia: vec![spatial::Articulated::zero(); n],
-            pa: vec![Force::zero(); n],
-            u: vec![Force::zero(); n],
-            d: vec![0.0; n],
-            uu: vec![0.0; n],
-        }
     }
 }
 

@@ -1,0 +1,770 @@
+//! Forward dynamics by Featherstone's articulated-body algorithm, in frames turned so that every
+//! joint moves about or along its z axis: the joint's rotation then mixes two coordinates, its
+//! motion subspace picks one, and the placements between joints, quarter turns in most URDFs,
+//! move entries instead of multiplying them. The robot's own frames (Pinocchio's) are kept
+//! everywhere else; torques and accelerations are the same in both.
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::spatial::{inertia_matrix, Force, Motion};
+use super::{JointKind, Robot, BODY_PARAMS};
+use crate::error::{invalid, Result};
+
+/// `a·b + c` (two roundings: a fused multiply–add lengthens the dependency chains, 20 % slower here).
+#[inline(always)]
+fn fma(a: f64, b: f64, c: f64) -> f64 {
+    a * b + c
+}
+
+/// `a·b − c·d`.
+#[inline(always)]
+fn det2(a: f64, b: f64, c: f64, d: f64) -> f64 {
+    fma(a, b, -c * d)
+}
+
+/// `a × b`.
+#[inline(always)]
+fn cross(a: &Vector3<f64>, b: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(
+        det2(a.y, b.z, a.z, b.y),
+        det2(a.z, b.x, a.x, b.z),
+        det2(a.x, b.y, a.y, b.x),
+    )
+}
+
+/// `x·a + y·b` for vectors `a`, `b`.
+#[inline(always)]
+fn comb2(x: f64, a: &Vector3<f64>, y: f64, b: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(fma(x, a.x, y * b.x), fma(x, a.y, y * b.y), fma(x, a.z, y * b.z))
+}
+
+/// `a + k·b` for vectors `a`, `b`.
+#[inline(always)]
+fn axpy(a: &Vector3<f64>, k: f64, b: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(fma(k, b.x, a.x), fma(k, b.y, a.y), fma(k, b.z, a.z))
+}
+
+/// Flat index of entry (i, j) of a symmetric 3 × 3 matrix stored as `[xx, xy, xz, yy, yz, zz]`.
+const SYM: [[usize; 3]; 3] = [[0, 1, 2], [1, 3, 4], [2, 4, 5]];
+
+/// A symmetric 3 × 3 matrix by its six entries `[xx, xy, xz, yy, yz, zz]`.
+#[derive(Clone, Copy, Debug)]
+struct Sym3([f64; 6]);
+
+impl Sym3 {
+    fn of(m: &Matrix3<f64>) -> Sym3 {
+        Sym3([m[(0, 0)], m[(0, 1)], m[(0, 2)], m[(1, 1)], m[(1, 2)], m[(2, 2)]])
+    }
+
+    #[inline(always)]
+    fn col(&self, k: usize) -> Vector3<f64> {
+        Vector3::new(self.0[SYM[0][k]], self.0[SYM[1][k]], self.0[SYM[2][k]])
+    }
+
+    /// `self − k·u·uᵀ`.
+    #[inline(always)]
+    fn sub_outer(&mut self, u: &Vector3<f64>, k: f64) {
+        let m = &mut self.0;
+        let ku = -u * k;
+        m[0] = fma(ku.x, u.x, m[0]);
+        m[1] = fma(ku.x, u.y, m[1]);
+        m[2] = fma(ku.x, u.z, m[2]);
+        m[3] = fma(ku.y, u.y, m[3]);
+        m[4] = fma(ku.y, u.z, m[4]);
+        m[5] = fma(ku.z, u.z, m[5]);
+    }
+
+    #[inline(always)]
+    fn add(&mut self, o: &Sym3) {
+        for k in 0..6 {
+            self.0[k] += o.0[k];
+        }
+    }
+
+    /// `Rz·M·Rzᵀ` for the rotation about z of `(cos, sin)` (with `cs2 = (c², s², c·s)`).
+    #[inline(always)]
+    fn rz(&self, c: f64, s: f64, cs2: (f64, f64, f64)) -> Sym3 {
+        let m = &self.0;
+        let (cc, ss, cs) = cs2;
+        let t = 2.0 * cs * m[1];
+        Sym3([
+            fma(cc, m[0], fma(ss, m[3], -t)),
+            fma(cs, m[0] - m[3], (cc - ss) * m[1]),
+            det2(c, m[2], s, m[4]),
+            fma(ss, m[0], fma(cc, m[3], t)),
+            fma(s, m[2], c * m[4]),
+            m[5],
+        ])
+    }
+}
+
+/// Largest off-axis entry (and departure of the on-axis ones from ±1) of a rotation taken for a
+/// permutation of the axes: URDFs write quarter turns with 11 or 12 digits of π/2, whose cosine
+/// is 5·10⁻¹² (dimensionless; the dynamics move by that relative amount).
+const AXES_SNAP: f64 = 1e-10;
+
+/// A constant rotation `R` (a joint's placement): a signed permutation of the axes, as quarter
+/// turns give (most URDFs), applied by moving entries, or any rotation.
+#[derive(Clone, Copy, Debug)]
+#[allow(clippy::large_enum_variant)] // the common variant, read in the inner loop: not boxed
+enum Turn {
+    /// `R[i][idx[i]] = sign[i]`, the other entries 0; `inv` the inverse permutation; the
+    /// sources and signs of each entry of `R·M·Rᵀ` for a matrix stored by columns (`src9`) or
+    /// a symmetric one (`src6`).
+    Axes {
+        idx: [usize; 3],
+        sign: [f64; 3],
+        inv: [usize; 3],
+        src9: [usize; 9],
+        sgn9: [f64; 9],
+        src6: [usize; 6],
+        sgn6: [f64; 6],
+    },
+    Any(Matrix3<f64>),
+}
+
+impl Turn {
+    fn of(r: &Matrix3<f64>) -> Turn {
+        let mut idx = [0usize; 3];
+        let mut sign = [0.0; 3];
+        for i in 0..3 {
+            let k = (0..3)
+                .max_by(|&x, &y| r[(i, x)].abs().total_cmp(&r[(i, y)].abs()))
+                .unwrap_or(0);
+            let exact = (r[(i, k)].abs() - 1.0).abs() <= AXES_SNAP
+                && (0..3).all(|j| j == k || r[(i, j)].abs() <= AXES_SNAP);
+            if !exact {
+                return Turn::Any(*r);
+            }
+            idx[i] = k;
+            sign[i] = r[(i, k)].signum();
+        }
+        let mut inv = [usize::MAX; 3];
+        for i in 0..3 {
+            inv[idx[i]] = i;
+        }
+        if inv.contains(&usize::MAX) {
+            return Turn::Any(*r);
+        }
+        let (mut src9, mut sgn9) = ([0; 9], [0.0; 9]);
+        let (mut src6, mut sgn6) = ([0; 6], [0.0; 6]);
+        for i in 0..3 {
+            for j in 0..3 {
+                src9[i + 3 * j] = idx[i] + 3 * idx[j];
+                sgn9[i + 3 * j] = sign[i] * sign[j];
+                src6[SYM[i][j]] = SYM[idx[i]][idx[j]];
+                sgn6[SYM[i][j]] = sign[i] * sign[j];
+            }
+        }
+        Turn::Axes {
+            idx,
+            sign,
+            inv,
+            src9,
+            sgn9,
+            src6,
+            sgn6,
+        }
+    }
+
+    /// `R·x`.
+    #[inline(always)]
+    fn apply(&self, x: &Vector3<f64>) -> Vector3<f64> {
+        match self {
+            Turn::Axes { idx, sign, .. } => {
+                Vector3::new(sign[0] * x[idx[0]], sign[1] * x[idx[1]], sign[2] * x[idx[2]])
+            }
+            Turn::Any(r) => r * x,
+        }
+    }
+
+    /// `Rᵀ·x`.
+    #[inline(always)]
+    fn apply_tr(&self, x: &Vector3<f64>) -> Vector3<f64> {
+        match self {
+            Turn::Axes { sign, inv, .. } => Vector3::new(
+                sign[inv[0]] * x[inv[0]],
+                sign[inv[1]] * x[inv[1]],
+                sign[inv[2]] * x[inv[2]],
+            ),
+            Turn::Any(r) => r.tr_mul(x),
+        }
+    }
+
+    /// `R·M·Rᵀ`.
+    #[inline(always)]
+    fn congruence(&self, m: &Matrix3<f64>) -> Matrix3<f64> {
+        match self {
+            Turn::Axes { src9, sgn9, .. } => {
+                let d = m.as_slice();
+                let e = |k: usize| sgn9[k] * d[src9[k]];
+                Matrix3::new(e(0), e(3), e(6), e(1), e(4), e(7), e(2), e(5), e(8))
+            }
+            Turn::Any(r) => r * m * r.transpose(),
+        }
+    }
+
+    /// `R·M·Rᵀ` for a symmetric `M`.
+    #[inline(always)]
+    fn congruence_sym(&self, m: &Sym3) -> Sym3 {
+        match self {
+            Turn::Axes { src6, sgn6, .. } => {
+                let d = &m.0;
+                Sym3([
+                    sgn6[0] * d[src6[0]],
+                    sgn6[1] * d[src6[1]],
+                    sgn6[2] * d[src6[2]],
+                    sgn6[3] * d[src6[3]],
+                    sgn6[4] * d[src6[4]],
+                    sgn6[5] * d[src6[5]],
+                ])
+            }
+            Turn::Any(r) => {
+                let full = inertia_matrix(&[m.0[0], m.0[1], m.0[3], m.0[2], m.0[4], m.0[5]]);
+                Sym3::of(&(r * full * r.transpose()))
+            }
+        }
+    }
+}
+
+/// sin and cos of `x` (rad): the argument reduced by multiples of π/2 in two parts (exact
+/// products for |x| ≤ 2²⁰ rad), then fdlibm's polynomials on [−π/4, π/4], within an ulp or two of
+/// the C library's (checked in the tests), which serves larger arguments.
+#[inline(always)]
+#[allow(clippy::excessive_precision)]
+pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
+    // π/2's first 33 bits and the rest (fdlibm's pio2_1, pio2_1t); the kernels' coefficients as
+    // fdlibm prints them
+    const PIO2_1: f64 = 1.570_796_326_734_125_6;
+    const PIO2_1T: f64 = 6.077_100_506_506_192e-11;
+    const S: [f64; 6] = [
+        -1.666_666_666_666_663_2e-1,
+        8.333_333_333_322_49e-3,
+        -1.984_126_982_985_795e-4,
+        2.755_731_370_707_006_8e-6,
+        -2.505_076_025_340_686_3e-8,
+        1.589_690_995_211_55e-10,
+    ];
+    const C: [f64; 6] = [
+        4.166_666_666_666_660_2e-2,
+        -1.388_888_888_887_411e-3,
+        2.480_158_728_947_673e-5,
+        -2.755_731_435_139_066_3e-7,
+        2.087_572_321_298_175e-9,
+        -1.135_964_755_778_819_5e-11,
+    ];
+    if x.abs() > 1_048_576.0 || x.is_nan() {
+        return x.sin_cos();
+    }
+    let k = (x * std::f64::consts::FRAC_2_PI).round();
+    let r = (x - k * PIO2_1) - k * PIO2_1T;
+    let z = r * r;
+    let sp = S[0] + z * (S[1] + z * (S[2] + z * (S[3] + z * (S[4] + z * S[5]))));
+    let sin = r + r * z * sp;
+    let cp = z * (C[0] + z * (C[1] + z * (C[2] + z * (C[3] + z * (C[4] + z * C[5])))));
+    let hz = 0.5 * z;
+    let w = 1.0 - hz;
+    let cos = w + (((1.0 - w) - hz) + z * cp);
+    // the quadrant without branches: odd ones swap, the upper two negate
+    let q = k as i64;
+    let (s, c) = if q & 1 == 0 { (sin, cos) } else { (cos, -sin) };
+    let flip = if q & 2 == 0 { 1.0 } else { -1.0 };
+    (flip * s, flip * c)
+}
+
+/// `Rz·x` for the rotation about z of `(cos, sin)`.
+#[inline(always)]
+fn rz(c: f64, s: f64, x: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(det2(c, x.x, s, x.y), fma(s, x.x, c * x.y), x.z)
+}
+
+/// `Rzᵀ·x`.
+#[inline(always)]
+fn rz_tr(c: f64, s: f64, x: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(fma(c, x.x, s * x.y), det2(c, x.y, s, x.x), x.z)
+}
+
+/// `Rz·M·Rzᵀ` for any `M`: its rows, then its columns 0 and 1 mixed.
+#[inline(always)]
+fn rz_congruence(c: f64, s: f64, m: &Matrix3<f64>) -> Matrix3<f64> {
+    let mut n = *m;
+    for j in 0..3 {
+        let (x, y) = (m[(0, j)], m[(1, j)]);
+        n[(0, j)] = det2(c, x, s, y);
+        n[(1, j)] = fma(s, x, c * y);
+    }
+    let mut o = n;
+    for i in 0..3 {
+        let (x, y) = (n[(i, 0)], n[(i, 1)]);
+        o[(i, 0)] = det2(c, x, s, y);
+        o[(i, 1)] = fma(s, x, c * y);
+    }
+    o
+}
+
+/// A spatial (articulated) inertia as 3 × 3 blocks `[A, B; Bᵀ, C]` (A, C symmetric): the force of
+/// a motion (ω, v) is (A ω + B v, Bᵀ ω + C v).
+#[derive(Clone, Copy, Debug)]
+struct Articulated {
+    a: Sym3,
+    b: Matrix3<f64>,
+    c: Sym3,
+}
+
+impl Articulated {
+    /// A rigid body's: `[I_O, [h]×; −[h]×, m·1]`.
+    fn of_body(p: &[f64; BODY_PARAMS]) -> Self {
+        Articulated {
+            a: Sym3([p[4], p[5], p[7], p[6], p[8], p[9]]),
+            b: Matrix3::new(0.0, -p[3], p[2], p[3], 0.0, -p[1], -p[2], p[1], 0.0),
+            c: Sym3([p[0], 0.0, 0.0, p[0], 0.0, p[0]]),
+        }
+    }
+
+    fn zero() -> Self {
+        Articulated {
+            a: Sym3([0.0; 6]),
+            b: Matrix3::zeros(),
+            c: Sym3([0.0; 6]),
+        }
+    }
+
+    /// The force of a motion with no z components (the velocity-product accelerations).
+    #[inline(always)]
+    fn apply_xy(&self, m: &Motion) -> Force {
+        let (a, c, b) = (&self.a, &self.c, &self.b);
+        let (b0, b1) = (b.column(0).into_owned(), b.column(1).into_owned());
+        let (r0, r1) = (b.row(0).transpose(), b.row(1).transpose());
+        Force {
+            n: comb2(m.w.x, &a.col(0), m.w.y, &a.col(1)) + comb2(m.v.x, &b0, m.v.y, &b1),
+            f: comb2(m.w.x, &r0, m.w.y, &r1) + comb2(m.v.x, &c.col(0), m.v.y, &c.col(1)),
+        }
+    }
+
+    /// `I·S` for `S` the z axis's rotation (`revolute`) or translation: the force that the
+    /// joint's unit motion takes.
+    #[inline(always)]
+    fn times_z(&self, revolute: bool) -> Force {
+        if revolute {
+            Force {
+                n: self.a.col(2),
+                f: self.b.row(2).transpose(),
+            }
+        } else {
+            Force {
+                n: self.b.column(2).into_owned(),
+                f: self.c.col(2),
+            }
+        }
+    }
+
+    /// `self − k·u·uᵀ` for a force `u` (the articulated inertia less what the joint takes up).
+    #[inline(always)]
+    fn subtract_outer(&mut self, u: &Force, k: f64) {
+        self.a.sub_outer(&u.n, k);
+        let kn = -u.n * k;
+        for j in 0..3 {
+            for i in 0..3 {
+                self.b[(i, j)] = fma(kn[i], u.f[j], self.b[(i, j)]);
+            }
+        }
+        self.c.sub_outer(&u.f, k);
+    }
+
+    #[inline(always)]
+    fn add(&mut self, o: &Articulated) {
+        self.a.add(&o.a);
+        self.b += o.b;
+        self.c.add(&o.c);
+    }
+
+    /// Turned about z by `(cos, sin)`: each block `Rz·X·Rzᵀ`.
+    #[inline(always)]
+    fn rz(&self, c: f64, s: f64) -> Articulated {
+        let cs2 = (c * c, s * s, c * s);
+        Articulated {
+            a: self.a.rz(c, s, cs2),
+            b: rz_congruence(c, s, &self.b),
+            c: self.c.rz(c, s, cs2),
+        }
+    }
+
+    /// Turned by `turn`: each block `R·X·Rᵀ`.
+    #[inline(always)]
+    fn turned(&self, turn: &Turn) -> Articulated {
+        Articulated {
+            a: turn.congruence_sym(&self.a),
+            b: turn.congruence(&self.b),
+            c: turn.congruence_sym(&self.c),
+        }
+    }
+
+    /// The inertia (in the parent's axes, about the child's origin) moved to the parent's origin,
+    /// the child's origin being at `p`: `Xᵀ·I·X` for a translation,
+    /// `A + S + Sᵀ − Q·P`, `B + Q`, `C` with `P = [p]×`, `S = P·Bᵀ`, `Q = P·C`, the skew
+    /// products as cross products.
+    #[inline(always)]
+    fn shifted(&self, p: &Vector3<f64>) -> Articulated {
+        // columns of S = P·Bᵀ and Q = P·C
+        let b = &self.b;
+        let s = [
+            cross(p, &b.row(0).transpose()),
+            cross(p, &b.row(1).transpose()),
+            cross(p, &b.row(2).transpose()),
+        ];
+        let q = [
+            cross(p, &self.c.col(0)),
+            cross(p, &self.c.col(1)),
+            cross(p, &self.c.col(2)),
+        ];
+        // Q·P's upper triangle: column j of Q·P is Q·(P's column j); q[k][i] = Q[i][k]
+        let qp = |i: usize, j: usize| match j {
+            0 => det2(q[1][i], p.z, q[2][i], p.y),
+            1 => det2(q[2][i], p.x, q[0][i], p.z),
+            _ => det2(q[0][i], p.y, q[1][i], p.x),
+        };
+        let a = &self.a.0;
+        let entry = |i: usize, j: usize| a[SYM[i][j]] + s[j][i] + s[i][j] - qp(i, j);
+        Articulated {
+            a: Sym3([
+                entry(0, 0),
+                entry(0, 1),
+                entry(0, 2),
+                entry(1, 1),
+                entry(1, 2),
+                entry(2, 2),
+            ]),
+            b: self.b + Matrix3::from_columns(&q),
+            c: self.c,
+        }
+    }
+}
+
+/// One joint of the chain in joint-aligned frames: whether it turns, the rotation and translation
+/// of its zero-position frame in the previous joint's, its body's parameters and spatial inertia.
+#[derive(Clone, Debug)]
+struct Link {
+    revolute: bool,
+    turn: Turn,
+    shift: Vector3<f64>,
+    params: [f64; BODY_PARAMS],
+    body: Articulated,
+}
+
+/// One joint's share of a call: its (cos, sin), its frame's origin (a prismatic joint's moves),
+/// the velocity-product acceleration, the bias force, `U = I·S`, `1/D` and `u`.
+#[derive(Clone, Copy, Debug)]
+struct State {
+    cs: (f64, f64),
+    origin: Vector3<f64>,
+    c: Motion,
+    pa: Force,
+    u: Force,
+    inv_d: f64,
+    uu: f64,
+}
+
+/// The articulated-body algorithm's workspace for one robot: the chain in joint-aligned frames
+/// (computed once) and the per-call state.
+#[derive(Clone, Debug)]
+pub struct AbaWork {
+    links: Vec<Link>,
+    state: Vec<State>,
+}
+
+/// A rotation whose z axis is `a` (unit): a permutation of the axes when `a` is one of them.
+fn z_onto(a: &Vector3<f64>) -> Matrix3<f64> {
+    let k = (0..3)
+        .min_by(|&x, &y| a[x].abs().total_cmp(&a[y].abs()))
+        .unwrap_or(0);
+    let e = Vector3::ith(k, 1.0);
+    let x = e.cross(a).normalize();
+    let y = a.cross(&x);
+    Matrix3::from_columns(&[x, y, *a])
+}
+
+/// A body's parameters in a frame turned by `r` (`x_old = r·x_new`).
+fn turned_params(p: &[f64; BODY_PARAMS], r: &Matrix3<f64>) -> [f64; BODY_PARAMS] {
+    let h = r.tr_mul(&Vector3::new(p[1], p[2], p[3]));
+    let i = r.transpose() * inertia_matrix(&p[4..10]) * r;
+    [
+        p[0],
+        h.x,
+        h.y,
+        h.z,
+        i[(0, 0)],
+        i[(0, 1)],
+        i[(1, 1)],
+        i[(0, 2)],
+        i[(1, 2)],
+        i[(2, 2)],
+    ]
+}
+
+impl AbaWork {
+    /// The workspace of `robot` (its chain turned into joint-aligned frames once).
+    pub fn new(robot: &Robot) -> Self {
+        let mut links = Vec::with_capacity(robot.ndof());
+        let mut before = Matrix3::identity();
+        for j in &robot.joints {
+            let align = z_onto(&j.axis.normalize());
+            let params = turned_params(&j.inertia, &align);
+            links.push(Link {
+                revolute: j.kind == JointKind::Revolute,
+                turn: Turn::of(&(before.transpose() * j.placement_rotation * align)),
+                shift: before.tr_mul(&j.placement_translation),
+                params,
+                body: Articulated::of_body(&params),
+            });
+            before = align;
+        }
+        let rest = State {
+            cs: (1.0, 0.0),
+            origin: Vector3::zeros(),
+            c: Motion::zero(),
+            pa: Force::zero(),
+            u: Force::zero(),
+            inv_d: 0.0,
+            uu: 0.0,
+        };
+        AbaWork {
+            state: vec![rest; links.len()],
+            links,
+        }
+    }
+}
+
+/// A motion of the previous joint's frame in this joint's.
+#[inline(always)]
+fn to_child(l: &Link, st: &State, m: &Motion) -> Motion {
+    let w = l.turn.apply_tr(&m.w);
+    let v = l.turn.apply_tr(&(m.v + cross(&m.w, &st.origin)));
+    if l.revolute {
+        let (c, s) = st.cs;
+        Motion::new(rz_tr(c, s, &w), rz_tr(c, s, &v))
+    } else {
+        Motion::new(w, v)
+    }
+}
+
+/// A force in this joint's frame, in the previous joint's.
+#[inline(always)]
+fn to_parent(l: &Link, st: &State, f: &Force) -> Force {
+    let (n, f) = if l.revolute {
+        let (c, s) = st.cs;
+        (rz(c, s, &f.n), rz(c, s, &f.f))
+    } else {
+        (f.n, f.f)
+    };
+    let fr = l.turn.apply(&f);
+    Force {
+        n: l.turn.apply(&n) + cross(&st.origin, &fr),
+        f: fr,
+    }
+}
+
+/// A body's bias force `v ×* (I·v)` for parameters `p` (in the body's frame) moving with `v`.
+#[inline(always)]
+fn bias(p: &[f64; BODY_PARAMS], m: &Motion) -> Force {
+    let (w, v) = (&m.w, &m.v);
+    let h = Vector3::new(p[1], p[2], p[3]);
+    let io = Vector3::new(
+        fma(p[4], w.x, fma(p[5], w.y, p[7] * w.z)),
+        fma(p[5], w.x, fma(p[6], w.y, p[8] * w.z)),
+        fma(p[7], w.x, fma(p[8], w.y, p[9] * w.z)),
+    );
+    let n = io + cross(&h, v);
+    let f = v * p[0] - cross(&h, w);
+    Force {
+        n: cross(w, &n) + cross(v, &f),
+        f: cross(w, &f),
+    }
+}
+
+/// The joint's motion `x` along its subspace (z): a rotation's about z, a translation's along z.
+#[inline(always)]
+fn along_z(revolute: bool, x: f64) -> Motion {
+    let z = Vector3::new(0.0, 0.0, x);
+    if revolute {
+        Motion::new(z, Vector3::zeros())
+    } else {
+        Motion::new(Vector3::zeros(), z)
+    }
+}
+
+impl Robot {
+    /// Forward dynamics: the accelerations that torques `tau` give at positions `q` and speeds
+    /// `v`, M(q)⁻¹ (τ − C(q, v) v − g(q)), with `armature` (rotor inertias reflected to each joint,
+    /// kg·m² or kg, added to M's diagonal) when given. Featherstone's articulated-body algorithm:
+    /// O(n), no mass matrix formed.
+    pub fn aba(&self, q: &[f64], v: &[f64], tau: &[f64], armature: Option<&[f64]>) -> Result<Vec<f64>> {
+        self.check("q", q)?;
+        self.check("v", v)?;
+        self.check("tau", tau)?;
+        if let Some(ia) = armature {
+            self.check("armature", ia)?;
+        }
+        let mut ws = AbaWork::new(self);
+        let mut out = vec![0.0; self.ndof()];
+        self.aba_into(q, v, tau, armature, &mut ws, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Robot::aba`] without the checks, in a reusable workspace, in the processor's widest
+    /// build (the simulator's inner loop calls [`Robot::aba_kernel`] inside its own).
+    pub fn aba_into(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        tau: &[f64],
+        armature: Option<&[f64]>,
+        ws: &mut AbaWork,
+        out: &mut [f64],
+    ) -> Result<()> {
+        #[cfg(target_arch = "x86_64")]
+        if crate::sim::driver::wide_simd() {
+            // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
+            return unsafe { self.aba_wide(q, v, tau, armature, ws, out) };
+        }
+        self.aba_kernel(q, v, tau, armature, ws, out)
+    }
+
+    /// [`Robot::aba_kernel`] compiled with AVX2 and FMA.
+    ///
+    /// # Safety
+    /// The processor must support AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn aba_wide(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        tau: &[f64],
+        armature: Option<&[f64]>,
+        ws: &mut AbaWork,
+        out: &mut [f64],
+    ) -> Result<()> {
+        self.aba_kernel(q, v, tau, armature, ws, out)
+    }
+
+    /// The articulated-body algorithm itself, inlined into its caller. Spatial inertias are kept
+    /// as 3 × 3 blocks, products as fused multiply–adds.
+    #[inline(always)]
+    pub(crate) fn aba_kernel(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        tau: &[f64],
+        armature: Option<&[f64]>,
+        ws: &mut AbaWork,
+        out: &mut [f64],
+    ) -> Result<()> {
+        let n = self.ndof();
+        debug_assert_eq!(ws.links.len(), n, "the workspace of another robot");
+        let (links, state) = (&ws.links[..n], &mut ws.state[..n]);
+        let (q, v, tau, out) = (&q[..n], &v[..n], &tau[..n], &mut out[..n]);
+        // forward: poses, velocities, velocity-product accelerations, bias forces
+        // the joints' sines and cosines first: independent of each other, they overlap
+        for ((l, st), &qi) in links.iter().zip(state.iter_mut()).zip(q) {
+            if l.revolute {
+                let (s, c) = sin_cos(qi);
+                st.cs = (c, s);
+            }
+        }
+        let mut vp = Motion::zero();
+        for ((l, st), (&qi, &qd)) in links.iter().zip(state.iter_mut()).zip(q.iter().zip(v)) {
+            if l.revolute {
+                st.origin = l.shift;
+            } else {
+                st.origin = l.shift + l.turn.apply(&Vector3::new(0.0, 0.0, qi));
+            }
+            let vi = to_child(l, st, &vp) + along_z(l.revolute, qd);
+            // vi × the joint's motion: in the xy plane
+            let (wz, vz) = (
+                Vector3::new(vi.w.y * qd, -vi.w.x * qd, 0.0),
+                Vector3::new(vi.v.y * qd, -vi.v.x * qd, 0.0),
+            );
+            st.c = if l.revolute {
+                Motion::new(wz, vz)
+            } else {
+                Motion::new(Vector3::zeros(), wz)
+            };
+            st.pa = bias(&l.params, &vi);
+            vp = vi;
+        }
+        // backward: articulated inertias and bias forces, each body's with what its child passes on
+        let mut child = Articulated::zero();
+        let mut child_pa = Force::zero();
+        for (i, ((l, st), &ti)) in links.iter().zip(state.iter_mut()).zip(tau).enumerate().rev() {
+            let mut ia = l.body;
+            ia.add(&child);
+            let pa_i = st.pa + child_pa;
+            let u_vec = ia.times_z(l.revolute);
+            let d = if l.revolute { u_vec.n.z } else { u_vec.f.z } + armature.map_or(0.0, |a| a[i]);
+            if d.is_nan() || d <= 0.0 {
+                return Err(invalid!(
+                    "joint {}: its articulated inertia is not positive ({d}): the inertial parameters are not those of physical bodies",
+                    self.joints[i].name
+                ));
+            }
+            let inv_d = 1.0 / d;
+            let u = ti - if l.revolute { pa_i.n.z } else { pa_i.f.z };
+            st.u = u_vec;
+            st.inv_d = inv_d;
+            st.uu = u;
+            if i > 0 {
+                ia.subtract_outer(&u_vec, inv_d);
+                let ic = ia.apply_xy(&st.c);
+                let ud = u * inv_d;
+                let pa = Force {
+                    n: axpy(&(pa_i.n + ic.n), ud, &u_vec.n),
+                    f: axpy(&(pa_i.f + ic.f), ud, &u_vec.f),
+                };
+                let ia = if l.revolute {
+                    let (c, s) = st.cs;
+                    ia.rz(c, s)
+                } else {
+                    ia
+                };
+                child = ia.turned(&l.turn).shifted(&st.origin);
+                child_pa = to_parent(l, st, &pa);
+            }
+        }
+        // forward: accelerations (gravity as an acceleration of the base)
+        let mut ap = Motion::new(Vector3::zeros(), -self.gravity);
+        for ((l, st), o) in links.iter().zip(state.iter()).zip(out.iter_mut()) {
+            let a = to_child(l, st, &ap) + st.c;
+            let (un, uf) = (&st.u.n, &st.u.f);
+            let ua =
+                un.x * a.w.x + un.y * a.w.y + un.z * a.w.z + (uf.x * a.v.x + uf.y * a.v.y + uf.z * a.v.z);
+            let qdd = (st.uu - ua) * st.inv_d;
+            *o = qdd;
+            ap = a + along_z(l.revolute, qdd);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::sin_cos;
+
+    /// Within 2 ulp of 1 of the C library's, over a grid of angles from −10³ to 10³ rad, near
+    /// the quadrant boundaries, and beyond the reduction's range.
+    #[test]
+    fn sin_cos_agrees_with_the_c_library() {
+        let mut xs: Vec<f64> = (-200_000..=200_000).map(|k| k as f64 * 5e-3 + 1e-7).collect();
+        for k in -64..=64 {
+            let b = k as f64 * std::f64::consts::FRAC_PI_2;
+            xs.extend([b, b + 1e-9, b - 1e-9, b.next_up(), b.next_down()]);
+        }
+        xs.extend([1e6, -3e6, 1e12, 0.0, -0.0, 1e-300]);
+        for x in xs {
+            let (s, c) = sin_cos(x);
+            let (s0, c0) = x.sin_cos();
+            assert!((s - s0).abs() <= 2.0 * f64::EPSILON, "sin({x}): {s} against {s0}");
+            assert!((c - c0).abs() <= 2.0 * f64::EPSILON, "cos({x}): {c} against {c0}");
+        }
+        assert!(sin_cos(f64::NAN).0.is_nan() && sin_cos(f64::INFINITY).1.is_nan());
+    }
+}
