@@ -98,72 +98,51 @@ impl Sym3 {
     }
 }
 
-/// Largest off-axis entry (and departure of the on-axis ones from ±1) of a rotation taken for a
-/// permutation of the axes: URDFs write quarter turns with 11 or 12 digits of π/2, whose cosine
-/// is 5·10⁻¹² (dimensionless; the dynamics move by that relative amount).
+/// How far a turn's cosine or sine may be from 0 or ±1 and be taken for a quarter or half turn:
+/// URDFs write them with 11 or 12 digits of π/2, whose cosine is 5·10⁻¹² (dimensionless; the
+/// dynamics move by that relative amount).
 const AXES_SNAP: f64 = 1e-10;
 
-/// A constant rotation `R` (a joint's placement): a signed permutation of the axes, as quarter
-/// turns give (most URDFs), applied by moving entries, or any rotation.
+/// The constant rotation `R` between two joints' frames. The frames are chosen (as
+/// Denavit–Hartenberg's) so that it turns about x only, by a quarter turn or none in most arms:
+/// those are applied by moving entries.
 #[derive(Clone, Copy, Debug)]
-#[allow(clippy::large_enum_variant)] // the common variant, read in the inner loop: not boxed
 enum Turn {
-    /// `R[i][idx[i]] = sign[i]`, the other entries 0; `inv` the inverse permutation; the
-    /// sources and signs of each entry of `R·M·Rᵀ` for a matrix stored by columns (`src9`) or
-    /// a symmetric one (`src6`).
-    Axes {
-        idx: [usize; 3],
-        sign: [f64; 3],
-        inv: [usize; 3],
-        src9: [usize; 9],
-        sgn9: [f64; 9],
-        src6: [usize; 6],
-        sgn6: [f64; 6],
-    },
+    /// No turn (parallel joints).
+    Same,
+    /// `Rx(+90°)`.
+    Up,
+    /// `Rx(180°)`.
+    Flip,
+    /// `Rx(α)` by `(cos α, sin α)`.
+    X(f64, f64),
+    /// Any rotation (after a prismatic joint whose next joint is turned about it).
     Any(Matrix3<f64>),
 }
 
 impl Turn {
-    fn of(r: &Matrix3<f64>) -> Turn {
-        let mut idx = [0usize; 3];
-        let mut sign = [0.0; 3];
-        for i in 0..3 {
-            let k = (0..3)
-                .max_by(|&x, &y| r[(i, x)].abs().total_cmp(&r[(i, y)].abs()))
-                .unwrap_or(0);
-            let exact = (r[(i, k)].abs() - 1.0).abs() <= AXES_SNAP
-                && (0..3).all(|j| j == k || r[(i, j)].abs() <= AXES_SNAP);
-            if !exact {
-                return Turn::Any(*r);
-            }
-            idx[i] = k;
-            sign[i] = r[(i, k)].signum();
+    /// `Rx(α)` of `(cos α, sin α)`, quarter and half turns recognised.
+    fn x(c: f64, s: f64) -> Turn {
+        let near = |x: f64, y: f64| (x - y).abs() <= AXES_SNAP;
+        if near(c, 1.0) && near(s, 0.0) {
+            Turn::Same
+        } else if near(c, 0.0) && near(s, 1.0) {
+            Turn::Up
+        } else if near(c, -1.0) && near(s, 0.0) {
+            Turn::Flip
+        } else {
+            Turn::X(c, s)
         }
-        let mut inv = [usize::MAX; 3];
-        for i in 0..3 {
-            inv[idx[i]] = i;
-        }
-        if inv.contains(&usize::MAX) {
-            return Turn::Any(*r);
-        }
-        let (mut src9, mut sgn9) = ([0; 9], [0.0; 9]);
-        let (mut src6, mut sgn6) = ([0; 6], [0.0; 6]);
-        for i in 0..3 {
-            for j in 0..3 {
-                src9[i + 3 * j] = idx[i] + 3 * idx[j];
-                sgn9[i + 3 * j] = sign[i] * sign[j];
-                src6[SYM[i][j]] = SYM[idx[i]][idx[j]];
-                sgn6[SYM[i][j]] = sign[i] * sign[j];
-            }
-        }
-        Turn::Axes {
-            idx,
-            sign,
-            inv,
-            src9,
-            sgn9,
-            src6,
-            sgn6,
+    }
+
+    fn matrix(&self) -> Matrix3<f64> {
+        let rx = |c: f64, s: f64| Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c);
+        match *self {
+            Turn::Same => Matrix3::identity(),
+            Turn::Up => rx(0.0, 1.0),
+            Turn::Flip => rx(-1.0, 0.0),
+            Turn::X(c, s) => rx(c, s),
+            Turn::Any(r) => r,
         }
     }
 
@@ -171,9 +150,10 @@ impl Turn {
     #[inline(always)]
     fn apply(&self, x: &Vector3<f64>) -> Vector3<f64> {
         match self {
-            Turn::Axes { idx, sign, .. } => {
-                Vector3::new(sign[0] * x[idx[0]], sign[1] * x[idx[1]], sign[2] * x[idx[2]])
-            }
+            Turn::Same => *x,
+            Turn::Up => Vector3::new(x.x, -x.z, x.y),
+            Turn::Flip => Vector3::new(x.x, -x.y, -x.z),
+            Turn::X(c, s) => Vector3::new(x.x, det2(*c, x.y, *s, x.z), fma(*s, x.y, c * x.z)),
             Turn::Any(r) => r * x,
         }
     }
@@ -182,11 +162,10 @@ impl Turn {
     #[inline(always)]
     fn apply_tr(&self, x: &Vector3<f64>) -> Vector3<f64> {
         match self {
-            Turn::Axes { sign, inv, .. } => Vector3::new(
-                sign[inv[0]] * x[inv[0]],
-                sign[inv[1]] * x[inv[1]],
-                sign[inv[2]] * x[inv[2]],
-            ),
+            Turn::Same => *x,
+            Turn::Up => Vector3::new(x.x, x.z, -x.y),
+            Turn::Flip => Vector3::new(x.x, -x.y, -x.z),
+            Turn::X(c, s) => Vector3::new(x.x, fma(*c, x.y, s * x.z), det2(*c, x.z, *s, x.y)),
             Turn::Any(r) => r.tr_mul(x),
         }
     }
@@ -194,11 +173,47 @@ impl Turn {
     /// `R·M·Rᵀ`.
     #[inline(always)]
     fn congruence(&self, m: &Matrix3<f64>) -> Matrix3<f64> {
+        let b = |i: usize, j: usize| m[(i, j)];
         match self {
-            Turn::Axes { src9, sgn9, .. } => {
-                let d = m.as_slice();
-                let e = |k: usize| sgn9[k] * d[src9[k]];
-                Matrix3::new(e(0), e(3), e(6), e(1), e(4), e(7), e(2), e(5), e(8))
+            Turn::Same => *m,
+            Turn::Up => Matrix3::new(
+                b(0, 0),
+                -b(0, 2),
+                b(0, 1),
+                -b(2, 0),
+                b(2, 2),
+                -b(2, 1),
+                b(1, 0),
+                -b(1, 2),
+                b(1, 1),
+            ),
+            Turn::Flip => Matrix3::new(
+                b(0, 0),
+                -b(0, 1),
+                -b(0, 2),
+                -b(1, 0),
+                b(1, 1),
+                b(1, 2),
+                -b(2, 0),
+                b(2, 1),
+                b(2, 2),
+            ),
+            Turn::X(c, s) => {
+                // rows 1 and 2 mixed, then columns 1 and 2
+                let (c, s) = (*c, *s);
+                let mut n = *m;
+                for j in 0..3 {
+                    let (y, z) = (m[(1, j)], m[(2, j)]);
+                    n[(1, j)] = det2(c, y, s, z);
+                    n[(2, j)] = fma(s, y, c * z);
+                }
+                let mut o = n;
+                for i in 0..3 {
+                    let (y, z) = (n[(i, 1)], n[(i, 2)]);
+                    o[(i, 1)] = det2(c, y, s, z);
+                    o[(i, 2)] = fma(s, y, c * z);
+                }
+                o
             }
             Turn::Any(r) => r * m * r.transpose(),
         }
@@ -207,20 +222,26 @@ impl Turn {
     /// `R·M·Rᵀ` for a symmetric `M`.
     #[inline(always)]
     fn congruence_sym(&self, m: &Sym3) -> Sym3 {
+        let d = &m.0;
         match self {
-            Turn::Axes { src6, sgn6, .. } => {
-                let d = &m.0;
+            Turn::Same => *m,
+            Turn::Up => Sym3([d[0], -d[2], d[1], d[5], -d[4], d[3]]),
+            Turn::Flip => Sym3([d[0], -d[1], -d[2], d[3], d[4], d[5]]),
+            Turn::X(c, s) => {
+                let (c, s) = (*c, *s);
+                let (cc, ss, cs) = (c * c, s * s, c * s);
+                let t = 2.0 * cs * d[4];
                 Sym3([
-                    sgn6[0] * d[src6[0]],
-                    sgn6[1] * d[src6[1]],
-                    sgn6[2] * d[src6[2]],
-                    sgn6[3] * d[src6[3]],
-                    sgn6[4] * d[src6[4]],
-                    sgn6[5] * d[src6[5]],
+                    d[0],
+                    det2(c, d[1], s, d[2]),
+                    fma(s, d[1], c * d[2]),
+                    fma(cc, d[3], fma(ss, d[5], -t)),
+                    fma(cs, d[3] - d[5], (cc - ss) * d[4]),
+                    fma(ss, d[3], fma(cc, d[5], t)),
                 ])
             }
             Turn::Any(r) => {
-                let full = inertia_matrix(&[m.0[0], m.0[1], m.0[3], m.0[2], m.0[4], m.0[5]]);
+                let full = inertia_matrix(&[d[0], d[1], d[3], d[2], d[4], d[5]]);
                 Sym3::of(&(r * full * r.transpose()))
             }
         }
@@ -445,6 +466,9 @@ impl Articulated {
 #[derive(Clone, Debug)]
 struct Link {
     revolute: bool,
+    /// A revolute joint's angle at which its frame is the robot's (its frame turned about z so
+    /// that the next joint's placement turns about x only).
+    offset: f64,
     turn: Turn,
     shift: Vector3<f64>,
     params: [f64; BODY_PARAMS],
@@ -469,18 +493,9 @@ struct State {
 #[derive(Clone, Debug)]
 pub struct AbaWork {
     links: Vec<Link>,
+    /// Gravity's acceleration in the base's frame (turned about z as the first joint needs).
+    gravity: Vector3<f64>,
     state: Vec<State>,
-}
-
-/// A rotation whose z axis is `a` (unit): a permutation of the axes when `a` is one of them.
-fn z_onto(a: &Vector3<f64>) -> Matrix3<f64> {
-    let k = (0..3)
-        .min_by(|&x, &y| a[x].abs().total_cmp(&a[y].abs()))
-        .unwrap_or(0);
-    let e = Vector3::ith(k, 1.0);
-    let x = e.cross(a).normalize();
-    let y = a.cross(&x);
-    Matrix3::from_columns(&[x, y, *a])
 }
 
 /// A body's parameters in a frame turned by `r` (`x_old = r·x_new`).
@@ -504,19 +519,56 @@ fn turned_params(p: &[f64; BODY_PARAMS], r: &Matrix3<f64>) -> [f64; BODY_PARAMS]
 impl AbaWork {
     /// The workspace of `robot` (its chain turned into joint-aligned frames once).
     pub fn new(robot: &Robot) -> Self {
-        let mut links = Vec::with_capacity(robot.ndof());
-        let mut before = Matrix3::identity();
+        // Each frame is the robot's turned by `align`, so that its joint moves about or along z;
+        // about z, it is chosen so that the next joint's placement turns about x only: the turn
+        // about z that this needs goes to the joint before (an offset of its angle) or the base.
+        let mut links: Vec<Link> = Vec::with_capacity(robot.ndof());
+        let mut align = Matrix3::identity();
+        let mut base = Matrix3::identity();
         for j in &robot.joints {
-            let align = z_onto(&j.axis.normalize());
+            let axis = j.axis.normalize();
+            // the joint's axis in the previous frame: (sin β sin α, −cos β sin α, cos α)
+            let u = align.tr_mul(&(j.placement_rotation * axis));
+            let sin_a = u.x.hypot(u.y);
+            if sin_a > AXES_SNAP {
+                let beta = u.x.atan2(-u.y);
+                let rzb = Matrix3::new(
+                    beta.cos(),
+                    -beta.sin(),
+                    0.0,
+                    beta.sin(),
+                    beta.cos(),
+                    0.0,
+                    0.0,
+                    0.0,
+                    1.0,
+                );
+                align *= rzb;
+                match links.last_mut() {
+                    None => base = align,
+                    Some(prev) => {
+                        prev.params = turned_params(&prev.params, &rzb);
+                        prev.body = Articulated::of_body(&prev.params);
+                        if prev.revolute {
+                            prev.offset += beta;
+                        } else {
+                            prev.turn = Turn::Any(prev.turn.matrix() * rzb);
+                        }
+                    }
+                }
+            }
+            let turn = Turn::x(u.z, sin_a);
+            let shift = align.tr_mul(&j.placement_translation);
+            align = j.placement_rotation.tr_mul(&(align * turn.matrix()));
             let params = turned_params(&j.inertia, &align);
             links.push(Link {
                 revolute: j.kind == JointKind::Revolute,
-                turn: Turn::of(&(before.transpose() * j.placement_rotation * align)),
-                shift: before.tr_mul(&j.placement_translation),
+                offset: 0.0,
+                turn,
+                shift,
                 params,
                 body: Articulated::of_body(&params),
             });
-            before = align;
         }
         let rest = State {
             cs: (1.0, 0.0),
@@ -530,6 +582,7 @@ impl AbaWork {
         AbaWork {
             state: vec![rest; links.len()],
             links,
+            gravity: base.tr_mul(&robot.gravity),
         }
     }
 }
@@ -667,7 +720,7 @@ impl Robot {
         // the joints' sines and cosines first: independent of each other, they overlap
         for ((l, st), &qi) in links.iter().zip(state.iter_mut()).zip(q) {
             if l.revolute {
-                let (s, c) = sin_cos(qi);
+                let (s, c) = sin_cos(qi + l.offset);
                 st.cs = (c, s);
             }
         }
@@ -731,7 +784,7 @@ impl Robot {
             }
         }
         // forward: accelerations (gravity as an acceleration of the base)
-        let mut ap = Motion::new(Vector3::zeros(), -self.gravity);
+        let mut ap = Motion::new(Vector3::zeros(), -ws.gravity);
         for ((l, st), o) in links.iter().zip(state.iter()).zip(out.iter_mut()) {
             let a = to_child(l, st, &ap) + st.c;
             let (un, uf) = (&st.u.n, &st.u.f);
