@@ -46,6 +46,7 @@ impl Drives {
     }
 
     /// The friction and offset torque of each joint at speeds `v`.
+    #[inline(always)]
     fn resist(&self, v: &[f64], out: &mut [f64]) {
         for i in 0..v.len() {
             out[i] = self.viscous[i] * v[i] + self.coulomb[i] * self.law.sign(v[i]) + self.offset[i];
