@@ -425,27 +425,36 @@ impl Articulated {
     /// `A + S + Sᵀ − Q·P`, `B + Q`, `C` with `P = [p]×`, `S = P·Bᵀ`, `Q = P·C`, the skew
     /// products as cross products.
     #[inline(always)]
-    fn shifted(&self, p: &Vector3<f64>) -> Articulated {
+    fn shifted(&self, p: &Shift) -> Articulated {
+        // one build per kind of translation: its cross products without branches
+        match *p {
+            Shift::X(a) => self.shifted_by(|x| Vector3::new(0.0, -a * x.z, a * x.y)),
+            Shift::Y(b) => self.shifted_by(|x| Vector3::new(b * x.z, 0.0, -b * x.x)),
+            Shift::Z(c) => self.shifted_by(|x| Vector3::new(-c * x.y, c * x.x, 0.0)),
+            Shift::Any(p) => self.shifted_by(|x| cross(&p, x)),
+        }
+    }
+
+    /// [`Articulated::shifted`] with `p × ·` as `cross`.
+    #[inline(always)]
+    fn shifted_by(&self, cross: impl Fn(&Vector3<f64>) -> Vector3<f64>) -> Articulated {
         // columns of S = P·Bᵀ and Q = P·C
         let b = &self.b;
         let s = [
-            cross(p, &b.row(0).transpose()),
-            cross(p, &b.row(1).transpose()),
-            cross(p, &b.row(2).transpose()),
+            cross(&b.row(0).transpose()),
+            cross(&b.row(1).transpose()),
+            cross(&b.row(2).transpose()),
         ];
         let q = [
-            cross(p, &self.c.col(0)),
-            cross(p, &self.c.col(1)),
-            cross(p, &self.c.col(2)),
+            cross(&self.c.col(0)),
+            cross(&self.c.col(1)),
+            cross(&self.c.col(2)),
         ];
-        // Q·P's upper triangle: column j of Q·P is Q·(P's column j); q[k][i] = Q[i][k]
-        let qp = |i: usize, j: usize| match j {
-            0 => det2(q[1][i], p.z, q[2][i], p.y),
-            1 => det2(q[2][i], p.x, q[0][i], p.z),
-            _ => det2(q[0][i], p.y, q[1][i], p.x),
-        };
+        // Q·P = −(P·Qᵀ)ᵀ: (Q·P)[i][j] = −(p × Q's row i)[j]
+        let qrow = |i: usize| Vector3::new(q[0][i], q[1][i], q[2][i]);
+        let qp = [-cross(&qrow(0)), -cross(&qrow(1)), -cross(&qrow(2))];
         let a = &self.a.0;
-        let entry = |i: usize, j: usize| a[SYM[i][j]] + s[j][i] + s[i][j] - qp(i, j);
+        let entry = |i: usize, j: usize| a[SYM[i][j]] + s[j][i] + s[i][j] - qp[i][j];
         Articulated {
             a: Sym3([
                 entry(0, 0),
@@ -461,6 +470,52 @@ impl Articulated {
     }
 }
 
+/// How far from 0, relative to the whole translation, a component of a joint's translation may be
+/// and be taken for 0: the rounding that turning a URDF's frames leaves (10⁻¹² here).
+const SHIFT_SNAP: f64 = 1e-9;
+
+/// The translation between two joints' frames: along one axis, as most arms' are in these frames
+/// (a cross product with it then takes two products), or any.
+#[derive(Clone, Copy, Debug)]
+enum Shift {
+    X(f64),
+    Y(f64),
+    Z(f64),
+    Any(Vector3<f64>),
+}
+
+impl Shift {
+    fn of(p: &Vector3<f64>) -> Shift {
+        let tol = SHIFT_SNAP * p.norm();
+        match [p.x, p.y, p.z].map(|x| x.abs() > tol) {
+            [_, false, false] => Shift::X(p.x),
+            [false, true, false] => Shift::Y(p.y),
+            [false, false, true] => Shift::Z(p.z),
+            _ => Shift::Any(*p),
+        }
+    }
+
+    fn vector(&self) -> Vector3<f64> {
+        match *self {
+            Shift::X(a) => Vector3::new(a, 0.0, 0.0),
+            Shift::Y(b) => Vector3::new(0.0, b, 0.0),
+            Shift::Z(c) => Vector3::new(0.0, 0.0, c),
+            Shift::Any(p) => p,
+        }
+    }
+
+    /// `p × x`.
+    #[inline(always)]
+    fn cross(&self, x: &Vector3<f64>) -> Vector3<f64> {
+        match *self {
+            Shift::X(a) => Vector3::new(0.0, -a * x.z, a * x.y),
+            Shift::Y(b) => Vector3::new(b * x.z, 0.0, -b * x.x),
+            Shift::Z(c) => Vector3::new(-c * x.y, c * x.x, 0.0),
+            Shift::Any(p) => cross(&p, x),
+        }
+    }
+}
+
 /// One joint of the chain in joint-aligned frames: whether it turns, the rotation and translation
 /// of its zero-position frame in the previous joint's, its body's parameters and spatial inertia.
 #[derive(Clone, Debug)]
@@ -470,7 +525,7 @@ struct Link {
     /// that the next joint's placement turns about x only).
     offset: f64,
     turn: Turn,
-    shift: Vector3<f64>,
+    shift: Shift,
     params: [f64; BODY_PARAMS],
     body: Articulated,
 }
@@ -480,7 +535,7 @@ struct Link {
 #[derive(Clone, Copy, Debug)]
 struct State {
     cs: (f64, f64),
-    origin: Vector3<f64>,
+    origin: Shift,
     c: Motion,
     pa: Force,
     u: Force,
@@ -558,7 +613,7 @@ impl AbaWork {
                 }
             }
             let turn = Turn::x(u.z, sin_a);
-            let shift = align.tr_mul(&j.placement_translation);
+            let shift = Shift::of(&align.tr_mul(&j.placement_translation));
             align = j.placement_rotation.tr_mul(&(align * turn.matrix()));
             let params = turned_params(&j.inertia, &align);
             links.push(Link {
@@ -572,7 +627,7 @@ impl AbaWork {
         }
         let rest = State {
             cs: (1.0, 0.0),
-            origin: Vector3::zeros(),
+            origin: Shift::X(0.0),
             c: Motion::zero(),
             pa: Force::zero(),
             u: Force::zero(),
@@ -591,7 +646,7 @@ impl AbaWork {
 #[inline(always)]
 fn to_child(l: &Link, st: &State, m: &Motion) -> Motion {
     let w = l.turn.apply_tr(&m.w);
-    let v = l.turn.apply_tr(&(m.v + cross(&m.w, &st.origin)));
+    let v = l.turn.apply_tr(&(m.v - st.origin.cross(&m.w)));
     if l.revolute {
         let (c, s) = st.cs;
         Motion::new(rz_tr(c, s, &w), rz_tr(c, s, &v))
@@ -611,7 +666,7 @@ fn to_parent(l: &Link, st: &State, f: &Force) -> Force {
     };
     let fr = l.turn.apply(&f);
     Force {
-        n: l.turn.apply(&n) + cross(&st.origin, &fr),
+        n: l.turn.apply(&n) + st.origin.cross(&fr),
         f: fr,
     }
 }
@@ -729,7 +784,7 @@ impl Robot {
             if l.revolute {
                 st.origin = l.shift;
             } else {
-                st.origin = l.shift + l.turn.apply(&Vector3::new(0.0, 0.0, qi));
+                st.origin = Shift::Any(l.shift.vector() + l.turn.apply(&Vector3::new(0.0, 0.0, qi)));
             }
             let vi = to_child(l, st, &vp) + along_z(l.revolute, qd);
             // vi × the joint's motion: in the xy plane
