@@ -94,7 +94,7 @@ impl Plant<'_> {
             self.tau[i] = u[i] - self.tau[i];
         }
         self.robot
-            .aba_kernel(q, v, &self.tau, Some(&self.drives.armature), &mut self.ws, out)
+            .aba_into(q, v, &self.tau, Some(&self.drives.armature), &mut self.ws, out)
     }
 }
 
