@@ -305,9 +305,24 @@ def _measured_states(rec: RobotRecording, dec) -> Tuple[np.ndarray, np.ndarray, 
 
 
 def _fit(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, law: Law, dec,
-         y: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Weighted least squares (:func:`_weighted`) of the force ``y`` on the model's regressor at the states."""
-    return _weighted(_rows(dec, y, _model_regressor(robot, base, q, v, a, offset, law), v, top_speeds(rec)))
+         y: np.ndarray, coulomb: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """Weighted least squares (:func:`_weighted`) of the force ``y`` on the model's regressor at the states. With
+    ``coulomb`` (each joint's Coulomb friction), one more column: the law's derivative in its smoothing speed ε times
+    it, whose coefficient is the step of ε that the force asks for (a Gauss–Newton step: ε trades with Fv where the
+    law's tail is long, and is estimated with it)."""
+    w = _model_regressor(robot, base, q, v, a, offset, law)
+    if coulomb is not None:
+        h = EPS_STEP * law[1]
+        ds = (_coulomb(v, (law[0], law[1] + h)) - _coulomb(v, (law[0], law[1] - h))) / (2 * h)
+        w = np.concatenate([w, (ds * coulomb)[:, :, None]], axis=2)
+    return _weighted(_rows(dec, y, w, v, top_speeds(rec)))
+
+
+#: Relative step of ε in the law's central difference.
+EPS_STEP = 1e-4
+#: ε is moved by the least squares only where they determine it (σ within this share of ε), and by at most a factor
+#: of 2 per iteration.
+EPS_SIGMA_MAX = 0.1
 
 
 def _default_law(rec: RobotRecording) -> Law:
@@ -568,7 +583,7 @@ ABSURD_ERROR = 1.0
 class _Run:
     """One DIDIM run: its best iterate (error, θ, covariance, simulation), history, law and how it ended."""
 
-    best: Optional[Tuple[float, np.ndarray, np.ndarray, Dict[str, np.ndarray]]] = None
+    best: Optional[Tuple[float, np.ndarray, np.ndarray, Dict[str, np.ndarray], Law]] = None
     history: List[float] = field(default_factory=list)
     law: Law = ("algebraic", 0.0)
     converged: bool = False
@@ -582,6 +597,8 @@ def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, t
     pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
     run = _Run(law=law)
     law_chosen = False
+    # the shape the inverse model chose on the rows the fits keep (the law's tail)
+    tail_shape = law[0]
     cov = np.zeros((len(theta), len(theta)))
     for it in range(max_iter):
         pi = base.standard_from(theta[:nb], pi0)
@@ -596,7 +613,7 @@ def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, t
         run.history.append(err)
         say(f"DIDIM iteration {it}: closed-loop force error {100 * err:.3f} %")
         if run.best is None or err < run.best[0]:
-            run.best = (err, theta.copy(), cov.copy(), sim)
+            run.best = (err, theta.copy(), cov.copy(), sim, run.law)
         # settled: the error changed by less than tol of itself, or it has not bettered the best by that much in
         # STALL iterations (it wanders at the level the encoder's rounding in the loop sets)
         h = run.history
@@ -614,6 +631,16 @@ def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, t
                 except (SimulationError, DataError) as e:
                     run.message = f"iteration {it}: {e}"
                     return run
+        if law_chosen and run.law[1] > 0 and run.law[0] == tail_shape:
+            # ε with the parameters, once the closed loop has confirmed the shape that the tail chose: the fits
+            # keep the tail's rows, and a shape the closed loop chose against it has its ε set near zero speed
+            theta_e, cov_e = _fit(rec, robot, base, sim["q"], sim["qd"], sim["qdd"], offset, run.law, dec, rec.force,
+                                  coulomb=theta[nb + n:nb + 2 * n])
+            step, sd = float(theta_e[-1]), float(np.sqrt(max(cov_e[-1, -1], 0.0)))
+            if sd <= EPS_SIGMA_MAX * run.law[1]:
+                eps = float(np.clip(run.law[1] + step, run.law[1] / 2, 2 * run.law[1]))
+                run.law = (run.law[0], eps)
+                say(f"DIDIM iteration {it}: smoothing speed ε = {eps:.4g} (σ {sd:.2g})")
         theta, cov = _fit(rec, robot, base, sim["q"], sim["qd"], sim["qdd"], offset, run.law, dec, rec.force)
     run.message = f"no convergence in {max_iter} iterations"
     return run
@@ -656,10 +683,10 @@ def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: 
             run = again
     if run.best is None:
         raise SimulationError(f"DIDIM could not simulate the robot's closed loop: {run.message}")
-    err, theta, cov, sim = run.best
+    err, theta, cov, sim, law = run.best
     res = _result("didim", rec, robot, base, offset, theta, cov, converged=run.converged,
                   iterations=len(run.history), message="" if run.converged else run.message, history=run.history,
-                  notes=notes, law=run.law)
+                  notes=notes, law=law)
     res.force_error, res.force_error_per_joint = force_errors(rec, sim["force"])
     res.elapsed_s = time.perf_counter() - t0
     return res
