@@ -1,8 +1,11 @@
-//! Forward dynamics by Featherstone's articulated-body algorithm, in frames turned so that every
-//! joint moves about or along its z axis: the joint's rotation then mixes two coordinates, its
-//! motion subspace picks one, and the placements between joints, quarter turns in most URDFs,
-//! move entries instead of multiplying them. The robot's own frames (Pinocchio's) are kept
-//! everywhere else; torques and accelerations are the same in both.
+//! Forward dynamics by Featherstone's articulated-body algorithm, in frames chosen as
+//! Denavit–Hartenberg's: every joint moves about or along its z axis (its rotation mixes two
+//! coordinates, its motion subspace picks one); the placement between two joints turns about x
+//! only, by a quarter or half turn in most arms (entries moved, not multiplied), and its
+//! translation lies along one axis in most (a cross product with it takes two products). Turning
+//! a joint's frame about z to get there is an offset of its angle. The robot's own frames
+//! (Pinocchio's) are kept everywhere else; torques and accelerations are the same in both (to
+//! 2·10⁻¹² where a URDF writes a quarter turn with 12 digits, taken here for exact).
 
 use nalgebra::{Matrix3, Vector3};
 
