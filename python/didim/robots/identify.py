@@ -581,7 +581,8 @@ ABSURD_ERROR = 1.0
 
 @dataclass
 class _Run:
-    """One DIDIM run: its best iterate (error, θ, covariance, simulation), history, law and how it ended."""
+    """One DIDIM run: its best iterate (error, θ, covariance, simulation, law), history, current law and how it
+    ended."""
 
     best: Optional[Tuple[float, np.ndarray, np.ndarray, Dict[str, np.ndarray], Law]] = None
     history: List[float] = field(default_factory=list)
@@ -592,7 +593,8 @@ class _Run:
 
 def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, tol, say) -> _Run:
     """DIDIM's iterations from ``theta``: simulate, refit on the simulated states, until settled; the law through
-    zero speed chosen in closed loop once the parameters settle, then on until they settle again."""
+    zero speed chosen in closed loop once the parameters settle, then on until they settle again, its smoothing
+    speed estimated with the parameters where the closed loop kept the tail's shape (:func:`_fit`)."""
     n, nb = robot.ndof, len(base.names)
     pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
     run = _Run(law=law)
