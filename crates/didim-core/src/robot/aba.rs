@@ -539,15 +539,14 @@ struct Link {
 }
 
 /// One joint's share of a call: its (cos, sin), its frame's origin (a prismatic joint's moves),
-/// the velocity-product acceleration, the bias force, `U = I·S`, `1/D` and `u`.
+/// the velocity-product acceleration, the bias force, `1/D` and `u − U·c`.
 #[derive(Clone, Copy, Debug)]
 struct State {
     cs: (f64, f64),
     origin: Shift,
     c: Motion,
     pa: Force,
-    u: Force,
-    /// `U` seen from the previous joint's frame (its force transform): the acceleration pass
+    /// `U = I·S` seen from the previous joint's frame (its force transform): the acceleration pass
     /// takes `U·a` from the parent's acceleration, beside that acceleration's transform.
     u_parent: Force,
     inv_d: f64,
@@ -641,7 +640,6 @@ impl AbaWork {
             origin: Shift::X(0.0),
             c: Motion::zero(),
             pa: Force::zero(),
-            u: Force::zero(),
             u_parent: Force::zero(),
             inv_d: 0.0,
             uu: 0.0,
@@ -830,7 +828,6 @@ impl Robot {
             }
             let inv_d = 1.0 / d;
             let u = ti - if l.revolute { pa_i.n.z } else { pa_i.f.z };
-            st.u = u_vec;
             st.inv_d = inv_d;
             // u − U·c (c has no z components)
             let (c, un, uf) = (&st.c, &u_vec.n, &u_vec.f);
