@@ -4,6 +4,7 @@ loop, an 18-bit encoder, the data folder's cascades). With ε chosen by the clos
 left Fv 5 % off on a Panda (docs/robots.md): the two trade where the law's tail is long."""
 
 import math
+import os
 import pathlib
 import sys
 
@@ -14,7 +15,12 @@ import didim
 
 pin = pytest.importorskip("pinocchio")
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benches"))
+_rayon = os.environ.get("RAYON_NUM_THREADS")
 from robots import pin_loop  # noqa: E402  the benches' independent plant: RK4 over pin.aba, controllers in Python
+
+# the bench pins rayon to one core for its timings; the tests keep the machine's default
+if _rayon is None:
+    os.environ.pop("RAYON_NUM_THREADS", None)
 
 
 def test_didim_estimates_the_smoothing_speed_of_a_long_tailed_law(robots_dir, tmp_path):
