@@ -109,8 +109,8 @@ def speed(lines):
     def ours(substeps):
         return _core.simulate_robot(true._core, truth["Ia"], truth["Fv"], truth["Fc"], truth["offset"],
                                     rec.core_controllers(), rec.qr, rec.dt, quantization=list(rec.encoder_step),
-                                    force0=list(rec.force[0]), substeps=substeps, coulomb_eps=truth["vs"],
-                                    coulomb_law="tanh")
+                                    force0=list(rec.force[0]), substeps=substeps, coulomb_eps=[truth["vs"]] * 6,
+                                    coulomb_law=["tanh"] * 6)
 
     model = pin.buildModelFromUrdf(str(DATA / "ur5_cad.urdf"))
     for i in range(1, model.njoints):

@@ -26,7 +26,8 @@ RIGHT = dict(kp=90.0, kv=220.0, ti=0.04, kff=1.0, f_lp=250.0, dt=1e-3, gain=35.1
 MISTAKES = {
     "feedforward forgotten": (dict(kff=0.0), "feedforward is missing"),
     "integral time typed in ms": (dict(ti=40.0), "ti in thousandths"),
-    "velocity gain in the wrong unit": (dict(kv=220.0 / (2 * math.pi)), "velocity-loop gain kv"),
+    # kv given per Hz, or the command's scale off by 2π through kv: the log cannot tell the two, both name kv
+    "velocity gain in the wrong unit": (dict(kv=220.0 / (2 * math.pi)), "kv "),
     "force gain wrong": (dict(gain=3.515065188248547), "force gain"),
 }
 

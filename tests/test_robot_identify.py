@@ -53,12 +53,12 @@ def test_the_closed_loop_with_the_truth_reproduces_the_records_floor(data, name)
 
     out = _core.simulate_robot(true._core, t["Ia"], t["Fv"], t["Fc"], t["offset"], rec.core_controllers(), rec.qr,
                                rec.dt, quantization=list(rec.encoder_step), force0=list(rec.force[0]),
-                               coulomb_eps=t["vs"], coulomb_law="tanh")
+                               coulomb_eps=[t["vs"]] * rec.ndof, coulomb_law=["tanh"] * rec.ndof)
     err, _ = force_errors(rec, out["force"])
     assert err == pytest.approx(t["records"]["train"]["truth_floor_total"], rel=0.05)
     # the integrator: the substeps chosen from the friction's stiffness against a fine reference (32 substeps), well
     # below the floor (the loop amplifies the difference as it does an encoder count)
-    kw = dict(quantization=[0.0] * rec.ndof, force0=list(rec.force[0]), coulomb_eps=t["vs"], coulomb_law="tanh")
+    kw = dict(quantization=[0.0] * rec.ndof, force0=list(rec.force[0]), coulomb_eps=[t["vs"]] * rec.ndof, coulomb_law=["tanh"] * rec.ndof)
     fine = _core.simulate_robot(true._core, t["Ia"], t["Fv"], t["Fc"], t["offset"], rec.core_controllers(), rec.qr,
                                 rec.dt, substeps=32, **kw)
     auto = _core.simulate_robot(true._core, t["Ia"], t["Fv"], t["Fc"], t["offset"], rec.core_controllers(), rec.qr,

@@ -118,8 +118,8 @@ def simulate_robot(
     quantization: Sequence[float],
     force0: Sequence[float],
     substeps: int = 0,
-    coulomb_eps: float = 0.01,
-    coulomb_law: str = "algebraic",
+    coulomb_eps: Sequence[float],
+    coulomb_law: Sequence[str],
 ) -> Dict[str, _F64]: ...
 
 def coulomb_sign(v: _F64, eps: float = ..., law: str = "algebraic") -> _F64: ...

@@ -112,7 +112,7 @@ def identify(
 
     if isinstance(model, Robot) or isinstance(recording, RobotRecording):
         return _identify_robot(recording, model, method, offset=offset, apM=apM, initial=initial, criterion=criterion,
-                               progress=progress, **options)
+                               progress=progress, controller_check=controller_check, **options)
     if not isinstance(model, Model) and (not isinstance(model, str) or model not in MODELS):
         raise DataError(f"unknown model {model!r}: use one of {', '.join(MODELS)} or a didim.Model")
     # the model, converted once: a didim.Model, or a kind with its structure fields as options
@@ -267,10 +267,12 @@ POOR_FORCE_ERROR = 0.5
 __all__ = ["identify", "METHODS"]
 
 
-def _identify_robot(recording, robot, method: str, *, offset, apM, initial, criterion, progress, **options):
+def _identify_robot(recording, robot, method: str, *, offset, apM, initial, criterion, progress, controller_check,
+                    **options):
     """:func:`identify` of a robot's record (:class:`didim.RobotRecording`) with its :class:`didim.Robot`: "didim"
     (from the URDF's values) or "idim-ls"; ``offset`` (default True) fits a constant torque per joint; ``max_iter``
-    and ``tol`` go to DIDIM."""
+    and ``tol`` go to DIDIM; ``controller_check`` as for one axis, on each joint."""
+    from .check import enforce
     from .robots import Robot, RobotRecording, didim as robot_didim, idim_ls as robot_idim_ls
 
     if not isinstance(recording, RobotRecording):
@@ -286,15 +288,22 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
     # a robot's joints carry a constant torque (a cable, what gravity compensation leaves): fitted unless refused,
     # since without it the friction takes it (on the data folder's UR5, Fv 7.8 % off instead of 0.24 %)
     offset = bool(_checks.flag("offset", offset)) if offset is not None else True
+    if method not in ("didim", "idim-ls"):
+        raise DataError(f"method {method!r} is not available for robots: use 'didim' or 'idim-ls'")
+    allowed = {"max_iter", "tol"} if method == "didim" else set()
+    unknown = sorted(set(options) - allowed)
+    if unknown:
+        raise DataError(f"unknown option(s) {', '.join(unknown)} for a robot's {method}; it takes "
+                        f"{', '.join(sorted(allowed)) or 'none'}")
+    if list(recording.joint_names) != robot.joint_names:
+        raise DataError(f"the record's joints ({', '.join(recording.joint_names)}) are not the robot's "
+                        f"({', '.join(robot.joint_names)}), in the same order")
+    chk = enforce(recording, controller_check)
     if method == "didim":
-        allowed = {"max_iter", "tol"}
-        unknown = sorted(set(options) - allowed)
-        if unknown:
-            raise DataError(f"unknown option(s) {', '.join(unknown)} for a robot's DIDIM; it takes "
-                            f"{', '.join(sorted(allowed))}")
-        return robot_didim(recording, robot, offset=offset, progress=progress, **options)
-    if method == "idim-ls":
-        if options:
-            raise DataError(f"unknown option(s) {', '.join(sorted(options))} for a robot's IDIM-LS: it takes none")
-        return robot_idim_ls(recording, robot, offset=offset)
-    raise DataError(f"method {method!r} is not available for robots: use 'didim' or 'idim-ls'")
+        res = robot_didim(recording, robot, offset=offset, progress=progress, **options)
+    else:
+        res = robot_idim_ls(recording, robot, offset=offset)
+    if chk is not None:
+        res.controller_check = chk.to_dict()
+        res.notes.insert(0, chk.summary())
+    return res

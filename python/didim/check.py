@@ -202,13 +202,75 @@ def check_controller(rec) -> ControllerCheck:
     return out
 
 
+@dataclass
+class RobotControllerCheck:
+    """Each joint's controller against its log (:func:`check_controller` on the joint as one axis), and, where a
+    joint's controller fails and another joint's replays its log, the swap that explains it."""
+
+    joints: Dict[str, ControllerCheck]
+    swapped: List[Tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return all(c.passed for c in self.joints.values())
+
+    @property
+    def mismatch(self) -> float:
+        return max(c.mismatch for c in self.joints.values())
+
+    def failed(self) -> List[str]:
+        return [j for j, c in self.joints.items() if not c.passed]
+
+    def summary(self) -> str:
+        if self.passed:
+            return (f"controller check: each joint's law on its logged qr and qm gives its logged force within "
+                    f"{100 * self.mismatch:.3g} % at most (" + ", ".join(f"{j} {100 * c.mismatch:.2g} %"
+                                                                        for j, c in self.joints.items()) + ")")
+        parts = []
+        for a, b in self.swapped:
+            parts.append(f"joints {a} and {b}: each one's controller gives the other's log: the two controllers are "
+                         "swapped in the file (its entries are in the robot's joint order)")
+        named = {j for pair in self.swapped for j in pair}
+        for j in self.failed():
+            if j not in named:
+                parts.append(f"joint {j}: " + self.joints[j].summary())
+        return "; ".join(parts)
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"passed": self.passed, "mismatch": self.mismatch, "swapped": [list(p) for p in self.swapped],
+                "joints": {j: c.to_dict() for j, c in self.joints.items()}}
+
+
+def check_robot_controllers(rec) -> RobotControllerCheck:
+    """:func:`check_controller` on each joint of a robot's record (:meth:`RobotRecording.joint`); a joint whose
+    controller fails is tried with the other joints' controllers, and two joints that replay each other's logs are
+    named as swapped."""
+    n = len(rec.joint_names)
+    out = RobotControllerCheck({rec.joint_names[j]: check_controller(rec.joint(j)) for j in range(n)})
+    bad = [j for j in range(n) if not out.joints[rec.joint_names[j]].passed]
+    fits = {}
+    for j in bad:
+        for i in bad:
+            if i != j:
+                try:
+                    fits[j, i] = check_controller(rec.joint(j, rec.controllers[i])).passed
+                except DataError:
+                    fits[j, i] = False
+    for j in bad:
+        for i in bad:
+            if i > j and fits.get((j, i)) and fits.get((i, j)):
+                out.swapped.append((rec.joint_names[j], rec.joint_names[i]))
+    return out
+
+
 #: What to do when the described controller does not give the logged force: refuse (a DataError, exit 2 from the
 #: command line), warn (a DidimWarning) and go on, or not check at all.
 CHECK_MODES = ("error", "warn", "off")
 
 
-def enforce(rec, mode: str = "error") -> Optional[ControllerCheck]:
-    """:func:`check_controller` on ``rec`` as ``mode`` asks (``CHECK_MODES``); the check, or None when "off"."""
+def enforce(rec, mode: str = "error"):
+    """:func:`check_controller` on ``rec`` (or, on a robot's record, :func:`check_robot_controllers`) as ``mode`` asks
+    (``CHECK_MODES``); the check, or None when "off"."""
     import warnings
 
     from . import _checks
@@ -217,9 +279,12 @@ def enforce(rec, mode: str = "error") -> Optional[ControllerCheck]:
     _checks.one_of("controller_check", mode, CHECK_MODES)
     if mode == "off":
         return None
-    chk = check_controller(rec)
+    robot = hasattr(rec, "joint_names")
+    chk = check_robot_controllers(rec) if robot else check_controller(rec)
     if not chk.passed:
-        text = (f"{rec.name or 'record'}: the described controller does not give the logged force: {chk.summary()}. "
+        what = (f"the described controller of joint{'s' if len(chk.failed()) > 1 else ''} {', '.join(chk.failed())} "
+                "does not give the logged force" if robot else "the described controller does not give the logged force")
+        text = (f"{rec.name or 'record'}: {what}: {chk.summary()}. "
                 "didim simulates the closed loop with this controller, so a fit would be wrong; correct the "
                 "description (Python: controller=..., CLI: --controller FILE), or go on anyway with "
                 "controller_check='warn' (CLI: --controller-check warn)")
@@ -229,4 +294,4 @@ def enforce(rec, mode: str = "error") -> Optional[ControllerCheck]:
     return chk
 
 
-__all__ = ["ControllerCheck", "check_controller", "enforce", "CHECK_TOLERANCE", "CHECK_MODES"]
+__all__ = ["ControllerCheck", "RobotControllerCheck", "check_controller", "check_robot_controllers", "enforce", "CHECK_TOLERANCE", "CHECK_MODES"]

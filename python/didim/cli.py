@@ -74,12 +74,12 @@ def _robot_record(args, path: str, robot):
     from .loaders import load_record
 
     for flag, value, default in (("--columns", getattr(args, "columns", None), None),
-                                 ("--units", getattr(args, "units", None), None),
                                  ("--force-scale", getattr(args, "force_scale", 1.0), 1.0)):
         if value != default:
-            raise DataError(f"{flag} applies to one axis's record; a robot's record is read in SI with columns t, "
-                            "qr_1..qr_n, force_1..force_n, qm_1..qm_n")
-    return load_record(path, robot=robot, controller=getattr(args, "controller", None) or None)
+            raise DataError(f"{flag} applies to one axis's record; a robot's record has columns t, qr_1..qr_n, "
+                            "force_1..force_n, qm_1..qm_n (a drive unit's scale goes in --units, e.g. deg,A=2.5)")
+    return load_record(path, robot=robot, controller=getattr(args, "controller", None) or None,
+                       units=getattr(args, "units", None))
 
 
 def cmd_identify_robot(args) -> int:
@@ -104,7 +104,8 @@ def cmd_identify_robot(args) -> int:
     opts = {k: v for k, v in (("max_iter", args.max_iter), ("tol", args.tol)) if v is not None}
     if opts and args.method != "didim":
         raise DataError("--max-iter and --tol apply to DIDIM")
-    res = identify(rec, robot, args.method, offset=args.offset, progress=_progress(args.quiet), **opts)
+    res = identify(rec, robot, args.method, offset=args.offset, progress=_progress(args.quiet),
+                   controller_check=args.controller_check, **opts)
     print(res.summary())
     if args.json:
         import json
@@ -236,18 +237,24 @@ def _simulate_robot(args, result) -> int:
     import json
 
     from ._io import save_figure, write_text
+    from .check import enforce
     from .robots.identify import force_errors, simulate_robot
 
     rec = _robot_record(args, args.file, result.robot)
+    chk = enforce(rec, args.controller_check)
     sim = simulate_robot(rec, result)
     err, per = force_errors(rec, sim["force"])
     print(f"{args.file}: closed-loop force error of {args.result} ({result.method}, {rec.ndof}-joint robot "
           f"{result.robot.name}): {100 * err:.2f} %")
     for j, e in per.items():
         print(f"  {j}: {100 * e:.2f} %")
+    if chk is not None:
+        print(f"  ({chk.summary()})")
     if args.json:
         write_text(args.json, json.dumps({"record": args.file, "result": args.result, "force_error": err,
-                                          "force_error_per_joint": per, "params": result.params}, indent=2) + "\n")
+                                          "force_error_per_joint": per, "params": result.params,
+                                          "controller_check": None if chk is None else chk.to_dict()},
+                                         indent=2) + "\n")
         print(f"wrote {args.json}")
     if args.plot:
         from .plots import plot_robot_forces
@@ -270,7 +277,10 @@ def cmd_payload(args) -> int:
     result = load_result(args.result)
     if not isinstance(result, RobotResult):
         raise DataError(f"{args.result}: not a robot's result (didim identify --urdf ... --json OUT.json)")
+    from .check import enforce
+
     rec = _robot_record(args, args.file, result.robot)
+    enforce(rec, args.controller_check)
     p = payload(rec, result, progress=_progress(args.quiet))
     print(p.summary())
     if args.json:
@@ -335,10 +345,37 @@ def cmd_controller_check(args) -> int:
     """Checks the record's described controller against its log."""
     from .check import enforce
 
-    rec = _load(args, args.file)
+    rec = _checked_record(args, args.file)
     chk = enforce(rec, "warn" if args.controller_check == "off" else args.controller_check)
     print(f"{args.file}: {chk.summary()}")
     return 0 if chk.passed else 2
+
+
+def _checked_record(args, path: str):
+    """The record of ``didim controller check``: a robot's with --urdf or a joints controller file, else one axis's."""
+    from ._errors import DataError
+    from .controllers import _spec
+    from .robots import Robot
+
+    if getattr(args, "urdf", None):
+        joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
+        return _robot_record(args, path, Robot.from_urdf(args.urdf, joints))
+    if args.joints:
+        raise DataError("--joints picks a URDF's joints: give --urdf too")
+    if args.controller:
+        _, spec = _spec(args.controller)
+        if isinstance(spec, dict) and spec.get("type") == "joints" and isinstance(spec.get("joints"), list):
+            return _robot_record(args, path, _NumberedJoints(len(spec["joints"])))
+    return _load(args, path)
+
+
+class _NumberedJoints:
+    """A robot's joints known only by number (a joints controller file without a URDF): 1..n, their kinds unknown
+    (revolute is assumed: the controller check does not depend on it)."""
+
+    def __init__(self, n: int):
+        self.joint_names = [str(i + 1) for i in range(n)]
+        self.joint_kinds = ["revolute"] * n
 
 
 def _load_plain(args, path: str):
@@ -554,6 +591,8 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--controller", metavar="FILE", help="the joints' controllers ({\"type\": \"joints\", ...}); "
                    "default: NAME_controller.json beside the record")
     y.add_argument("--json", metavar="OUT", help="write mass, mass_sigma, com, com_sigma and the fit")
+    y.add_argument("--controller-check", choices=("error", "warn", "off"), default="error",
+                   help="each joint's controller against its log before the fit, as for identify")
     y.add_argument("--quiet", action="store_true", help="no progress messages")
     y.set_defaults(func=cmd_payload)
 
@@ -572,6 +611,9 @@ def build_parser() -> argparse.ArgumentParser:
     cc = csub.add_parser("check", help="check a described controller against the log (exit 2 when it fails)")
     cc.add_argument("file", help="the record")
     _record_options(cc)
+    cc.add_argument("--urdf", metavar="URDF", help="a robot's record: its URDF (joint names and kinds); without it a "
+                    "joints controller file ({\"type\": \"joints\"}) reads columns qr_1..qr_n, force_1.., qm_1..")
+    cc.add_argument("--joints", metavar="J1,J2,..", help="with --urdf: the actuated joints, as for identify")
     cc.add_argument("--quiet", action="store_true")
     cc.set_defaults(func=cmd_controller_check)
 

@@ -238,24 +238,24 @@ class TransferFunction:
 
         qr = np.asarray(qr, dtype=float)
         qm = np.asarray(qm, dtype=float)
-        b_r, a_r, b_y, a_y = (np.array(c) for c in (self.b_r, self.a_r, self.b_y, self.a_y))
-        if self.a_r == self.a_y:
-            num_r, num_y, den = b_r, b_y, a_r
-        else:
-            num_r, num_y, den = np.convolve(b_r, a_y), np.convolve(b_y, a_r), np.convolve(a_r, a_y)
-        n = max(len(num_r), len(num_y), len(den))
-        num_r, num_y, den = (np.pad(c, (0, n - len(c))) / den[0] for c in (num_r, num_y, den))
-        # the two numerators over the shared denominator, each from the core's rest state (constant input since
-        # forever and, where the denominator integrates, zero output): linear, so their difference is the law
-        integrates = abs(den.sum()) <= 1e-12 * np.abs(den).sum()
+        # each branch on its own denominator (their product would hold an integrator twice, and a double pole at 1
+        # turns rounding into a ramp: 0.2 % of a robot joint's force after 20 s), on the positions' departures from
+        # the first reference (large absolute positions times large gains cancel digits), each from the core's rest
+        # state (constant input since forever and, where the denominator integrates, zero output); a branch that
+        # does not integrate adds back its static gain times that reference, so the law is unchanged
+        x0 = float(qr[0]) if len(qr) else 0.0
 
-        def run(num: np.ndarray, x: np.ndarray) -> np.ndarray:
+        def run(num: np.ndarray, den: np.ndarray, x: np.ndarray) -> np.ndarray:
+            n = max(len(num), len(den))
+            num, den = (np.pad(c, (0, n - len(c))) / den[0] for c in (num, den))
+            integrates = abs(den.sum()) <= 1e-12 * np.abs(den).sum()
             u0 = 0.0 if integrates else num.sum() * x[0] / den.sum()
             zi = np.array([(num[i + 1:] * x[0] - den[i + 1:] * u0).sum() for i in range(n - 1)])
-            return lfilter(num, den, x, zi=zi)[0] if n > 1 else num[0] * x / den[0]
+            out = lfilter(num, den, x, zi=zi)[0] if n > 1 else num[0] * x / den[0]
+            return out if integrates else out + num.sum() / den.sum() * x0
 
         with np.errstate(all="ignore"):
-            u = run(num_r, qr) - run(num_y, qm)
+            u = run(np.array(self.b_r), np.array(self.a_r), qr - x0) - run(np.array(self.b_y), np.array(self.a_y), qm - x0)
             v = u + (0.0 if u_ext is None else np.asarray(u_ext, dtype=float) / self.gain)
             return self.gain * np.clip(v, -self.saturation, self.saturation)
 

@@ -249,9 +249,11 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
                 robot: Optional["Robot"] = None) -> Union[Recording, "RobotRecording"]:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
 
-    With ``robot`` (a :class:`didim.Robot`): a robot's record (:class:`didim.RobotRecording`), columns ``t,
-    qr_1..qr_n, force_1..force_n, qm_1..qm_n`` in the robot's joint order (or ``qr_<joint name>``…), in rad (m)
-    and N·m (N), the controller a ``{"type": "joints", ...}`` file (by default ``NAME_controller.json`` beside it).
+    With ``robot`` (a :class:`didim.Robot` or a URDF's path): a robot's record (:class:`didim.RobotRecording`),
+    columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n`` in the robot's joint order (or ``qr_<joint name>``…),
+    in rad (m) and N·m (N) unless ``units`` (``"deg"``, ``"deg,mm"``, one per joint), the header or the controllers'
+    file says otherwise (:func:`load_robot_record`), the controller a ``{"type": "joints", ...}`` file (by default
+    ``NAME_controller.json`` beside it).
 
     CSV: a header line naming the columns, then one row of numbers per sample (comma, semicolon, tab or spaces).
     Parquet: one column per signal. HDF5: one dataset per signal (``columns`` may name ``group/dataset``). MAT: the
@@ -272,10 +274,16 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     (:func:`didim.fit_controller`) and ``Recording.controller_origin`` says so.
     """
     if robot is not None:
-        if columns is not None or force_scale != 1.0 or units is not None:
-            raise DataError("a robot record is read in SI (rad or m, N·m or N) with columns t, qr_1..qr_n, force_1.., "
-                            "qm_1..; columns, force_scale and units apply to one axis's record")
-        return load_robot_record(path, robot, controller=controller, name=name)
+        if isinstance(robot, (str, os.PathLike)):
+            robot = Robot.from_urdf(robot)  # the URDF's path
+        if not (isinstance(robot, Robot) or hasattr(robot, "joint_names") and hasattr(robot, "joint_kinds")):
+            raise DataError(f"robot must be a didim.Robot (didim.Robot.from_urdf(path)) or a URDF's path, got "
+                            f"{type(robot).__name__}")
+        if columns is not None or force_scale != 1.0:
+            raise DataError("a robot record has columns t, qr_1..qr_n, force_1.., qm_1.. (or qr_<joint name>..); "
+                            "columns and force_scale apply to one axis's record: declare a drive unit with its scale "
+                            "in units (e.g. units='deg,A=2.5')")
+        return load_robot_record(path, robot, controller=controller, name=name, units=units)
     rec = _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain, units,
                        beside_controller)
     if isinstance(lead_in, str) and lead_in == "auto":
@@ -341,11 +349,96 @@ def _columns(available: Sequence[str], names: Sequence[str], key: str, where: st
                     f"{len(names)} joints ({', '.join(names)}); the file has {', '.join(available)}")
 
 
-def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Optional[str] = None) -> RobotRecording:
+#: A robot's positions are read to this many binary digits below its encoder step (or below its reference's span
+#: where no encoder is seen): what a conversion of units moves (their last digits) is gone, so the same record in
+#: degrees and in radians is the same numbers in SI (the closed loop's encoder turns a difference in the last digit
+#: into whole counts some seconds later, and DIDIM's estimate by 1e-5).
+READING_BITS = 24
+
+
+def _reading_grid(step: float, qr: np.ndarray) -> float:
+    """The dyadic grid a joint's positions are read on: 2^-READING_BITS of its encoder step, or of its reference's
+    span (2^-40 of it) without one."""
+    scale = step if step > 0 else float(np.ptp(qr)) * 2.0**-16
+    if not (math.isfinite(scale) and scale > 0):
+        return 0.0
+    return 2.0 ** (math.floor(math.log2(scale)) - READING_BITS)
+
+
+def _canonical(x, grid: float):
+    """``x`` on the dyadic ``grid`` (unchanged when the grid is 0)."""
+    if not grid:
+        return x
+    return np.round(np.asarray(x) / grid) * grid if np.ndim(x) else float(round(x / grid) * grid)
+
+
+#: A reference beyond a joint's URDF limits by more than this share of their range is in other units than the
+#: URDF's (degrees read as radians, mm as m).
+LIMIT_MARGIN = 0.1
+
+
+def _check_limits(p, robot, qr: np.ndarray, declared: bool) -> None:
+    """Refuses a reference that leaves a joint's URDF limits by more than :data:`LIMIT_MARGIN` of their range: the
+    URDF sets the scale of its joints' positions (rad, m), and a record in degrees or mm leaves it."""
+    limits = getattr(robot, "limits", None)
+    if limits is None:
+        return
+    for j, (lo, hi, *_rest) in enumerate(limits):
+        if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+            continue
+        m = LIMIT_MARGIN * (hi - lo)
+        a, b = float(np.min(qr[:, j])), float(np.max(qr[:, j]))
+        if a < lo - m or b > hi + m:
+            prismatic = robot.joint_kinds[j] == "prismatic"
+            unit = "m" if prismatic else "rad"
+            hint = ("the positions are in another unit than declared" if declared else
+                    f"the positions are in another unit than {unit}: declare it (units='{'mm' if prismatic else 'deg'}', "
+                    f"CLI: --units {'mm' if prismatic else 'deg'}, a header such as qr_{j + 1}[{'mm' if prismatic else 'deg'}], "
+                    "or \"units\" in the controllers' file)")
+            raise DataError(f"{p}: joint {robot.joint_names[j]}'s reference spans {a:.4g} to {b:.4g} {unit}, beyond "
+                            f"its URDF limits {lo:.4g} to {hi:.4g} {unit}: {hint}, or the record is another robot's")
+
+
+def _robot_file_units(path, kinds) -> Optional[list]:
+    """The units a robot's controller file declares: ``"units"`` beside ``"joints"`` (all joints) and in each joint's
+    entry (that joint), per joint (None when it declares none)."""
+    from .controllers import _spec
+    from .units import for_joints
+
+    _, spec = _spec(path)
+    if not isinstance(spec, dict):
+        return None
+    where = f"{path}"
+    whole = for_joints(spec.get("units"), kinds, f"{where}: \"units\"")
+    entries = spec.get("joints") if isinstance(spec.get("joints"), list) else []
+    each = [e.get("units") if isinstance(e, dict) else None for e in entries]
+    if len(each) != len(kinds) or all(e is None for e in each):
+        return whole
+    per = for_joints(each, kinds, f"{where}: the joints' \"units\"")
+    assert per is not None
+    out = []
+    for j, u in enumerate(per):
+        if each[j] is None:
+            out.append(whole[j] if whole is not None else u)
+        elif whole is not None and whole[j] != u:
+            raise DataError(f"{where}: joint {j + 1} is declared in {u.describe()} in its entry and in "
+                            f"{whole[j].describe()} beside \"joints\": give one")
+        else:
+            out.append(u)
+    return out
+
+
+def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Optional[str] = None,
+                      units: Any = None) -> RobotRecording:
     """A robot record from a CSV, Parquet or HDF5 file with columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``
-    in ``robot``'s joint order (or ``qr_<joint name>``…), positions in rad (prismatic joints: m), forces in N·m (N).
-    ``controller``: the joints' controllers (a sequence, one per joint) or the path of their file; by default
-    ``NAME_controller.json`` beside the record."""
+    in ``robot``'s joint order (or ``qr_<joint name>``…), positions in rad (prismatic joints: m), forces in N·m (N),
+    unless the record declares other units: ``units`` (``"deg"``, ``"deg,mm"``, one per joint:
+    :func:`didim.units.for_joints`), a header suffix (``qr_1[deg]``), or ``"units"`` in the controllers' file (for
+    all joints, or in a joint's entry); declarations that disagree are refused. Positions, encoder steps and the
+    controllers are converted to SI once. ``controller``: the joints' controllers (a sequence, one per joint) or
+    the path of their file; by default ``NAME_controller.json`` beside the record."""
+    from .units import for_joints
+
     p = check_input(path, "robot record")
     ext = os.path.splitext(p)[1].lower()
     kind = EXTENSIONS.get(ext)
@@ -359,29 +452,93 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
             raise DataError(f"{p}: no controller given and no {os.path.splitext(p)[0]}_controller.json beside it: give "
                             "the joints' controller file (CLI: --controller CTL.json)")
         controller = side
+    kinds = list(robot.joint_kinds)
+    declared = []  # (where, per-joint units)
     if isinstance(controller, (str, os.PathLike)):
+        file_units = _robot_file_units(controller, kinds)
+        if file_units is not None:
+            declared.append((f"the controller file {controller}", file_units))
         controller = load_joint_controllers(controller)
     controllers = tuple(controller)
+    arg_units = for_joints(units, kinds, "units")
+    if arg_units is not None:
+        declared.append(("units=" + (units if isinstance(units, str) else "..."), arg_units))
     try:
         get, available = {"CSV": _csv, "Parquet": _parquet, "HDF5": _hdf5}[kind](p)
     except UnicodeDecodeError:
         raise DataError(f"{p}: not a text file: a {kind} record was expected from its extension") from None
     names = robot.joint_names
+    # a header's "[unit]" suffixes: qr_1[deg] is column qr_1 in degrees
+    import re
+
+    suffix: Dict[str, str] = {}
+    plain = []
+    for c in available:
+        m = re.fullmatch(r"\s*(.*?)\s*\[(.+)\]\s*", c)
+        plain.append(m.group(1) if m else c)
+        if m:
+            suffix[m.group(1)] = m.group(2).strip()
+    if plain != list(available):
+        twice = sorted({c for c in plain if plain.count(c) > 1})
+        if twice:
+            raise DataError(f"{p}: column(s) {', '.join(twice)} appear more than once in the header (with different "
+                            "units): rename one")
+        raw_get, by_plain = get, dict(zip(plain, available))
+        get, available = (lambda c: raw_get(by_plain[c])), plain
     if "t" not in available:
         raise DataError(f"{p}: no time column t; the file has {', '.join(available)}")
+    if suffix.get("t", "s") != "s":
+        raise DataError(f"{p}: the time column is in {suffix['t']}: didim reads it in s; convert it (t / 1000 for ms)")
     dt = _time_step(np.asarray(get("t"), dtype=float), f"{p}: ")
-    signals = {key: np.column_stack([np.asarray(get(c), dtype=float).ravel() for c in _columns(available, names, key, p)])
+    cols = {key: _columns(available, names, key, p) for key in ("qr", "force", "qm")}
+    signals = {key: np.column_stack([np.asarray(get(c), dtype=float).ravel() for c in cols[key]])
                for key in ("qr", "force", "qm")}
+    if any(c in suffix for key in cols for c in cols[key]):
+        head = []
+        for j in range(len(names)):
+            pos = {suffix[c] for c in (cols["qr"][j], cols["qm"][j]) if c in suffix}
+            if len(pos) > 1:
+                raise DataError(f"{p}: joint {names[j]}'s positions are in several units ({', '.join(sorted(pos))})")
+            force = suffix.get(cols["force"][j])
+            text = ",".join([*pos] + ([force] if force and force not in ("N", "N*m", "N·m", "Nm") else []))
+            head.append(text or None)
+        declared.append(("the header", for_joints(head, kinds, f"{p}: the header")))
+    u = None
+    for where, got in declared:
+        if u is None:
+            u, first = got, where
+            continue
+        for j in range(len(names)):
+            if got[j] != u[j]:
+                raise DataError(f"{p}: joint {names[j]} is in {u[j].describe()} by {first} but in "
+                                f"{got[j].describe()} by {where}: declare its units once")
     if len(controllers) != len(names):
         raise DataError(f"{p}: {len(controllers)} controllers for the robot's {len(names)} joints")
-    steps = tuple(_encoder_step(signals["qm"][:, j]) for j in range(len(names)))
+    if u is not None:
+        for j in range(len(names)):
+            k, ff = u[j].position_factor, u[j].force_factor
+            for key, factor in (("qr", k), ("qm", k), ("force", ff)):
+                signals[key][:, j] *= factor
+            try:
+                controllers = controllers[:j] + (in_units(controllers[j], dt, k, ff),) + controllers[j + 1:]
+            except DataError as e:
+                raise DataError(f"{p}: joint {names[j]}: {e}") from None
+    _check_limits(p, robot, signals["qr"], u is not None)
+    steps = []
+    for j in range(len(names)):
+        step = _encoder_step(signals["qm"][:, j])
+        grid = _reading_grid(step, signals["qr"][:, j])
+        steps.append(_canonical(step, grid))
+        for key in ("qr", "qm"):
+            signals[key][:, j] = _canonical(signals[key][:, j], grid)
+    steps = tuple(steps)
     label = name if name is not None else os.path.splitext(os.path.basename(p))[0]
     try:
         return RobotRecording(dt=dt, joint_names=tuple(names), controllers=controllers, encoder_step=steps, name=label,
-                              joint_kinds=tuple(robot.joint_kinds), **signals)
+                              joint_kinds=tuple(kinds), **signals,
+                              units=tuple(u) if u is not None else ())
     except DataError as e:
         raise DataError(f"{p}: {e}") from None
-
 
 
 def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str, str]] = None,

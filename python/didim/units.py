@@ -239,5 +239,79 @@ def check_stroke(qr, units: Units, where: str) -> None:
                         f"units='{guess}' or units='deg' (CLI: --units {guess}, or a CSV header such as qm[{guess}])")
 
 
-__all__ = ["Units", "SI", "parse", "from_header", "label", "length", "speed", "force", "force_unit", "plot_length",
+def _kind_unit(u: Units, kind: str) -> bool:
+    """Whether the units ``u`` apply to a joint of ``kind`` ("revolute" or "prismatic")."""
+    return u.rotary == (kind != "prismatic")
+
+
+def for_joints(spec, kinds, where: str = "units") -> Optional[list]:
+    """Each joint's :class:`Units` from a robot's declaration, or None when ``spec`` declares none. ``spec`` is text
+    naming at most one angle unit and one length unit, which apply to the revolute and the prismatic joints
+    (``"deg"``: revolute joints in degrees, prismatic ones in m; ``"deg,mm"``; a drive unit with its scale, e.g.
+    ``"deg,A=2.5"``, scales every joint's force), a sequence with one declaration per joint (text, a mapping or a
+    :class:`Units`, None for SI), a mapping (a controller file's ``"units"``) or a :class:`Units`. A unit that fits
+    no joint (``"mm"`` on an arm of revolute joints) or two units of one kind (``"deg,rad"``) are refused."""
+    n = len(kinds)
+    si = [Units("rad", "N*m") if k != "prismatic" else Units("m", "N") for k in kinds]
+    if spec is None:
+        return None
+    if isinstance(spec, (list, tuple)):
+        if len(spec) != n:
+            raise DataError(f"{where}: {len(spec)} declarations for {n} joints: give one per joint (None for SI)")
+        out = []
+        for j, (sp, kind) in enumerate(zip(spec, kinds)):
+            u = parse(sp) if sp is not None else None
+            if u is None:
+                out.append(si[j])
+                continue
+            if not _kind_unit(u, kind):
+                raise DataError(f"{where}: joint {j + 1} is {kind} but is declared in {u.position} "
+                                f"({'an angle' if u.rotary else 'a length'}): give "
+                                f"{'rad, deg or rev' if kind != 'prismatic' else 'm, mm or um'}")
+            out.append(u)
+        return out
+    if isinstance(spec, (Mapping, Units)):
+        u = parse(spec)
+        assert u is not None
+        parts = [u]
+    elif isinstance(spec, str):
+        parts = []
+        for text in (p.strip() for p in spec.split(",") if p.strip()):
+            name = text.partition("=")[0].strip()
+            if name in POSITION_UNITS or name.startswith("counts"):
+                parts.append(parse(text))
+            elif name in FORCE_UNITS:
+                raise DataError(f"{where}: a robot's forces are N·m on revolute joints and N on prismatic ones; "
+                                f"{text!r} names one of them: leave it out, or give a drive unit with its scale "
+                                "(A=2.5)")
+            else:
+                parts.append(("force", parse(f"m,{text}")))
+    else:
+        raise DataError(f"{where}: units must be text such as 'deg' or 'deg,mm', or one per joint, got "
+                        f"{type(spec).__name__}")
+    rot = [p for p in parts if isinstance(p, Units) and p.rotary]
+    lin = [p for p in parts if isinstance(p, Units) and not p.rotary]
+    drive = [p[1] for p in parts if isinstance(p, tuple)]
+    for kind, found in (("angle", rot), ("length", lin)):
+        if len({(u.position, u.counts_per) for u in found}) > 1:
+            raise DataError(f"{where}: several {kind} units ({', '.join(u.position for u in found)}): a robot's "
+                            f"joints of one kind share one; declare them per joint where they differ")
+    if len(drive) > 1:
+        raise DataError(f"{where}: several force units; give one drive unit with its scale")
+    for kind, found, word in (("revolute", rot, "angle"), ("prismatic", lin, "length")):
+        if found and kind not in kinds:
+            raise DataError(f"{where}: {found[0].position} is a{'n' if word == 'angle' else ''} {word} unit but the "
+                            f"robot has no {kind} joint (its joints are {', '.join(kinds)})")
+    out = []
+    for j, kind in enumerate(kinds):
+        pos = (rot if kind != "prismatic" else lin)
+        base = pos[0] if pos else si[j]
+        if drive:
+            base = Units(base.position, drive[0].force, base.counts_per, base.per, drive[0].force_scale,
+                         torque=kind != "prismatic")
+        out.append(base)
+    return out
+
+
+__all__ = ["Units", "SI", "parse", "for_joints", "from_header", "label", "length", "speed", "force", "force_unit", "plot_length",
            "check_stroke"]

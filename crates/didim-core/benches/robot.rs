@@ -44,7 +44,7 @@ fn setup() -> (Robot, Drives, Vec<TransferFunction>, Vec<f64>) {
         viscous: vec![3.6, 1.3, 4.2, 0.4, 1.0, 0.8],
         coulomb: vec![9.5, 3.3, 3.0, 0.8, 1.7, 1.5],
         offset: vec![0.0; n],
-        law: FrictionLaw::algebraic(0.015),
+        laws: vec![FrictionLaw::algebraic(0.015); n],
     };
     // a PI velocity loop (kv·(1 + T/(ti (1 − z⁻¹)))) on kp·(qr − qm) − D(z) qm, as the data folder's
     let (dt, kp, ti) = (1e-3, 50.0, 0.0265);

@@ -203,11 +203,12 @@ impl PyRobot {
 }
 
 /// The closed loop of `robot` (its inertial parameters) with the drives (per joint: rotor
-/// inertia, viscous and Coulomb friction, offset; the friction law), one controller per joint
+/// inertia, viscous and Coulomb friction, offset; each joint's friction law: `coulomb_law` its
+/// shape and `coulomb_eps` its smoothing speed, rad/s or m/s), one controller per joint
 /// (`(kind, gains)` as `Problem` takes them), following `qr` (N, n) from rest at `qr[0]`, the
 /// controllers' output starting at `force0`: a dict of q, qd, qdd, force (N, n).
 #[pyfunction]
-#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps=0.01, coulomb_law="algebraic"))]
+#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate_robot<'py>(
     py: Python<'py>,
@@ -222,24 +223,37 @@ pub fn simulate_robot<'py>(
     quantization: Vec<f64>,
     force0: Vec<f64>,
     substeps: usize,
-    coulomb_eps: f64,
-    coulomb_law: &str,
+    coulomb_eps: Vec<f64>,
+    coulomb_law: Vec<String>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let (rows, n) = (qr.as_array().nrows(), robot.inner.ndof());
     let qr = flat(&qr);
     let out = run(py, || {
-        let law = FrictionLaw {
-            shape: LawShape::from_name(coulomb_law)?,
-            eps: coulomb_eps,
-        };
+        if coulomb_eps.len() != coulomb_law.len() {
+            return Err(Error::InvalidInput(format!(
+                "{} smoothing speeds for {} friction laws: give one of each per joint",
+                coulomb_eps.len(),
+                coulomb_law.len()
+            )));
+        }
+        let laws = coulomb_law
+            .iter()
+            .zip(&coulomb_eps)
+            .map(|(shape, &eps)| {
+                Ok(FrictionLaw {
+                    shape: LawShape::from_name(shape)?,
+                    eps,
+                })
+            })
+            .collect::<Result<Vec<_>, Error>>()?;
         let drives = Drives {
             armature,
             viscous,
             coulomb,
             offset,
-            law,
+            laws,
         };
-        let laws = controllers
+        let control = controllers
             .iter()
             .map(|(kind, gains)| crate::make_controller(kind, gains).and_then(|c| c.law(dt)))
             .collect::<Result<Vec<_>, Error>>()?;
@@ -249,7 +263,7 @@ pub fn simulate_robot<'py>(
             quantization,
             force0,
         };
-        simulate_robot_core(&robot.inner, &drives, &laws, &qr, &opts)
+        simulate_robot_core(&robot.inner, &drives, &control, &qr, &opts)
     })?;
     let d = pyo3::types::PyDict::new(py);
     for (name, x) in [

@@ -6,7 +6,7 @@ every joint, sampled together, with one controller per joint; read from CSV, Par
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
 
@@ -42,6 +42,8 @@ class RobotRecording:
     name: str = ""
     #: "revolute" or "prismatic" per joint (the units: rad and N·m, or m and N).
     joint_kinds: Tuple[str, ...] = ()
+    #: The units each joint was logged in (:class:`didim.units.Units`; the arrays hold SI), empty when SI.
+    units: Tuple = ()
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -78,6 +80,25 @@ class RobotRecording:
     @property
     def t(self) -> np.ndarray:
         return np.arange(self.n) * self.dt
+
+    def joint(self, j: int, controller: Optional[Controller] = None):
+        """Joint ``j`` (an index or a name) as a one-axis :class:`didim.Recording`: its reference, force and measured
+        position with its controller (or ``controller``) and encoder step, in rad and N·m (or m and N), from rest
+        on its first sample as the robot's loop starts. Every one-axis method that reads one joint's log (the
+        controller check, the controller fitted from the log) takes it."""
+        from ..recording import Recording
+        from ..units import Units
+
+        if isinstance(j, str):
+            if j not in self.joint_names:
+                raise DataError(f"no joint {j!r} in the record: its joints are {', '.join(self.joint_names)}")
+            j = self.joint_names.index(j)
+        rotary = self.joint_kinds[j] != "prismatic"
+        return Recording(dt=self.dt, qr=self.qr[:, j], force=self.force[:, j], qm=self.qm[:, j],
+                         controller=controller if controller is not None else self.controllers[j],
+                         position_resolution=self.encoder_step[j] or None,
+                         name=f"{self.name or 'record'}, joint {self.joint_names[j]}", lead_in=None,
+                         units=Units("rad", "N*m") if rotary else Units("m", "N"))
 
     def core_controllers(self) -> List[Tuple[str, List[float]]]:
         """The controllers as the core takes them: (kind, gains) per joint."""

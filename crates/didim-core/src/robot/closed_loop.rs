@@ -11,14 +11,15 @@ use super::{AbaWork, Robot};
 
 /// The drive side of each joint, beside the rigid bodies: rotor inertia reflected to the joint
 /// (kg·m² or kg), viscous (N·m·s/rad or N·s/m) and Coulomb (N·m or N) friction, and a constant
-/// torque offset, plus the friction law through zero speed shared by the joints.
+/// torque offset, and each joint's friction law through zero speed (its shape and smoothing
+/// speed in the joint's own units: rad/s or m/s).
 #[derive(Clone, Debug)]
 pub struct Drives {
     pub armature: Vec<f64>,
     pub viscous: Vec<f64>,
     pub coulomb: Vec<f64>,
     pub offset: Vec<f64>,
-    pub law: FrictionLaw,
+    pub laws: Vec<FrictionLaw>,
 }
 
 impl Drives {
@@ -40,6 +41,19 @@ impl Drives {
                 return Err(invalid!("{name} holds a non-finite value"));
             }
         }
+        if self.laws.len() != n {
+            return Err(invalid!(
+                "{} friction laws for a robot of {n} joints: give one per joint",
+                self.laws.len()
+            ));
+        }
+        if let Some(j) = self.laws.iter().position(|l| !(l.eps >= 0.0 && l.eps.is_finite())) {
+            return Err(invalid!(
+                "the friction law of joint {} has the smoothing speed {}: it must be finite and >= 0",
+                j + 1,
+                self.laws[j].eps
+            ));
+        }
         // a negative rotor inertia is refused by the dynamics only where the arm's inertia does not make up for it
         // (a base parameter that regroups it with link inertias fixes only their sum)
         Ok(())
@@ -49,7 +63,7 @@ impl Drives {
     #[inline(always)]
     fn resist(&self, v: &[f64], out: &mut [f64]) {
         for i in 0..v.len() {
-            out[i] = self.viscous[i] * v[i] + self.coulomb[i] * self.law.sign(v[i]) + self.offset[i];
+            out[i] = self.viscous[i] * v[i] + self.coulomb[i] * self.laws[i].sign(v[i]) + self.offset[i];
         }
     }
 }
@@ -104,9 +118,9 @@ impl Plant<'_> {
 /// small smoothing speed) is stiff: on the UR5 with ε = 0.01 rad/s the wrist's λ is about 4·10³/s.
 pub fn auto_substeps(robot: &Robot, drives: &Drives, q0: &[f64], dt: f64) -> Result<usize> {
     let m = robot.mass_matrix(q0)?;
-    let (_, slope) = drives.law.sign_and_derivative(0.0);
     let mut lambda: f64 = 0.0;
     for j in 0..robot.ndof() {
+        let (_, slope) = drives.laws[j].sign_and_derivative(0.0);
         let inertia = drives.armature[j] + m[(j, j)];
         if inertia > 0.0 {
             lambda = lambda.max((drives.viscous[j].abs() + drives.coulomb[j].abs() * slope) / inertia);

@@ -1,0 +1,114 @@
+"""Each joint's controller against its log, on robots as on one axis: the usual mistakes of a robot's controller file
+(every gain 30 % off, one joint's gain ten times, two joints' controllers swapped, a sample of delay, a force that is
+a current loop's output) are refused before any fit, naming the joint and, where one explains the log, the mistake;
+the right file passes. On the data folder's records (an independent simulator: its controllers replay the force to
+1e-12)."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import signal
+
+import didim
+from didim.check import check_robot_controllers
+from didim.cli import main
+
+
+def _controllers(robots_dir, robot="pendulum"):
+    return json.loads((robots_dir / f"{robot}_controller.json").read_text())
+
+
+def _record(robots_dir, spec, robot="pendulum", force=None, tmp_path=None):
+    bot = didim.Robot.from_urdf(robots_dir / f"{robot}_cad.urdf")
+    ctl = didim.robots.load_joint_controllers(_write(tmp_path / "ctl.json", spec))
+    rec = didim.load_record(robots_dir / f"{robot}_train.csv", robot=bot, controller=ctl)
+    if force is not None:
+        import dataclasses
+
+        rec = dataclasses.replace(rec, force=force(rec.force))
+    return bot, rec
+
+
+def _write(path, spec):
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def _scaled(entry, k):
+    return {**entry, "b_r": [k * x for x in entry["b_r"]], "b_y": [k * x for x in entry["b_y"]]}
+
+
+def test_the_right_controllers_pass_on_every_joint(robots_dir, tmp_path):
+    _, rec = _record(robots_dir, _controllers(robots_dir, "ur5"), "ur5", tmp_path=tmp_path)
+    chk = check_robot_controllers(rec)
+    assert chk.passed
+    assert chk.mismatch < 1e-6  # the files replay the force to 1e-12 (the data folder's README)
+    assert len(chk.joints) == 6
+
+
+def test_every_gain_30_percent_off_is_refused_naming_the_scale(robots_dir, tmp_path):
+    spec = _controllers(robots_dir)
+    spec["joints"] = [_scaled(c, 0.7) for c in spec["joints"]]
+    bot, rec = _record(robots_dir, spec, tmp_path=tmp_path)
+    with pytest.raises(didim.DataError) as e:
+        didim.identify(rec, bot, "idim-ls")
+    msg = str(e.value)
+    assert "joint1" in msg and "joint2" in msg
+    assert "scale is off by a factor 1.429" in msg  # the log is 1/0.7 of the law
+
+
+def test_one_joint_gain_times_ten_is_refused_on_that_joint_only(robots_dir, tmp_path):
+    spec = _controllers(robots_dir)
+    spec["joints"][1] = _scaled(spec["joints"][1], 10.0)
+    _, rec = _record(robots_dir, spec, tmp_path=tmp_path)
+    chk = check_robot_controllers(rec)
+    assert chk.failed() == ["joint2"]
+    assert "factor 0.1" in chk.joints["joint2"].likely
+
+
+def test_swapped_controllers_are_named_as_swapped(robots_dir, tmp_path):
+    spec = _controllers(robots_dir, "ur5")
+    spec["joints"][3], spec["joints"][4] = spec["joints"][4], spec["joints"][3]
+    _, rec = _record(robots_dir, spec, "ur5", tmp_path=tmp_path)
+    chk = check_robot_controllers(rec)
+    assert chk.failed() == ["wrist_1_joint", "wrist_2_joint"]
+    assert chk.swapped == [("wrist_1_joint", "wrist_2_joint")]
+    assert "swapped" in chk.summary()
+
+
+def test_a_sample_of_delay_is_named(robots_dir, tmp_path):
+    # the force logged one sample late: the drive computed its command a sample after the positions it read
+    spec = _controllers(robots_dir)
+    _, rec = _record(robots_dir, spec, force=lambda f: np.vstack([f[:1], f[:-1]]), tmp_path=tmp_path)
+    chk = check_robot_controllers(rec)
+    assert chk.failed() == ["joint1", "joint2"]
+    for c in chk.joints.values():
+        assert "1 sample late" in c.likely
+
+
+def test_a_measured_current_is_refused_with_no_usual_mistake(robots_dir, tmp_path):
+    # the force is the command through a 300 Hz current loop (a first-order lag), not the command itself
+    b, a = signal.bilinear([2 * math.pi * 300], [1, 2 * math.pi * 300], fs=1000)
+    spec = _controllers(robots_dir)
+    _, rec = _record(robots_dir, spec, force=lambda f: signal.lfilter(b, a, f - f[0], axis=0) + f[0],
+                     tmp_path=tmp_path)
+    chk = check_robot_controllers(rec)
+    assert not chk.passed
+    assert "not a measured current" in chk.summary()
+
+
+def test_the_command_line_refuses_with_exit_2_and_checks_a_joints_file(robots_dir, tmp_path, capsys):
+    spec = _controllers(robots_dir)
+    spec["joints"][0] = _scaled(spec["joints"][0], 10.0)
+    bad = _write(tmp_path / "bad.json", spec)
+    rec = str(robots_dir / "pendulum_train.csv")
+    assert main(["controller", "check", rec, "--controller", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "joint 1" in err or "joints 1" in err
+    ok = str(robots_dir / "pendulum_controller.json")
+    assert main(["controller", "check", rec, "--controller", ok, "--urdf", str(robots_dir / "pendulum_cad.urdf")]) == 0
+    assert main(["identify", rec, "--urdf", str(robots_dir / "pendulum_cad.urdf"), "--controller", str(bad),
+                 "--method", "idim-ls"]) == 2
+    assert "joint1" in capsys.readouterr().err
