@@ -149,7 +149,8 @@ def own_urdf(name: str, comment: str, base_mass: float, chain: list[dict], tool:
     link, mass, com, inertia (ixx, ixy, ixz, iyy, iyz, izz)}; ``tool`` an optional massless frame on the last link."""
     lines = ['<?xml version="1.0"?>', f"<!-- {comment} -->", f'<robot name="{name}">', '  <link name="base_link">',
              "    <inertial>", f'      <mass value="{base_mass!r}"/>', '      <origin xyz="0 0 0" rpy="0 0 0"/>',
-             '      <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>', "    </inertial>", "  </link>"]
+             '      <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>', "    </inertial>",
+             "  </link>"]
     parent = "base_link"
     for j in chain:
         ixx, ixy, ixz, iyy, iyz, izz = j["inertia"]
@@ -160,7 +161,8 @@ def own_urdf(name: str, comment: str, base_mass: float, chain: list[dict], tool:
                   f'velocity="{j["velocity"]!r}"/>', "  </joint>",
                   f'  <link name="{j["link"]}">', "    <inertial>", f'      <mass value="{j["mass"]!r}"/>',
                   f'      <origin xyz="{_fmt(j["com"])}" rpy="0 0 0"/>',
-                  f'      <inertia ixx="{ixx!r}" ixy="{ixy!r}" ixz="{ixz!r}" iyy="{iyy!r}" iyz="{iyz!r}" izz="{izz!r}"/>',
+                  f'      <inertia ixx="{ixx!r}" ixy="{ixy!r}" ixz="{ixz!r}" iyy="{iyy!r}" iyz="{iyz!r}" '
+                  f'izz="{izz!r}"/>',
                   "    </inertial>", "  </link>"]
         parent = j["link"]
     if tool:
@@ -715,12 +717,8 @@ def run_case(name: str, out: pathlib.Path, check_substeps: bool = True) -> dict:
     seed = spec["seed"]
     rng = lambda k: np.random.default_rng([seed, k])  # noqa: E731  one stream per purpose
     dt = spec["dt"]
-    log = []
-
     def say(msg):
-        line = f"[{name}] {msg}"
-        print(line, flush=True)
-        log.append(line)
+        print(f"[{name}] {msg}", flush=True)
 
     # ---- CAD model and truth
     cad_path = out / f"{name}_cad.urdf"
@@ -769,7 +767,7 @@ def run_case(name: str, out: pathlib.Path, check_substeps: bool = True) -> dict:
     rq = rng(9)
     worst = 0.0
     for _ in range(5):
-        q = pin.randomConfiguration(mt, np.maximum(lo, -3.0), np.minimum(hi, 3.0))
+        q = rq.uniform(np.maximum(lo, -3.0), np.minimum(hi, 3.0))
         v, tq = rq.normal(size=n), rq.normal(size=n) * 5
         a1 = pin.aba(mt, dt_, q, v, tq).copy()
         M = pin.crba(mt, dt_, q)
@@ -782,8 +780,7 @@ def run_case(name: str, out: pathlib.Path, check_substeps: bool = True) -> dict:
     q0 = np.round(np.array(spec["q0"], float) / steps) * steps
     dtruth, dtruth_pl, dcad = truth.createData(), truth_pl.createData(), cad.createData()
     rb = rng(8)
-    Wr = regressor(cad, dcad, [pin.randomConfiguration(cad, np.maximum(lo, -3.0), np.minimum(hi, 3.0))
-                               for _ in range(300)],
+    Wr = regressor(cad, dcad, rb.uniform(np.maximum(lo, -3.0), np.minimum(hi, 3.0), size=(300, n)),
                    rb.normal(size=(300, n)), rb.normal(size=(300, n)) * 3, law, eps)
     base = base_columns(Wr)
 
@@ -847,7 +844,8 @@ def run_case(name: str, out: pathlib.Path, check_substeps: bool = True) -> dict:
     for j in range(n):
         dq = np.zeros(n)
         dq[j] = 1e-6
-        kg[j] = (pin.computeGeneralizedGravity(m0, d0, q0 + dq)[j] - pin.computeGeneralizedGravity(m0, d0, q0 - dq)[j]) / 2e-6
+        gp = pin.computeGeneralizedGravity(m0, d0, q0 + dq)[j]
+        kg[j] = (gp - pin.computeGeneralizedGravity(m0, d0, q0 - dq)[j]) / 2e-6
     tfs, designs, checks = [], [], []
     for j in range(n):
         if spec["ctl"] == "pid":
@@ -943,7 +941,8 @@ def run_case(name: str, out: pathlib.Path, check_substeps: bool = True) -> dict:
                  dynamics="pin.aba with model.armature = Ia (checked equal to (crba+diag(Ia))^-1 (tau - rnea(q,v,0)), "
                           f"max rel diff {worst:.1e})",
                  substep_rule=f"S = ceil(dt * lambda_max / {KAPPA}), lambda_max = largest eigenvalue of "
-                              "(M(q)+diag(Ia))^-1 diag(Fv + Fc/eps) over the train reference (with and without payload)",
+                              "(M(q)+diag(Ia))^-1 diag(Fv + Fc/eps) over the train reference (with and without "
+                              "payload)",
                  lambda_max_per_s=lam,
                  sampling="q sampled at t_k = k*dt, qm[k] = quantised q(t_k); u[k] computed from qr[k], qm[k] and "
                           "applied over [t_k, t_k+dt) (no computation delay)")
@@ -1104,14 +1103,18 @@ def main(argv=None):
              "robots": robots}
     truth_path.write_text(json.dumps(truth, indent=1) + "\n")
     print(f"\nwrote {truth_path} ({len(robots)} cases) in {time.perf_counter() - t0:.0f} s")
-    print("| case | record | samples | truth floor | per joint | replay mismatch (double) | substeps (2x check: force diff without / with encoder) |")
+    print("| case | record | samples | truth floor | per joint | replay mismatch (double) | "
+          "substeps (2x check: force diff without / with encoder) |")
     for nm in names:
         e = results[nm]
         chk = e["integration"].get("check_2x_substeps")
         for rn, r in e["records"].items():
             print(f"| {nm} | {rn} | {r['samples']} | {r['truth_floor_total']:.4f} | "
-                  f"{' '.join(f'{x:.4f}' for x in r['truth_floor_per_joint'])} | {r['tf_replay_max_rel_mismatch']:.1e} ({r['tf_replay_double_max_rel_mismatch']:.1e}) "
-                  f"| {e['integration']['substeps']}" + (f" ({chk['without_encoder']['force_rel_diff']:.1e} / {chk['with_encoder']['force_rel_diff']:.1e})" if chk else "") + " |")
+                  f"{' '.join(f'{x:.4f}' for x in r['truth_floor_per_joint'])} | "
+                  f"{r['tf_replay_max_rel_mismatch']:.1e} ({r['tf_replay_double_max_rel_mismatch']:.1e}) "
+                  f"| {e['integration']['substeps']}"
+                  + (f" ({chk['without_encoder']['force_rel_diff']:.1e} / "
+                     f"{chk['with_encoder']['force_rel_diff']:.1e})" if chk else "") + " |")
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ from .result import IdentificationResult, Iteration
 from .model import STRUCTURE_FIELDS, Model, as_model, knot_weights
 from .signal import Decimation, decimation_matches, diffcent, lowpass
 from .simulation import DEFAULT_TOL, coulomb_eps_of, params_vector, problem, settling_samples, simulate
+from .didim_loop import DIVERGENCE_FACTOR, DidimLoop, didim_loop
 
 Progress = Optional[Callable[[str], None]]
 
@@ -274,11 +275,7 @@ def prefetch(cost, cost_batch, points) -> Callable:
 
 #: Masses and stiffness must stay positive for the closed loop to be simulated.
 _POSITIVE = ("M", "M1", "M2", "K12")
-#: DIDIM's divergence test: the simulated output error of an iterate above this factor times the best so far is a real
-#: rise (not the wandering of a fixed point that is not the output-error minimum).
-DIVERGENCE_FACTOR = 1.5
-#: How many times an iterate may be pulled back halfway to the best one before DIDIM reports divergence.
-MAX_BACKTRACKS = 6
+# DIDIM's divergence test and pull-backs are the shared loop's (didim.didim_loop)
 #: Largest factor by which one DIDIM step may change a mass or the stiffness. The regression is only valid while the
 #: simulated loop's bandwidth stays near the real one (eqs. (17)-(18)); from a far a priori mass (1000 kg for a 100 kg
 #: axis) the first LS step can overshoot by orders of magnitude (to 1 kg, where the simulated loop chatters and the
@@ -302,6 +299,103 @@ def _physical(names: Sequence[str], chi: np.ndarray, ref: Optional[np.ndarray] =
             if ref is not None and ref[i] > 0 and not (1 / MAX_STEP_RATIO <= chi[i] / ref[i] <= MAX_STEP_RATIO):
                 return False
     return True
+
+
+class _AxisPlant:
+    """One axis as DIDIM's loop (:func:`didim.didim_loop.didim_loop`) sees it: the core's problem simulates χ and
+    builds the decimated regressor of the simulated states in one call; the least squares leave out the samples
+    around reversals (the rows follow each iterate's velocity; an alternation between two sets freezes both out) and
+    the start the simulation takes to join the record; a mass or the stiffness must stay positive and change by at
+    most MAX_STEP_RATIO per step; criterion (21) says when it has converged."""
+
+    short_step_reason = ("a mass or the stiffness would have changed by more than "
+                         f"{MAX_STEP_RATIO:g}× or become non-positive")
+
+    def __init__(self, *, rec, pb, names, free, fi, y_motor, yd_motor, ny, dec, m_fit, start_row, exclude, hint, tol,
+                 method, kind, progress):
+        self.rec, self.pb, self.names, self.free_names, self.free = rec, pb, names, free, fi
+        self.y_motor, self.yd_motor, self.ny, self.dec, self.m_fit = y_motor, yd_motor, ny, dec, m_fit
+        self.start_row, self.exclude, self.hint, self.tol = start_row, exclude, hint, tol
+        self.method, self.kind, self.progress = method, kind, progress
+        self.iterations: List[Iteration] = []
+        self.notes: List[str] = []
+        self.masks: List[np.ndarray] = []  # the rows kept by the reversal exclusion in the last two iterations
+        self.frozen_rows: Optional[np.ndarray] = None  # set when the iterates alternated between two masks
+
+    def simulate(self, chi: np.ndarray):
+        # one call: simulate with χᵏ, build W of the simulated states, decimate Y, W and the simulated force
+        y_all, w_all, force_dec = self.pb.didim_system(chi, self.y_motor, self.free, self.dec.core)
+        if self.m_fit is not None:  # keep the training rows of each dof's block
+            m = len(force_dec)
+            keep = np.concatenate([np.arange(d * m, d * m + self.m_fit) for d in range(len(y_all) // m)])
+            y_all, w_all, force_dec = y_all[keep], w_all[keep], force_dec[:self.m_fit]
+        self._chi = chi
+        return y_all, w_all, force_dec
+
+    def output_error(self, sim) -> float:
+        err = float(np.linalg.norm((self.yd_motor - sim[2])[self.start_row:])) / self.ny
+        it = self.iterations
+        if it and np.array_equal(self._chi, _vector(it[-1].params, self.names)):
+            it[-1].output_error = err  # the output error of the iterate the last step produced
+        return err
+
+    def solve(self, chi: np.ndarray, sim) -> dict:
+        y_all, w_all, force_dec = sim
+        it = self.iterations
+        rows = _moving_rows(w_all, self.free_names) if self.exclude else None
+        if rows is not None:
+            if self.frozen_rows is not None:
+                rows = rows & self.frozen_rows
+            elif (len(self.masks) == 2 and len(it) >= 3 and self.masks[1].shape == rows.shape
+                  and np.array_equal(self.masks[0], rows) and not np.array_equal(self.masks[1], rows)
+                  and np.allclose(chi, _vector(it[-3].params, self.names), rtol=1e-9, atol=0)):
+                # the rows left out follow each iterate's simulated velocity; a row whose decimated Coulomb
+                # regressor sits at the threshold can make DIDIM alternate between two points, each leaving out
+                # the row the other keeps (rigid with offset on DATA_EMPS_PULSES): both are left out from here on
+                self.frozen_rows = rows & self.masks[1]
+                rows = self.frozen_rows
+                self.notes.append(f"iteration {len(it) + 1}: the iterates alternated between two points, each "
+                                  "leaving out samples around reversals that the other kept; both sets are left out "
+                                  "from here on")
+            self.masks = (self.masks + [rows])[-2:]
+        if self.start_row:
+            m_rows = len(force_dec)
+            settled = np.tile(np.arange(m_rows) >= self.start_row, len(y_all) // m_rows)
+            rows = settled if rows is None else rows & settled
+        sol = (_solve(w_all, y_all, self.free_names, hint=self.hint) if rows is None
+               else _solve(w_all[rows], y_all[rows], self.free_names, hint=self.hint))
+        sol["rows_kept"] = None if rows is None else (int(np.count_nonzero(rows)), len(rows))
+        return sol
+
+    def physical(self, new: np.ndarray, old: Optional[np.ndarray]) -> bool:
+        return _physical(self.names, new, old)
+
+    def describe(self, loop: DidimLoop) -> str:
+        sol = loop.history[-1]
+        self.iterations.append(Iteration(
+            k=len(self.iterations) + 1,
+            params=dict(zip(self.names, map(float, loop.theta))),
+            rel_std_pct=dict(zip(self.free_names, map(float, sol["rel_std_pct"]))),
+            relative_error=float(sol["relative_error"]),
+            output_error=float("nan"),
+        ))
+        msg = (f"{self.method} {self.kind} iteration {len(self.iterations)}: ‖Y−Wχ‖/‖Y‖ = "
+               f"{100 * sol['relative_error']:.3f} %, output error of χ{len(self.iterations) - 1} = "
+               f"{100 * loop.error:.3f} %")
+        _say(self.progress, msg)
+        return msg
+
+    def converged(self, loop: DidimLoop) -> bool:
+        """Criterion (21) on a whole step: the regression's residual changed by at most ``tol`` of itself (or the
+        model reproduces the data exactly)."""
+        h = loop.history
+        if loop.alpha != 1 or len(h) < 2:
+            return False
+        rho, rho_prev = float(h[-1]["residual_norm"]), float(h[-2]["residual_norm"])
+        return abs(rho - rho_prev) / rho_prev <= self.tol or h[-1]["relative_error"] <= EXACT_FIT
+
+    def settled(self, loop: DidimLoop) -> str:
+        return "accept"
 
 
 def didim_iterate(
@@ -409,125 +503,19 @@ def didim_iterate(
     # the states answer the force applied: the command `delay` samples earlier, through the force lag
     y_motor = pb.applied_force(rec.force)
 
-    history: List[Iteration] = []
-    notes: List[str] = []
-    best = (math.inf, chi.copy(), None, None)  # (output error, χ, solution, history index)
-    n_sim, backtracks, converged, message = 0, 0, False, ""
-    rho_prev = None
-    masks: List[np.ndarray] = []  # the rows kept by the reversal exclusion in the last two iterations
-    frozen_rows: Optional[np.ndarray] = None  # set when the iterates alternated between two masks
-    sol = None
-    stop: Optional[DidimError] = None  # the error that stopped the iterations, re-raised if there is no iterate
-    last_rise = ""
-
-    def pull_back(reason: str) -> bool:
-        """Moves χ halfway back to the best iterate; False when there is none or the budget is spent."""
-        nonlocal chi, backtracks, last_rise
-        if best[2] is None or backtracks >= MAX_BACKTRACKS:
-            return False
-        backtracks += 1
-        last_rise = reason
-        chi = best[1] + 0.5 * (chi - best[1])
-        return True
-
-    for _ in range(max_iter * (MAX_BACKTRACKS + 1)):  # each iteration may be preceded by MAX_BACKTRACKS pull-backs
-        if len(history) >= max_iter:
-            break
-        # one call: simulate with χᵏ, build W of the simulated states, decimate Y, W and the simulated force
-        try:
-            y_all, w_all, force_dec = pb.didim_system(chi, y_motor, fi, dec.core)
-            if m_fit is not None:  # keep the training rows of each dof's block
-                m = len(force_dec)
-                keep = np.concatenate([np.arange(d * m, d * m + m_fit) for d in range(len(y_all) // m)])
-                y_all, w_all, force_dec = y_all[keep], w_all[keep], force_dec[:m_fit]
-        except (SimulationError, DataError) as e:
-            n_sim += 1
-            if pull_back(f"the simulation failed ({e})"):
-                continue
-            message = f"iteration {len(history)}: the simulation with χ{len(history)} failed ({e}); stopped"
-            stop = e
-            break
-        n_sim += 1
-        out_err = float(np.linalg.norm((yd_motor - force_dec)[start_row:])) / ny
-        if history and np.array_equal(chi, _vector(history[-1].params, names)):
-            history[-1].output_error = out_err
-        if out_err > divergence_factor * best[0]:
-            if pull_back(f"output error {100 * out_err:.2f} % against {100 * best[0]:.2f} %"):
-                continue
-            message = (
-                f"diverged: the simulated output error rose from {100 * best[0]:.2f} % to {100 * out_err:.2f} % and "
-                f"stayed above {divergence_factor:g} × the best after {MAX_BACKTRACKS} steps back toward the best "
-                "iterate; returning the iterate with the lowest output error. The initial values are probably too far "
-                "from the truth, or the model misses a physical effect"
-            )
-            break
-        if best[2] is not None and backtracks:
-            notes.append(f"iteration {len(history)}: step shortened {backtracks}× ({last_rise})")
-        backtracks = 0
-        try:
-            rows = _moving_rows(w_all, free) if exclude else None
-            if rows is not None:
-                if frozen_rows is not None:
-                    rows = rows & frozen_rows
-                elif (len(masks) == 2 and len(history) >= 3 and masks[1].shape == rows.shape
-                      and np.array_equal(masks[0], rows) and not np.array_equal(masks[1], rows)
-                      and np.allclose(chi, _vector(history[-3].params, names), rtol=1e-9, atol=0)):
-                    # the rows left out follow each iterate's simulated velocity; a row whose decimated Coulomb
-                    # regressor sits at the threshold can make DIDIM alternate between two points, each leaving out
-                    # the row the other keeps (rigid with offset on DATA_EMPS_PULSES): both are left out from here on
-                    frozen_rows = rows & masks[1]
-                    rows = frozen_rows
-                    notes.append(f"iteration {len(history) + 1}: the iterates alternated between two points, each "
-                                 "leaving out samples around reversals that the other kept; both sets are left out "
-                                 "from here on")
-                masks = (masks + [rows])[-2:]
-            if start_row:
-                m_rows = len(force_dec)
-                settled = np.tile(np.arange(m_rows) >= start_row, len(y_all) // m_rows)
-                rows = settled if rows is None else rows & settled
-            sol = (_solve(w_all, y_all, free, hint=hint) if rows is None
-                   else _solve(w_all[rows], y_all[rows], free, hint=hint))
-            sol["rows_kept"] = None if rows is None else (int(np.count_nonzero(rows)), len(rows))
-        except IdentifiabilityError as e:
-            message = f"iteration {len(history) + 1}: {e}"
-            stop = e
-            break
-        if out_err < best[0]:
-            best = (out_err, chi.copy(), sol, len(history))
-        new = chi.copy()
-        new[fi] = sol["params"]
-        alpha = 1.0
-        while not _physical(names, new, chi) and alpha > 1 / 64:
-            alpha /= 2
-            new = chi.copy()
-            new[fi] = chi[fi] + alpha * (sol["params"] - chi[fi])
-        if not _physical(names, new):
-            message = (f"iteration {len(history) + 1}: the least-squares step makes a mass or the stiffness "
-                       "non-positive even when shortened 64×; stopped")
-            break
-        if alpha < 1:
-            notes.append(f"iteration {len(history) + 1}: step shortened to {alpha:g} (a mass or the stiffness would "
-                         f"have changed by more than {MAX_STEP_RATIO:g}× or become non-positive)")
-        chi = new
-        rho = float(sol["residual_norm"])
-        history.append(
-            Iteration(
-                k=len(history) + 1,
-                params=dict(zip(names, map(float, chi))),
-                rel_std_pct=dict(zip(free, map(float, sol["rel_std_pct"]))),
-                relative_error=float(sol["relative_error"]),
-                output_error=float("nan"),
-            )
-        )
-        _say(progress, f"{method} {kind} iteration {len(history)}: ‖Y−Wχ‖/‖Y‖ = {100 * sol['relative_error']:.3f} %, "
-             f"output error of χ{len(history) - 1} = {100 * out_err:.3f} %")
-        if alpha == 1 and rho_prev is not None and (abs(rho - rho_prev) / rho_prev <= tol
-                                                     or sol["relative_error"] <= EXACT_FIT):
-            converged = True
-            break
-        rho_prev = rho
-    if not converged and not message:
+    plant = _AxisPlant(rec=rec, pb=pb, names=names, free=free, fi=fi, y_motor=y_motor, yd_motor=yd_motor, ny=ny,
+                       dec=dec, m_fit=m_fit, start_row=start_row, exclude=exclude, hint=hint, tol=tol, method=method,
+                       kind=kind, progress=progress)
+    loop = didim_loop(plant, chi, max_iter=max_iter, divergence_factor=divergence_factor, notes=plant.notes)
+    history, notes = plant.iterations, plant.notes
+    chi, converged, message, n_sim, stop = loop.theta, loop.converged, loop.message, loop.simulations, loop.stop
+    best = (loop.best[0], loop.best[1], loop.best[2]) if loop.best[2] is not None else (math.inf, chi, None)
+    sol = loop.history[-1] if loop.history else None
+    if not converged and message.startswith("no convergence"):
         message = f"no convergence in {max_iter} iterations (criterion (21) with tol = {tol})"
+    if "non-physical estimate even when shortened" in message:
+        message = (f"iteration {len(history) + 1}: the least-squares step makes a mass or the stiffness "
+                   "non-positive even when shortened 64×; stopped")
 
     final_out = float("nan")
     if converged:

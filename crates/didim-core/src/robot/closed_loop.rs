@@ -47,7 +47,11 @@ impl Drives {
                 self.laws.len()
             ));
         }
-        if let Some(j) = self.laws.iter().position(|l| !(l.eps >= 0.0 && l.eps.is_finite())) {
+        if let Some(j) = self
+            .laws
+            .iter()
+            .position(|l| !(l.eps >= 0.0 && l.eps.is_finite()))
+        {
             return Err(invalid!(
                 "the friction law of joint {} has the smoothing speed {}: it must be finite and >= 0",
                 j + 1,
