@@ -112,3 +112,25 @@ def test_the_command_line_refuses_with_exit_2_and_checks_a_joints_file(robots_di
     assert main(["identify", rec, "--urdf", str(robots_dir / "pendulum_cad.urdf"), "--controller", str(bad),
                  "--method", "idim-ls"]) == 2
     assert "joint1" in capsys.readouterr().err
+
+
+def test_without_a_controller_each_joints_law_is_fitted_from_its_log(robots_dir, tmp_path, capsys):
+    import shutil
+
+    shutil.copy(robots_dir / "pendulum_train.csv", tmp_path / "pendulum.csv")  # no controller file beside it
+    robot = didim.Robot.from_urdf(robots_dir / "pendulum_cad.urdf")
+    rec = didim.load_record(tmp_path / "pendulum.csv", robot=robot)
+    assert len(rec.controller_origin) == 2 and "fitted from the log" in rec.controller_origin[0]
+    chk = check_robot_controllers(rec)
+    assert chk.passed and chk.mismatch < 1e-6  # the fitted laws replay the logged force (the true ones: 1e-12)
+    known = didim.load_record(robots_dir / "pendulum_train.csv", robot=robot,
+                              controller=robots_dir / "pendulum_controller.json")
+    a, b = didim.identify(rec, robot, "idim-ls"), didim.identify(known, robot, "idim-ls")
+    for k, v in b.params.items():  # the inverse model does not depend on the controller
+        assert a.params[k] == pytest.approx(v, rel=1e-9, abs=1e-12), k
+    assert any("no controller was described" in n for n in a.notes)
+    out = tmp_path / "fitted.json"
+    assert main(["controller", "fit", str(tmp_path / "pendulum.csv"), "--urdf", str(robots_dir / "pendulum_cad.urdf"),
+                 "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["type"] == "joints"
+    assert main(["controller", "check", str(tmp_path / "pendulum.csv"), "--controller", str(out)]) == 0

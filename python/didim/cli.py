@@ -332,6 +332,29 @@ def cmd_controller_fit(args) -> int:
     from .controller_fit import fit_controller
 
     _check_outputs([args.file], [args.json])
+    if args.urdf:  # a robot's record: each joint's law from its own log, written as a joints file
+        from .loaders import load_record
+        from .robots import Robot
+
+        if args.columns or args.force_scale != 1.0:
+            from ._errors import DataError
+
+            raise DataError("--columns and --force-scale apply to one axis's record; a robot's drive unit goes in "
+                            "--units (e.g. deg,A=2.5)")
+        joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
+        robot = Robot.from_urdf(args.urdf, joints)
+        rec = load_record(args.file, robot=robot, controller=None, units=args.units, beside_controller=False)
+        for line in rec.controller_origin:
+            print(f"{args.file}: {line}")
+        if args.json:
+            spec = {"type": "joints", "joints": [c.transfer_function(rec.dt).to_dict() for c in rec.controllers]}
+            write_text(args.json, json.dumps(spec, indent=1) + "\n")
+            print(f"wrote {args.json}")
+        return 0
+    if args.joints:
+        from ._errors import DataError
+
+        raise DataError("--joints picks a URDF's joints: give --urdf too")
     rec = _load_plain(args, args.file)
     cf = fit_controller(rec)
     print(f"{args.file}: {cf.summary()}")
@@ -605,7 +628,10 @@ def build_parser() -> argparse.ArgumentParser:
     cf.add_argument("--force-scale", type=float, default=1.0, metavar="N_PER_UNIT")
     cf.add_argument("--units", default=None, metavar="UNITS", help="as for identify")
     cf.add_argument("--json", metavar="OUT", help="write the fitted controller as a controller file "
-                                                 "(type transfer_function; --controller reads it back)")
+                                                 "(type transfer_function, or joints with --urdf; --controller reads "
+                                                 "it back)")
+    cf.add_argument("--urdf", metavar="URDF", help="a robot's record: each joint's controller fitted from its log")
+    cf.add_argument("--joints", metavar="J1,J2,..", help="with --urdf: the actuated joints, as for identify")
     cf.add_argument("--quiet", action="store_true")
     cf.set_defaults(func=cmd_controller_fit)
     cc = csub.add_parser("check", help="check a described controller against the log (exit 2 when it fails)")

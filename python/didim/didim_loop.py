@@ -87,6 +87,8 @@ class DidimLoop:
     #: The last simulation and its output error.
     sim: Any = None
     error: float = math.nan
+    #: Where in ``errors`` and ``history`` the iterations began again after the plant changed its model.
+    since: int = 0
 
 
 def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
@@ -171,6 +173,7 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
                 break
             if verdict == "restart":
                 loop.best = (math.inf, None, None, None)
+                loop.since = len(loop.errors)
     if not loop.converged and not loop.message:
         loop.message = f"no convergence in {max_iter} iterations"
     return loop

@@ -13,7 +13,7 @@ import math
 import os
 import warnings
 from dataclasses import replace
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -283,7 +283,8 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
             raise DataError("a robot record has columns t, qr_1..qr_n, force_1.., qm_1.. (or qr_<joint name>..); "
                             "columns and force_scale apply to one axis's record: declare a drive unit with its scale "
                             "in units (e.g. units='deg,A=2.5')")
-        return load_robot_record(path, robot, controller=controller, name=name, units=units)
+        return load_robot_record(path, robot, controller=controller, name=name, units=units,
+                                 beside_controller=beside_controller)
     rec = _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain, units,
                        beside_controller)
     if isinstance(lead_in, str) and lead_in == "auto":
@@ -429,14 +430,16 @@ def _robot_file_units(path, kinds) -> Optional[list]:
 
 
 def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Optional[str] = None,
-                      units: Any = None) -> RobotRecording:
+                      units: Any = None, beside_controller: bool = True) -> RobotRecording:
     """A robot record from a CSV, Parquet or HDF5 file with columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``
     in ``robot``'s joint order (or ``qr_<joint name>``…), positions in rad (prismatic joints: m), forces in N·m (N),
     unless the record declares other units: ``units`` (``"deg"``, ``"deg,mm"``, one per joint:
     :func:`didim.units.for_joints`), a header suffix (``qr_1[deg]``), or ``"units"`` in the controllers' file (for
     all joints, or in a joint's entry); declarations that disagree are refused. Positions, encoder steps and the
     controllers are converted to SI once. ``controller``: the joints' controllers (a sequence, one per joint) or
-    the path of their file; by default ``NAME_controller.json`` beside the record."""
+    the path of their file; by default ``NAME_controller.json`` beside the record (unless ``beside_controller`` is
+    False), and without one each joint's linear law is fitted from its log (:func:`didim.fit_controller`;
+    ``RobotRecording.controller_origin`` says so)."""
     from .units import for_joints
 
     p = check_input(path, "robot record")
@@ -446,12 +449,8 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
         raise DataError(f"{p}: a robot record is a CSV, Parquet or HDF5 file, got {ext or 'no extension'!r}")
     if os.path.getsize(p) == 0:
         raise DataError(f"{p}: the file is empty (0 bytes)")
-    if controller is None:
-        side = beside(p)
-        if side is None:
-            raise DataError(f"{p}: no controller given and no {os.path.splitext(p)[0]}_controller.json beside it: give "
-                            "the joints' controller file (CLI: --controller CTL.json)")
-        controller = side
+    if controller is None and beside_controller:
+        controller = beside(p)  # NAME_controller.json beside the record, if there is one
     kinds = list(robot.joint_kinds)
     declared = []  # (where, per-joint units)
     if isinstance(controller, (str, os.PathLike)):
@@ -459,7 +458,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
         if file_units is not None:
             declared.append((f"the controller file {controller}", file_units))
         controller = load_joint_controllers(controller)
-    controllers = tuple(controller)
+    controllers = tuple(controller) if controller is not None else None
     arg_units = for_joints(units, kinds, "units")
     if arg_units is not None:
         declared.append(("units=" + (units if isinstance(units, str) else "..."), arg_units))
@@ -512,6 +511,25 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
             if got[j] != u[j]:
                 raise DataError(f"{p}: joint {names[j]} is in {u[j].describe()} by {first} but in "
                                 f"{got[j].describe()} by {where}: declare its units once")
+    origin: Tuple[str, ...] = ()
+    if controllers is None:  # nobody described them: each joint's linear law from its own log, in SI
+        from .controller_fit import fit_controller
+
+        fits = []
+        for j in range(len(names)):
+            k, ff = (u[j].position_factor, u[j].force_factor) if u is not None else (1.0, 1.0)
+            try:
+                fits.append(fit_controller(dict(dt=dt, qr=signals["qr"][:, j] * k, qm=signals["qm"][:, j] * k,
+                                                 force=signals["force"][:, j] * ff, name=f"{p}: joint {names[j]}")))
+            except DataError as e:
+                raise DataError(f"{e}. No controller was given (controller=..., CLI: --controller FILE, or "
+                                f"{os.path.splitext(p)[0]}_controller.json beside the record), so didim tried to fit "
+                                "each joint's from the log") from None
+        controllers = tuple(f.controller for f in fits)
+        origin = tuple(f"joint {j}: {f.summary()}" for j, f in zip(names, fits))
+        converted = True
+    else:
+        converted = False
     if len(controllers) != len(names):
         raise DataError(f"{p}: {len(controllers)} controllers for the robot's {len(names)} joints")
     if u is not None:
@@ -519,6 +537,8 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
             k, ff = u[j].position_factor, u[j].force_factor
             for key, factor in (("qr", k), ("qm", k), ("force", ff)):
                 signals[key][:, j] *= factor
+            if converted:
+                continue  # fitted on SI signals already
             try:
                 controllers = controllers[:j] + (in_units(controllers[j], dt, k, ff),) + controllers[j + 1:]
             except DataError as e:
@@ -536,7 +556,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     try:
         return RobotRecording(dt=dt, joint_names=tuple(names), controllers=controllers, encoder_step=steps, name=label,
                               joint_kinds=tuple(kinds), **signals,
-                              units=tuple(u) if u is not None else ())
+                              units=tuple(u) if u is not None else (), controller_origin=origin)
     except DataError as e:
         raise DataError(f"{p}: {e}") from None
 

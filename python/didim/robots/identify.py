@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import _checks, _core
 from ..didim_loop import didim_loop
-from .._errors import DataError, SimulationError
+from .._errors import DataError, IdentifiabilityError, SimulationError
 from .chain import Robot
 from .record import RobotRecording
 
@@ -460,32 +460,38 @@ def fit_law(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, of
     def law_of(shape: str, rel: float) -> Law:
         return (shape, tuple(float(rel * s_) for s_ in scale))
 
-    table = [((shape, rel), cost(law_of(shape, rel))[0]) for shape in LAW_SHAPES for rel in LAW_EPS_REL]
-    (shape, rel), best = min(table, key=lambda t: t[1])
-    if per_shape is not None:  # each shape's best ε on the grid
-        for sh in LAW_SHAPES:
-            per_shape[sh] = law_of(sh, min(((r_, c) for (s_, r_), c in table if s_ == sh), key=lambda t: t[1])[0])[1]
-    # laws within LAW_TIE of the best are alike on these rows: the smoothest, the cheapest to simulate
-    ties = [(k, c) for k, c in table if c <= (1 + LAW_TIE) * best]
-    shape, rel = max(ties, key=lambda t: t[0][1])[0]
-    eps = list(law_of(shape, rel)[1])
-    total, per = cost((shape, tuple(eps)))
-    # each joint's ε between its grid neighbours, where its rows ask for it: the residual must fall by more than a
-    # χ² of one degree of freedom at p = 0.001 times the joint's residual variance (a flat tail, tanh's, leaves ε
-    # where the kind's grid put it)
     step = math.log(LAW_EPS_REL[1] / LAW_EPS_REL[0])
-    for j in range(n):
-        def cj(x: float, j: int = j) -> float:
-            e = list(eps)
-            e[j] = math.exp(x)
-            return cost((shape, tuple(e)))[0]
 
-        got = minimize_scalar(cj, bounds=(math.log(eps[j]) - step, math.log(eps[j]) + step), method="bounded",
-                              options={"xatol": 0.02})
-        if got.fun < total - EPS_CHI2 * per[j] / max(sizes[j] - 1, 1):
-            eps[j] = float(math.exp(got.x))
-            total, per = cost((shape, tuple(eps)))
-    return (shape, tuple(eps))
+    def refined(shape: str) -> Tuple[Tuple[float, ...], float]:
+        """The shape's best ε on the grid (laws within LAW_TIE of it are alike on these rows: the smoothest, the
+        cheapest to simulate), then each joint's between its grid neighbours where its rows ask for it: the residual
+        must fall by more than a χ² of one degree of freedom at p = 0.001 times the joint's residual variance (a
+        flat tail, tanh's, leaves ε where the kind's grid put it)."""
+        table = [(rel, cost(law_of(shape, rel))[0]) for rel in LAW_EPS_REL]
+        low = min(c for _, c in table)
+        rel = max(r_ for r_, c in table if c <= (1 + LAW_TIE) * low)
+        eps = list(law_of(shape, rel)[1])
+        total, per = cost((shape, tuple(eps)))
+        for j in range(n):
+            def cj(x: float, j: int = j) -> float:
+                e = list(eps)
+                e[j] = math.exp(x)
+                return cost((shape, tuple(e)))[0]
+
+            got = minimize_scalar(cj, bounds=(math.log(eps[j]) - step, math.log(eps[j]) + step), method="bounded",
+                                  options={"xatol": 0.02})
+            if got.fun < total - EPS_CHI2 * per[j] / max(sizes[j] - 1, 1):
+                eps[j] = float(math.exp(got.x))
+                total, per = cost((shape, tuple(eps)))
+        return tuple(eps), total
+
+    # every shape with its joints' ε refined, then the shape that fits best: a shape compared at one ε for all
+    # joints takes the place of another whose joints' ε differ (a Panda with an algebraic law chose atan)
+    laws = {shape: refined(shape) for shape in LAW_SHAPES}
+    if per_shape is not None:
+        per_shape.update({sh: eps for sh, (eps, _) in laws.items()})
+    shape = min(laws, key=lambda sh: laws[sh][1])
+    return (shape, laws[shape][0])
 
 
 def _first_half(rec: RobotRecording) -> RobotRecording:
@@ -500,36 +506,61 @@ def _first_half(rec: RobotRecording) -> RobotRecording:
 CLOSED_LOOP_FACTORS = tuple(2.0 ** (k / 2) for k in range(-4, 5))
 
 
-def closed_loop_law(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]], law: Law,
+def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dict[str, List[float]]]], law: Law,
                     per_shape: Dict[str, Tuple[float, ...]], progress=None) -> Law:
-    """The friction law through zero speed that the closed loop follows best, the model's other parameters kept: each
-    shape at the smoothing speeds the inverse model chose for it, then the joints' ε of the best shape scaled together
-    (a factor of 10 either way), by the closed-loop force error on the first half of the record. The inverse model
-    cannot choose it: it leaves out the rows where the law acts, and on the rows it keeps every sharp law is alike (on
-    the data folder's pendulum, a tanh law of ε = 0.01 rad/s and an exp law of 0.015 fit them equally, and the second
-    simulates the validation record at 1.23 times its floor, the first at 1.01)."""
+    """The friction law through zero speed that the closed loop follows best, by the joints' relative force errors on
+    the first half of the record (their RMS: every joint alike, where the total would hear only the heavy ones):
+    each shape with the model's other parameters refitted for it (``refit(law)``: the robot and its drives;
+    parameters fitted with one shape have taken its tail into their viscous friction, and would favour it), at the
+    smoothing speeds the inverse model chose for it scaled together on a grid; the best refined on a finer grid, then
+    each joint's ε on its own by that joint's force error (a Panda's slow fourth joint turns over at a third of the
+    others' ε). The inverse model cannot choose the law: it leaves out the rows where the law acts, and on the rows
+    it keeps every sharp law is alike (on the data folder's pendulum, a tanh law of ε = 0.01 rad/s and an exp law of
+    0.015 fit them equally, and the second simulates the validation record at 1.23 times its floor, the first at
+    1.01)."""
     part = _first_half(rec)
     say = progress or (lambda s: None)
+    # each shape starts from the smoothing speeds the inverse model chose for it, with the model's other parameters
+    # refitted for it
+    starts: Dict[Tuple[str, str], Tuple[float, ...]] = {}
+    for sh, eps in list(per_shape.items()) + [(law[0], law[1])]:
+        starts.setdefault((sh, "fitted"), tuple(eps))
+    models: Dict[Tuple[str, str], Any] = {}
 
-    def err(lw: Law) -> float:
+    norms = np.maximum(np.linalg.norm(part.force, axis=0), 1e-300)
+
+    def balanced(sim) -> float:
+        """The joints' relative force errors, each joint alike (the total would hear only the heavy joints)."""
+        return float(np.sqrt(np.mean((np.linalg.norm(part.force - sim["force"], axis=0) / norms) ** 2)))
+
+    def err_of(lw: Law, robot: Robot, d) -> float:
         try:
             sim = _simulate(part, robot, d, lw)
         except (SimulationError, DataError):
             return math.inf
-        return float(np.linalg.norm(part.force - sim["force"]) / np.linalg.norm(part.force))
+        return balanced(sim)
 
-    # every shape on a coarse grid of factors on its joints' ε (the inverse model leaves ε poorly set where the
-    # law's tail is flat: tanh's on the UR5 came 1.3 times too large, and at that ε another shape simulated better),
-    # then the best one on a grid twice as fine and the parabola through the best and its neighbours (in log ε): the
+    def err(key: Tuple[str, str], f: float) -> float:
+        if key not in models:
+            try:
+                models[key] = refit((key[0], starts[key]))
+            except (SimulationError, DataError, IdentifiabilityError):
+                models[key] = None
+        if models[key] is None:
+            return math.inf
+        robot, d = models[key]
+        return err_of(_scaled((key[0], starts[key]), f), robot, d)
+
+    # every start on a coarse grid of factors on its joints' ε (the inverse model leaves ε poorly set where the law's
+    # tail is flat: tanh's on the UR5 came 1.3 times too large, and at that ε another shape simulated better), then
+    # the best one on a grid twice as fine and the parabola through the best and its neighbours (in log ε): the
     # encoder makes the error rough at the scale of a count, and a search that follows it lands elsewhere on every
     # perturbation of the record's last digits; fixed grids and a parabola do not
-    starts = dict(per_shape)
-    starts.setdefault(law[0], law[1])
-    table = {(sh, f): err(_scaled((sh, tuple(eps)), f)) for sh, eps in starts.items() for f in CLOSED_LOOP_FACTORS}
-    (shape, f0), best = min(table.items(), key=lambda t: t[1])
-    start = (shape, tuple(starts[shape]))
+    table = {(key, f): err(key, f) for key in starts for f in CLOSED_LOOP_FACTORS}
+    (key, f0), best = min(table.items(), key=lambda t: t[1])
+    start = (key[0], starts[key])
     fs = [f0 * 2**-0.5, f0 * 2**-0.25, f0, f0 * 2**0.25, f0 * 2**0.5]
-    e = np.array([table[(shape, f)] if (shape, f) in table else err(_scaled(start, f)) for f in fs])
+    e = np.array([table[(key, f)] if (key, f) in table else err(key, f) for f in fs])
     x = np.log(fs)
     i = int(np.argmin(e))
     xi = float(x[i])
@@ -539,12 +570,38 @@ def closed_loop_law(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]]
             xi = float(np.clip(-c1 / (2 * c2), x[i - 1], x[i + 1]))
     best_law, best = _scaled(start, fs[i]), float(e[i])
     if xi != x[i]:
-        cand = _scaled(start, math.exp(xi))
-        ec = err(cand)
+        ec = err(key, math.exp(xi))
         if ec < best:
-            best_law, best = cand, ec
+            best_law, best = _scaled(start, math.exp(xi)), ec
+    # then each joint's ε on its own, by that joint's own force error (a joint's ε acts on its own torque: the total
+    # error hardly sees a wrist's), on the same grid and parabola
+    if models.get(key) is not None and len(best_law[1]) > 1:
+        robot, d = models[key]
+        ff = np.array([0.5, 2**-0.5, 1.0, 2**0.5, 2.0])
+        for j in range(len(best_law[1])):
+            def joint_err(f: float, j: int = j) -> float:
+                eps = list(best_law[1])
+                eps[j] *= f
+                try:
+                    sim = _simulate(part, robot, d, (best_law[0], tuple(eps)))
+                except (SimulationError, DataError):
+                    return math.inf
+                return float(np.linalg.norm(part.force[:, j] - sim["force"][:, j]))
+
+            ej = np.array([joint_err(f) for f in ff])
+            k = int(np.argmin(ej))
+            xk = float(np.log(ff[k]))
+            if 0 < k < len(ff) - 1 and np.all(np.isfinite(ej[k - 1:k + 2])):
+                c2, c1, _ = np.polyfit(np.log(ff[k - 1:k + 2]), ej[k - 1:k + 2], 2)
+                if c2 > 0:
+                    xk = float(np.clip(-c1 / (2 * c2), np.log(ff[k - 1]), np.log(ff[k + 1])))
+            if k != 2 or xk != 0.0:
+                eps = list(best_law[1])
+                eps[j] *= math.exp(xk)
+                best_law = (best_law[0], tuple(eps))
+        best = err_of(best_law, robot, d)
     say(f"friction law through zero speed, in closed loop: {best_law[0]}, ε = "
-        + ", ".join(f"{e:.4g}" for e in best_law[1]) + f" (force error on the first half {100 * best:.3f} %)")
+        + ", ".join(f"{e:.4g}" for e in best_law[1]) + f" (joints' force errors on the first half, RMS {100 * best:.3f} %)")
     return best_law
 
 
@@ -665,16 +722,22 @@ def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> Robot
     q, v, a = _measured_states(rec, dec)
     per_shape: Dict[str, Tuple[float, ...]] = {}
     law = fit_law(rec, robot, base, q, v, a, offset, dec, per_shape)
-    theta, cov = _fit(rec, robot, base, q, v, a, offset, law, dec, rec.force)
-    res = _result("idim-ls", rec, robot, base, offset, theta, cov, law=law)
-    # the law through zero speed is the closed loop's to choose (the inverse model leaves out where it acts)
+    # the law through zero speed is the closed loop's to choose (the inverse model leaves out where it acts), each
+    # shape compared with the parameters the inverse model gives with it
+    def refit(lw: Law):
+        return _model_of(robot, base, offset, _fit(rec, robot, base, q, v, a, offset, lw, dec, rec.force)[0])
+
+    sim_law = law
     try:
-        pi = res.standard()
-        d = res.drives()
-        d["armature"] = list(pi[:robot.ndof])
-        res.law = closed_loop_law(rec, robot.with_inertial_params(pi[robot.ndof:]), d, law, per_shape)
+        sim_law = closed_loop_law(rec, refit, law, per_shape)
     except SimulationError:
         pass
+    # the parameters with the shape the closed loop chose, at the smoothing speeds the inverse model gives that shape
+    # (the rows it fits see the law's tail; a shape chosen against it there bends the viscous friction: a Panda's
+    # slow joint 44 % off), the closed loop's law simulating them
+    fit_with = law if sim_law[0] == law[0] else (sim_law[0], tuple(per_shape.get(sim_law[0], sim_law[1])))
+    theta, cov = _fit(rec, robot, base, q, v, a, offset, fit_with, dec, rec.force)
+    res = _result("idim-ls", rec, robot, base, offset, theta, cov, law=sim_law)
     try:
         sim = simulate_robot(rec, res)
         res.force_error, res.force_error_per_joint = force_errors(rec, sim["force"])
@@ -688,11 +751,21 @@ def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> Robot
 ABSURD_ERROR = 1.0
 
 
+def _model_of(robot: Robot, base: BaseParameters, offset: bool, theta: np.ndarray):
+    """The robot with the standard parameters closest to the URDF's that give θ's base parameters, and its drives
+    (rotor inertias, each joint's viscous and Coulomb friction and offset)."""
+    n, nb = robot.ndof, len(base.names)
+    pi = base.standard_from(theta[:nb], np.concatenate([np.zeros(n), robot.inertial_params]))
+    d = {"armature": list(pi[:n]), "viscous": list(theta[nb:nb + n]), "coulomb": list(theta[nb + n:nb + 2 * n]),
+         "offset": list(theta[nb + 2 * n:]) if offset else [0.0] * n}
+    return robot.with_inertial_params(pi[n:]), d
+
+
 def _settled(loop, tol: float) -> bool:
     """A robot's DIDIM has settled when its closed-loop force error changed by less than ``tol`` of itself in the last
     step, or has not bettered the best by that much in :data:`STALL` iterations (it wanders at the level the
     encoder's rounding in the loop sets)."""
-    h = loop.errors
+    h = loop.errors[loop.since:]  # since the plant last changed its model
     if len(h) < 2:
         return False
     stalled = len(h) > STALL and min(h[-STALL:]) > (1 - tol) * min(h[:-STALL])
@@ -720,11 +793,7 @@ class _RobotPlant:
 
     def model(self, theta: np.ndarray):
         """The robot with θ's standard parameters and its drives."""
-        n, nb = self.n, self.nb
-        pi = self.base.standard_from(theta[:nb], self.pi0)
-        d = {"armature": list(pi[:n]), "viscous": list(theta[nb:nb + n]), "coulomb": list(theta[nb + n:nb + 2 * n]),
-             "offset": list(theta[nb + 2 * n:]) if self.offset else [0.0] * n}
-        return self.robot.with_inertial_params(pi[n:]), d
+        return _model_of(self.robot, self.base, self.offset, theta)
 
     def simulate(self, theta: np.ndarray):
         robot, d = self.model(theta)
@@ -765,8 +834,15 @@ class _RobotPlant:
         if self.law_chosen:
             return "accept"
         self.law_chosen = True
-        robot, d = self.model(loop.best[1])
-        new_law = closed_loop_law(self.rec, robot, d, self.law, self.per_shape, self.say)
+        # each shape with the parameters one least squares gives with it on the best iterate's simulated states
+        sim = self.simulate(loop.best[1])
+
+        def refit(lw: Law):
+            est, _ = _fit(self.rec, self.robot, self.base, sim["q"], sim["qd"], sim["qdd"], self.offset, lw, self.dec,
+                          self.rec.force)
+            return self.model(est)
+
+        new_law = closed_loop_law(self.rec, refit, self.law, self.per_shape, self.say)
         if new_law != self.law:
             self.law = new_law
             return "restart"

@@ -44,6 +44,8 @@ class RobotRecording:
     joint_kinds: Tuple[str, ...] = ()
     #: The units each joint was logged in (:class:`didim.units.Units`; the arrays hold SI), empty when SI.
     units: Tuple = ()
+    #: Where each joint's controller comes from when nobody described it (the fit's summary), else empty.
+    controller_origin: Tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):

@@ -1,0 +1,73 @@
+"""DIDIM's one loop (didim.didim_loop), on a plant small enough to follow by hand: the safeguards act where they
+should and never where an iteration goes well."""
+
+import math
+
+import numpy as np
+import pytest
+
+from didim._errors import SimulationError
+from didim.didim_loop import MAX_BACKTRACKS, didim_loop
+
+
+class Toy:
+    """θ = (m,): the 'simulation' fails for m <= 0.5 (a loop that cannot be simulated); its error is |m − 2|; the
+    least squares jump to ``jumps`` in turn, then to the truth 2."""
+
+    free = [0]
+
+    def __init__(self, jumps, tol=1e-9):
+        self.jumps, self.tol, self.sims = list(jumps), tol, []
+
+    def simulate(self, theta):
+        self.sims.append(float(theta[0]))
+        if theta[0] <= 0.5:
+            raise SimulationError("articulated inertia is not positive")
+        return float(theta[0])
+
+    def output_error(self, sim):
+        return abs(sim - 2.0) + 1e-3
+
+    def solve(self, theta, sim):
+        nxt = self.jumps.pop(0) if self.jumps else 2.0
+        return {"params": np.array([nxt]), "std": np.array([0.1]), "covariance": np.eye(1) * 0.01}
+
+    def physical(self, new, old):
+        return bool(np.isfinite(new[0]))
+
+    def converged(self, loop):
+        return len(loop.errors) >= 2 and abs(loop.errors[-1] - loop.errors[-2]) <= self.tol
+
+    def settled(self, loop):
+        return "accept"
+
+    def describe(self, loop):
+        return f"iteration {len(loop.history)}"
+
+
+def test_an_iterate_that_cannot_be_simulated_is_pulled_back_toward_the_best():
+    plant = Toy([0.1])  # from 1.5 the least squares jump to 0.1, where the loop cannot be simulated
+    loop = didim_loop(plant, np.array([1.5]))
+    assert loop.converged
+    assert loop.theta[0] == pytest.approx(2.0)
+    # 0.1 failed, then halfway back to the best (1.5): 0.8 simulates but its error is above 1.5 times the best, so
+    # back again, until 1.325 is within it
+    assert plant.sims[:5] == [1.5, 0.1, 0.8, pytest.approx(1.15), pytest.approx(1.325)]
+    assert loop.notes == ["iteration 1: step shortened 3× (output error 85.10 % against 50.10 %)"]
+
+
+def test_a_rising_error_is_pulled_back_and_divergence_declared_after_the_budget():
+    plant = Toy([40.0] * 50)  # every step jumps far off: the error rises more than 1.5× the best each time
+    loop = didim_loop(plant, np.array([1.9]), max_iter=10)
+    assert not loop.converged
+    assert loop.message.startswith("diverged")
+    assert loop.best[1][0] == pytest.approx(1.9)
+    assert len(plant.sims) == 1 + 1 + MAX_BACKTRACKS  # the start, the jump, and the pull-backs
+
+
+def test_an_iteration_that_goes_well_is_left_alone():
+    plant = Toy([1.95, 1.99])
+    loop = didim_loop(plant, np.array([1.5]))
+    assert loop.converged and not loop.notes
+    assert plant.sims == [1.5, 1.95, 1.99, 2.0, 2.0]
+    assert math.isclose(loop.theta[0], 2.0)
