@@ -430,7 +430,13 @@ def cmd_doctor(args) -> int:
     from ._io import write_text
     from .doctor import doctor
 
-    _check_outputs([args.file, args.validate, args.controller], [args.json, args.html, args.result])
+    _check_outputs([args.file, args.validate, args.controller, args.urdf], [args.json, args.html, args.result])
+    if args.urdf:
+        return _doctor_robot(args)
+    if args.joints:
+        from ._errors import DataError
+
+        raise DataError("--joints picks a URDF's joints: give --urdf too")
     rec = _load(args, args.file)
     val = _load(args, args.validate) if args.validate else None
     from .doctor import BaseFitError
@@ -451,6 +457,36 @@ def cmd_doctor(args) -> int:
     if args.result:
         d.final_result.save(args.result)
         print(f"wrote {args.result} (the final model: didim simulate RECORD {args.result})")
+    return 0
+
+
+def _doctor_robot(args) -> int:
+    """``didim doctor REC --urdf U``: the robot's base fit and where each joint's simulation and record differ."""
+    import json
+
+    from ._errors import DataError
+    from ._io import write_text
+    from .doctor import doctor
+    from .robots import Robot
+
+    for flag, value in (("--model", args.model != "rigid"), ("--apm", args.apm is not None)):
+        if value:
+            raise DataError(f"{flag} does not apply to a robot (--urdf): DIDIM starts from the URDF's values")
+    joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
+    robot = Robot.from_urdf(args.urdf, joints)
+    rec = _robot_record(args, args.file, robot)
+    val = _robot_record(args, args.validate, robot) if args.validate else None
+    d = doctor(rec, robot, val, progress=_progress(args.quiet), controller_check=args.controller_check)
+    print(d.summary())
+    if args.json:
+        write_text(args.json, d.to_json() + "\n")
+        print(f"wrote {args.json}")
+    if args.html:
+        write_text(args.html, d.to_html())
+        print(f"wrote {args.html}")
+    if args.result:
+        write_text(args.result, json.dumps(d.base.to_dict(), indent=1) + "\n")
+        print(f"wrote {args.result} (the base model: didim simulate RECORD {args.result})")
     return 0
 
 
@@ -596,6 +632,9 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--html", metavar="OUT", help="the report an engineer reads (plots embedded)")
     o.add_argument("--result", metavar="OUT.json", help="the final model as a result (for didim simulate)")
     o.add_argument("--quiet", action="store_true")
+    o.add_argument("--urdf", metavar="URDF", help="a robot's record: its URDF; the base model is fitted by DIDIM and "
+                   "each joint's mismatch located")
+    o.add_argument("--joints", metavar="J1,J2,..", help="with --urdf: the actuated joints, as for identify")
     o.set_defaults(func=cmd_doctor)
 
     m = sub.add_parser("simulate", help="apply a saved result to a record: simulated vs measured force (cross-test)")

@@ -121,7 +121,9 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
             loop.simulations += 1
             if pull_back(f"the simulation failed ({e})"):
                 continue
-            loop.message = f"iteration {len(loop.history)}: the simulation with θ{len(loop.history)} failed ({e}); stopped"
+            sym = getattr(plant, "symbol", "θ")  # the paper writes χ for one axis's parameters
+            loop.message = (f"iteration {len(loop.history)}: the simulation with {sym}{len(loop.history)} failed ({e}); "
+                            "stopped")
             loop.stop = e
             break
         loop.simulations += 1

@@ -308,6 +308,7 @@ class _AxisPlant:
     the start the simulation takes to join the record; a mass or the stiffness must stay positive and change by at
     most MAX_STEP_RATIO per step; criterion (21) says when it has converged."""
 
+    symbol = "χ"
     short_step_reason = ("a mass or the stiffness would have changed by more than "
                          f"{MAX_STEP_RATIO:g}× or become non-positive")
 

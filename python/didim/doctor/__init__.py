@@ -868,13 +868,27 @@ def doctor(
     coulomb_eps: Union[str, float, None] = "fit",
     controller_check: str = "error",
 ) -> Diagnosis:
-    """Diagnoses what the ``model`` ("rigid" or "flexible") misses on ``recording``; ``validate`` is a recording the
+    """Diagnoses what the ``model`` ("rigid" or "flexible") misses on ``recording``; with a robot's record and its
+    :class:`didim.Robot` as ``model``, where each joint's simulation and record differ (:mod:`didim.doctor.robot`).
+    ``validate`` is a recording the
     fit does not see (otherwise the last ``holdout`` share of the record is held out). ``alpha`` is the family-wise
     level of the candidate tests and of the held-out confirmation. ``cutoff_hz`` is the decimation cutoff of the fits
     and of the residual analysis. ``coulomb_eps``: the Coulomb smoothing speed of the base model (m/s or rad/s),
     ``"fit"`` (default) to fit it with the base model before any effect is looked for
     (:func:`didim.doctor.fit.fit_friction_law`), None for didim's default. ``controller_check``: as for
     :func:`didim.identify`, on both records."""
+    from ..robots import Robot, RobotRecording
+
+    if isinstance(model, Robot) or isinstance(recording, RobotRecording):
+        if not isinstance(model, Robot) or not isinstance(recording, RobotRecording):
+            raise DataError("a robot's record is diagnosed with its didim.Robot: didim.doctor(rec, robot, "
+                            "validate=...) with rec = didim.load_record(path, robot=robot)")
+        if apM is not None:
+            raise DataError("apM does not apply to a robot: DIDIM on a robot starts from the URDF's values")
+        from .robot import doctor_robot
+
+        return doctor_robot(recording, model, validate, progress=progress,  # type: ignore[return-value]
+                            controller_check=controller_check)
     apM, alpha, max_findings = _check_arguments(recording, model, validate, apM, alpha, max_findings, cutoff_hz,
                                                 holdout, progress)
     from ..check import enforce

@@ -1,0 +1,36 @@
+"""The doctor's entry for robots (issue 36: the entry point; the robot effects are issue 40's): the base model by
+DIDIM on the training record, and per joint where the simulation and the held-out record differ. On the data folder's
+pendulum, whose plant the model holds (a clean record): no finding, each joint's held-out error near its truth
+floor, the residual located in shares that add up."""
+
+import json
+
+import pytest
+
+import didim
+from didim.cli import main
+
+
+def test_the_robot_doctor_locates_each_joints_mismatch_on_held_out_data(robots_dir, tmp_path, capsys):
+    truth = json.loads((robots_dir / "truth.json").read_text())["robots"]["pendulum"]
+    robot = didim.Robot.from_urdf(robots_dir / "pendulum_cad.urdf")
+    ctl = robots_dir / "pendulum_controller.json"
+    rec = didim.load_record(robots_dir / "pendulum_train.csv", robot=robot, controller=ctl)
+    val = didim.load_record(robots_dir / "pendulum_valid.csv", robot=robot, controller=ctl)
+    d = didim.doctor(rec, robot, val)
+    assert d.findings == []
+    floors = dict(zip(truth["joint_names"], truth["records"]["valid"]["truth_floor_per_joint"]))
+    for m in d.joints:
+        assert m.error_valid <= 1.3 * floors[m.joint], m.joint
+        assert sum(m.shares.values()) == pytest.approx(1.0, abs=1e-9)
+        assert 0 <= m.worst_time["share"] <= 1
+    assert d.joints[0].error_valid >= d.joints[-1].error_valid  # worst first
+    with pytest.raises(didim.DataError, match="validation record is the training record"):
+        didim.doctor(rec, robot, rec)
+    out = tmp_path / "d.json"
+    assert main(["doctor", str(robots_dir / "pendulum_train.csv"), "--urdf", str(robots_dir / "pendulum_cad.urdf"),
+                 "--controller", str(ctl), "--validate", str(robots_dir / "pendulum_valid.csv"), "--json", str(out),
+                 "--quiet"]) == 0
+    got = json.loads(out.read_text())
+    assert got["findings"] == [] and {j["joint"] for j in got["joints"]} == set(robot.joint_names)
+    assert "where simulation and record differ, per joint" in capsys.readouterr().out
