@@ -134,3 +134,19 @@ def test_without_a_controller_each_joints_law_is_fitted_from_its_log(robots_dir,
                  "--json", str(out)]) == 0
     assert json.loads(out.read_text())["type"] == "joints"
     assert main(["controller", "check", str(tmp_path / "pendulum.csv"), "--controller", str(out)]) == 0
+
+
+def test_a_sample_of_delay_in_the_description_is_named(robots_dir, tmp_path):
+    spec = _controllers(robots_dir)
+    c = spec["joints"][1]
+    spec["joints"][1] = {**c, "b_r": [0.0] + c["b_r"], "b_y": [0.0] + c["b_y"]}  # a computation delay the drive lacks
+    _, rec = _record(robots_dir, spec, tmp_path=tmp_path)
+    chk = check_robot_controllers(rec)
+    assert chk.failed() == ["joint2"]
+    assert "description has 1 sample of delay" in chk.joints["joint2"].likely
+
+
+def test_a_record_with_more_joints_than_the_robot_is_refused(robots_dir):
+    robot = didim.Robot.from_urdf(robots_dir / "pendulum_cad.urdf")
+    with pytest.raises(didim.DataError, match=r"columns for 6 joints .* the robot has 2"):
+        didim.load_record(robots_dir / "ur5_train.csv", robot=robot, controller=robots_dir / "pendulum_controller.json")

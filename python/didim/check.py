@@ -59,8 +59,9 @@ class ControllerCheck:
         return bool(self.mismatch <= self.tolerance)
 
     def summary(self) -> str:
-        noise = (f", what the best linear law fitted from the log reaches ({100 * self.best_linear:.3g} %) times "
-                 f"{NOISE_MARGIN:g}" if math.isfinite(self.best_linear) and self.tolerance < CHECK_TOLERANCE else "")
+        noise = (f": what the best linear law fitted from the log reaches ({100 * self.best_linear:.3g} %) times "
+                 f"{NOISE_MARGIN:g}, or the rounding level {100 * ROUNDING_LEVEL:g} %, whichever is larger"
+                 if math.isfinite(self.best_linear) and self.tolerance < CHECK_TOLERANCE else "")
         head = (f"controller check: its law on the logged qr and qm gives the logged force within "
                 f"{100 * self.mismatch:.3g} % (RMS, {self.samples} unsaturated samples; at most "
                 f"{100 * self.tolerance:.3g} % is accepted{noise})")
@@ -195,6 +196,9 @@ def check_controller(rec) -> ControllerCheck:
     for lag in (1, 2):
         cands.append((f"the logged force is {lag} sample{'s' if lag > 1 else ''} late against the logged positions "
                       "(a delay in the drive's log, or the positions logged early)", np.r_[np.full(lag, c[0]), c[:-lag]]))
+        cands.append((f"the description has {lag} sample{'s' if lag > 1 else ''} of delay that the log does not (a "
+                      "computation delay written into the controller that the drive does not have, or the force "
+                      "logged early)", np.r_[c[lag:], np.full(lag, c[-1])]))
     out.tried = [(what, mismatch(tf, f, alt, keep)) for what, alt in cands]
     best = min(out.tried, key=lambda t: t[1]) if out.tried else None
     if best is not None and best[1] <= tol:
@@ -285,11 +289,10 @@ def enforce(rec, mode: str = "error"):
         what = (f"the described controller of joint{'s' if len(chk.failed()) > 1 else ''} {', '.join(chk.failed())} "
                 "does not give the logged force" if robot else "the described controller does not give the logged force")
         text = (f"{rec.name or 'record'}: {what}: {chk.summary()}. "
-                "didim simulates the closed loop with this controller, so a fit would be wrong; correct the "
-                "description (Python: controller=..., CLI: --controller FILE), or go on anyway with "
-                "controller_check='warn' (CLI: --controller-check warn)")
+                "didim simulates the closed loop with this controller, so a fit or a simulation with it would be "
+                "wrong; correct the description (Python: controller=..., CLI: --controller FILE)")
         if mode == "error":
-            raise DataError(text)
+            raise DataError(text + ", or go on anyway with controller_check='warn' (CLI: --controller-check warn)")
         warnings.warn(text, DidimWarning, stacklevel=3)
     return chk
 

@@ -250,9 +250,12 @@ def _simulate_robot(args, result) -> int:
         print(f"  {j}: {100 * e:.2f} %")
     if chk is not None:
         print(f"  ({chk.summary()})")
+    for o in rec.controller_origin:
+        print(f"  (no controller was described: {o})")
     if args.json:
         write_text(args.json, json.dumps({"record": args.file, "result": args.result, "force_error": err,
                                           "force_error_per_joint": per, "params": result.params,
+                                          "controller_origin": list(rec.controller_origin),
                                           "controller_check": None if chk is None else chk.to_dict()},
                                          indent=2) + "\n")
         print(f"wrote {args.json}")
@@ -346,8 +349,18 @@ def cmd_controller_fit(args) -> int:
         rec = load_record(args.file, robot=robot, controller=None, units=args.units, beside_controller=False)
         for line in rec.controller_origin:
             print(f"{args.file}: {line}")
-        if args.json:
-            spec = {"type": "joints", "joints": [c.transfer_function(rec.dt).to_dict() for c in rec.controllers]}
+        if args.json:  # in the record's own units, which the file declares, so that --controller reads it back
+            from .controllers import in_units
+
+            entries = []
+            for j, c in enumerate(rec.controllers):
+                u = rec.units[j] if rec.units else None
+                if u is None or u.is_si:
+                    entries.append(c.transfer_function(rec.dt).to_dict())
+                else:
+                    native = in_units(c, rec.dt, 1 / u.position_factor, 1 / u.force_factor)
+                    entries.append({**native.transfer_function(rec.dt).to_dict(), "units": u.to_dict()})
+            spec = {"type": "joints", "joints": entries}
             write_text(args.json, json.dumps(spec, indent=1) + "\n")
             print(f"wrote {args.json}")
         return 0
@@ -359,7 +372,13 @@ def cmd_controller_fit(args) -> int:
     cf = fit_controller(rec)
     print(f"{args.file}: {cf.summary()}")
     if args.json:
-        write_text(args.json, json.dumps(cf.to_dict(), indent=1) + "\n")
+        spec = cf.to_dict()
+        if not rec.units.is_si:  # in the record's own units, which the file declares: --controller reads it back
+            from .controllers import in_units
+
+            native = in_units(cf.controller, rec.dt, 1 / rec.units.position_factor, 1 / rec.units.force_factor)
+            spec = {**native.transfer_function(rec.dt).to_dict(), "units": rec.units.to_dict(), "note": spec["note"]}
+        write_text(args.json, json.dumps(spec, indent=1) + "\n")
         print(f"wrote {args.json}")
     return 0
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 from dataclasses import replace
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
@@ -117,6 +118,9 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
         a = get(col) if col in available else None
         if a is None and key in REQUIRED:
             hint = " (or give dt)" if key == "t" else ""
+            if key != "t" and f"{key}_1" in available:
+                hint += (f"; the file has {key}_1, {key}_2, …: a robot's record, read with its URDF (Python: "
+                         "load_record(path, robot=...), CLI: --urdf URDF)")
             raise DataError(f"{where}: no column {col!r} for {key}{hint}; the file has {', '.join(available) or 'none'}. "
                             f"A record needs columns {', '.join(REQUIRED)} (optional {', '.join(OPTIONAL)}); map other "
                             "names with columns={'force': 'YOUR_NAME', ...} (CLI: --columns force=YOUR_NAME)")
@@ -468,8 +472,6 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
         raise DataError(f"{p}: not a text file: a {kind} record was expected from its extension") from None
     names = robot.joint_names
     # a header's "[unit]" suffixes: qr_1[deg] is column qr_1 in degrees
-    import re
-
     suffix: Dict[str, str] = {}
     plain = []
     for c in available:
@@ -490,6 +492,12 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
         raise DataError(f"{p}: the time column is in {suffix['t']}: didim reads it in s; convert it (t / 1000 for ms)")
     dt = _time_step(np.asarray(get("t"), dtype=float), f"{p}: ")
     cols = {key: _columns(available, names, key, p) for key in ("qr", "force", "qm")}
+    extra = [c for c in available if re.fullmatch(r"(qr|force|qm)_\d+", c) and int(c.split("_")[-1]) > len(names)]
+    if extra:
+        m = max(int(c.split("_")[-1]) for c in extra)
+        raise DataError(f"{p}: the record has columns for {m} joints (qr_1..qr_{m}) but the robot has {len(names)} "
+                        f"({', '.join(names)}): the URDF (or the controller file) is another robot's, or --joints "
+                        "picks fewer joints than were logged")
     signals = {key: np.column_stack([np.asarray(get(c), dtype=float).ravel() for c in cols[key]])
                for key in ("qr", "force", "qm")}
     if any(c in suffix for key in cols for c in cols[key]):
