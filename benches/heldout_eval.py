@@ -28,6 +28,14 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 SHARED = pathlib.Path(os.environ.get("DIDIM_ROBOTS_DIR", ROOT.parent / "shared" / "data" / "robots"))
 
 
+def _law_name(truth: dict) -> str:
+    """The truth's friction law's shape (the shared folder writes it as a formula)."""
+    if truth.get("friction_shape"):
+        return str(truth["friction_shape"])
+    text = str(truth.get("friction_law", ""))
+    return next((name for name in ("algebraic", "tanh", "atan", "exp") if name in text), text)
+
+
 def evaluate(folder: pathlib.Path, name: str, truth: dict) -> list:
     """One robot's rows: per method, the worst Fv and Fc errors (and where), validation/floor, payload, time."""
     robot = didim.Robot.from_urdf(folder / f"{name}_cad.urdf")
@@ -44,7 +52,7 @@ def evaluate(folder: pathlib.Path, name: str, truth: dict) -> list:
         fc = [r.params[f"Fc_{j}"] / truth["Fc"][i] - 1 for i, j in enumerate(robot.joint_names)]
         e, _ = force_errors(val, simulate_robot(val, r)["force"])
         row = dict(robot=name, method=method, joints=robot.ndof, kinds=sorted(set(robot.joint_kinds)),
-                   rate_hz=round(1 / rec.dt), law=truth.get("friction_shape", truth.get("friction_law")),
+                   rate_hz=round(1 / rec.dt), law=_law_name(truth),
                    law_found=r.law[0] if r.law else "", fv=fv, fc=fc, worst_fv=float(np.max(np.abs(fv))),
                    worst_fc=float(np.max(np.abs(fc))), valid_ratio=e / floor, cpu_s=cpu, converged=r.converged)
         if method == "didim" and (folder / f"{name}_payload.csv").exists():

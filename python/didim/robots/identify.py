@@ -258,21 +258,23 @@ def _scaled(law: Law, factor) -> Law:
 
 
 def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, law: Law) -> np.ndarray:
-    """(N, n, p): the base parameters' columns, then each joint's friction (and offset) on its own row."""
-    n = robot.ndof
-    # the dependent columns are combinations of the independent ones: W·π = W[:, independent]·β
-    wb = _full_regressor(robot, q, v, a)[:, list(base.independent)].reshape(len(q), n, -1)
+    """(N, n, p): the base parameters' columns, then each joint's friction (and offset) on its own row, written into
+    one array (the dependent columns are combinations of the independent ones: W·π = W[:, independent]·β)."""
+    n, nb = robot.ndof, len(base.independent)
+    out = np.zeros((len(q), n, nb + (3 if offset else 2) * n))
+    ind = np.asarray(base.independent)
+    arm, body = ind[ind < n], ind[ind >= n]  # rotor inertias' columns, then the bodies'
+    y = robot.regressor(q, v, a)  # (N, n, 10 n)
+    pos = np.arange(nb)
+    out[:, :, pos[ind >= n]] = y[:, :, body - n]
     idx = np.arange(n)
-    fv = np.zeros((len(q), n, n))
-    fv[:, idx, idx] = v
-    fc = np.zeros((len(q), n, n))
-    fc[:, idx, idx] = _coulomb(v, law)
-    parts = [wb, fv, fc]
+    for k, col in zip(pos[ind < n], arm):
+        out[:, col, k] = a[:, col]  # a rotor inertia acts on its own joint's row, times its acceleration
+    out[:, idx, nb + idx] = v
+    out[:, idx, nb + n + idx] = _coulomb(v, law)
     if offset:
-        of = np.zeros((len(q), n, n))
-        of[:, idx, idx] = 1.0
-        parts.append(of)
-    return np.concatenate(parts, axis=2)
+        out[:, idx, nb + 2 * n + idx] = 1.0
+    return out
 
 
 def _decimation(rec: RobotRecording):
