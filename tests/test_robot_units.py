@@ -15,10 +15,8 @@ from didim.cli import main
 DEG = math.pi / 180
 
 
-def _deg_copy(robots_dir, tmp_path, header_units=False, file_units=None, n=2):
-    """The pendulum's training record and controllers as a drive logging degrees would have them: positions in deg,
-    each controller's coefficients per degree."""
-    src = robots_dir / "pendulum_train.csv"
+def _in_degrees(src, dst, header_units=False):
+    """The robot record ``src`` with its positions in degrees (``[deg]`` in the header when ``header_units``)."""
     head = src.read_text().splitlines()[0].split(",")
     data = np.loadtxt(src, delimiter=",", skiprows=1)
     for i, c in enumerate(head):
@@ -26,8 +24,14 @@ def _deg_copy(robots_dir, tmp_path, header_units=False, file_units=None, n=2):
             data[:, i] /= DEG
     if header_units:
         head = [f"{c}[deg]" if c.startswith(("qr_", "qm_")) else c for c in head]
-    path = tmp_path / "pendulum_deg.csv"
-    np.savetxt(path, data, delimiter=",", header=",".join(head), comments="", fmt="%.17g")
+    np.savetxt(dst, data, delimiter=",", header=",".join(head), comments="", fmt="%.17g")
+    return dst
+
+
+def _deg_copy(robots_dir, tmp_path, header_units=False, file_units=None, n=2):
+    """The pendulum's training record and controllers as a drive logging degrees would have them: positions in deg,
+    each controller's coefficients per degree."""
+    path = _in_degrees(robots_dir / "pendulum_train.csv", tmp_path / "pendulum_deg.csv", header_units)
     spec = json.loads((robots_dir / "pendulum_controller.json").read_text())
     for c in spec["joints"]:
         c["b_r"] = [b * DEG for b in c["b_r"]]
@@ -73,14 +77,7 @@ def test_the_header_or_the_controllers_file_declares_the_units(robots_dir, tmp_p
 
 def test_undeclared_degrees_are_refused_by_the_urdf_limits(robots_dir, tmp_path):
     # the UR5's joints are limited to ±2π: its 20 s reference in degrees leaves them
-    src = robots_dir / "ur5_train.csv"
-    head = src.read_text().splitlines()[0].split(",")
-    data = np.loadtxt(src, delimiter=",", skiprows=1)
-    for i, c in enumerate(head):
-        if c.startswith(("qr_", "qm_")):
-            data[:, i] /= DEG
-    path = tmp_path / "ur5_deg.csv"
-    np.savetxt(path, data, delimiter=",", header=",".join(head), comments="", fmt="%.17g")
+    path = _in_degrees(robots_dir / "ur5_train.csv", tmp_path / "ur5_deg.csv")
     robot = didim.Robot.from_urdf(robots_dir / "ur5_cad.urdf")
     with pytest.raises(didim.DataError, match=r"beyond its URDF limits .* \(units='deg'"):
         didim.load_record(path, robot=robot, controller=robots_dir / "ur5_controller.json")

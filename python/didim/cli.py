@@ -95,8 +95,7 @@ def cmd_identify_robot(args) -> int:
     _check_outputs([args.file, args.controller, args.urdf], [args.json, args.plot])
     if args.plot:
         _check_figure_format(args.plot)
-    joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
-    robot = Robot.from_urdf(args.urdf, joints)
+    robot = Robot.from_urdf(args.urdf, _joints(args))
     if robot.locked_joints and not args.quiet:
         print(f"  … {', '.join(robot.locked_joints)} locked at zero (not actuated); --joints picks others",
               file=sys.stderr, flush=True)
@@ -344,8 +343,7 @@ def cmd_controller_fit(args) -> int:
 
             raise DataError("--columns and --force-scale apply to one axis's record; a robot's drive unit goes in "
                             "--units (e.g. deg,A=2.5)")
-        joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
-        robot = Robot.from_urdf(args.urdf, joints)
+        robot = Robot.from_urdf(args.urdf, _joints(args))
         rec = load_record(args.file, robot=robot, controller=None, units=args.units, beside_controller=False)
         for line in rec.controller_origin:
             print(f"{args.file}: {line}")
@@ -400,8 +398,7 @@ def _checked_record(args, path: str):
     from .robots import Robot
 
     if getattr(args, "urdf", None):
-        joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
-        return _robot_record(args, path, Robot.from_urdf(args.urdf, joints))
+        return _robot_record(args, path, Robot.from_urdf(args.urdf, _joints(args)))
     if args.joints:
         raise DataError("--joints picks a URDF's joints: give --urdf too")
     if args.controller:
@@ -451,21 +448,23 @@ def cmd_doctor(args) -> int:
 
     _check_outputs([args.file, args.validate, args.controller, args.urdf], [args.json, args.html, args.result])
     if args.urdf:
-        return _doctor_robot(args)
-    if args.joints:
-        from ._errors import DataError
+        d = _robot_diagnosis(args)
+    else:
+        if args.joints:
+            from ._errors import DataError
 
-        raise DataError("--joints picks a URDF's joints: give --urdf too")
-    rec = _load(args, args.file)
-    val = _load(args, args.validate) if args.validate else None
-    from .doctor import BaseFitError
+            raise DataError("--joints picks a URDF's joints: give --urdf too")
+        rec = _load(args, args.file)
+        val = _load(args, args.validate) if args.validate else None
+        from .doctor import BaseFitError
 
-    try:
-        d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet),
-                   controller_check=args.controller_check)
-    except BaseFitError as e:  # not bad input: the record does not support the base model (like a fit not converged)
-        print(f"didim: doctor: {_one_line(str(e))}", file=sys.stderr)
-        return 1
+        try:
+            d = doctor(rec, args.model, val, apM=args.apm, alpha=args.alpha, progress=_progress(args.quiet),
+                       controller_check=args.controller_check)
+        except BaseFitError as e:  # not bad input: the record does not support the base model (like a fit not
+            # converged)
+            print(f"didim: doctor: {_one_line(str(e))}", file=sys.stderr)
+            return 1
     print(d.summary())
     if args.json:
         write_text(args.json, d.to_json() + "\n")
@@ -479,34 +478,24 @@ def cmd_doctor(args) -> int:
     return 0
 
 
-def _doctor_robot(args) -> int:
+def _robot_diagnosis(args):
     """``didim doctor REC --urdf U``: the robot's base fit and where each joint's simulation and record differ."""
-    import json
-
     from ._errors import DataError
-    from ._io import write_text
     from .doctor import doctor
     from .robots import Robot
 
     for flag, value in (("--model", args.model != "rigid"), ("--apm", args.apm is not None)):
         if value:
             raise DataError(f"{flag} does not apply to a robot (--urdf): DIDIM starts from the URDF's values")
-    joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
-    robot = Robot.from_urdf(args.urdf, joints)
+    robot = Robot.from_urdf(args.urdf, _joints(args))
     rec = _robot_record(args, args.file, robot)
     val = _robot_record(args, args.validate, robot) if args.validate else None
-    d = doctor(rec, robot, val, progress=_progress(args.quiet), controller_check=args.controller_check)
-    print(d.summary())
-    if args.json:
-        write_text(args.json, d.to_json() + "\n")
-        print(f"wrote {args.json}")
-    if args.html:
-        write_text(args.html, d.to_html())
-        print(f"wrote {args.html}")
-    if args.result:
-        write_text(args.result, json.dumps(d.base.to_dict(), indent=1) + "\n")
-        print(f"wrote {args.result} (the base model: didim simulate RECORD {args.result})")
-    return 0
+    return doctor(rec, robot, val, progress=_progress(args.quiet), controller_check=args.controller_check)
+
+
+def _joints(args):
+    """The --joints list (a URDF's actuated joints), None when not given."""
+    return [j.strip() for j in args.joints.split(",") if j.strip()] if getattr(args, "joints", None) else None
 
 
 def _keyvals(items, parse) -> dict:

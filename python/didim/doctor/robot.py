@@ -88,6 +88,11 @@ class RobotDiagnosis:
         lines.append(f"({self.elapsed_s:.1f} s)")
         return "\n".join(lines)
 
+    @property
+    def final_result(self):
+        """The model the doctor ends with (the base model: no effect is adopted on robots yet)."""
+        return self.base
+
     def to_dict(self) -> Dict[str, Any]:
         from .._io import jsonable
 

@@ -185,6 +185,10 @@ class RobotResult:
                          "base": {"names": list(self.base.names), "standard_names": list(self.base.standard_names),
                                   "K": self.base.K.tolist(), "independent": list(self.base.independent)}})
 
+    def save(self, path) -> None:
+        """Writes the result as JSON (read back by :func:`didim.load_result`), as a one-axis result's ``save``."""
+        save_result(self, path)
+
     def summary(self) -> str:
         lines = [f"{self.method} on a {self.robot.ndof}-joint robot ({self.robot.name}): "
                  + ("converged" if self.converged else "NOT converged") + f" in {self.iterations} iteration(s), "
