@@ -11,7 +11,7 @@ from typing import Any, Dict
 import numpy as np
 
 from . import units
-from .doctor import lead_in_words, start_words
+from .doctor.words import lead_in_words, start_words
 from .doctor.effects import REGISTRY
 
 

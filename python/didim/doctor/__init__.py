@@ -41,9 +41,10 @@ from ..signal import Decimation
 from ..model import Model
 from ..simulation import SimResult, coulomb_eps_of, default_coulomb_eps, param_names
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
-from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect, _g, final_values,
+from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect, final_values,
                       params_text, separating_experiment)
 from .fit import Data, State, base_columns, fit_friction_law, refit
+from .words import lead_in_words, start_words
 
 #: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
 #: of it (besides being statistically significant). Real friction differs from any smooth law, and at low noise a test
@@ -356,16 +357,6 @@ def _start(rec: Recording, state: State) -> Optional[Dict[str, Any]]:
             "force_error_after_start": after, "lead_in": bool(rec.qr_lead.size)}
 
 
-def start_words(s: Dict[str, Any]) -> str:
-    """A record's start (:func:`_start`) in words."""
-    where = ("(after its lead-in: the simulation does not join the log at once)" if s.get("lead_in") else
-             "(at rest on the reference: the closed loop was already running when the log began)")
-    return (f"{s['record']} begins with the axis {_g(1e6 * s['initial_gap_m'])} µm from where the simulation is "
-            f"{where}; its first {_g(1e3 * s['seconds'])} ms hold {100 * s['residual_share']:.0f} % of its residual "
-            f"energy, which comes from that start, not from the model; after them the force error is "
-            f"{100 * s['force_error_after_start']:.2f} %")
-
-
 def _lead_in(rec: Recording) -> Optional[Dict[str, Any]]:
     """A record's lead-in (:attr:`Recording.qr_lead`): the stretch before the log that the simulation runs through."""
     lead = rec.qr_lead
@@ -374,15 +365,6 @@ def _lead_in(rec: Recording) -> Optional[Dict[str, Any]]:
     return {"record": rec.name or "recording", "samples": int(lead.size), "seconds": float(lead.size * rec.dt),
             "speed_m_s": float((rec.qr[1] - lead[-1]) / (2 * rec.dt)), "rest_m": float(lead[0]),
             "first_m": float(rec.qr[0]), "reconstructed": isinstance(rec.lead_in, str)}
-
-
-def lead_in_words(s: Dict[str, Any]) -> str:
-    """A record's lead-in (:func:`_lead_in`) in words."""
-    how = ("reconstructed back to the rest it left (to start at the first sample instead: lead_in=None, on the command "
-           "line --lead-in none)" if s["reconstructed"] else "given with the record")
-    return (f"{s['record']} begins in motion (its reference at {_g(1e3 * s['speed_m_s'])} mm/s, at "
-            f"{_g(1e3 * s['first_m'])} mm): the simulation starts {_g(1e3 * s['seconds'])} ms earlier, at rest at "
-            f"{round(1e3 * s['rest_m'], 3) + 0.0:.3f} mm, on the reference {how}")
 
 
 def _unnamed(data: Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: float) -> Optional[Finding]:
