@@ -507,9 +507,9 @@ def _first_half(rec: RobotRecording) -> RobotRecording:
     return dataclasses.replace(rec, qr=rec.qr[:m], force=rec.force[:m], qm=rec.qm[:m])
 
 
-#: The factors on each shape's ε that :func:`closed_loop_law` tries first (a factor of 4 either way, √2 apart: the
+#: The factors on each shape's ε that :func:`closed_loop_law` tries first (a factor of 2 either way, √2 apart: the
 #: error's minimum in ε is sharp, 20 % up over a factor 1.4 on the UR5).
-CLOSED_LOOP_FACTORS = tuple(2.0 ** (k / 2) for k in range(-4, 5))
+CLOSED_LOOP_FACTORS = tuple(2.0 ** (k / 2) for k in range(-2, 3))
 
 
 def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dict[str, List[float]]]], law: Law,
