@@ -528,10 +528,10 @@ def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dic
     say = progress or (lambda s: None)
     # each shape starts from the smoothing speeds the inverse model chose for it, with the model's other parameters
     # refitted for it
-    starts: Dict[Tuple[str, str], Tuple[float, ...]] = {}
+    starts: Dict[str, Tuple[float, ...]] = {}
     for sh, eps in list(per_shape.items()) + [(law[0], law[1])]:
-        starts.setdefault((sh, "fitted"), tuple(eps))
-    models: Dict[Tuple[str, str], Any] = {}
+        starts.setdefault(sh, tuple(eps))
+    models: Dict[str, Any] = {}
 
     norms = np.maximum(np.linalg.norm(part.force, axis=0), 1e-300)
 
@@ -546,16 +546,16 @@ def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dic
             return math.inf
         return balanced(sim)
 
-    def err(key: Tuple[str, str], f: float) -> float:
+    def err(key: str, f: float) -> float:
         if key not in models:
             try:
-                models[key] = refit((key[0], starts[key]))
+                models[key] = refit((key, starts[key]))
             except (SimulationError, DataError, IdentifiabilityError):
                 models[key] = None
         if models[key] is None:
             return math.inf
         robot, d = models[key]
-        return err_of(_scaled((key[0], starts[key]), f), robot, d)
+        return err_of(_scaled((key, starts[key]), f), robot, d)
 
     # every start on a coarse grid of factors on its joints' ε (the inverse model leaves ε poorly set where the law's
     # tail is flat: tanh's on the UR5 came 1.3 times too large, and at that ε another shape simulated better), then
@@ -564,7 +564,7 @@ def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dic
     # perturbation of the record's last digits; fixed grids and a parabola do not
     table = {(key, f): err(key, f) for key in starts for f in CLOSED_LOOP_FACTORS}
     (key, f0), best = min(table.items(), key=lambda t: t[1])
-    start = (key[0], starts[key])
+    start = (key, starts[key])
     fs = [f0 * 2**-0.5, f0 * 2**-0.25, f0, f0 * 2**0.25, f0 * 2**0.5]
     e = np.array([table[(key, f)] if (key, f) in table else err(key, f) for f in fs])
     x = np.log(fs)
@@ -791,7 +791,6 @@ class _RobotPlant:
         self.rec, self.robot, self.base, self.dec, self.offset = rec, robot, base, dec, offset
         self.law, self.per_shape, self.tol, self.say = law, per_shape, tol, say
         self.n, self.nb = robot.ndof, len(base.names)
-        self.pi0 = np.concatenate([np.zeros(self.n), robot.inertial_params])
         self.tail_shape = law[0]  # the shape the inverse model chose on the rows the fits keep (the law's tail)
         self.law_chosen = False
         self.free = list(range(len(base.names) + (3 if offset else 2) * self.n))
