@@ -23,6 +23,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from . import _core
 from ._errors import DataError
 from .controllers import TransferFunction
 
@@ -40,15 +41,13 @@ def free_responses(tf: TransferFunction, n: int) -> np.ndarray:
     begins with the loop already running starts the law in a state the log does not hold (an integrator's, a
     filter's); the replay from rest differs from the log by a combination of these columns, which the comparison
     takes out."""
-    from scipy.signal import lfilter
-
     den = np.array(tf.a_r) if tf.a_r == tf.a_y else np.convolve(tf.a_r, tf.a_y)
     k = len(den) - 1
     out = np.zeros((n, k))
     for i in range(k):
         x = np.zeros(n)
         x[i] = 1.0
-        out[:, i] = lfilter([1.0], den, x)
+        out[:, i] = _core.lfilter([1.0], list(den), x)
     return out
 
 

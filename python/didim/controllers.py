@@ -19,7 +19,7 @@ from typing import Any, Dict, Optional, Tuple, Union
 
 import numpy as np
 
-from . import _checks
+from . import _checks, _core
 from ._errors import DataError
 
 
@@ -234,8 +234,6 @@ class TransferFunction:
 
     def command(self, qr: np.ndarray, qm: np.ndarray, u_ext: Optional[np.ndarray] = None) -> np.ndarray:
         """The force (N) this law computes from logged ``qr`` and ``qm`` (and ``u_ext``), from rest, saturated."""
-        from scipy.signal import lfilter
-
         qr = np.asarray(qr, dtype=float)
         qm = np.asarray(qm, dtype=float)
         # each branch on its own denominator (their product would hold an integrator twice, and a double pole at 1
@@ -251,7 +249,7 @@ class TransferFunction:
             integrates = abs(den.sum()) <= 1e-12 * np.abs(den).sum()
             u0 = 0.0 if integrates else num.sum() * x[0] / den.sum()
             zi = np.array([(num[i + 1:] * x[0] - den[i + 1:] * u0).sum() for i in range(n - 1)])
-            out = lfilter(num, den, x, zi=zi)[0] if n > 1 else num[0] * x / den[0]
+            out = _core.lfilter(num, den, np.ascontiguousarray(x, dtype=float), zi=list(zi)) if n > 1 else num[0] * x / den[0]
             return out if integrates else out + num.sum() / den.sum() * x0
 
         with np.errstate(all="ignore"):

@@ -66,6 +66,19 @@ class DidimPlant(Protocol):
         """The progress line of the iteration just taken."""
 
 
+def residual_settled(loop: "DidimLoop", tol: float) -> bool:
+    """Criterion (21), every plant's: the least squares' residual ‖y − Wθ̂‖ on the simulated states changed by at
+    most ``tol`` of itself over a whole step (a shortened step says nothing of the fixed point), since the plant last
+    changed its model. The regression's residual, not the closed loop's output error: the latter wanders at the
+    level the encoder's rounding in the loop sets (a UR5's: ±0.2 % of itself from one iterate to the next, where the
+    residual moves by 1e-4 of itself)."""
+    h = loop.history[loop.since_step:]
+    if loop.alpha != 1 or len(h) < 2:
+        return False
+    rho, rho_prev = float(h[-1]["residual_norm"]), float(h[-2]["residual_norm"])
+    return abs(rho - rho_prev) <= tol * rho_prev
+
+
 @dataclass
 class DidimLoop:
     """The state and outcome of DIDIM's iterations: ``theta`` the last estimate, ``best`` the iterate with the lowest
@@ -87,8 +100,10 @@ class DidimLoop:
     #: The last simulation and its output error.
     sim: Any = None
     error: float = math.nan
-    #: Where in ``errors`` and ``history`` the iterations began again after the plant changed its model.
+    #: Where in ``errors`` the iterations began again after the plant changed its model.
     since: int = 0
+    #: Where in ``history`` they began again.
+    since_step: int = 0
 
 
 def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
@@ -175,10 +190,10 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
                 break
             if verdict == "restart":
                 loop.best = (math.inf, None, None, None)
-                loop.since = len(loop.errors)
+                loop.since, loop.since_step = len(loop.errors), len(loop.history)
     if not loop.converged and not loop.message:
         loop.message = f"no convergence in {max_iter} iterations"
     return loop
 
 
-__all__ = ["DidimPlant", "DidimLoop", "didim_loop", "MAX_BACKTRACKS", "DIVERGENCE_FACTOR"]
+__all__ = ["DidimPlant", "DidimLoop", "didim_loop", "residual_settled", "MAX_BACKTRACKS", "DIVERGENCE_FACTOR"]

@@ -33,7 +33,7 @@ from .result import IdentificationResult, Iteration
 from .model import STRUCTURE_FIELDS, Model, as_model, knot_weights
 from .signal import Decimation, decimation_matches, diffcent, lowpass
 from .simulation import DEFAULT_TOL, coulomb_eps_of, params_vector, problem, settling_samples, simulate
-from .didim_loop import DIVERGENCE_FACTOR, DidimLoop, didim_loop
+from .didim_loop import DIVERGENCE_FACTOR, DidimLoop, didim_loop, residual_settled
 
 Progress = Optional[Callable[[str], None]]
 
@@ -390,10 +390,8 @@ class _AxisPlant:
         """Criterion (21) on a whole step: the regression's residual changed by at most ``tol`` of itself (or the
         model reproduces the data exactly)."""
         h = loop.history
-        if loop.alpha != 1 or len(h) < 2:
-            return False
-        rho, rho_prev = float(h[-1]["residual_norm"]), float(h[-2]["residual_norm"])
-        return abs(rho - rho_prev) / rho_prev <= self.tol or h[-1]["relative_error"] <= EXACT_FIT
+        return residual_settled(loop, self.tol) or (loop.alpha == 1 and len(h) >= 2
+                                                    and h[-1]["relative_error"] <= EXACT_FIT)
 
     def settled(self, loop: DidimLoop) -> str:
         return "accept"

@@ -366,6 +366,31 @@ fn design<'py>(
     }
 }
 
+/// Causal filtering, `scipy.signal.lfilter(b, a, x, zi=zi)[0]` (direct form II transposed; `zi` the initial state,
+/// zero when omitted).
+#[pyfunction]
+#[pyo3(signature = (b, a, x, *, zi=None))]
+fn lfilter<'py>(
+    py: Python<'py>,
+    b: Vec<Real>,
+    a: Vec<Real>,
+    x: PyReadonlyArray1<'py, f64>,
+    zi: Option<Vec<Real>>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (b, a) = (reals(b), reals(a));
+    if b.is_empty() || a.is_empty() || a[0] == 0.0 {
+        return Err(PyValueError::new_err(
+            "lfilter: b and a must be non-empty and a[0] non-zero",
+        ));
+    }
+    let zi = zi.map(reals);
+    let x = slice1(&x);
+    let x: &[f64] = &x;
+    let tf = flt::Tf { b, a };
+    let y = py.detach(|| flt::lfilter(&tf, x, zi.as_deref()));
+    Ok(y.into_pyarray(py))
+}
+
 /// Zero-phase filtering, `scipy.signal.filtfilt(b, a, x, padtype="odd", padlen=padlen)`.
 #[pyfunction]
 #[pyo3(signature = (b, a, x, *, padlen=None))]
@@ -492,6 +517,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(lstsq, m)?)?;
     m.add_function(wrap_pyfunction!(butter, m)?)?;
     m.add_function(wrap_pyfunction!(cheby1, m)?)?;
+    m.add_function(wrap_pyfunction!(lfilter, m)?)?;
     m.add_function(wrap_pyfunction!(filtfilt, m)?)?;
     m.add_function(wrap_pyfunction!(sosfiltfilt, m)?)?;
     m.add_function(wrap_pyfunction!(decimate, m)?)?;

@@ -19,7 +19,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 import numpy as np
 
 from .. import _checks, _core
-from ..didim_loop import didim_loop
+from ..didim_loop import didim_loop, residual_settled
 from .._errors import DataError, IdentifiabilityError, SimulationError
 from .chain import Robot
 from .record import RobotRecording
@@ -40,9 +40,6 @@ COEF_TOL = 1e-9
 #: Rows where a joint moves slower than this share of its top speed are left out of its least squares: there the
 #: friction's shape through zero speed (unknown, and not the model's) sets the force.
 SLOW_SHARE = 0.05
-
-#: DIDIM has settled when its output error has not bettered its best by ``tol`` of itself in this many iterations.
-STALL = 3
 
 #: The friction law of the simulated loop: algebraic, each joint's smoothing speed this share of its speed scale (its
 #: shape only matters in the rows left out).
@@ -270,9 +267,10 @@ def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, 
     arm, body = ind[ind < n], ind[ind >= n]  # rotor inertias' columns, then the bodies'
     y = robot.regressor(q, v, a)  # (N, n, 10 n)
     pos = np.arange(nb)
-    out[:, :, pos[ind >= n]] = y[:, :, body - n]
+    # the independent columns are sorted, the rotor inertias' first: the bodies' fill one slice
+    out[:, :, len(arm):nb] = np.take(y, body - n, axis=2)
     idx = np.arange(n)
-    for k, col in zip(pos[ind < n], arm):
+    for k, col in zip(pos[:len(arm)], arm):
         out[:, col, k] = a[:, col]  # a rotor inertia acts on its own joint's row, times its acceleration
     out[:, idx, nb + idx] = v
     out[:, idx, nb + n + idx] = _coulomb(v, law)
@@ -301,20 +299,10 @@ def top_speeds(rec: RobotRecording) -> np.ndarray:
     return np.max(np.abs(np.diff(rec.qr, axis=0)), axis=0) / rec.dt
 
 
-def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray, vmax: np.ndarray) -> List[Tuple[np.ndarray, np.ndarray]]:
-    """Each joint's force and regressor rows decimated, the rows where it moves slowly (below :data:`SLOW_SHARE` of
-    its top reference speed ``vmax``) left out."""
-    out = []
-    for j in range(y.shape[1]):
-        yd, wd = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, :]))
-        keep = np.abs(dec(np.ascontiguousarray(v[:, j]))) > SLOW_SHARE * vmax[j]
-        out.append((yd[keep], wd[keep]))
-    return out
-
-
-def _weighted(parts: List[Tuple[np.ndarray, np.ndarray]]) -> Tuple[np.ndarray, np.ndarray]:
+def _weighted_fit(parts: List[Tuple[np.ndarray, np.ndarray]]) -> Tuple[np.ndarray, np.ndarray, Dict[str, float]]:
     """Least squares of the joints' rows, ordinary first, then each joint's rows divided by its residual's σ: the
-    estimate and its covariance. A joint without two rows to weigh (it never moved above the threshold) is left out."""
+    estimate, its covariance, and the regression's residual ‖y − Wθ̂‖ on the rows it kept (unweighted: the weights are
+    the residuals' own and change with them) with its share of ‖y‖: what criterion (21) follows."""
     parts = [p for p in parts if len(p[0]) >= 2]
     if not parts:
         from .._errors import IdentifiabilityError
@@ -324,7 +312,9 @@ def _weighted(parts: List[Tuple[np.ndarray, np.ndarray]]) -> Tuple[np.ndarray, n
     sig = [max(float(np.std(yd - wd @ theta)), 1e-12 * max(float(np.std(yd)), 1e-300)) for yd, wd in parts]
     theta, cov, _ = _solve(np.concatenate([yd / s_ for (yd, _), s_ in zip(parts, sig)]),
                            np.concatenate([wd / s_ for (_, wd), s_ in zip(parts, sig)]))
-    return theta, cov
+    rho = math.sqrt(sum(float(np.sum((yd - wd @ theta) ** 2)) for yd, wd in parts))
+    norm = math.sqrt(sum(float(yd @ yd) for yd, _ in parts))
+    return theta, cov, {"residual_norm": rho, "relative_error": rho / norm if norm > 0 else 0.0}
 
 
 def _solve(y: np.ndarray, w: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -346,22 +336,72 @@ def _measured_states(rec: RobotRecording, dec) -> Tuple[np.ndarray, np.ndarray, 
     return q, v, a
 
 
-def _fit(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, law: Law, dec,
-         y: np.ndarray, coulomb: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
-    """Weighted least squares (:func:`_weighted`) of the force ``y`` on the model's regressor at the states. With
-    ``coulomb`` (each joint's Coulomb friction), one more column: the law's derivative in its smoothing speed ε times
-    it, whose coefficient is the step of ε that the force asks for (a Gauss–Newton step: ε trades with Fv where the
-    law's tail is long, and is estimated with it)."""
-    w = _model_regressor(robot, base, q, v, a, offset, law)
-    if coulomb is not None:
-        n = robot.ndof
-        ds = (_coulomb(v, _scaled(law, 1 + EPS_STEP)) - _coulomb(v, _scaled(law, 1 - EPS_STEP)))
-        ds /= 2 * EPS_STEP * np.maximum(np.asarray(law[1]), 1e-300)
-        col = np.zeros((len(q), n, n))
-        idx = np.arange(n)
-        col[:, idx, idx] = ds * np.asarray(coulomb)  # each joint's ε on its own rows
-        w = np.concatenate([w, col], axis=2)
-    return _weighted(_rows(dec, y, w, v, top_speeds(rec)))
+def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray,
+          vmax: np.ndarray) -> List[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Each joint's force and regressor rows decimated, the rows where it moves slowly (below :data:`SLOW_SHARE` of
+    its top reference speed ``vmax``) left out: (force, regressor, the decimated rows kept) per joint."""
+    out = []
+    # only the columns that act on a joint (a chain's joint feels the bodies beyond it and its own drive: half of a
+    # 6-joint arm's columns are zero on its rows); zero columns decimate to zero
+    acting = np.any(w != 0, axis=0)
+    for j in range(y.shape[1]):
+        act = np.flatnonzero(acting[j])
+        if len(act):
+            yd, wa = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, act]))
+        else:
+            yd, wa = dec(np.ascontiguousarray(y[:, j])), None
+        keep = np.abs(dec(np.ascontiguousarray(v[:, j]))) > SLOW_SHARE * vmax[j]
+        wd = np.zeros((int(keep.sum()), w.shape[2]))
+        if wa is not None:
+            wd[:, act] = wa[keep]
+        out.append((yd[keep], wd, keep))
+    return out
+
+
+class _InverseModel:
+    """The inverse model's least squares on one set of states ``q, v, a`` (measured or simulated): each joint's force
+    and regressor rows decimated once, the rows where it moves slowly (below :data:`SLOW_SHARE` of its top reference
+    speed) left out; a friction law only replaces each joint's Coulomb column (one column decimated per joint), so
+    that the laws a search compares, and DIDIM's step of ε, cost a fraction of a fit each."""
+
+    def __init__(self, rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, dec,
+                 y: Optional[np.ndarray] = None):
+        self.robot, self.base, self.offset, self.dec, self.v = robot, base, offset, dec, v
+        n, nb = robot.ndof, len(base.names)
+        self.n, self.nb = n, nb
+        w = _model_regressor(robot, base, q, v, a, offset, ("algebraic", (0.0,) * n))
+        w[:, np.arange(n), nb + n + np.arange(n)] = 0.0  # each joint's Coulomb column is the law's (see rows)
+        got = _rows(dec, rec.force if y is None else y, w, v, top_speeds(rec))
+        self.parts = [(yd, wd) for yd, wd, _ in got]
+        self.keep = [keep for _, _, keep in got]
+
+    def column(self, j: int, values: np.ndarray) -> np.ndarray:
+        """A full-rate column on joint ``j``'s rows, decimated, on its kept rows."""
+        return self.dec(np.ascontiguousarray(values))[self.keep[j]]
+
+    def rows(self, law: Law, coulomb: Optional[np.ndarray] = None) -> List[Tuple[np.ndarray, np.ndarray]]:
+        """Each joint's kept rows with its Coulomb column under ``law``. With ``coulomb`` (each joint's Coulomb
+        friction), one more column per joint: the law's derivative in its smoothing speed ε times it, whose
+        coefficient is the step of ε that the force asks for (a Gauss–Newton step: ε trades with Fv where the law's
+        tail is long, and is estimated with it)."""
+        n, nb, v = self.n, self.nb, self.v
+        out = []
+        for j, (yd, wd) in enumerate(self.parts):
+            wl = wd.copy()
+            wl[:, nb + n + j] = self.column(j, _sign(v[:, j], law[0], law[1][j]))
+            if coulomb is not None:
+                e = max(float(law[1][j]), 1e-300)
+                ds = (_sign(v[:, j], law[0], e * (1 + EPS_STEP)) - _sign(v[:, j], law[0], e * (1 - EPS_STEP)))
+                col = np.zeros((len(yd), n))
+                col[:, j] = self.column(j, ds / (2 * EPS_STEP * e) * float(coulomb[j]))
+                wl = np.concatenate([wl, col], axis=1)
+            out.append((yd, wl))
+        return out
+
+    def fit(self, law: Law, coulomb: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray, Dict[str, float]]:
+        """Weighted least squares (:func:`_weighted_fit`) under ``law``: the estimate, its covariance and the
+        regression's residual."""
+        return _weighted_fit(self.rows(law, coulomb))
 
 
 #: Relative step of ε in the law's central difference.
@@ -405,29 +445,18 @@ EPS_CHI2 = 10.83
 LAW_TIE = 1e-3
 
 
-def fit_law(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, dec,
+def fit_law(rec: RobotRecording, inverse: "_InverseModel",
             per_shape: Optional[Dict[str, Tuple[float, ...]]] = None) -> Law:
     """The friction law through zero speed that best explains the force: each shape with each joint's ε a share of the
-    grid of its speed scale (:func:`_speed_scales`), in the weighted least squares of the inverse model on the states ``q, v, a`` (the rows
-    where a joint moves slowly are left out, as in every fit: what is chosen is the law's tail, where a slow law such
-    as the atan one is still several percent below its Coulomb level at ten times ε and would bend the viscous
-    friction), then each joint's ε refined on its own (a prismatic quill's m/s and a shoulder's rad/s have no common
-    scale). ``per_shape`` receives each shape's best ε per joint on the grid."""
-    from scipy.optimize import minimize_scalar
-
-    n = robot.ndof
-    vmax = top_speeds(rec)
+    grid of its speed scale (:func:`_speed_scales`), in the weighted least squares of the inverse model ``inverse``
+    (the rows where a joint moves slowly are left out, as in every fit: what is chosen is the law's tail, where a
+    slow law such as the atan one is still several percent below its Coulomb level at ten times ε and would bend the
+    viscous friction), then each joint's ε refined on its own (a prismatic quill's m/s and a shoulder's rad/s have no
+    common scale). ``per_shape`` receives each shape's best ε per joint on the grid."""
+    n, nb, v = inverse.n, inverse.nb, inverse.v
     scale = _speed_scales(rec)
-    w = _model_regressor(robot, base, q, v, a, offset, ("algebraic", (0.0,) * n))
-    nb = len(base.names)
     fc_cols = [nb + n + j for j in range(n)]
-    keep = [np.zeros(0, bool)] * n
-    parts = []
-    for j in range(n):
-        yd, wd = dec.apply(np.ascontiguousarray(rec.force[:, j]), np.ascontiguousarray(w[:, j, :]))
-        vd = dec(np.ascontiguousarray(v[:, j]))
-        keep[j] = np.abs(vd) > SLOW_SHARE * vmax[j]
-        parts.append((yd[keep[j]], wd[keep[j]]))
+    parts = inverse.rows(("algebraic", (0.0,) * n))  # the hard sign
     # per-joint weights from the hard sign's fit
     y0 = np.concatenate([p[0] for p in parts])
     w0 = np.concatenate([p[1] for p in parts])
@@ -438,7 +467,7 @@ def fit_law(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, of
     # the same residual as the whole fit, at a fraction of its cost
     sizes = [len(p_[0]) for p_ in parts]
     bounds = np.concatenate([[0], np.cumsum(sizes)])
-    other = [c for c in range(w.shape[2]) if c not in fc_cols]
+    other = [c for c in range(w0.shape[1]) if c not in fc_cols]
     yy = np.concatenate([p_[0] / s_ for p_, s_ in zip(parts, sig)])
     wf = np.concatenate([p_[1][:, other] / s_ for p_, s_ in zip(parts, sig)])
     u, sv, _ = np.linalg.svd(wf, full_matrices=False)
@@ -450,7 +479,7 @@ def fit_law(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, of
         """Joint j's Coulomb column under the law, weighted, with the fixed columns' span projected out."""
         key = (shape, j, eps)
         if key not in cols:
-            c = dec(np.ascontiguousarray(_sign(v[:, j], shape, eps)))[keep[j]] / sig[j]
+            c = inverse.column(j, _sign(v[:, j], shape, eps)) / sig[j]
             rows = slice(bounds[j], bounds[j + 1])
             full = -(basis @ (basis[rows].T @ c))
             full[rows] += c
@@ -484,10 +513,15 @@ def fit_law(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, of
                 e[j] = math.exp(x)
                 return cost((shape, tuple(e)))[0]
 
-            got = minimize_scalar(cj, bounds=(math.log(eps[j]) - step, math.log(eps[j]) + step), method="bounded",
-                                  options={"xatol": 0.02})
-            if got.fun < total - EPS_CHI2 * per[j] / max(sizes[j] - 1, 1):
-                eps[j] = float(math.exp(got.x))
+            # a grid a ninth of the kind's grid step apart, and the parabola through the lowest and its neighbours
+            xs = math.log(eps[j]) + np.linspace(-step, step, 9)
+            cs = np.array([cj(float(x_)) for x_ in xs])
+            x_best = _parabola_min(xs, cs)
+            c_best = cj(x_best) if x_best != xs[int(np.argmin(cs))] else float(np.min(cs))
+            if c_best > float(np.min(cs)):
+                x_best, c_best = float(xs[int(np.argmin(cs))]), float(np.min(cs))
+            if c_best < total - EPS_CHI2 * per[j] / max(sizes[j] - 1, 1):
+                eps[j] = float(math.exp(x_best))
                 total, per = cost((shape, tuple(eps)))
         return tuple(eps), total
 
@@ -500,6 +534,22 @@ def fit_law(rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, of
     return (shape, laws[shape][0])
 
 
+def _parabola_min(x: np.ndarray, e: np.ndarray) -> float:
+    """The lowest of ``e`` on the sorted grid ``x``, moved to the vertex of the parabola through it and its neighbours
+    when that opens upward (kept between them)."""
+    i = int(np.argmin(e))
+    xi = float(x[i])
+    if 0 < i < len(x) - 1 and np.all(np.isfinite(e[i - 1:i + 2])):
+        (x0, x1, x2), (e0, e1, e2) = x[i - 1:i + 2], e[i - 1:i + 2]
+        # Newton's form e0 + d01 (x − x0) + c2 (x − x0)(x − x1), its vertex
+        d01, d12 = (e1 - e0) / (x1 - x0), (e2 - e1) / (x2 - x1)
+        c2 = (d12 - d01) / (x2 - x0)
+        if c2 > 0:
+            c1 = d01 - c2 * (x0 + x1)  # e = c2 x² + c1 x + c0
+            xi = float(np.clip(-c1 / (2 * c2), x0, x2))
+    return xi
+
+
 def _first_half(rec: RobotRecording) -> RobotRecording:
     import dataclasses
 
@@ -507,9 +557,10 @@ def _first_half(rec: RobotRecording) -> RobotRecording:
     return dataclasses.replace(rec, qr=rec.qr[:m], force=rec.force[:m], qm=rec.qm[:m])
 
 
-#: The factors on each shape's ε that :func:`closed_loop_law` tries first (a factor of 2 either way, √2 apart: the
-#: error's minimum in ε is sharp, 20 % up over a factor 1.4 on the UR5).
-CLOSED_LOOP_FACTORS = tuple(2.0 ** (k / 2) for k in range(-2, 3))
+#: The factors on each shape's ε that :func:`closed_loop_law` tries first (a factor of 2 either way), before the best
+#: shape's grid is refined to a factor 2^(1/4) around its best (the error's minimum in ε is sharp: 20 % up over a
+#: factor 1.4 on the UR5).
+CLOSED_LOOP_FACTORS = (0.5, 1.0, 2.0)
 
 
 def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dict[str, List[float]]]], law: Law,
@@ -534,17 +585,19 @@ def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dic
     models: Dict[str, Any] = {}
 
     norms = np.maximum(np.linalg.norm(part.force, axis=0), 1e-300)
+    #: each simulation's joints' absolute force errors, by (shape, factor on its start's ε)
+    per_joint: Dict[Tuple[str, float], np.ndarray] = {}
 
-    def balanced(sim) -> float:
+    def balanced(per: np.ndarray) -> float:
         """The joints' relative force errors, each joint alike (the total would hear only the heavy joints)."""
-        return float(np.sqrt(np.mean((np.linalg.norm(part.force - sim["force"], axis=0) / norms) ** 2)))
+        return float(np.sqrt(np.mean((per / norms) ** 2)))
 
-    def err_of(lw: Law, robot: Robot, d) -> float:
+    def joint_errors(lw: Law, robot: Robot, d) -> Optional[np.ndarray]:
         try:
             sim = _simulate(part, robot, d, lw)
         except (SimulationError, DataError):
-            return math.inf
-        return balanced(sim)
+            return None
+        return np.linalg.norm(part.force - sim["force"], axis=0)
 
     def err(key: str, f: float) -> float:
         if key not in models:
@@ -555,7 +608,11 @@ def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dic
         if models[key] is None:
             return math.inf
         robot, d = models[key]
-        return err_of(_scaled((key, starts[key]), f), robot, d)
+        per = joint_errors(_scaled((key, starts[key]), f), robot, d)
+        if per is None:
+            return math.inf
+        per_joint[(key, f)] = per
+        return balanced(per)
 
     # every start on a coarse grid of factors on its joints' ε (the inverse model leaves ε poorly set where the law's
     # tail is flat: tanh's on the UR5 came 1.3 times too large, and at that ε another shape simulated better), then
@@ -569,43 +626,26 @@ def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dic
     e = np.array([table[(key, f)] if (key, f) in table else err(key, f) for f in fs])
     x = np.log(fs)
     i = int(np.argmin(e))
-    xi = float(x[i])
-    if 0 < i < len(x) - 1 and np.all(np.isfinite(e[i - 1:i + 2])):
-        c2, c1, _ = np.polyfit(x[i - 1:i + 2], e[i - 1:i + 2], 2)
-        if c2 > 0:
-            xi = float(np.clip(-c1 / (2 * c2), x[i - 1], x[i + 1]))
+    xi = _parabola_min(x, e)
     best_law, best = _scaled(start, fs[i]), float(e[i])
     if xi != x[i]:
         ec = err(key, math.exp(xi))
         if ec < best:
             best_law, best = _scaled(start, math.exp(xi)), ec
-    # then each joint's ε on its own, by that joint's own force error (a joint's ε acts on its own torque: the total
-    # error hardly sees a wrist's), on the same grid and parabola
+    # then each joint's ε on its own, by that joint's own force error over the shape's simulations so far (a joint's
+    # ε acts on its own torque, hardly on the others': the total error does not see a wrist's, and a Panda's slow
+    # fourth joint turns over at a third of the others' ε), its lowest moved to the parabola's vertex; kept when the
+    # joints' errors together fall
     if models.get(key) is not None and len(best_law[1]) > 1:
         robot, d = models[key]
-        ff = np.array([0.5, 2**-0.5, 1.0, 2**0.5, 2.0])
-        for j in range(len(best_law[1])):
-            def joint_err(f: float, j: int = j) -> float:
-                eps = list(best_law[1])
-                eps[j] *= f
-                try:
-                    sim = _simulate(part, robot, d, (best_law[0], tuple(eps)))
-                except (SimulationError, DataError):
-                    return math.inf
-                return float(np.linalg.norm(part.force[:, j] - sim["force"][:, j]))
-
-            ej = np.array([joint_err(f) for f in ff])
-            k = int(np.argmin(ej))
-            xk = float(np.log(ff[k]))
-            if 0 < k < len(ff) - 1 and np.all(np.isfinite(ej[k - 1:k + 2])):
-                c2, c1, _ = np.polyfit(np.log(ff[k - 1:k + 2]), ej[k - 1:k + 2], 2)
-                if c2 > 0:
-                    xk = float(np.clip(-c1 / (2 * c2), np.log(ff[k - 1]), np.log(ff[k + 1])))
-            if k != 2 or xk != 0.0:
-                eps = list(best_law[1])
-                eps[j] *= math.exp(xk)
-                best_law = (best_law[0], tuple(eps))
-        best = err_of(best_law, robot, d)
+        done = sorted(f for (k, f) in per_joint if k == key)
+        xs = np.log(done)
+        errs = np.array([per_joint[(key, f)] for f in done])
+        factors = [math.exp(_parabola_min(xs, errs[:, j])) for j in range(len(best_law[1]))]
+        candidate = _scaled(start, factors)
+        per = joint_errors(candidate, robot, d)
+        if per is not None and balanced(per) < best:
+            best_law, best = candidate, balanced(per)
     say(f"friction law through zero speed, in closed loop: {best_law[0]}, ε = "
         + ", ".join(f"{e:.4g}" for e in best_law[1]) + f" (joints' force errors on the first half, RMS {100 * best:.3f} %)")
     return best_law
@@ -726,12 +766,14 @@ def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> Robot
     base = base_parameters(robot)
     dec = _decimation(rec)
     q, v, a = _measured_states(rec, dec)
+    inverse = _InverseModel(rec, robot, base, q, v, a, offset, dec)
     per_shape: Dict[str, Tuple[float, ...]] = {}
-    law = fit_law(rec, robot, base, q, v, a, offset, dec, per_shape)
+    law = fit_law(rec, inverse, per_shape)
     # the law through zero speed is the closed loop's to choose (the inverse model leaves out where it acts), each
     # shape compared with the parameters the inverse model gives with it
+
     def refit(lw: Law):
-        return _model_of(robot, base, offset, _fit(rec, robot, base, q, v, a, offset, lw, dec, rec.force)[0])
+        return _model_of(robot, base, offset, inverse.fit(lw)[0])
 
     sim_law = law
     try:
@@ -742,7 +784,7 @@ def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> Robot
     # (the rows it fits see the law's tail; a shape chosen against it there bends the viscous friction: a Panda's
     # slow joint 44 % off), the closed loop's law simulating them
     fit_with = law if sim_law[0] == law[0] else (sim_law[0], tuple(per_shape.get(sim_law[0], sim_law[1])))
-    theta, cov = _fit(rec, robot, base, q, v, a, offset, fit_with, dec, rec.force)
+    theta, cov, _ = inverse.fit(fit_with)
     res = _result("idim-ls", rec, robot, base, offset, theta, cov, law=sim_law)
     try:
         sim = simulate_robot(rec, res)
@@ -767,17 +809,6 @@ def _model_of(robot: Robot, base: BaseParameters, offset: bool, theta: np.ndarra
     return robot.with_inertial_params(pi[n:]), d
 
 
-def _settled(loop, tol: float) -> bool:
-    """A robot's DIDIM has settled when its closed-loop force error changed by less than ``tol`` of itself in the last
-    step, or has not bettered the best by that much in :data:`STALL` iterations (it wanders at the level the
-    encoder's rounding in the loop sets)."""
-    h = loop.errors[loop.since:]  # since the plant last changed its model
-    if len(h) < 2:
-        return False
-    stalled = len(h) > STALL and min(h[-STALL:]) > (1 - tol) * min(h[:-STALL])
-    return abs(h[-2] - h[-1]) <= tol * h[-1] or stalled
-
-
 class _RobotPlant:
     """A robot as DIDIM's loop (:func:`didim.didim_loop.didim_loop`) sees it: θ holds the base parameters, each
     joint's viscous and Coulomb friction (and offset); the closed loop of the arm with the standard parameters
@@ -793,6 +824,7 @@ class _RobotPlant:
         self.n, self.nb = robot.ndof, len(base.names)
         self.tail_shape = law[0]  # the shape the inverse model chose on the rows the fits keep (the law's tail)
         self.law_chosen = False
+        self.inverses: List[Tuple[np.ndarray, _InverseModel]] = []
         self.free = list(range(len(base.names) + (3 if offset else 2) * self.n))
         self.norm = float(np.linalg.norm(rec.force))
 
@@ -809,13 +841,23 @@ class _RobotPlant:
     def output_error(self, sim) -> float:
         return float(np.linalg.norm(self.rec.force - sim["force"]) / self.norm)
 
+    def inverse(self, theta: np.ndarray, sim) -> _InverseModel:
+        """The inverse model on the simulated states of θ (the last few kept: the law's search refits on the best
+        iterate's)."""
+        for th, im in self.inverses:
+            if np.array_equal(th, theta):
+                return im
+        im = _InverseModel(self.rec, self.robot, self.base, sim["q"], sim["qd"], sim["qdd"], self.offset, self.dec)
+        self.inverses = [(theta.copy(), im)] + self.inverses[:3]
+        return im
+
     def solve(self, theta: np.ndarray, sim) -> Dict[str, Any]:
         n, nb, rec = self.n, self.nb, self.rec
+        inverse = self.inverse(theta, sim)
         if self.law_chosen and min(self.law[1]) > 0 and self.law[0] == self.tail_shape:
             # each joint's ε with the parameters, once the closed loop has confirmed the shape that the tail chose:
             # the fits keep the tail's rows, and a shape the closed loop chose against it has its ε set near zero speed
-            theta_e, cov_e = _fit(rec, self.robot, self.base, sim["q"], sim["qd"], sim["qdd"], self.offset, self.law,
-                                  self.dec, rec.force, coulomb=theta[nb + n:nb + 2 * n])
+            theta_e, cov_e, _ = inverse.fit(self.law, coulomb=theta[nb + n:nb + 2 * n])
             step = theta_e[-n:]
             sd = np.sqrt(np.maximum(np.diag(cov_e)[-n:], 0.0))
             eps = np.asarray(self.law[1])
@@ -824,28 +866,28 @@ class _RobotPlant:
                 new = np.where(moved, np.clip(eps + step, eps / 2, 2 * eps), eps)
                 self.law = (self.law[0], tuple(float(e) for e in new))
                 self.say("smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new))
-        est, cov = _fit(rec, self.robot, self.base, sim["q"], sim["qd"], sim["qdd"], self.offset, self.law, self.dec,
-                        rec.force)
+        est, cov, res = inverse.fit(self.law)
         return {"params": est, "covariance": cov, "std": np.sqrt(np.maximum(np.diag(cov), 0.0)), "law": sim["law"],
-                "force_errors": force_errors(rec, sim["force"])}
+                "force_errors": force_errors(rec, sim["force"]), **res}
 
     def physical(self, new: np.ndarray, old) -> bool:
         return bool(np.all(np.isfinite(new)))
 
     def converged(self, loop) -> bool:
-        return _settled(loop, self.tol)
+        return residual_settled(loop, self.tol)
 
     def settled(self, loop) -> str:
         if self.law_chosen:
             return "accept"
         self.law_chosen = True
         # each shape with the parameters one least squares gives with it on the best iterate's simulated states
-        sim = self.simulate(loop.best[1])
+        best = loop.best[1]
+        inverse = next((im for th, im in self.inverses if np.array_equal(th, best)), None)
+        if inverse is None:
+            inverse = self.inverse(best, self.simulate(best))
 
         def refit(lw: Law):
-            est, _ = _fit(self.rec, self.robot, self.base, sim["q"], sim["qd"], sim["qdd"], self.offset, lw, self.dec,
-                          self.rec.force)
-            return self.model(est)
+            return self.model(inverse.fit(lw)[0])
 
         new_law = closed_loop_law(self.rec, refit, self.law, self.per_shape, self.say)
         if new_law != self.law:
@@ -881,9 +923,9 @@ def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: 
     say = progress or (lambda s: None)
     base = base_parameters(robot)
     dec = _decimation(rec)
-    qm, vm, am = _measured_states(rec, dec)
+    measured = _InverseModel(rec, robot, base, *_measured_states(rec, dec), offset, dec)
     per_shape: Dict[str, Tuple[float, ...]] = {}
-    law = fit_law(rec, robot, base, qm, vm, am, offset, dec, per_shape)
+    law = fit_law(rec, measured, per_shape)
     say(f"friction law through zero speed, by the inverse model: {law[0]}, ε = " + ", ".join(f"{e:.4g}" for e in law[1]))
     n = robot.ndof
     pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
@@ -896,7 +938,7 @@ def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: 
         why = (f"its first closed-loop force error was {100 * run.errors[0]:.0f} %"
                if run.errors and run.errors[0] > ABSURD_ERROR else run.message)
         say(f"DIDIM from the URDF's values failed ({why}): again from IDIM-LS's estimate")
-        theta_ls, _ = _fit(rec, robot, base, qm, vm, am, offset, law, dec, rec.force)
+        theta_ls = measured.fit(law)[0]
         again = _didim_run(rec, robot, base, dec, offset, theta_ls, law, per_shape, max_iter, tol, say)
         if again.best[2] is not None and (run.best[2] is None or again.best[0] < run.best[0]):
             notes.append(f"DIDIM from the URDF's values failed ({why}); it started from IDIM-LS's estimate")
@@ -970,14 +1012,15 @@ class _PayloadPlant:
         q, v, a = sim["q"], sim["qd"], sim["qdd"]
         known = np.einsum("kjp,p->kj", _model_regressor(res.robot, res.base, q, v, a, res.offset, self.law), self.theta)
         w = res.robot.regressor(q, v, a)[:, :, -10:][:, :, self.free]
-        est, cov = _weighted(_rows(self.dec, rec.force - known, w, v, top_speeds(rec)))
-        return {"params": est, "covariance": cov, "std": np.sqrt(np.maximum(np.diag(cov), 0.0))}
+        rows = _rows(self.dec, rec.force - known, w, v, top_speeds(rec))
+        est, cov, fit = _weighted_fit([(yd, wd) for yd, wd, _ in rows])
+        return {"params": est, "covariance": cov, "std": np.sqrt(np.maximum(np.diag(cov), 0.0)), **fit}
 
     def physical(self, new: np.ndarray, old) -> bool:
         return bool(np.all(np.isfinite(new)) and self.pi[-10] + new[0] > 0)  # the last body keeps a mass
 
     def converged(self, loop) -> bool:
-        return _settled(loop, self.tol)
+        return residual_settled(loop, self.tol)
 
     def settled(self, loop) -> str:
         return "accept"

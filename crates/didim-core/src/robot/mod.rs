@@ -317,25 +317,21 @@ impl Robot {
         let p = BODY_PARAMS * n;
         let (poses, vel, acc) = self.forward(q, v, a, true);
         let mut y = vec![0.0; n * p];
+        // joint j's torque from body i's force f is s_j · X*_{j<-i} f = (X_{i<-j} s_j) · f: the
+        // ancestors' axes carried out to each body (one motion transform per pair), rather than
+        // each body's ten unit forces carried in to every ancestor (ten force transforms per pair)
+        let mut axes: Vec<Motion> = Vec::with_capacity(n);
         for i in 0..n {
-            // the body's spatial force is linear in its parameters: one column per unit parameter
-            let mut cols: Vec<Force> = (0..BODY_PARAMS)
-                .map(|k| {
-                    let mut e = [0.0; BODY_PARAMS];
-                    e[k] = 1.0;
-                    spatial::inertia_apply(&e, &acc[i])
-                        + vel[i].cross_force(&spatial::inertia_apply(&e, &vel[i]))
-                })
-                .collect();
-            for j in (0..=i).rev() {
-                let s = Self::subspace(&self.joints[j]);
-                for (k, c) in cols.iter().enumerate() {
-                    y[j * p + BODY_PARAMS * i + k] = s.dot(c);
+            if i > 0 {
+                for m in axes.iter_mut() {
+                    *m = poses[i].motion_to_child(m);
                 }
-                if j > 0 {
-                    for c in cols.iter_mut() {
-                        *c = poses[j].force_to_parent(c);
-                    }
+            }
+            axes.push(Self::subspace(&self.joints[i]));
+            // the body's spatial force is linear in its parameters: one column per unit parameter
+            for (k, c) in spatial::unit_forces(&acc[i], &vel[i]).iter().enumerate() {
+                for (j, s) in axes.iter().enumerate() {
+                    y[j * p + BODY_PARAMS * i + k] = s.dot(c);
                 }
             }
         }

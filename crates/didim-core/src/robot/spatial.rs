@@ -156,6 +156,54 @@ pub fn inertia_apply(p: &[f64; BODY_PARAMS], m: &Motion) -> Force {
     }
 }
 
+/// The regressor's columns of one body: for each of its ten parameters (as [`inertia_apply`] orders
+/// them), the spatial force `I_k·a + v ×* (I_k·v)` of a body whose parameters are that one at 1 and
+/// the others 0, moving with speed `v` and acceleration `a` (the body's force is linear in them).
+#[inline(always)]
+pub fn unit_forces(a: &Motion, v: &Motion) -> [Force; BODY_PARAMS] {
+    // I_k applied to a motion m: mass: (0, m.v); first moment along e_d: (e_d × m.v, m.w × e_d);
+    // an inertia entry: (E_k m.w, 0)
+    let e = [Vector3::x(), Vector3::y(), Vector3::z()];
+    let apply = |k: usize, m: &Motion| -> Force {
+        let w = &m.w;
+        match k {
+            0 => Force {
+                n: Vector3::zeros(),
+                f: m.v,
+            },
+            1..=3 => Force {
+                n: e[k - 1].cross(&m.v),
+                f: m.w.cross(&e[k - 1]),
+            },
+            4 => Force {
+                n: Vector3::new(w.x, 0.0, 0.0),
+                f: Vector3::zeros(),
+            },
+            5 => Force {
+                n: Vector3::new(w.y, w.x, 0.0),
+                f: Vector3::zeros(),
+            },
+            6 => Force {
+                n: Vector3::new(0.0, w.y, 0.0),
+                f: Vector3::zeros(),
+            },
+            7 => Force {
+                n: Vector3::new(w.z, 0.0, w.x),
+                f: Vector3::zeros(),
+            },
+            8 => Force {
+                n: Vector3::new(0.0, w.z, w.y),
+                f: Vector3::zeros(),
+            },
+            _ => Force {
+                n: Vector3::new(0.0, 0.0, w.z),
+                f: Vector3::zeros(),
+            },
+        }
+    };
+    std::array::from_fn(|k| apply(k, a) + v.cross_force(&apply(k, v)))
+}
+
 /// A body's parameters from its mass, centre of mass and inertia about the centre of mass, all in
 /// the frame the parameters are expressed in.
 pub fn params_of(mass: f64, com: &Vector3<f64>, inertia_com: &Matrix3<f64>) -> [f64; BODY_PARAMS] {

@@ -171,3 +171,25 @@ fn bad_urdfs_and_inputs_are_refused_by_name() {
         .contains("3 joints"));
     assert!(r.gravity_torque(&[f64::NAN, 0.0, 0.0]).is_err());
 }
+
+#[test]
+fn each_unit_force_is_the_inertia_of_that_parameter_alone() {
+    use super::spatial::{inertia_apply, unit_forces, Motion};
+    use nalgebra::Vector3;
+    for seed in 0..10 {
+        let x = state(12, seed);
+        let a = Motion::new(Vector3::new(x[0], x[1], x[2]), Vector3::new(x[3], x[4], x[5]));
+        let v = Motion::new(Vector3::new(x[6], x[7], x[8]), Vector3::new(x[9], x[10], x[11]));
+        let got = unit_forces(&a, &v);
+        for (k, g) in got.iter().enumerate() {
+            let mut e = [0.0; BODY_PARAMS];
+            e[k] = 1.0;
+            let want = inertia_apply(&e, &a) + v.cross_force(&inertia_apply(&e, &v));
+            // both are a few products of the same entries, of order 1: rounding only
+            assert!(
+                (g.n - want.n).norm() + (g.f - want.f).norm() < 1e-14,
+                "parameter {k}"
+            );
+        }
+    }
+}
