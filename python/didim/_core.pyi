@@ -121,6 +121,9 @@ def simulate_robot(
     substeps: int = 0,
     coulomb_eps: Sequence[float],
     coulomb_law: Sequence[str],
+    u_ext: Optional[_F64] = None,
+    delay: Optional[Sequence[int]] = None,
+    force_lag: Optional[Sequence[float]] = None,
 ) -> Dict[str, _F64]: ...
 
 def coulomb_sign(v: _F64, eps: float = ..., law: str = "algebraic") -> _F64: ...

@@ -380,8 +380,10 @@ def controller_from_dict(spec: Dict[str, Any], where: str = "controller") -> Con
     if not isinstance(kind, str) or kind not in _FILE_TYPES:
         raise DataError(f"{where}: \"type\" must be one of {', '.join(_FILE_TYPES)}, got {kind!r}")
     allowed = _FILE_TYPES[kind]
-    # "units" belongs to the record the controller ran (read by the loaders: didim.units)
-    args = {k: v for k, v in spec.items() if k not in ("type", "units") and not k.startswith(("note", "_", "comment"))}
+    # "units" belongs to the record the controller ran (read by the loaders: didim.units); a robot joint's "delay"
+    # and "force_lag" to its drive (read by didim.robots.load_joint_controllers)
+    args = {k: v for k, v in spec.items() if k not in ("type", "units", "delay", "force_lag")
+            and not k.startswith(("note", "_", "comment"))}
     unknown = sorted(set(args) - set(allowed))
     if unknown:
         raise DataError(f"{where}: unknown key(s) {', '.join(unknown)} for a {kind} controller; it takes "

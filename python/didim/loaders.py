@@ -23,7 +23,7 @@ from ._errors import DataError
 from ._io import beside, check_input
 from .controllers import Controller, EmpsCascade, controller_file_units, in_units, load_controller
 from .robots.chain import Robot
-from .robots.record import RobotRecording, load_joint_controllers
+from .robots.record import RobotRecording, load_joint_controllers, load_joint_drives
 from .recording import Recording, _check_expected_dt, _number, _signal, _time_step
 from .units import SI, Units, check_stroke, from_header, parse as parse_units
 
@@ -457,10 +457,13 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
         controller = beside(p)  # NAME_controller.json beside the record, if there is one
     kinds = list(robot.joint_kinds)
     declared = []  # (where, per-joint units)
+    delay: Tuple[int, ...] = ()
+    force_lag: Tuple[float, ...] = ()
     if isinstance(controller, (str, os.PathLike)):
         file_units = _robot_file_units(controller, kinds)
         if file_units is not None:
             declared.append((f"the controller file {controller}", file_units))
+        delay, force_lag = load_joint_drives(controller)
         controller = load_joint_controllers(controller)
     controllers = tuple(controller) if controller is not None else None
     arg_units = for_joints(units, kinds, "units")
@@ -492,21 +495,27 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
         raise DataError(f"{p}: the time column is in {suffix['t']}: didim reads it in s; convert it (t / 1000 for ms)")
     dt = _time_step(np.asarray(get("t"), dtype=float), f"{p}: ")
     cols = {key: _columns(available, names, key, p) for key in ("qr", "force", "qm")}
-    extra = [c for c in available if re.fullmatch(r"(qr|force|qm)_\d+", c) and int(c.split("_")[-1]) > len(names)]
+    extra = [c for c in available if re.fullmatch(r"(qr|force|qm|u_ext)_\d+", c) and int(c.split("_")[-1]) > len(names)]
     if extra:
         m = max(int(c.split("_")[-1]) for c in extra)
         raise DataError(f"{p}: the record has columns for {m} joints (qr_1..qr_{m}) but the robot has {len(names)} "
                         f"({', '.join(names)}): the URDF (or the controller file) is another robot's, or --joints "
                         "picks fewer joints than were logged")
-    signals = {key: np.column_stack([np.asarray(get(c), dtype=float).ravel() for c in cols[key]])
-               for key in ("qr", "force", "qm")}
+    # a feedforward the drives add to the commands: u_ext_1..u_ext_n (or u_ext_<joint name>), every joint's or none
+    if any(c.startswith("u_ext_") for c in available):
+        cols["u_ext"] = _columns(available, names, "u_ext", p)
+    signals = {key: np.column_stack([np.asarray(get(c), dtype=float).ravel() for c in cols[key]]) for key in cols}
     if any(c in suffix for key in cols for c in cols[key]):
         head = []
         for j in range(len(names)):
             pos = {suffix[c] for c in (cols["qr"][j], cols["qm"][j]) if c in suffix}
             if len(pos) > 1:
                 raise DataError(f"{p}: joint {names[j]}'s positions are in several units ({', '.join(sorted(pos))})")
-            force = suffix.get(cols["force"][j])
+            forces = {suffix[cols[key][j]] for key in ("force", "u_ext") if key in cols and cols[key][j] in suffix}
+            if len(forces) > 1:
+                raise DataError(f"{p}: joint {names[j]}'s force and u_ext are in different units "
+                                f"({', '.join(sorted(forces))}): give them in one")
+            force = forces.pop() if forces else None
             text = ",".join([*pos] + ([force] if force and force not in ("N", "N*m", "N·m", "Nm") else []))
             head.append(text or None)
         declared.append(("the header", for_joints(head, kinds, f"{p}: the header")))
@@ -543,8 +552,9 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     if u is not None:
         for j in range(len(names)):
             k, ff = u[j].position_factor, u[j].force_factor
-            for key, factor in (("qr", k), ("qm", k), ("force", ff)):
-                signals[key][:, j] *= factor
+            for key, factor in (("qr", k), ("qm", k), ("force", ff), ("u_ext", ff)):
+                if key in signals:
+                    signals[key][:, j] *= factor
             if converted:
                 continue  # fitted on SI signals already
             try:
@@ -563,7 +573,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     label = name if name is not None else os.path.splitext(os.path.basename(p))[0]
     try:
         return RobotRecording(dt=dt, joint_names=tuple(names), controllers=controllers, encoder_step=steps, name=label,
-                              joint_kinds=tuple(kinds), **signals,
+                              joint_kinds=tuple(kinds), **signals, delay=delay, force_lag=force_lag,
                               units=tuple(u) if u is not None else (), controller_origin=origin)
     except DataError as e:
         raise DataError(f"{p}: {e}") from None

@@ -76,12 +76,12 @@ fn setup() -> (Robot, Drives, Vec<TransferFunction>, Vec<f64>) {
 fn bench(c: &mut Criterion) {
     let (robot, drives, ctl, qr) = setup();
     let n = robot.ndof();
-    let opts = RobotLoopOptions {
-        dt: 1e-3,
-        substeps: 4,
-        quantization: vec![2.0 * std::f64::consts::PI / 1_048_576.0; n],
-        force0: vec![0.0; n],
-    };
+    let opts = RobotLoopOptions::new(
+        1e-3,
+        4,
+        vec![2.0 * std::f64::consts::PI / 1_048_576.0; n],
+        vec![0.0; n],
+    );
     let mut g = c.benchmark_group("robot");
     g.sample_size(10);
     g.throughput(Throughput::Elements((qr.len() / n) as u64));

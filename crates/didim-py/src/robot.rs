@@ -206,9 +206,11 @@ impl PyRobot {
 /// inertia, viscous and Coulomb friction, offset; each joint's friction law: `coulomb_law` its
 /// shape and `coulomb_eps` its smoothing speed, rad/s or m/s), one controller per joint
 /// (`(kind, gains)` as `Problem` takes them), following `qr` (N, n) from rest at `qr[0]`, the
-/// controllers' output starting at `force0`: a dict of q, qd, qdd, force (N, n).
+/// controllers' output starting at `force0`; `u_ext` (N, n) a known force added to each
+/// command, `delay` each joint's actuation delay (samples), `force_lag` each joint's lag from
+/// command to force (s): a dict of q, qd, qdd, force (N, n; the force is the commands).
 #[pyfunction]
-#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law))]
+#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law, u_ext=None, delay=None, force_lag=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate_robot<'py>(
     py: Python<'py>,
@@ -225,9 +227,21 @@ pub fn simulate_robot<'py>(
     substeps: usize,
     coulomb_eps: Vec<f64>,
     coulomb_law: Vec<String>,
+    u_ext: Option<PyReadonlyArray2<'py, f64>>,
+    delay: Option<Vec<usize>>,
+    force_lag: Option<Vec<f64>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let (rows, n) = (qr.as_array().nrows(), robot.inner.ndof());
     let qr = flat(&qr);
+    if let Some(u) = &u_ext {
+        let shape = u.as_array().dim();
+        if shape != (rows, n) {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "u_ext must be (samples, joints) = ({rows}, {n}) like qr, got {shape:?}"
+            )));
+        }
+    }
+    let u_ext: Vec<f64> = u_ext.as_ref().map(flat).unwrap_or_default();
     let out = run(py, || {
         if coulomb_eps.len() != coulomb_law.len() {
             return Err(Error::InvalidInput(format!(
@@ -257,12 +271,10 @@ pub fn simulate_robot<'py>(
             .iter()
             .map(|(kind, gains)| crate::make_controller(kind, gains).and_then(|c| c.law(dt)))
             .collect::<Result<Vec<_>, Error>>()?;
-        let opts = RobotLoopOptions {
-            dt,
-            substeps,
-            quantization,
-            force0,
-        };
+        let mut opts = RobotLoopOptions::new(dt, substeps, quantization, force0);
+        opts.u_ext = u_ext;
+        opts.delay = delay.unwrap_or_default();
+        opts.force_lag = force_lag.unwrap_or_default();
         simulate_robot_core(&robot.inner, &drives, &control, &qr, &opts)
     })?;
     let d = pyo3::types::PyDict::new(py);

@@ -371,7 +371,7 @@ class _InverseModel:
         self.n, self.nb = n, nb
         w = _model_regressor(robot, base, q, v, a, offset, ("algebraic", (0.0,) * n))
         w[:, np.arange(n), nb + n + np.arange(n)] = 0.0  # each joint's Coulomb column is the law's (see rows)
-        got = _rows(dec, rec.force if y is None else y, w, v, top_speeds(rec))
+        got = _rows(dec, rec.applied_force() if y is None else y, w, v, top_speeds(rec))
         self.parts = [(yd, wd) for yd, wd, _ in got]
         self.keep = [keep for _, _, keep in got]
 
@@ -554,7 +554,8 @@ def _first_half(rec: RobotRecording) -> RobotRecording:
     import dataclasses
 
     m = max(rec.n // 2, 2)
-    return dataclasses.replace(rec, qr=rec.qr[:m], force=rec.force[:m], qm=rec.qm[:m])
+    return dataclasses.replace(rec, qr=rec.qr[:m], force=rec.force[:m], qm=rec.qm[:m],
+                               u_ext=None if rec.u_ext is None else rec.u_ext[:m])
 
 
 #: The factors on each shape's ε that :func:`closed_loop_law` tries first (a factor of 2 either way, √2 apart: the
@@ -689,7 +690,8 @@ def _simulate(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]], law:
         return _core.simulate_robot(robot._core, d["armature"], d["viscous"], d["coulomb"], d["offset"],
                                     rec.core_controllers(), rec.qr, rec.dt, quantization=list(rec.encoder_step),
                                     force0=list(rec.force[0]), substeps=substeps, coulomb_eps=list(law[1]),
-                                    coulomb_law=[law[0]] * len(law[1]))
+                                    coulomb_law=[law[0]] * len(law[1]), u_ext=rec.u_ext,
+                                    delay=list(rec.delay) or None, force_lag=list(rec.force_lag) or None)
     except DataError as e:
         raise SimulationError(f"the robot's closed loop cannot be simulated with these parameters: {e}") from None
 
@@ -1059,7 +1061,7 @@ class _PayloadPlant:
         q, v, a = sim["q"], sim["qd"], sim["qdd"]
         known = np.einsum("kjp,p->kj", _model_regressor(res.robot, res.base, q, v, a, res.offset, self.law), self.theta)
         w = res.robot.regressor(q, v, a)[:, :, -10:][:, :, self.free]
-        rows = _rows(self.dec, rec.force - known, w, v, top_speeds(rec))
+        rows = _rows(self.dec, rec.applied_force() - known, w, v, top_speeds(rec))
         est, cov, fit = _weighted_fit([(yd, wd) for yd, wd, _ in rows])
         return {"params": est, "covariance": cov, "std": np.sqrt(np.maximum(np.diag(cov), 0.0)), **fit}
 

@@ -5,6 +5,7 @@ every joint, sampled together, with one controller per joint; read from CSV, Par
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
@@ -24,6 +25,48 @@ def load_joint_controllers(path) -> Tuple[Controller, ...]:
     if not spec["joints"]:
         raise DataError(f"{p}: \"joints\" is empty: give one controller per joint")
     return tuple(controller_from_dict(c, f"{p}: joint {i + 1}") for i, c in enumerate(spec["joints"]))
+
+
+def load_joint_drives(path) -> Tuple[Tuple[int, ...], Tuple[float, ...]]:
+    """Each joint's actuation delay (samples) and force lag (s) from the entries of a robot's controller file
+    (``"delay"``, ``"force_lag"``; 0 where absent): the drive between the controller's command and the force on the
+    joint, which the closed loop simulates and the least squares regress on (:func:`applied_force`)."""
+    from .. import _checks
+
+    p, spec = _spec(path)
+    entries = spec.get("joints") if isinstance(spec, dict) and isinstance(spec.get("joints"), list) else []
+    delay, lag = [], []
+    for i, e in enumerate(entries):
+        e = e if isinstance(e, dict) else {}
+        delay.append(_checks.whole(f"{p}: joint {i + 1}'s delay", e.get("delay", 0), hint=" (samples)"))
+        lag.append(_checks.real(f"{p}: joint {i + 1}'s force_lag", e.get("force_lag", 0.0), "s", lo=0.0,
+                                lo_open=False))
+    return tuple(delay), tuple(lag)
+
+
+def applied_force(force: np.ndarray, delay: Tuple[int, ...], force_lag: Tuple[float, ...], dt: float) -> np.ndarray:
+    """The force each joint's plant receives, as its mean over each sample period, when the drive logs the commands
+    ``force`` (samples × joints): the command of ``delay`` samples earlier (the first one before the record: the
+    drive held it), through a first-order lag of ``force_lag`` s started at it, as the robot's closed loop applies
+    them. The least squares regress on it: the simulated states answer it, not the logged command."""
+    from .. import _core
+
+    out = np.array(force, dtype=float)
+    for j in range(out.shape[1]):
+        d = delay[j] if j < len(delay) else 0
+        lag = force_lag[j] if j < len(force_lag) else 0.0
+        col = out[:, j].copy()
+        if d:
+            col = np.r_[np.full(d, col[0]), col[:-d]]
+        if lag > 0:
+            decay = math.exp(-dt / lag)
+            share = lag / dt * (1 - decay)
+            # the lag's value at each period's start: f[k+1] = decay f[k] + (1 - decay) tau[k], f[0] = tau[0]
+            end = _core.lfilter([1 - decay], [1.0, -decay], np.ascontiguousarray(col), zi=[decay * col[0]])
+            start = np.r_[col[0], end[:-1]]
+            col = col + (start - col) * share
+        out[:, j] = col
+    return out
 
 
 @dataclass(frozen=True)
@@ -46,6 +89,13 @@ class RobotRecording:
     units: Tuple = ()
     #: Where each joint's controller comes from when nobody described it (the fit's summary), else empty.
     controller_origin: Tuple[str, ...] = ()
+    #: A known force each joint's drive adds to its controller's command before saturation (a feedforward), (N, n)
+    #: like ``force``; None for none (the logged force includes it).
+    u_ext: Optional[np.ndarray] = None
+    #: Each joint's actuation delay (samples) and force lag (s) between its command and the force on the joint;
+    #: empty for none.
+    delay: Tuple[int, ...] = ()
+    force_lag: Tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -61,8 +111,28 @@ class RobotRecording:
                 raise DataError(f"{key} of joint {self.joint_names[j]} is not finite at sample {k}")
             a.setflags(write=False)
             object.__setattr__(self, key, a)
+        if self.u_ext is not None:
+            a = np.ascontiguousarray(np.asarray(self.u_ext, dtype=float))
+            if a.shape != self.force.shape:
+                raise DataError(f"u_ext must be (samples, {n}) like force {self.force.shape}, got {a.shape}")
+            bad = np.argwhere(~np.isfinite(a))
+            if len(bad):
+                k, j = bad[0]
+                raise DataError(f"u_ext of joint {self.joint_names[j]} is not finite at sample {k}")
+            a.setflags(write=False)
+            object.__setattr__(self, "u_ext", a)
         if not (len(self.qr) == len(self.force) == len(self.qm)):
             raise DataError("qr, force and qm must have the same number of samples")
+        for key in ("delay", "force_lag"):
+            got = tuple(getattr(self, key))
+            if got and len(got) != n:
+                raise DataError(f"{key} needs one value per joint ({n}), got {len(got)}")
+            object.__setattr__(self, key, got)
+        if any(d < 0 or d >= max(len(self.qr), 1) or int(d) != d for d in self.delay):
+            raise DataError(f"each joint's delay must be a whole number of samples, >= 0 and shorter than the record "
+                            f"({len(self.qr)} samples), got {self.delay}")
+        if any(not (math.isfinite(x) and x >= 0) for x in self.force_lag):
+            raise DataError(f"each joint's force lag must be finite and >= 0 s, got {self.force_lag}")
         if not self.joint_kinds:
             object.__setattr__(self, "joint_kinds", ("revolute",) * n)
         if len(self.controllers) != n:
@@ -97,10 +167,17 @@ class RobotRecording:
             j = self.joint_names.index(j)
         rotary = self.joint_kinds[j] != "prismatic"
         return Recording(dt=self.dt, qr=self.qr[:, j], force=self.force[:, j], qm=self.qm[:, j],
+                         u_ext=None if self.u_ext is None else self.u_ext[:, j],
                          controller=controller if controller is not None else self.controllers[j],
                          position_resolution=self.encoder_step[j] or None,
                          name=f"{self.name or 'record'}, joint {self.joint_names[j]}", lead_in=None,
                          units=Units("rad", "N*m") if rotary else Units("m", "N"))
+
+    def applied_force(self) -> np.ndarray:
+        """The force the joints receive (:func:`applied_force`): the logged one without delay nor lag."""
+        if not any(self.delay) and not any(self.force_lag):
+            return self.force
+        return applied_force(self.force, self.delay, self.force_lag, self.dt)
 
     def core_controllers(self) -> List[Tuple[str, List[float]]]:
         """The controllers as the core takes them: (kind, gains) per joint."""
@@ -111,4 +188,4 @@ class RobotRecording:
                 f"{', '.join(self.joint_names)})")
 
 
-__all__ = ["RobotRecording", "load_joint_controllers"]
+__all__ = ["RobotRecording", "load_joint_controllers", "load_joint_drives", "applied_force"]

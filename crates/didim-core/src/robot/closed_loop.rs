@@ -6,6 +6,7 @@ use crate::controller::{FilterState, TransferFunction};
 use crate::error::{invalid, Error, Result};
 use crate::interrupt;
 use crate::model::FrictionLaw;
+use crate::sim::driver::ForceLag;
 
 use super::{AbaWork, Robot};
 
@@ -85,6 +86,30 @@ pub struct RobotLoopOptions {
     /// record (the logged force of the first sample): each controller runs on the positions'
     /// departures from the first reference and adds this.
     pub force0: Vec<f64>,
+    /// A known force added to each joint's command before its saturation (`samples × n`,
+    /// row-major: a feedforward the drive adds, as one axis's `u_ext`); empty for none.
+    pub u_ext: Vec<f64>,
+    /// Each joint's actuation delay (samples) between its command and the force applied; empty
+    /// for none. The drive held the first command before the record.
+    pub delay: Vec<usize>,
+    /// Each joint's first-order lag (s) from the held command to the applied force (a current
+    /// loop's); empty for none.
+    pub force_lag: Vec<f64>,
+}
+
+impl RobotLoopOptions {
+    /// Options with no feedforward, delay nor lag.
+    pub fn new(dt: f64, substeps: usize, quantization: Vec<f64>, force0: Vec<f64>) -> Self {
+        Self {
+            dt,
+            substeps,
+            quantization,
+            force0,
+            u_ext: Vec::new(),
+            delay: Vec::new(),
+            force_lag: Vec::new(),
+        }
+    }
 }
 
 /// The simulated record: positions, speeds, accelerations and the controllers' forces, each
@@ -188,6 +213,46 @@ pub fn simulate_robot(
         return Err(invalid!("quantization and force0 need one value per joint ({n})"));
     }
     let samples = qr.len() / n;
+    if !opts.u_ext.is_empty() && opts.u_ext.len() != qr.len() {
+        return Err(invalid!(
+            "the external force must be samples × {n} values like the references ({} samples), got {}",
+            samples,
+            opts.u_ext.len()
+        ));
+    }
+    if let Some(i) = opts.u_ext.iter().position(|x| !x.is_finite()) {
+        return Err(invalid!(
+            "the external force of joint {} is not finite at sample {}",
+            i % n + 1,
+            i / n
+        ));
+    }
+    if !opts.delay.is_empty() && opts.delay.len() != n {
+        return Err(invalid!(
+            "give one delay per joint ({n}), got {}",
+            opts.delay.len()
+        ));
+    }
+    if let Some(j) = opts.delay.iter().position(|&d| d >= samples.max(1)) {
+        return Err(invalid!(
+            "joint {}'s delay of {} samples is not shorter than the record ({samples} samples)",
+            j + 1,
+            opts.delay[j]
+        ));
+    }
+    if !opts.force_lag.is_empty() && opts.force_lag.len() != n {
+        return Err(invalid!(
+            "give one force lag per joint ({n}), got {}",
+            opts.force_lag.len()
+        ));
+    }
+    if let Some(j) = opts.force_lag.iter().position(|l| !(l.is_finite() && *l >= 0.0)) {
+        return Err(invalid!(
+            "joint {}'s force lag must be finite and >= 0 s, got {}",
+            j + 1,
+            opts.force_lag[j]
+        ));
+    }
     let mut out = RobotLoopOutput {
         q: crate::error::filled(samples * n, 0.0, "the simulated positions")?,
         qd: crate::error::filled(samples * n, 0.0, "the simulated speeds")?,
@@ -266,6 +331,16 @@ fn run(
     let (mut k3q, mut k3v, mut k4q, mut k4v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
     let (mut qs, mut vs) = (vec![0.0; n], vec![0.0; n]);
     let h = opts.dt / substeps as f64;
+    // each joint's commands on their way to the plant: `delay` samples late (the first command held
+    // before the record), then through the force lag over each period (its mean applied)
+    let mut pending: Vec<Vec<f64>> = (0..n)
+        .map(|j| vec![0.0; opts.delay.get(j).copied().unwrap_or(0)])
+        .collect();
+    let lags: Vec<Option<ForceLag>> = (0..n)
+        .map(|j| ForceLag::new(opts.force_lag.get(j).copied().unwrap_or(0.0), opts.dt))
+        .collect();
+    let mut lagged: Vec<f64> = vec![0.0; n]; // each lag's output at the start of the period
+    let mut applied = vec![0.0; n];
     for k in 0..samples {
         if k % interrupt::EVERY == 0 {
             interrupt::check()?;
@@ -278,8 +353,26 @@ fn run(
             } else {
                 q[j]
             };
-            let (f, _) = controllers[j].step(&mut z[j], qr[row + j] - qr0[j], qm - qr0[j], opts.force0[j]);
+            let ext = opts.force0[j] + opts.u_ext.get(row + j).copied().unwrap_or(0.0);
+            let (f, _) = controllers[j].step(&mut z[j], qr[row + j] - qr0[j], qm - qr0[j], ext);
             u[j] = f;
+            if k == 0 {
+                // the drive held the first command before the record
+                pending[j].iter_mut().for_each(|p| *p = f);
+                lagged[j] = f;
+            }
+            let held = match pending[j].len() {
+                0 => f,
+                d => std::mem::replace(&mut pending[j][k % d], f),
+            };
+            applied[j] = match lags[j] {
+                None => held,
+                Some(lag) => {
+                    let (mean, end) = lag.period(lagged[j], held);
+                    lagged[j] = end;
+                    mean
+                }
+            };
             if (q[j] - qr[row + j]).abs() > span[j] || !q[j].is_finite() || !v[j].is_finite() {
                 return Err(Error::Simulation(format!(
                 "the robot's closed loop diverged at sample {k} (t = {:.6} s): joint {} ({}) is {:.3e} away from its reference",
@@ -290,7 +383,7 @@ fn run(
             )));
             }
         }
-        plant.accel(&q, &v, &u, &mut a)?;
+        plant.accel(&q, &v, &applied, &mut a)?;
         out.q[row..row + n].copy_from_slice(&q);
         out.qd[row..row + n].copy_from_slice(&v);
         out.qdd[row..row + n].copy_from_slice(&a);
@@ -300,7 +393,7 @@ fn run(
             if s == 0 {
                 k1v.copy_from_slice(&a);
             } else {
-                plant.accel(&q, &v, &u, &mut k1v)?;
+                plant.accel(&q, &v, &applied, &mut k1v)?;
             }
             k1q.copy_from_slice(&v);
             for j in 0..n {
@@ -308,19 +401,19 @@ fn run(
                 vs[j] = v[j] + 0.5 * h * k1v[j];
             }
             k2q.copy_from_slice(&vs);
-            plant.accel(&qs, &vs, &u, &mut k2v)?;
+            plant.accel(&qs, &vs, &applied, &mut k2v)?;
             for j in 0..n {
                 qs[j] = q[j] + 0.5 * h * k2q[j];
                 vs[j] = v[j] + 0.5 * h * k2v[j];
             }
             k3q.copy_from_slice(&vs);
-            plant.accel(&qs, &vs, &u, &mut k3v)?;
+            plant.accel(&qs, &vs, &applied, &mut k3v)?;
             for j in 0..n {
                 qs[j] = q[j] + h * k3q[j];
                 vs[j] = v[j] + h * k3v[j];
             }
             k4q.copy_from_slice(&vs);
-            plant.accel(&qs, &vs, &u, &mut k4v)?;
+            plant.accel(&qs, &vs, &applied, &mut k4v)?;
             for j in 0..n {
                 q[j] += h / 6.0 * (k1q[j] + 2.0 * k2q[j] + 2.0 * k3q[j] + k4q[j]);
                 v[j] += h / 6.0 * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j]);

@@ -180,7 +180,7 @@ impl Quantizer {
 /// A first-order lag `T ḟ = τ − f` between the held command `τ` and the applied force `f`
 /// (see [`SimOptions::force_lag`]).
 #[derive(Clone, Copy, Debug)]
-struct ForceLag {
+pub(crate) struct ForceLag {
     /// `e^{−T_s/T}`: what remains of the gap `f − τ` after one period.
     decay: f64,
     /// `(T/T_s)(1 − e^{−T_s/T})`: the share of the initial gap in the period's mean force.
@@ -188,7 +188,7 @@ struct ForceLag {
 }
 
 impl ForceLag {
-    fn new(lag: f64, dt: f64) -> Option<Self> {
+    pub(crate) fn new(lag: f64, dt: f64) -> Option<Self> {
         (lag > 0.0).then(|| {
             let decay = (-dt / lag).exp();
             Self {
@@ -201,7 +201,7 @@ impl ForceLag {
     /// The mean applied force over a period from `f0` under the command `tau`, and the
     /// applied force at its end.
     #[inline(always)]
-    fn period(&self, f0: f64, tau: f64) -> (f64, f64) {
+    pub(crate) fn period(&self, f0: f64, tau: f64) -> (f64, f64) {
         (tau + (f0 - tau) * self.mean, tau + (f0 - tau) * self.decay)
     }
 }
