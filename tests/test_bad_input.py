@@ -401,8 +401,10 @@ def test_cli_user_errors_exit_2_with_one_line(emps_path, args, match):
 
 
 def test_cli_debug_shows_the_traceback(tmp_path):
+    """--debug adds the traceback; the error line and the exit status (2: the user's input) stay."""
     p = _cli("--debug", "identify", str(tmp_path / "missing.mat"))
-    assert p.returncode != 0 and "Traceback" in p.stderr and "DataError" in p.stderr
+    assert p.returncode == 2 and "Traceback" in p.stderr and "DataError" in p.stderr
+    assert p.stderr.rstrip().splitlines()[-1].startswith("didim: error: ")
 
 
 def test_cli_warnings_are_one_line_each(tmp_path, emps_path):

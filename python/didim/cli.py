@@ -759,8 +759,10 @@ def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
                 return 143 if sig == "TERM" else 130
             return code
         except (DidimError, OSError) as e:
-            if args.debug:
-                raise
+            if args.debug:  # the traceback, then the same error line and exit status as without --debug
+                import traceback
+
+                traceback.print_exc()
             print(f"didim: error: {_one_line(_describe_error(e))}", file=sys.stderr)
             return 2
         except Terminated:

@@ -285,7 +285,11 @@ def for_joints(spec, kinds, where: str = "units") -> Optional[list]:
                                 f"{text!r} names one of them: leave it out, or give a drive unit with its scale "
                                 "(A=2.5)")
             else:
-                parts.append(("force", parse(f"m,{text}")))
+                try:
+                    parts.append(("force", parse(f"m,{text}")))
+                except DataError:  # neither a position unit nor a drive's: say so of what the user wrote
+                    raise DataError(f"{where}: {text!r} is not a unit didim knows: a position unit (rad, deg, rev, "
+                                    "m, mm, um, counts/...) or a drive unit with its scale (A=2.5)") from None
     else:
         raise DataError(f"{where}: units must be text such as 'deg' or 'deg,mm', or one per joint, got "
                         f"{type(spec).__name__}")

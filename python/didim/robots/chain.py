@@ -61,7 +61,13 @@ class Robot:
             if isinstance(joints, str) or not all(isinstance(j, str) for j in joints):
                 raise DataError("joints must be a list of joint names")
             joints = list(joints)
-        return cls(_core.Robot.from_urdf(text, joints), text, source)
+        try:
+            core = _core.Robot.from_urdf(text, joints)
+        except DataError as e:
+            if source is None:
+                raise
+            raise DataError(f"{source}: {e}") from None
+        return cls(core, text, source)
 
     # ------------------------------------------------------------------------------------------------ description
 

@@ -411,17 +411,49 @@ EPS_STEP = 1e-4
 EPS_SIGMA_MAX = 0.1
 
 
+def urdf_residual(rec: RobotRecording, robot: Robot, angle_factor: float = 1.0) -> float:
+    """The share of the force (each joint's scaled alike) that the URDF's bodies leave unexplained once each joint's
+    own drive (rotor inertia, viscous and Coulomb friction, offset) is fitted to the rest, on the measured states
+    (every ``n/2000``-th sample), the revolute joints' positions taken times ``angle_factor``: how well the record's
+    position units fit the URDF's dynamics (its gravity and inertia depend on the angles themselves, where units
+    read wrong put them elsewhere)."""
+    q, v, a = _measured_states(rec, _decimation(rec))
+    rev = np.array([k != "prismatic" for k in rec.joint_kinds])
+    step = max(1, rec.n // 2000)
+    q, v, a = (x[::step].copy() for x in (q, v, a))
+    for x in (q, v, a):
+        x[:, rev] *= angle_factor
+    force = rec.force[::step]
+    rest = force - robot.rnea(q, v, a)
+    scale = np.maximum(np.std(force, axis=0), 1e-300)
+    left = total = 0.0
+    for j in range(rec.ndof):
+        w = np.column_stack([a[:, j], v[:, j], np.sign(v[:, j]), np.ones(len(v))]) / scale[j]
+        y = rest[:, j] / scale[j]
+        r = y - w @ np.linalg.lstsq(w, y, rcond=None)[0]
+        left += float(r @ r)
+        total += float(np.sum((force[:, j] / scale[j]) ** 2))
+    return math.sqrt(left / total) if total > 0 else 0.0
+
+
 def _speed_scales(rec: RobotRecording) -> np.ndarray:
     """Each joint's speed scale: the median top reference speed of the joints of its kind (rad/s for revolute
-    joints, m/s for prismatic ones), or 1 when none of them moves. A friction law's smoothing speed belongs to the
-    friction, not to how fast one joint's trajectory goes: joints of one kind start from one ε, each refined where
-    its rows say so (:func:`fit_law`)."""
+    joints, m/s for prismatic ones), or, when none of them is driven, its encoder step per sample period. A friction
+    law's smoothing speed belongs to the friction, not to how fast one joint's trajectory goes: joints of one kind
+    start from one ε, each refined where its rows say so (:func:`fit_law`)."""
     vmax = top_speeds(rec)
     kinds = np.array(rec.joint_kinds)
     out = np.ones(len(vmax))
     for kind in set(rec.joint_kinds):
         same = vmax[(kinds == kind) & (vmax > 0)]
-        out[kinds == kind] = float(np.median(same)) if len(same) else 1.0
+        if len(same):
+            out[kinds == kind] = float(np.median(same))
+            continue
+        # no joint of this kind is driven: the record's own resolution of speed (an encoder step, or the positions'
+        # excursion, per sample period); a joint that stays exactly still keeps 1 (of its units: its law never acts)
+        for j in np.flatnonzero(kinds == kind):
+            res = max(float(rec.encoder_step[j]), float(np.ptp(rec.qm[:, j])))
+            out[j] = res / rec.dt if res > 0 else 1.0
     return out
 
 

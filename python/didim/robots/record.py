@@ -101,26 +101,19 @@ class RobotRecording:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise DataError(f"the sample period must be finite and > 0 s, got {self.dt}")
         n = len(self.joint_names)
-        for key in ("qr", "force", "qm"):
+        for key in ("qr", "force", "qm", "u_ext"):
+            if getattr(self, key) is None and key == "u_ext":
+                continue
             a = np.ascontiguousarray(np.asarray(getattr(self, key), dtype=float))
-            if a.ndim != 2 or a.shape[1] != n:
-                raise DataError(f"{key} must be (samples, {n}) for joints {', '.join(self.joint_names)}, got {a.shape}")
+            if a.ndim != 2 or a.shape[1] != n or (key == "u_ext" and a.shape != self.force.shape):
+                raise DataError(f"{key} must be (samples, {n}) for joints {', '.join(self.joint_names)}"
+                                f"{' like force' if key == 'u_ext' else ''}, got {a.shape}")
             bad = np.argwhere(~np.isfinite(a))
             if len(bad):
                 k, j = bad[0]
                 raise DataError(f"{key} of joint {self.joint_names[j]} is not finite at sample {k}")
             a.setflags(write=False)
             object.__setattr__(self, key, a)
-        if self.u_ext is not None:
-            a = np.ascontiguousarray(np.asarray(self.u_ext, dtype=float))
-            if a.shape != self.force.shape:
-                raise DataError(f"u_ext must be (samples, {n}) like force {self.force.shape}, got {a.shape}")
-            bad = np.argwhere(~np.isfinite(a))
-            if len(bad):
-                k, j = bad[0]
-                raise DataError(f"u_ext of joint {self.joint_names[j]} is not finite at sample {k}")
-            a.setflags(write=False)
-            object.__setattr__(self, "u_ext", a)
         if not (len(self.qr) == len(self.force) == len(self.qm)):
             raise DataError("qr, force and qm must have the same number of samples")
         for key in ("delay", "force_lag"):
