@@ -759,6 +759,8 @@ def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
                 return 143 if sig == "TERM" else 130
             return code
         except (DidimError, OSError) as e:
+            if received and not args.debug:  # an error the interrupt caused (see below)
+                return _interrupted(received[0])
             if args.debug:  # the traceback, then the same error line and exit status as without --debug
                 import traceback
 
@@ -766,11 +768,15 @@ def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
             print(f"didim: error: {_one_line(_describe_error(e))}", file=sys.stderr)
             return 2
         except Terminated:
-            print("didim: terminated (SIGTERM); outputs left as they were", file=sys.stderr)
-            return 143
+            return _interrupted("TERM")
         except KeyboardInterrupt:
-            print("didim: interrupted; outputs left as they were", file=sys.stderr)
-            return 130
+            return _interrupted("INT")
+        except Exception:
+            # after a signal, whatever surfaces is its consequence: a library that caught the interrupt half-way
+            # and failed on the state it left (matplotlib's renderer: "Invalid bounding box") is still an interrupt
+            if not received or args.debug:
+                raise
+            return _interrupted(received[0])
         finally:
             if not (_last and received):  # an interrupted command exits next: its teardown stays quiet too
                 sys.unraisablehook = unraisable
@@ -788,6 +794,13 @@ def main(argv: Optional[List[str]] = None, *, _last: bool = False) -> int:
 class Terminated(KeyboardInterrupt):
     """SIGTERM, raised in the main thread like Ctrl-C so that every ``finally`` runs: temporary files are removed,
     worker processes stopped, and no output is half-written."""
+
+
+def _interrupted(sig: str) -> int:
+    """Says that the run was interrupted (``"INT"``) or terminated (``"TERM"``) and returns its exit status."""
+    print(f"didim: {'terminated (SIGTERM)' if sig == 'TERM' else 'interrupted'}; outputs left as they were",
+          file=sys.stderr)
+    return 143 if sig == "TERM" else 130
 
 
 def _signals_as_exceptions(received: List[str]):
