@@ -391,6 +391,23 @@ fn lfilter<'py>(
     Ok(y.into_pyarray(py))
 }
 
+/// The force a joint receives (its mean over each sample period) under the logged commands
+/// `force`: `delay` samples late (`held` before the first), through a first-order lag of
+/// `force_lag` s; the simulators' own arithmetic (`sim::applied_force`).
+#[pyfunction]
+#[pyo3(signature = (force, delay, force_lag, dt, *, held=0.0))]
+fn applied_force<'py>(
+    py: Python<'py>,
+    force: PyReadonlyArray1<'py, f64>,
+    delay: usize,
+    force_lag: f64,
+    dt: f64,
+    held: f64,
+) -> Bound<'py, PyArray1<f64>> {
+    let f = slice1(&force);
+    sim::applied_force(&f, delay, force_lag, dt, held).into_pyarray(py)
+}
+
 /// Zero-phase filtering, `scipy.signal.filtfilt(b, a, x, padtype="odd", padlen=padlen)`.
 #[pyfunction]
 #[pyo3(signature = (b, a, x, *, padlen=None))]
@@ -518,6 +535,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(butter, m)?)?;
     m.add_function(wrap_pyfunction!(cheby1, m)?)?;
     m.add_function(wrap_pyfunction!(lfilter, m)?)?;
+    m.add_function(wrap_pyfunction!(applied_force, m)?)?;
     m.add_function(wrap_pyfunction!(filtfilt, m)?)?;
     m.add_function(wrap_pyfunction!(sosfiltfilt, m)?)?;
     m.add_function(wrap_pyfunction!(decimate, m)?)?;

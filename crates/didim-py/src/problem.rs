@@ -244,7 +244,7 @@ impl Problem {
         let f = slice1(&force);
         PyArray1::from_vec(
             py,
-            sim::applied_force(&f, self.opts.delay, self.opts.force_lag, self.opts.dt),
+            sim::applied_force(&f, self.opts.delay, self.opts.force_lag, self.opts.dt, 0.0),
         )
     }
 

@@ -48,24 +48,17 @@ def applied_force(force: np.ndarray, delay: Tuple[int, ...], force_lag: Tuple[fl
     """The force each joint's plant receives, as its mean over each sample period, when the drive logs the commands
     ``force`` (samples × joints): the command of ``delay`` samples earlier (the first one before the record: the
     drive held it), through a first-order lag of ``force_lag`` s started at it, as the robot's closed loop applies
-    them. The least squares regress on it: the simulated states answer it, not the logged command."""
+    them (the core's arithmetic, one axis's too). The least squares regress on it: the simulated states answer it,
+    not the logged command."""
     from .. import _core
 
     out = np.array(force, dtype=float)
     for j in range(out.shape[1]):
         d = delay[j] if j < len(delay) else 0
         lag = force_lag[j] if j < len(force_lag) else 0.0
-        col = out[:, j].copy()
-        if d:
-            col = np.r_[np.full(d, col[0]), col[:-d]]
-        if lag > 0:
-            decay = math.exp(-dt / lag)
-            share = lag / dt * (1 - decay)
-            # the lag's value at each period's start: f[k+1] = decay f[k] + (1 - decay) tau[k], f[0] = tau[0]
-            end = _core.lfilter([1 - decay], [1.0, -decay], np.ascontiguousarray(col), zi=[decay * col[0]])
-            start = np.r_[col[0], end[:-1]]
-            col = col + (start - col) * share
-        out[:, j] = col
+        if d or lag > 0:
+            out[:, j] = _core.applied_force(np.ascontiguousarray(out[:, j]), int(d), float(lag), dt,
+                                            held=float(out[0, j]))
     return out
 
 

@@ -207,14 +207,15 @@ impl ForceLag {
 }
 
 /// The force the plant receives, as the mean over each sample period, when the drive logs the
-/// commands `force`: the command of `delay` samples earlier (0 before the first), held over
-/// the period, through the first-order [`SimOptions::force_lag`] `lag` (s) started at its
-/// first value, as the simulator applies it; `dt` the sample period (s). With no delay and
-/// no lag, the commands themselves. DIDIM's regression target: the simulated states answer
-/// this force, not the logged command.
-pub fn applied_force(force: &[f64], delay: usize, lag: f64, dt: f64) -> Vec<f64> {
+/// commands `force`: the command of `delay` samples earlier (`held` before the first: 0 for one
+/// axis's loop from rest, the first command for a robot's, whose drive held it), held over the
+/// period, through the first-order [`SimOptions::force_lag`] `lag` (s) started at its first
+/// value, as the simulators apply it; `dt` the sample period (s). With no delay and no lag, the
+/// commands themselves. DIDIM's regression target: the simulated states answer this force, not
+/// the logged command.
+pub fn applied_force(force: &[f64], delay: usize, lag: f64, dt: f64, held: f64) -> Vec<f64> {
     let n = force.len();
-    let delayed = (0..n).map(|k| if k < delay { 0.0 } else { force[k - delay] });
+    let delayed = (0..n).map(|k| if k < delay { held } else { force[k - delay] });
     match ForceLag::new(lag, dt) {
         None => delayed.collect(),
         Some(fl) => {
