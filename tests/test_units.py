@@ -16,7 +16,7 @@ import pytest
 
 import didim
 from didim.controllers import in_units
-from didim.doctor.fit import EPS_XTOL
+from didim.friction_law import QUARTER
 from didim.units import parse
 
 from conftest import TRUTHBENCH_DIR
@@ -134,10 +134,11 @@ def test_the_doctor_gives_the_same_findings_and_law_in_any_unit(wrist, s):
     assert [f.effect for f in d.findings] == [f.effect for f in d0.findings]
     law, law0 = d.final_result.structure, d0.final_result.structure
     assert law.coulomb_law == law0.coulomb_law
-    # the smoothing speed is searched to EPS_XTOL (in log ε) near a flat optimum, on simulations through the encoder
-    # quantizer, where the scaled positions' rounding flips a count here and there: the search may end elsewhere
-    # within a few EPS_XTOL, and the final error moves by as much as that law's difference (a few 1e-3 of itself)
-    assert law.coulomb_eps / s == pytest.approx(law0.coulomb_eps, rel=3 * EPS_XTOL)
+    # the smoothing speed is searched on grids of factors on the record's speed scale (the same in any unit), then
+    # moved to a parabola's vertex between the fine grid's points (QUARTER apart in log ε), on simulations through the
+    # encoder quantizer, where the scaled positions' rounding flips a count here and there: the vertex may move by a
+    # fraction of the grid's step, and the final error by as much as that law's difference (a few 1e-3 of itself)
+    assert math.log(law.coulomb_eps / s / law0.coulomb_eps) == pytest.approx(0.0, abs=QUARTER / 2)
     assert d.fit["valid_force_after"] == pytest.approx(d0.fit["valid_force_after"], rel=5e-3)
 
 

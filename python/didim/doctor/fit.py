@@ -212,10 +212,6 @@ EPS_GRID_REL = tuple(float(x) for x in np.geomspace(1e-6, 1e-2, 9))
 #: 3.27 % to 3.59 %.
 DOCTOR_LAWS = ("algebraic", "tanh", "exp")
 
-#: The precision of the fitted smoothing speed, as a relative step (the criterion is sharp in ε: on the truthbench's
-#: portal axis the output error doubles between 0.6 and 1 times the best ε).
-EPS_XTOL = 0.02
-
 
 def fit_friction_law(data: Data, state: State, progress, around: Optional[float] = None,
                      shapes: Optional[Sequence[str]] = None) -> Tuple[State, IdentificationResult]:
@@ -226,62 +222,60 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
     in m/s is a hidden scale that a rotary axis or a record in mm reads as another law, and whatever the law misses
     shows up as a "low-speed effect" that is only the law's shape.
 
-    The search: ε on ``EPS_GRID_REL`` with the algebraic law (or the first of ``shapes``) brackets the optimum (or, given ``around``, a smoothing
-    speed in m/s or rad/s, the bracket is √10 either side of it); then, for each shape, a bounded scalar search in
-    log ε within that bracket (to ``EPS_XTOL``), the shapes (``shapes``, all by default) in parallel."""
+    The start: ε on ``EPS_GRID_REL`` with the algebraic law (or the first of ``shapes``), its best point (or, given
+    ``around``, that smoothing speed in m/s or rad/s); then every plant's search (:func:`didim.friction_law.
+    closed_loop_law`) from it, for each shape (``shapes``, all by default), each law a DIDIM refit, a batch of them
+    on the cores of the machine."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from scipy.optimize import minimize_scalar
-
+    from .. import friction_law
     from .._errors import DidimError
     scale = data.rec.speed_scale
     say = progress or (lambda s: None)
     say("friction law: fitting the Coulomb law's shape and smoothing speed")
+    shapes = tuple(shapes or DOCTOR_LAWS)
+    fitted: Dict[Any, Tuple[State, IdentificationResult]] = {}
+    known: Dict[Any, Optional[np.ndarray]] = {}
+    start = state
+    workers = max(1, min(len(shapes) * 3, os.cpu_count() or 1))
 
-    def fit(st: State, law: str, rel: float):
+    def evaluate(f, laws):
+        if workers == 1 or len(laws) == 1:
+            return [f(lw) for lw in laws]
+        with ThreadPoolExecutor(workers) as pool:
+            return list(pool.map(f, laws))
+
+    def errors(law) -> Optional[np.ndarray]:
         try:
-            got = refit(data, st.with_(coulomb_law=law, coulomb_eps=rel * scale), {}, progress)
+            got = refit(data, start.with_(coulomb_law=law[0], coulomb_eps=law[1][0]), {}, progress)
         except DidimError:
             return None
-        return got if np.isfinite(got[1].output_error) else None
+        if not np.isfinite(got[1].output_error):
+            return None
+        fitted[law] = got
+        return np.array([got[1].output_error])
 
-    step = float(EPS_GRID_REL[1] / EPS_GRID_REL[0])
     if around is not None:
-        here = refit(data, state, {}, progress)
-        grid, k = [(around / scale, here)], 0
-        lo, hi = around / scale / step, around / scale * step
+        eps0 = float(around)
     else:
-        first = shapes[0] if shapes else "algebraic"
-        jobs = [(state.with_(coulomb_law=first, coulomb_eps=rel * scale), {}) for rel in EPS_GRID_REL]
-        grid = [(rel, g) for rel, g in zip(EPS_GRID_REL, refit_each(data, jobs, progress))
-                if not isinstance(g, DidimError) and np.isfinite(g[1].output_error)]
-        if not grid:  # keep the law the base model came with
+        first = shapes[0]
+        grid = [(first, (rel * scale,)) for rel in EPS_GRID_REL]
+        for lw, e in zip(grid, evaluate(errors, grid)):
+            known[lw] = e
+        good = [lw for lw in grid if known[lw] is not None]
+        if not good:  # keep the law the base model came with
             return refit(data, state, {}, progress)
-        k = min(range(len(grid)), key=lambda i: grid[i][1][1].output_error)
-        lo = grid[k - 1][0] if k > 0 else grid[k][0] / step
-        hi = grid[k + 1][0] if k < len(grid) - 1 else grid[k][0] * step
-    start = grid[k][1][0]
-
-    def line(law: str):
-        best: Dict[str, Any] = {}
-
-        def f(x: float) -> float:
-            got = fit(best.get("state", start), law, math.exp(x))
-            if got is None:
-                return math.inf
-            if got[1].output_error < best.get("err", math.inf):
-                best.update(err=got[1].output_error, state=got[0], result=got[1], rel=math.exp(x))
-            return got[1].output_error
-
-        minimize_scalar(f, bounds=(math.log(lo), math.log(hi)), method="bounded", options=dict(xatol=EPS_XTOL))
-        return law, best
-
-    shapes = tuple(shapes or DOCTOR_LAWS)
-    with ThreadPoolExecutor(max(1, min(len(shapes), os.cpu_count() or 1))) as pool:
-        lines = [b for b in pool.map(line, shapes) if b[1]]
-    if not lines:
-        return grid[k][1]
-    law, best = min(lines, key=lambda b: b[1]["err"])
-    say(f"friction law: {law}, Coulomb smoothing speed {best['rel']:.3g} of the top speed (output error "
-        f"{100 * best['err']:.2f} %)")
-    return best["state"], best["result"]
+        best0 = min(good, key=lambda lw: float(known[lw][0]))
+        eps0, start = best0[1][0], fitted[best0][0]
+    # the grid's points √10 apart, the search's a fraction of that: it reaches the grid's neighbours of the start
+    reach = int(math.ceil(math.log(float(EPS_GRID_REL[1] / EPS_GRID_REL[0])) / (2 * friction_law.QUARTER)))
+    found = friction_law.closed_loop_law({sh: (eps0,) for sh in shapes}, errors, reach=reach, evaluate=evaluate,
+                                         known=known)
+    if not math.isfinite(found.error):
+        return refit(data, state, {}, progress)
+    law = found.law
+    say(f"friction law: {law[0]}, Coulomb smoothing speed {law[1][0] / scale:.3g} of the top speed (output error "
+        f"{100 * found.error:.2f} %)")
+    if law not in fitted and errors(law) is None:
+        return refit(data, state, {}, progress)
+    return fitted[law]

@@ -18,7 +18,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .. import _checks, _core
+from .. import _checks, _core, friction_law
 from ..didim_loop import didim_loop, residual_settled
 from .._errors import DataError, IdentifiabilityError, SimulationError
 from .chain import Robot
@@ -235,10 +235,10 @@ def _theta_names(robot: Robot, base: BaseParameters, offset: bool) -> List[str]:
     return names
 
 
-#: A friction law through zero speed: its shape (one of the core's ``COULOMB_LAWS``, shared by the joints) and each
+#: A friction law through zero speed (:data:`didim.friction_law.Law`): its shape, shared by the joints, and each
 #: joint's smoothing speed ε in the joint's units (rad/s or m/s: a prismatic quill and a revolute shoulder have no
 #: common speed); ε = 0 is the hard sign.
-Law = Tuple[str, Tuple[float, ...]]
+Law = friction_law.Law
 
 
 def _sign(v: np.ndarray, shape: str, eps: float) -> np.ndarray:
@@ -251,11 +251,6 @@ def _sign(v: np.ndarray, shape: str, eps: float) -> np.ndarray:
 def _coulomb(v: np.ndarray, law: Law) -> np.ndarray:
     """The law at the speeds ``v`` (samples × joints), each joint's column with its own ε."""
     return np.column_stack([_sign(v[:, j], law[0], e) for j, e in enumerate(law[1])])
-
-
-def _scaled(law: Law, factor) -> Law:
-    """The law with each joint's ε times ``factor`` (a number, or one per joint)."""
-    return (law[0], tuple(float(e * f) for e, f in zip(law[1], np.broadcast_to(factor, len(law[1])))))
 
 
 def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, law: Law) -> np.ndarray:
@@ -548,7 +543,7 @@ def fit_law(rec: RobotRecording, inverse: "_InverseModel",
             # a grid a ninth of the kind's grid step apart, and the parabola through the lowest and its neighbours
             xs = math.log(eps[j]) + np.linspace(-step, step, 9)
             cs = np.array([cj(float(x_)) for x_ in xs])
-            x_best = _parabola_min(xs, cs)
+            x_best = friction_law.parabola_min(xs, cs)
             c_best = cj(x_best) if x_best != xs[int(np.argmin(cs))] else float(np.min(cs))
             if c_best > float(np.min(cs)):
                 x_best, c_best = float(xs[int(np.argmin(cs))]), float(np.min(cs))
@@ -566,22 +561,6 @@ def fit_law(rec: RobotRecording, inverse: "_InverseModel",
     return (shape, laws[shape][0])
 
 
-def _parabola_min(x: np.ndarray, e: np.ndarray) -> float:
-    """The lowest of ``e`` on the sorted grid ``x``, moved to the vertex of the parabola through it and its neighbours
-    when that opens upward (kept between them)."""
-    i = int(np.argmin(e))
-    xi = float(x[i])
-    if 0 < i < len(x) - 1 and np.all(np.isfinite(e[i - 1:i + 2])):
-        (x0, x1, x2), (e0, e1, e2) = x[i - 1:i + 2], e[i - 1:i + 2]
-        # Newton's form e0 + d01 (x − x0) + c2 (x − x0)(x − x1), its vertex
-        d01, d12 = (e1 - e0) / (x1 - x0), (e2 - e1) / (x2 - x1)
-        c2 = (d12 - d01) / (x2 - x0)
-        if c2 > 0:
-            c1 = d01 - c2 * (x0 + x1)  # e = c2 x² + c1 x + c0
-            xi = float(np.clip(-c1 / (2 * c2), x0, x2))
-    return xi
-
-
 def _first_half(rec: RobotRecording) -> RobotRecording:
     import dataclasses
 
@@ -590,122 +569,43 @@ def _first_half(rec: RobotRecording) -> RobotRecording:
                                u_ext=None if rec.u_ext is None else rec.u_ext[:m])
 
 
-#: The factors on each shape's ε that :func:`closed_loop_law` tries first (a factor of 2 either way, √2 apart: the
-#: error's minimum in ε is sharp, 20 % up over a factor 1.4 on the UR5; on a grid a factor 2 apart the held-out
-#: Panda's algebraic law fell between two points and an exp law took its place, a joint's Fv 17 % off).
-CLOSED_LOOP_FACTORS = tuple(2.0 ** (k / 2) for k in range(-2, 3))
-
-
 def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dict[str, List[float]]]], law: Law,
                     per_shape: Dict[str, Tuple[float, ...]], progress=None) -> Law:
-    """The friction law through zero speed that the closed loop follows best, by the joints' relative force errors on
-    the first half of the record (their RMS: every joint alike, where the total would hear only the heavy ones):
-    each shape with the model's other parameters refitted for it (``refit(law)``: the robot and its drives;
-    parameters fitted with one shape have taken its tail into their viscous friction, and would favour it), at the
-    smoothing speeds the inverse model chose for it scaled together on a grid; the best refined on a finer grid, then
-    each joint's ε on its own by that joint's force error (a Panda's slow fourth joint turns over at a third of the
-    others' ε). The inverse model cannot choose the law: it leaves out the rows where the law acts, and on the rows
-    it keeps every sharp law is alike (on the data folder's pendulum, a tanh law of ε = 0.01 rad/s and an exp law of
-    0.015 fit them equally, and the second simulates the validation record at 1.23 times its floor, the first at
-    1.01)."""
+    """The friction law through zero speed that the closed loop follows best (:func:`didim.friction_law.closed_loop_law`,
+    every plant's search), by the joints' relative force errors on the first half of the record: each shape with the
+    model's other parameters refitted for it (``refit(law)``: the robot and its drives; parameters fitted with one
+    shape have taken its tail into their viscous friction, and would favour it), starting from the smoothing speeds
+    the inverse model chose for it. The inverse model cannot choose the law: it leaves out the rows where the law acts,
+    and on the rows it keeps every sharp law is alike (on the data folder's pendulum, a tanh law of ε = 0.01 rad/s and
+    an exp law of 0.015 fit them equally, and the second simulates the validation record at 1.23 times its floor, the
+    first at 1.01)."""
     part = _first_half(rec)
     say = progress or (lambda s: None)
-    # each shape starts from the smoothing speeds the inverse model chose for it, with the model's other parameters
-    # refitted for it
     starts: Dict[str, Tuple[float, ...]] = {}
     for sh, eps in list(per_shape.items()) + [(law[0], law[1])]:
         starts.setdefault(sh, tuple(eps))
     models: Dict[str, Any] = {}
-
     norms = np.maximum(np.linalg.norm(part.force, axis=0), 1e-300)
-    #: each simulation's joints' absolute force errors, by (shape, factor on its start's ε)
-    per_joint: Dict[Tuple[str, float], np.ndarray] = {}
 
-    def balanced(per: np.ndarray) -> float:
-        """The joints' relative force errors, each joint alike (the total would hear only the heavy joints)."""
-        return float(np.sqrt(np.mean((per / norms) ** 2)))
-
-    def joint_errors(lw: Law, robot: Robot, d) -> Optional[np.ndarray]:
+    def errors(lw: Law) -> Optional[np.ndarray]:
+        if lw[0] not in models:
+            try:
+                models[lw[0]] = refit((lw[0], starts[lw[0]]))
+            except (SimulationError, DataError, IdentifiabilityError):
+                models[lw[0]] = None
+        if models[lw[0]] is None:
+            return None
+        robot, d = models[lw[0]]
         try:
             sim = _simulate(part, robot, d, lw)
         except (SimulationError, DataError):
             return None
-        return np.linalg.norm(part.force - sim["force"], axis=0)
+        return np.linalg.norm(part.force - sim["force"], axis=0) / norms
 
-    def err(key: str, f: float) -> float:
-        if key not in models:
-            try:
-                models[key] = refit((key, starts[key]))
-            except (SimulationError, DataError, IdentifiabilityError):
-                models[key] = None
-        if models[key] is None:
-            return math.inf
-        robot, d = models[key]
-        per = joint_errors(_scaled((key, starts[key]), f), robot, d)
-        if per is None:
-            return math.inf
-        per_joint[(key, f)] = per
-        return balanced(per)
-
-    # every start on a coarse grid of factors on its joints' ε (the inverse model leaves ε poorly set where the law's
-    # tail is flat: tanh's on the UR5 came 1.3 times too large, and at that ε another shape simulated better), then
-    # the best one on a grid twice as fine and the parabola through the best and its neighbours (in log ε): the
-    # encoder makes the error rough at the scale of a count, and a search that follows it lands elsewhere on every
-    # perturbation of the record's last digits; fixed grids and a parabola do not
-    table: Dict[Tuple[str, float], float] = {}
-    grid = CLOSED_LOOP_FACTORS
-    for sh in starts:
-        # the middle of the grid, then outward while the lowest is at an edge: the error is unimodal in ε, so the
-        # points beyond an interior minimum cannot win (a third fewer simulations)
-        lo, hi = len(grid) // 2 - 1, len(grid) // 2 + 1
-        for f in grid[lo:hi + 1]:
-            table[(sh, f)] = err(sh, f)
-        while True:
-            row = [table[(sh, f)] for f in grid[lo:hi + 1]]
-            k = int(np.argmin(row))
-            if k == 0 and lo > 0:
-                lo -= 1
-                table[(sh, grid[lo])] = err(sh, grid[lo])
-            elif k == len(row) - 1 and hi < len(grid) - 1:
-                hi += 1
-                table[(sh, grid[hi])] = err(sh, grid[hi])
-            else:
-                break
-    (key, f0), best = min(table.items(), key=lambda t: t[1])
-    for f in grid:  # the best shape on the whole grid: each joint's own ε is chosen among its simulations (below)
-        if (key, f) not in table:
-            table[(key, f)] = err(key, f)
-    f0 = min((f for (k, f) in table if k == key), key=lambda f: table[(key, f)])
-    best = table[(key, f0)]
-    start = (key, starts[key])
-    fs = [f0 * 2**-0.5, f0 * 2**-0.25, f0, f0 * 2**0.25, f0 * 2**0.5]
-    e = np.array([table[(key, f)] if (key, f) in table else err(key, f) for f in fs])
-    x = np.log(fs)
-    i = int(np.argmin(e))
-    xi = _parabola_min(x, e)
-    best_law, best = _scaled(start, fs[i]), float(e[i])
-    if xi != x[i]:
-        ec = err(key, math.exp(xi))
-        if ec < best:
-            best_law, best = _scaled(start, math.exp(xi)), ec
-    # then each joint's ε on its own, by that joint's own force error over the shape's simulations so far (a joint's
-    # ε acts on its own torque, hardly on the others': the total error does not see a wrist's, and a Panda's slow
-    # fourth joint turns over at a third of the others' ε), its lowest moved to the parabola's vertex. Not judged by
-    # the joints' errors together: on the held-out arm with a quill, the ε of each joint's own error (0.019, 0.0012,
-    # 0.029 for a truth of 0.018, 0.0014, 0.033) raised them on the first half from 2.87 to 3.10 %, and lowered the
-    # validation record's from 2.8 to 1.37 times its floor
-    if models.get(key) is not None and len(best_law[1]) > 1:
-        robot, d = models[key]
-        done = sorted(f for (k, f) in per_joint if k == key)
-        xs = np.log(done)
-        errs = np.array([per_joint[(key, f)] for f in done])
-        factors = [math.exp(_parabola_min(xs, errs[:, j])) for j in range(len(best_law[1]))]
-        best_law = _scaled(start, factors)
-        per = joint_errors(best_law, robot, d)
-        best = balanced(per) if per is not None else math.inf
-    say(f"friction law through zero speed, in closed loop: {best_law[0]}, ε = "
-        + ", ".join(f"{e:.4g}" for e in best_law[1]) + f" (joints' force errors on the first half, RMS {100 * best:.3f} %)")
-    return best_law
+    found = friction_law.closed_loop_law(starts, errors)
+    say(f"friction law through zero speed, in closed loop: {friction_law.describe(found.law)} (joints' force errors "
+        f"on the first half, RMS {100 * found.error:.3f} %)")
+    return found.law
 
 
 def simulate_robot(rec: RobotRecording, result: RobotResult, substeps: int = 0) -> Dict[str, np.ndarray]:
