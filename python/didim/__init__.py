@@ -16,7 +16,7 @@ from .api import METHODS, identify
 from . import scenarios
 from .doctor import Diagnosis, Finding, doctor
 from .model import Model, Term
-from .robots import Robot, RobotRecording, RobotResult, load_joint_controllers
+from .robots import Robot, RobotRecording, load_joint_controllers
 from .result import load_result
 from .check import check_controller
 from .controller_fit import fit_controller
@@ -37,7 +37,6 @@ __all__ = [
     "Recording",
     "Robot",
     "RobotRecording",
-    "RobotResult",
     "load_joint_controllers",
     "load_mat",
     "from_dataframe",

@@ -304,7 +304,7 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
     else:
         res = robot_idim_ls(recording, robot, offset=offset)
     if chk is not None:
-        res.controller_check = chk.to_dict()
+        res.options["controller_check"] = chk.to_dict()
         res.notes.insert(0, chk.summary())
     res.notes[:0] = [f"no controller was described: {o}" for o in recording.controller_origin]
     return res

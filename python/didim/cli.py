@@ -192,9 +192,7 @@ def cmd_simulate(args) -> int:
     from .check import enforce
 
     result = load_result(args.result)
-    from .robots import RobotResult
-
-    if isinstance(result, RobotResult):
+    if result.robot is not None:  # a robot's result
         return _simulate_robot(args, result)
     rec = _load(args, args.file)
     chk = enforce(rec, args.controller_check)
@@ -273,11 +271,11 @@ def cmd_payload(args) -> int:
     from ._errors import DataError
     from ._io import write_text
     from .result import load_result
-    from .robots import RobotResult, payload
+    from .robots import payload
 
     _check_outputs([args.file, args.result, args.controller], [args.json])
     result = load_result(args.result)
-    if not isinstance(result, RobotResult):
+    if result.robot is None:
         raise DataError(f"{args.result}: not a robot's result (didim identify --urdf ... --json OUT.json)")
     from .check import enforce
 

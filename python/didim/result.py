@@ -6,7 +6,7 @@ import json
 import math
 import os
 from dataclasses import asdict, dataclass, field
-from typing import Any, Dict, List, Mapping, Optional
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
@@ -88,10 +88,27 @@ class IdentificationResult:
     #: "linear" (m, N, kg) or "rotary" (rad, N·m, kg·m²): the axis of the record the result was identified on; the
     #: numbers are SI either way, and :attr:`units` names them for this axis.
     axis: str = "linear"
+    #: A robot's result (the plant of n joints; None for one axis, a plant of one joint described by
+    #: :attr:`structure`): the robot (:class:`didim.Robot`, its URDF) the parameters belong to, with its base map
+    #: (:class:`didim.robots.BaseParameters`: what each base parameter combines), each joint's closed-loop force
+    #: error and its friction law through zero speed (shape, each joint's ε in rad/s or m/s). ``options["offset"]``
+    #: says whether each joint's constant torque was fitted, ``options["controller_check"]`` holds each joint's
+    #: controller check. :mod:`didim.robots.identify` reads and writes them.
+    robot: Optional[Any] = None
+    base: Optional[Any] = None
+    force_error_per_joint: Dict[str, float] = field(default_factory=dict)
+    law: Optional[Tuple[str, Tuple[float, ...]]] = None
 
     def __post_init__(self):
-        if self.structure is None:
+        if self.structure is None and self.robot is None:
             self.structure = Model.of_result(self.model, self.all_params, self.options)
+
+    @property
+    def offset(self) -> bool:
+        """Whether the model has a constant force (torque) per joint."""
+        if self.robot is not None:
+            return bool(self.options.get("offset", False))
+        return bool(self.structure is not None and self.structure.offset)
 
     @property
     def units(self) -> Dict[str, str]:
@@ -122,8 +139,10 @@ class IdentificationResult:
 
     def to_dict(self) -> Dict[str, Any]:
         """A JSON-ready dict with the contract keys: model, method, params, std, rel_std_pct, relative_error, iterations,
-        simulations, elapsed_s (plus converged, message, initial, output_error, frozen, options, history)."""
-
+        simulations, elapsed_s (plus converged, message, initial, output_error, frozen, options, history); a robot's
+        adds ``"kind": "robot"``, its robot (URDF), base map, friction law and each joint's force error."""
+        if self.robot is not None:
+            return _robot_dict(self)
         d = {
             "model": self.model,
             "method": self.method,
@@ -190,6 +209,11 @@ class IdentificationResult:
                                 f", got {type(x).__name__}")
             return x
 
+        if isinstance(d, dict) and d.get("kind") == "robot":  # a robot's result carries its robot
+            try:
+                return _robot_from_dict(d)
+            except (KeyError, TypeError, ValueError) as e:
+                raise DataError(f"not a readable robot result ({type(e).__name__}: {e})") from None
         if not isinstance(d, dict) or "params" not in d or "model" not in d:
             raise DataError("a result is an object with 'model' and 'params' (save one with result.save('r.json') or "
                             "didim identify --json)")
@@ -252,7 +276,10 @@ class IdentificationResult:
             raise DataError(f"cannot save a result as {ext or 'a file without extension'!r}: use .json or .txt")
 
     def summary(self) -> str:
-        """A table in the paper's layout: χ⁰, χ̂ᵏ and %σ per parameter, then ‖Y − Wχ‖/‖Y‖."""
+        """A table in the paper's layout: χ⁰, χ̂ᵏ and %σ per parameter, then ‖Y − Wχ‖/‖Y‖ (a robot's: each joint's
+        force error, its friction law, the parameters with their %σ)."""
+        if self.robot is not None:
+            return _robot_summary(self)
         k = self.iterations
         head = f"{self.method} identification of the {self.model} model"
         lines = [head, "=" * len(head)]
@@ -320,6 +347,83 @@ class IdentificationResult:
         ax.grid(True, alpha=0.3)
         ax.legend(ncol=2, fontsize=8)
         return fig
+
+
+def iterations_of(errors) -> List[Iteration]:
+    """DIDIM's closed-loop force error at each iteration, as a result's history."""
+    return [Iteration(k=i, params={}, rel_std_pct={}, relative_error=math.nan, output_error=float(e))
+            for i, e in enumerate(errors)]
+
+
+def _robot_dict(res: IdentificationResult) -> Dict[str, Any]:
+    """A robot result as JSON (``"kind": "robot"``, read back by :func:`_robot_from_dict`)."""
+
+    return jsonable({"kind": "robot", "method": res.method, "params": res.params, "std": res.std,
+                     "std_pct": res.rel_std_pct, "offset": res.offset, "force_error": res.force_error,
+                     "force_error_per_joint": res.force_error_per_joint, "converged": res.converged,
+                     "iterations": res.iterations, "message": res.message, "elapsed_s": res.elapsed_s,
+                     "notes": res.notes, "history": [h.output_error for h in res.history],
+                     "controller_check": res.options.get("controller_check"),
+                     "friction_law": None if res.law is None else {"shape": res.law[0], "eps": list(res.law[1])},
+                     "robot": {"name": res.robot.name, "joints": res.robot.joint_names, "urdf": res.robot.urdf},
+                     "base": {"names": list(res.base.names), "standard_names": list(res.base.standard_names),
+                              "K": res.base.K.tolist(), "independent": list(res.base.independent)}})
+
+
+def _robot_summary(res: IdentificationResult) -> str:
+    """A robot result in words: the method and its work, each joint's force error, the friction law, the parameters
+    with their %σ, the notes."""
+    lines = [f"{res.method} on a {res.robot.ndof}-joint robot ({res.robot.name}): "
+             + ("converged" if res.converged else "NOT converged") + f" in {res.iterations} iteration(s), "
+             f"{res.elapsed_s:.1f} s; closed-loop force error {100 * res.force_error:.2f} %"]
+    lines += [f"  {j}: force error {100 * e:.2f} %" for j, e in res.force_error_per_joint.items()]
+    if res.law is not None:
+        eps = ", ".join(f"{j} {e:.4g} {'m/s' if k == 'prismatic' else 'rad/s'}"
+                        for j, k, e in zip(res.robot.joint_names, res.robot.joint_kinds, res.law[1]))
+        lines.append(f"  friction law through zero speed: {res.law[0]}, smoothing speed ε: {eps}")
+    for k, v in res.params.items():
+        lines.append(f"  {k} = {v:.6g} (±{res.rel_std_pct.get(k, math.nan):.2g} %)")
+    lines += [f"note: {x}" for x in res.notes]
+    return "\n".join(lines)
+
+
+def robot_result(method: str, params: Dict[str, float], std: Dict[str, float], robot, base, offset: bool,
+                 **kw) -> IdentificationResult:
+    """A robot's :class:`didim.IdentificationResult` (every plant's result type)."""
+    pct = {k: 100 * std[k] / abs(v) if v else math.inf for k, v in params.items() if k in std}
+    options = {"offset": bool(offset), **kw.pop("options", {})}
+    fields = dict(relative_error=math.nan, iterations=0, simulations=0, elapsed_s=0.0)
+    fields.update(kw)
+    return IdentificationResult(model="robot", method=method, params=params, std=std, rel_std_pct=pct, robot=robot,
+                                base=base, options=options, **fields)
+
+
+def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
+    from .robots.chain import BaseParameters, Robot
+
+    r = d["robot"]
+    robot = Robot.from_urdf_string(r["urdf"], r["joints"])
+    b = d["base"]
+    base = BaseParameters(tuple(b["standard_names"]), tuple(b["names"]), np.array(b["K"], dtype=float),
+                          tuple(b["independent"]))
+    return robot_result(d["method"], dict(d["params"]), dict(d["std"]), robot, base, bool(d["offset"]),
+                         force_error=d.get("force_error", math.nan),
+                         force_error_per_joint=dict(d.get("force_error_per_joint", {})),
+                         converged=bool(d.get("converged", True)), iterations=int(d.get("iterations", 0)),
+                         message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
+                         notes=list(d.get("notes", [])), history=iterations_of(d.get("history", [])),
+                         law=None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof),
+                         options={"controller_check": d.get("controller_check")})
+
+
+def _law_from(d: Dict[str, Any], n: int) -> Tuple[str, Tuple[float, ...]]:
+    """A saved friction law: its shape and each joint's ε (one ε for every joint in results saved before ε was per
+    joint)."""
+    eps = d["eps"]
+    eps = [float(eps)] * n if isinstance(eps, (int, float)) else [float(e) for e in eps]
+    if len(eps) != n:
+        raise DataError(f"the saved friction law has {len(eps)} smoothing speeds for {n} joints")
+    return (str(d["shape"]), tuple(eps))
 
 
 def _fmt(x: float) -> str:
@@ -425,14 +529,7 @@ def load_result(path) -> "IdentificationResult":  # noqa: F821
         raise DataError(f"{os.fspath(path)}: not a JSON result ({e})") from None
     except RecursionError:
         raise DataError(f"{os.fspath(path)}: not a didim result (its JSON is nested too deeply)") from None
-    if isinstance(d, dict) and d.get("kind") == "robot":  # a robot's result carries its robot
-        from .robots.identify import result_from_dict
-
-        try:
-            return result_from_dict(d)  # type: ignore[return-value]
-        except (KeyError, TypeError, ValueError) as e:
-            raise DataError(f"{os.fspath(path)}: not a readable robot result ({type(e).__name__}: {e})") from None
-    if not isinstance(d, dict) or "params" not in d or "model" not in d:
+    if not isinstance(d, dict) or ("params" not in d or "model" not in d) and d.get("kind") != "robot":
         raise DataError(f"{os.fspath(path)}: not a didim result (needs 'model' and 'params'; save one with "
                         "result.save('r.json') or didim identify --json)")
     try:
@@ -443,4 +540,4 @@ def load_result(path) -> "IdentificationResult":  # noqa: F821
         raise DataError(f"{os.fspath(path)}: not a didim result (its steps are nested too deeply)") from None
 
 
-__all__ = ["IdentificationResult", "Iteration", "compare", "UNITS", "load_result"]
+__all__ = ["IdentificationResult", "Iteration", "compare", "UNITS", "load_result", "robot_result", "iterations_of"]

@@ -330,6 +330,10 @@ def _is_result(x) -> bool:
 
 
 def _structure(result):
+    if result.robot is not None:
+        raise DataError(f"this is a robot's result ({result.robot.ndof} joints of {result.robot.name}): simulate it on "
+                        "a robot's record with didim.robots.simulate_robot(record, result) (command line: didim "
+                        "simulate REC.csv RESULT.json --controller C)")
     if result.structure is None:
         raise DataError(f"this {result.method} result holds no parameter set of a model ({', '.join(result.params)}); "
                         "simulate the final result of the identification (or one of its steps that has one)")

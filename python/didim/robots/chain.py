@@ -5,6 +5,7 @@ matrix, gravity and forward dynamics), as Pinocchio computes them. SI units: rad
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -177,4 +178,22 @@ class Robot:
         return out[0] if one else out
 
 
-__all__ = ["Robot"]
+@dataclass(frozen=True)
+class BaseParameters:
+    """The map β = K·π from the standard parameters π (rotor inertias, then 10 per body) to the base parameters."""
+
+    standard_names: Tuple[str, ...]
+    names: Tuple[str, ...]
+    K: np.ndarray
+    independent: Tuple[int, ...]
+
+    def of(self, pi: np.ndarray) -> np.ndarray:
+        return self.K @ pi
+
+    def standard_from(self, beta: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+        """The standard parameters closest to ``anchor`` (the URDF's, say) whose base parameters are ``beta``: every
+        such set gives the same dynamics."""
+        return anchor + np.linalg.lstsq(self.K, beta - self.K @ anchor, rcond=None)[0]
+
+
+__all__ = ["Robot", "BaseParameters"]

@@ -10,7 +10,6 @@ those combinations, β = K·π; their names say what each combines."""
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -21,7 +20,8 @@ import numpy as np
 from .. import _checks, _core, friction_law
 from ..didim_loop import didim_loop, residual_settled
 from .._errors import DataError, IdentifiabilityError, SimulationError
-from .chain import Robot
+from ..result import IdentificationResult, iterations_of, robot_result
+from .chain import BaseParameters, Robot
 from .record import RobotRecording
 
 #: A regressor column is independent when its R diagonal, after the columns are scaled to unit norm, is above this
@@ -44,24 +44,6 @@ SLOW_SHARE = 0.05
 #: The friction law of the simulated loop: algebraic, each joint's smoothing speed this share of its speed scale (its
 #: shape only matters in the rows left out).
 EPS_SHARE = 0.01
-
-
-@dataclass(frozen=True)
-class BaseParameters:
-    """The map β = K·π from the standard parameters π (rotor inertias, then 10 per body) to the base parameters."""
-
-    standard_names: Tuple[str, ...]
-    names: Tuple[str, ...]
-    K: np.ndarray
-    independent: Tuple[int, ...]
-
-    def of(self, pi: np.ndarray) -> np.ndarray:
-        return self.K @ pi
-
-    def standard_from(self, beta: np.ndarray, anchor: np.ndarray) -> np.ndarray:
-        """The standard parameters closest to ``anchor`` (the URDF's, say) whose base parameters are ``beta``: every
-        such set gives the same dynamics."""
-        return anchor + np.linalg.lstsq(self.K, beta - self.K @ anchor, rcond=None)[0]
 
 
 def _standard_names(robot: Robot) -> List[str]:
@@ -122,109 +104,25 @@ def base_parameters(robot: Robot, samples: int = 400, seed: int = 0) -> BasePara
     return BaseParameters(tuple(names), tuple(base_names), k, tuple(int(x) for x in ind))
 
 
-@dataclass
-class RobotResult:
-    """A robot's identified dynamics: ``params`` (each joint's ``Ia_``, ``Fv_``, ``Fc_`` (and ``OF_``) under its
-    name, and the base parameters under names that say what they combine), their standard deviations ``std`` and
-    relative ``std_pct``, the closed-loop force error on the training record (``force_error``, and per joint),
-    the robot (its URDF text) and the base map, the method and what it did."""
-
-    method: str
-    params: Dict[str, float]
-    std: Dict[str, float]
-    robot: Robot
-    base: BaseParameters
-    offset: bool
-    force_error: float = math.nan
-    force_error_per_joint: Dict[str, float] = field(default_factory=dict)
-    converged: bool = True
-    iterations: int = 0
-    message: str = ""
-    elapsed_s: float = 0.0
-    notes: List[str] = field(default_factory=list)
-    history: List[float] = field(default_factory=list)
-    #: The friction law through zero speed, (shape, each joint's ε in rad/s or m/s), fitted with the model
-    #: (:func:`fit_law`).
-    law: Optional[Law] = None
-    #: Each joint's controller against its log (:func:`didim.check.check_robot_controllers`), when it was checked.
-    controller_check: Optional[Dict[str, Any]] = None
-
-    @property
-    def std_pct(self) -> Dict[str, float]:
-        return {k: 100 * self.std[k] / abs(v) if v else math.inf for k, v in self.params.items() if k in self.std}
-
-    def theta(self) -> np.ndarray:
-        return np.array([self.params[k] for k in _theta_names(self.robot, self.base, self.offset)])
-
-    def drives(self) -> Dict[str, List[float]]:
-        names = self.robot.joint_names
-        return {"armature": [self.params[f"Ia_{j}"] for j in names], "viscous": [self.params[f"Fv_{j}"] for j in names],
-                "coulomb": [self.params[f"Fc_{j}"] for j in names],
-                "offset": [self.params.get(f"OF_{j}", 0.0) for j in names]}
-
-    def standard(self) -> np.ndarray:
-        """Standard parameters (rotor inertias, bodies) with this result's base parameters, closest to the URDF's."""
-        anchor = np.concatenate([np.zeros(self.robot.ndof), self.robot.inertial_params])
-        beta = np.array([self.params[b] for b in self.base.names])
-        return self.base.standard_from(beta, anchor)
-
-    def to_dict(self) -> Dict[str, Any]:
-        from .._io import jsonable
-
-        return jsonable({"kind": "robot", "method": self.method, "params": self.params, "std": self.std,
-                         "std_pct": self.std_pct, "offset": self.offset, "force_error": self.force_error,
-                         "force_error_per_joint": self.force_error_per_joint, "converged": self.converged,
-                         "iterations": self.iterations, "message": self.message, "elapsed_s": self.elapsed_s,
-                         "notes": self.notes, "history": self.history, "controller_check": self.controller_check,
-                         "friction_law": None if self.law is None else {"shape": self.law[0],
-                                                                         "eps": list(self.law[1])},
-                         "robot": {"name": self.robot.name, "joints": self.robot.joint_names, "urdf": self.robot.urdf},
-                         "base": {"names": list(self.base.names), "standard_names": list(self.base.standard_names),
-                                  "K": self.base.K.tolist(), "independent": list(self.base.independent)}})
-
-    def save(self, path) -> None:
-        """Writes the result as JSON (read back by :func:`didim.load_result`), as a one-axis result's ``save``."""
-        save_result(self, path)
-
-    def summary(self) -> str:
-        lines = [f"{self.method} on a {self.robot.ndof}-joint robot ({self.robot.name}): "
-                 + ("converged" if self.converged else "NOT converged") + f" in {self.iterations} iteration(s), "
-                 f"{self.elapsed_s:.1f} s; closed-loop force error {100 * self.force_error:.2f} %"]
-        lines += [f"  {j}: force error {100 * e:.2f} %" for j, e in self.force_error_per_joint.items()]
-        if self.law is not None:
-            eps = ", ".join(f"{j} {e:.4g} {'m/s' if k == 'prismatic' else 'rad/s'}"
-                            for j, k, e in zip(self.robot.joint_names, self.robot.joint_kinds, self.law[1]))
-            lines.append(f"  friction law through zero speed: {self.law[0]}, smoothing speed ε: {eps}")
-        pct = self.std_pct
-        for k, v in self.params.items():
-            lines.append(f"  {k} = {v:.6g} (±{pct.get(k, math.nan):.2g} %)")
-        lines += [f"note: {x}" for x in self.notes]
-        return "\n".join(lines)
+def theta_of(res: IdentificationResult) -> np.ndarray:
+    """A robot result's parameter vector θ: the base parameters, each joint's viscous and Coulomb friction (and
+    offset)."""
+    return np.array([res.params[k] for k in _theta_names(res.robot, res.base, res.offset)])
 
 
-def result_from_dict(d: Dict[str, Any]) -> RobotResult:
-    r = d["robot"]
-    robot = Robot.from_urdf_string(r["urdf"], r["joints"])
-    b = d["base"]
-    base = BaseParameters(tuple(b["standard_names"]), tuple(b["names"]), np.array(b["K"], dtype=float),
-                          tuple(b["independent"]))
-    return RobotResult(method=d["method"], params=dict(d["params"]), std=dict(d["std"]), robot=robot, base=base,
-                       offset=bool(d["offset"]), force_error=d.get("force_error", math.nan),
-                       force_error_per_joint=dict(d.get("force_error_per_joint", {})),
-                       converged=bool(d.get("converged", True)), iterations=int(d.get("iterations", 0)),
-                       message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
-                       notes=list(d.get("notes", [])), history=list(d.get("history", [])),
-                       law=None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof))
+def drives_of(res: IdentificationResult) -> Dict[str, List[float]]:
+    """A robot result's drives: each joint's rotor inertia, viscous and Coulomb friction and offset."""
+    names = res.robot.joint_names
+    return {"armature": [res.params[f"Ia_{j}"] for j in names], "viscous": [res.params[f"Fv_{j}"] for j in names],
+            "coulomb": [res.params[f"Fc_{j}"] for j in names],
+            "offset": [res.params.get(f"OF_{j}", 0.0) for j in names]}
 
 
-def _law_from(d: Dict[str, Any], n: int) -> "Law":
-    """A saved friction law: its shape and each joint's ε (one ε for every joint in results saved before ε was per
-    joint)."""
-    eps = d["eps"]
-    eps = [float(eps)] * n if isinstance(eps, (int, float)) else [float(e) for e in eps]
-    if len(eps) != n:
-        raise DataError(f"the saved friction law has {len(eps)} smoothing speeds for {n} joints")
-    return (str(d["shape"]), tuple(eps))
+def standard_of(res: IdentificationResult) -> np.ndarray:
+    """Standard parameters (rotor inertias, bodies) with a robot result's base parameters, closest to the URDF's."""
+    anchor = np.concatenate([np.zeros(res.robot.ndof), res.robot.inertial_params])
+    beta = np.array([res.params[b] for b in res.base.names])
+    return res.base.standard_from(beta, anchor)
 
 
 def _theta_names(robot: Robot, base: BaseParameters, offset: bool) -> List[str]:
@@ -608,12 +506,12 @@ def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dic
     return found.law
 
 
-def simulate_robot(rec: RobotRecording, result: RobotResult, substeps: int = 0) -> Dict[str, np.ndarray]:
+def simulate_robot(rec: RobotRecording, result: IdentificationResult, substeps: int = 0) -> Dict[str, np.ndarray]:
     """The closed loop of ``rec`` (its references, controllers, encoders, first force) with the model of ``result``
     (its friction law)."""
-    robot = result.robot.with_inertial_params(result.standard()[result.robot.ndof:])
-    d = result.drives()
-    d["armature"] = list(result.standard()[:result.robot.ndof])
+    robot = result.robot.with_inertial_params(standard_of(result)[result.robot.ndof:])
+    d = drives_of(result)
+    d["armature"] = list(standard_of(result)[:result.robot.ndof])
     return _simulate(rec, robot, d, result.law if result.law is not None else _default_law(rec), substeps)
 
 
@@ -637,7 +535,7 @@ def force_errors(rec: RobotRecording, force_sim: np.ndarray) -> Tuple[float, Dic
 
 
 def _result(method: str, rec: RobotRecording, robot: Robot, base: BaseParameters, offset: bool, theta, cov,
-            **kw) -> RobotResult:
+            **kw) -> IdentificationResult:
     names = _theta_names(robot, base, offset)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     params = dict(zip(names, map(float, theta)))
@@ -663,7 +561,7 @@ def _result(method: str, rec: RobotRecording, robot: Robot, base: BaseParameters
     ordered = {k: params[k] for k in [f"{p}_{j}" for p in ("Ia", "Fv", "Fc") + (("OF",) if offset else ())
                                       for j in robot.joint_names]}
     ordered.update({k: v for k, v in params.items() if k not in ordered})
-    res = RobotResult(method=method, params=ordered, std=stds, robot=robot, base=base, offset=offset, notes=notes, **kw)
+    res = robot_result(method, ordered, stds, robot, base, offset, notes=notes, **kw)
     res.notes += plausibility(res)
     return res
 
@@ -673,7 +571,7 @@ def _result(method: str, rec: RobotRecording, robot: Robot, base: BaseParameters
 POOR_EXCITATION = 0.1
 
 
-def plausibility(res: RobotResult) -> List[str]:
+def plausibility(res: IdentificationResult) -> List[str]:
     """What a robotics engineer checks before trusting the estimate: the base parameters the record excites poorly
     (relative standard deviation above :data:`POOR_EXCITATION`), and whether the standard parameters closest to the
     URDF's that give these base parameters are those of physical bodies (mass > 0, pseudo-inertia positive definite:
@@ -687,7 +585,7 @@ def plausibility(res: RobotResult) -> List[str]:
                    + ("; …" if len(poor) > 8 else "") + " (they change the torques little: another trajectory "
                    "would pin them down)")
     n = res.robot.ndof
-    pi = res.standard()
+    pi = standard_of(res)
     bad = []
     for j, name in enumerate(res.robot.joint_names):
         p = pi[n + 10 * j:n + 10 * j + 10]
@@ -714,7 +612,7 @@ def plausibility(res: RobotResult) -> List[str]:
     return out
 
 
-def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> RobotResult:
+def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> IdentificationResult:
     """IDIM-LS: the inverse dynamic model on the measured positions (zero-phase low-passed, differentiated twice),
     weighted least squares per joint, the rows where a joint moves slowly left out; the friction law's tail fitted
     with it (:func:`fit_law`), its shape through zero speed chosen in closed loop (:func:`closed_loop_law`) for the
@@ -877,7 +775,7 @@ def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, t
 
 
 def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: int = 30, tol: float = 1e-3,
-          progress: Optional[Callable[[str], None]] = None) -> RobotResult:
+          progress: Optional[Callable[[str], None]] = None) -> IdentificationResult:
     """DIDIM from the URDF's values (rotor inertias and friction 0): the closed loop simulated with the current
     estimate, weighted least squares of the measured force on the simulated states, until the regression's residual
     changes by less than ``tol`` of itself over a step (the paper's criterion (21), every plant's); the iterations and their safeguards are those of every plant (:func:`didim.didim_loop.didim_loop`): an iterate whose
@@ -928,7 +826,8 @@ def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: 
         raise SimulationError(f"DIDIM could not simulate the robot's closed loop: {run.message}")
     err, theta, sol, _ = run.best
     res = _result("didim", rec, robot, base, offset, theta, sol["covariance"], converged=run.converged,
-                  iterations=len(run.history), message="" if run.converged else run.message, history=run.errors,
+                  iterations=len(run.history), message="" if run.converged else run.message,
+                  history=iterations_of(run.errors),
                   notes=notes + run.notes, law=sol["law"])
     res.force_error, res.force_error_per_joint = sol["force_errors"]
     res.elapsed_s = time.perf_counter() - t0
@@ -1010,7 +909,7 @@ class _PayloadPlant:
         return f"payload iteration {len(loop.history) - 1}: closed-loop force error {100 * loop.error:.3f} %"
 
 
-def payload(rec: RobotRecording, result: RobotResult, *, max_iter: int = 30, tol: float = 1e-3,
+def payload(rec: RobotRecording, result: IdentificationResult, *, max_iter: int = 30, tol: float = 1e-3,
             progress: Optional[Callable[[str], None]] = None) -> PayloadResult:
     """The payload on the last link of the robot of ``result`` (identified without it) from ``rec`` (recorded with
     it): DIDIM on the parameters the payload adds to the last body, the rest of the model kept; the parameters the
@@ -1020,10 +919,10 @@ def payload(rec: RobotRecording, result: RobotResult, *, max_iter: int = 30, tol
     robot, n = result.robot, result.robot.ndof
     _check(rec, robot)
     say = progress or (lambda s: None)
-    pi = result.standard()
-    drives = result.drives()
+    pi = standard_of(result)
+    drives = drives_of(result)
     drives["armature"] = list(pi[:n])
-    theta = result.theta()
+    theta = theta_of(result)
     dec = _decimation(rec)
     law = result.law if result.law is not None else _default_law(rec)
     # the last body's identifiable parameters (the rest of the robot known)
@@ -1085,11 +984,5 @@ def _check(rec: RobotRecording, robot: Robot) -> None:
                         f"({', '.join(robot.joint_names)}), in the same order")
 
 
-def save_result(result: RobotResult, path) -> None:
-    from .._io import write_text
-
-    write_text(path, json.dumps(result.to_dict(), indent=1))
-
-
-__all__ = ["BaseParameters", "RobotResult", "PayloadResult", "payload", "base_parameters", "idim_ls", "didim", "simulate_robot", "force_errors",
-           "result_from_dict", "save_result"]
+__all__ = ["BaseParameters", "PayloadResult", "payload", "base_parameters", "idim_ls", "didim", "simulate_robot", "force_errors",
+           "theta_of", "drives_of", "standard_of"]
