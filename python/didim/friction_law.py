@@ -51,6 +51,19 @@ def parabola_min(x: np.ndarray, e: np.ndarray) -> float:
     return xi
 
 
+def _vertex_value(x: np.ndarray, e: np.ndarray) -> float:
+    """The value at :func:`parabola_min`'s point: the vertex of the parabola through the lowest of ``e`` and its
+    neighbours where that opens upward, else the lowest of ``e``."""
+    i = int(np.argmin(e))
+    xv = parabola_min(x, e)
+    if xv == x[i]:
+        return float(e[i])
+    (x0, x1, x2), (e0, e1, e2) = x[i - 1:i + 2], e[i - 1:i + 2]
+    d01, d12 = (e1 - e0) / (x1 - x0), (e2 - e1) / (x2 - x1)
+    c2 = (d12 - d01) / (x2 - x0)
+    return float(e0 + d01 * (xv - x0) + c2 * (xv - x0) * (xv - x1))
+
+
 def _lower_bound(x: np.ndarray, e: np.ndarray) -> float:
     """The lowest a convex error through the points (``x`` sorted) can reach between the lowest point's neighbours: on
     each side of it, where the extension of the chord beyond the lowest point meets the extension of the chord beyond
@@ -180,11 +193,30 @@ def closed_loop_law(starts: Dict[str, Tuple[float, ...]], errors: Callable[[Law]
         e = np.array([table[(sh, m)] for m in ms])
         return bool(np.isfinite(np.min(e))) and _lower_bound(ms, e) <= coarse_best
 
-    refined = {sh: refine(sh) for sh in starts if dips(sh)}
-    key = min(refined, key=lambda sh: refined[sh][1])
-    best_m, best = refined[key]
+    def separable(sh: str) -> float:
+        """What the shape's joints reach each at its own factor: each joint's error over the shape's coarse points,
+        the lowest of the parabola through its lowest point and neighbours, together."""
+        ms = sorted(m for (s_, m) in table if s_ == sh and math.isfinite(table[(s_, m)]))
+        if len(ms) < 3:
+            return min((table[(sh, m)] for m in ms), default=math.inf)
+        errs = np.array([tried[law_at(sh, m)] for m in ms])
+        return rms(np.array([max(_vertex_value(np.array(ms, dtype=float), errs[:, j]), 0.0)
+                             for j in range(errs.shape[1])]))
+
+    several = per_joint and len(next(iter(starts.values()))) > 1
+    if several:
+        # with several joints, each shape judged by what its joints' own factors reach (a joint's ε acts on its own
+        # force, hardly on the others'): compared at one factor for all joints, a shape whose joints' starting speeds
+        # are off by different factors loses to another it beats once each joint has its own (the held-out 1 kHz
+        # Panda's algebraic law, 1.77 % against exp's 1.75 % at a common factor; exp with its own factors, 1.54 %,
+        # left the slow fourth joint's Fv 16 % off)
+        key = min(starts, key=separable)
+        best_m, best = refine(key)
+    else:
+        refined = {sh: refine(sh) for sh in starts if dips(sh)}
+        key = min(refined, key=lambda sh: refined[sh][1])
+        best_m, best = refined[key]
     # 3. the best shape on its whole grid: each joint's own ε is chosen among its simulations
-    several = per_joint and len(starts[key]) > 1
     if several:
         batch([(key, 2 * k) for k in range(-reach, reach + 1)])
     law = law_at(key, best_m)
