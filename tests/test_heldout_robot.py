@@ -8,6 +8,7 @@ was per joint, one ε served m/s and rad/s at once: the quill's Fv came out 61 %
 import json
 import os
 
+import numpy as np
 import pytest
 
 import didim
@@ -62,3 +63,28 @@ def test_idim_ls_identifies_the_arm_with_a_prismatic_joint_within_5_percent(rpr)
     val = didim.load_record(out / "rpr_valid.csv", robot=robot, controller=ctl)
     err, _ = force_errors(val, simulate_robot(val, res)["force"])
     assert err <= 1.2 * truth["records"]["valid"]["truth_floor_total"]
+
+
+def test_a_quill_logged_in_mm_and_read_as_m_is_refused_by_the_urdfs_dynamics(rpr, tmp_path):
+    """The prismatic joint's positions in mm, undeclared, on a URDF whose limits would not betray them: the URDF's
+    dynamics explain the force far better read in mm, and the record is refused naming mm (declared, it loads)."""
+    out, truth = rpr
+    text = (out / "rpr_cad.urdf").read_text()
+    assert 'lower="-0.15" upper="0.15"' in text
+    urdf = tmp_path / "rpr_wide_limits.urdf"
+    urdf.write_text(text.replace('lower="-0.15" upper="0.15"', 'lower="-1000" upper="1000"'))
+    robot = didim.Robot.from_urdf(urdf)
+    j = robot.joint_kinds.index("prismatic")
+    head = (out / "rpr_train.csv").read_text().splitlines()[0].split(",")
+    data = np.loadtxt(out / "rpr_train.csv", delimiter=",", skiprows=1)
+    for i, c in enumerate(head):
+        if c in (f"qr_{j + 1}", f"qm_{j + 1}"):
+            data[:, i] *= 1000
+    path = tmp_path / "rpr_mm.csv"
+    np.savetxt(path, data, delimiter=",", header=",".join(head), comments="", fmt="%.17g")
+    ctl = out / "rpr_controller.json"
+    with pytest.raises(didim.DataError, match=r"prismatic joints.*probably in mm.*qr_2\[mm\]"):
+        didim.load_record(path, robot=robot, controller=ctl)
+    rec = didim.load_record(path, robot=robot, controller=ctl, units="mm")
+    ref = didim.load_record(out / "rpr_train.csv", robot=robot, controller=ctl)
+    np.testing.assert_allclose(rec.qm, ref.qm, rtol=1e-12, atol=1e-15)

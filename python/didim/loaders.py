@@ -409,35 +409,47 @@ def _check_limits(p, robot, qr: np.ndarray, declared: bool) -> None:
                             f"its URDF limits {lo:.4g} to {hi:.4g} {unit}: {hint}, or the record is another robot's")
 
 
-#: A record's angles are refused as in the wrong unit when the URDF's dynamics explain its force this many times
-#: better with them in the other unit (rad for deg, deg for rad). Measured on seven arms (the data folder's and
-#: held-out ones): the right unit leaves 4-9 % of the force unexplained, the wrong one at least 2.7 times that.
+#: A record's positions are refused as in the wrong unit when the URDF's dynamics explain its force this many times
+#: better with them in the other unit (rad for deg, deg for rad, m for mm, mm for m). Measured on seven arms (the data
+#: folder's and held-out ones): the right angle unit leaves 4-9 % of the force unexplained, the wrong one at least 2.7
+#: times that; the held-out arm's quill in mm read as m, 360 % against 4 % (its position hardly enters the others'
+#: torques, so a quill in m declared in mm fits alike, 3.53 % against 3.52 %, and passes).
 UNITS_RATIO = 2.0
 
 
-def _check_angle_units(p, robot, rec: RobotRecording) -> None:
-    """Refuses a record whose angles fit the URDF's dynamics :data:`UNITS_RATIO` times better in the other unit than
-    in the one they were read in (a record in rad declared in degrees, or in degrees declared in nothing):
-    :func:`didim.robots.identify.urdf_residual`. The limits catch a reference in degrees beyond the URDF's range;
-    this catches the rest, in either direction."""
+#: The other reading of each unit of position the dynamics can tell apart, an angle in rad or degrees, a length in m
+#: or mm, and the factor that takes the positions read in the one to the other (both in SI).
+OTHER_READING = {"rad": ("deg", math.pi / 180), "deg": ("rad", 180 / math.pi),
+                 "m": ("mm", 1e-3), "mm": ("m", 1e3)}
+
+
+def _check_position_units(p, robot, rec: RobotRecording) -> None:
+    """Refuses a record whose positions fit the URDF's dynamics :data:`UNITS_RATIO` times better in the other unit
+    than in the one they were read in, for the revolute joints (rad or degrees) and the prismatic ones (m or mm) each
+    as a group (a record in rad declared in degrees, in degrees declared in nothing, a quill in m declared in mm):
+    :func:`didim.robots.identify.urdf_residual`. The limits catch a reference beyond the URDF's range; this catches
+    the rest, in either direction."""
     from .robots.identify import urdf_residual
 
-    rev = [j for j, k in enumerate(rec.joint_kinds) if k != "prismatic"]
-    if not rev or not hasattr(robot, "rnea"):  # no angles, or joints known by number only (no dynamics)
+    if not hasattr(robot, "rnea"):  # joints known by number only (no dynamics)
         return
-    read_as = {rec.units[j].position if rec.units else "rad" for j in rev}
-    if not read_as <= {"rad"} and read_as != {"deg"}:
-        return  # revolutions, counts, or several units: no single other reading to compare with
-    in_deg = read_as == {"deg"}
-    read, other, factor = ("deg", "rad", 180 / math.pi) if in_deg else ("rad", "deg", math.pi / 180)
-    here = urdf_residual(rec, robot)
-    there = urdf_residual(rec, robot, factor)
-    if here > UNITS_RATIO * there:
-        raise DataError(f"{p}: read in {read}, the revolute joints' positions leave the URDF's dynamics "
-                        f"{100 * here:.0f} % of the force unexplained, read in {other} {100 * there:.0f} %: the record "
-                        f"is probably in {other}; declare its units (units='{other}', CLI: --units {other}, a header "
-                        f"such as qr_1[{other}], or \"units\" in the controllers' file), or check that the URDF is "
-                        "this robot's")
+    for kind, si in (("revolute", "rad"), ("prismatic", "m")):
+        joints = [j for j, k in enumerate(rec.joint_kinds) if (k == "prismatic") == (kind == "prismatic")]
+        read_as = {rec.units[j].position if rec.units else si for j in joints}
+        if len(read_as) != 1 or next(iter(read_as)) not in OTHER_READING:
+            continue  # no joint of the kind; revolutions, counts, µm or several units: no single other reading
+        read = next(iter(read_as))
+        other, factor = OTHER_READING[read]
+        key = "length_factor" if kind == "prismatic" else "angle_factor"
+        here = urdf_residual(rec, robot)
+        there = urdf_residual(rec, robot, **{key: factor})
+        if here > UNITS_RATIO * there:
+            raise DataError(f"{p}: read in {read}, the {kind} joints' positions leave the URDF's dynamics "
+                            f"{100 * here:.0f} % of the force unexplained, read in {other} {100 * there:.0f} %: the "
+                            f"record is probably in {other}; declare its units (units='{other}', CLI: --units "
+                            f"{other}, a header such as qr_{joints[0] + 1}[{other}], or \"units\" in the controllers' "
+                            "file), or "
+                            "check that the URDF is this robot's")
 
 
 def _robot_file_units(path, kinds) -> Optional[list]:
@@ -613,7 +625,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
                              units=tuple(u) if u is not None else (), controller_origin=origin)
     except DataError as e:
         raise DataError(f"{p}: {e}") from None
-    _check_angle_units(p, robot, rec)
+    _check_position_units(p, robot, rec)
     return rec
 
 
