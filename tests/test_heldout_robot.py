@@ -30,19 +30,26 @@ def rpr(tmp_path_factory):
     return out, json.loads((out / "truth.json").read_text())["robots"]["rpr"]
 
 
-def test_didim_identifies_an_arm_with_a_prismatic_joint_from_another_simulator(rpr):
-    out, truth = rpr
+def _identified_within_bounds(out, truth, method):
+    """``method`` on the arm's training record: each joint's friction within 5 % of the truth, the validation record
+    simulated with the estimate within 1.2 times its truth floor. Returns the robot, its controllers and the result."""
     robot = didim.Robot.from_urdf(out / "rpr_cad.urdf")
     assert robot.joint_kinds == ["revolute", "prismatic", "revolute"]
     ctl = out / "rpr_controller.json"
     rec = didim.load_record(out / "rpr_train.csv", robot=robot, controller=ctl)
-    res = didim.identify(rec, robot, "didim")
+    res = didim.identify(rec, robot, method)
     for i, j in enumerate(robot.joint_names):
         assert res.params[f"Fv_{j}"] == pytest.approx(truth["Fv"][i], rel=0.05), j
         assert res.params[f"Fc_{j}"] == pytest.approx(truth["Fc"][i], rel=0.05), j
     val = didim.load_record(out / "rpr_valid.csv", robot=robot, controller=ctl)
     err, _ = force_errors(val, simulate_robot(val, res)["force"])
     assert err <= 1.2 * truth["records"]["valid"]["truth_floor_total"]
+    return robot, ctl, res
+
+
+def test_didim_identifies_an_arm_with_a_prismatic_joint_from_another_simulator(rpr):
+    out, truth = rpr
+    robot, ctl, res = _identified_within_bounds(out, truth, "didim")
     pay = payload(didim.load_record(out / "rpr_payload.csv", robot=robot, controller=ctl), res)
     assert pay.mass == pytest.approx(truth["payload"]["mass"], rel=0.03)
 
@@ -53,16 +60,7 @@ def test_idim_ls_identifies_the_arm_with_a_prismatic_joint_within_5_percent(rpr)
     floor with the closed loop's law (1.9 % and 1.31 times when the positions were low-passed at the decimation's
     own cutoff)."""
     out, truth = rpr
-    robot = didim.Robot.from_urdf(out / "rpr_cad.urdf")
-    ctl = out / "rpr_controller.json"
-    rec = didim.load_record(out / "rpr_train.csv", robot=robot, controller=ctl)
-    res = didim.identify(rec, robot, "idim-ls")
-    for i, j in enumerate(robot.joint_names):
-        assert res.params[f"Fv_{j}"] == pytest.approx(truth["Fv"][i], rel=0.05), j
-        assert res.params[f"Fc_{j}"] == pytest.approx(truth["Fc"][i], rel=0.05), j
-    val = didim.load_record(out / "rpr_valid.csv", robot=robot, controller=ctl)
-    err, _ = force_errors(val, simulate_robot(val, res)["force"])
-    assert err <= 1.2 * truth["records"]["valid"]["truth_floor_total"]
+    _identified_within_bounds(out, truth, "idim-ls")
 
 
 def test_a_quill_logged_in_mm_and_read_as_m_is_refused_by_the_urdfs_dynamics(rpr, tmp_path):
