@@ -307,4 +307,6 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
         res.options["controller_check"] = chk.to_dict()
         res.notes.insert(0, chk.summary())
     res.notes[:0] = [f"no controller was described: {o}" for o in recording.controller_origin]
+    if recording.lead_in_note():
+        res.notes.insert(0, recording.lead_in_note())
     return res

@@ -79,7 +79,8 @@ def _robot_record(args, path: str, robot):
             raise DataError(f"{flag} applies to one axis's record; a robot's record has columns t, qr_1..qr_n, "
                             "force_1..force_n, qm_1..qm_n (a drive unit's scale goes in --units, e.g. deg,A=2.5)")
     return load_record(path, robot=robot, controller=getattr(args, "controller", None) or None,
-                       units=getattr(args, "units", None))
+                       units=getattr(args, "units", None),
+                       lead_in=None if getattr(args, "lead_in", "auto") == "none" else "auto")
 
 
 def cmd_identify_robot(args) -> int:

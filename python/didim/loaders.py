@@ -288,7 +288,7 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
                             "columns and force_scale apply to one axis's record: declare a drive unit with its scale "
                             "in units (e.g. units='deg,A=2.5')")
         return load_robot_record(path, robot, controller=controller, name=name, units=units,
-                                 beside_controller=beside_controller)
+                                 beside_controller=beside_controller, lead_in=lead_in)
     rec = _load_record(path, controller, columns, force_scale, dt, position_resolution, name, pulses_gain, units,
                        beside_controller)
     if isinstance(lead_in, str) and lead_in == "auto":
@@ -482,7 +482,7 @@ def _robot_file_units(path, kinds) -> Optional[list]:
 
 
 def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Optional[str] = None,
-                      units: Any = None, beside_controller: bool = True) -> RobotRecording:
+                      units: Any = None, beside_controller: bool = True, lead_in: Any = "auto") -> RobotRecording:
     """A robot record from a CSV, Parquet or HDF5 file with columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``
     in ``robot``'s joint order (or ``qr_<joint name>``…), positions in rad (prismatic joints: m), forces in N·m (N),
     unless the record declares other units: ``units`` (``"deg"``, ``"deg,mm"``, one per joint:
@@ -622,7 +622,8 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     try:
         rec = RobotRecording(dt=dt, joint_names=tuple(names), controllers=controllers, encoder_step=steps, name=label,
                              joint_kinds=tuple(kinds), **signals, delay=delay, force_lag=force_lag,
-                             units=tuple(u) if u is not None else (), controller_origin=origin)
+                             units=tuple(u) if u is not None else (), controller_origin=origin,
+                             lead_in=lead_in)
     except DataError as e:
         raise DataError(f"{p}: {e}") from None
     _check_position_units(p, robot, rec)

@@ -474,7 +474,8 @@ def _first_half(rec: RobotRecording) -> RobotRecording:
 
     m = max(rec.n // 2, 2)
     return dataclasses.replace(rec, qr=rec.qr[:m], force=rec.force[:m], qm=rec.qm[:m],
-                               u_ext=None if rec.u_ext is None else rec.u_ext[:m])
+                               u_ext=None if rec.u_ext is None else rec.u_ext[:m],
+                               lead_in=rec.qr_lead if len(rec.qr_lead) else None)
 
 
 #: The closed loop's shape replaces the one the inverse model chose on the law's tail only when its force errors are
@@ -546,14 +547,26 @@ def simulate_robot(rec: RobotRecording, result: IdentificationResult, substeps: 
 
 
 def _simulate(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]], law: Law, substeps: int = 0):
+    """The closed loop of ``rec`` with the robot ``robot`` and drives ``d`` under ``law``: from rest at the first
+    reference, each controller's integrator holding the logged first force; through the record's lead-in
+    (:attr:`RobotRecording.qr_lead`) when it begins in motion, from rest at the lead-in's start, each integrator then
+    holding the model's static torque there (gravity and offset, less the feedforward), the lead-in's samples dropped
+    from the outputs."""
+    qr, u_ext = rec.lead_in_signals()
+    lead = len(qr) - rec.n
+    force0 = rec.force[0]
+    if lead:
+        rest = np.zeros(rec.ndof)
+        force0 = robot.rnea(qr[0], rest, rest) + np.asarray(d["offset"]) - (0.0 if u_ext is None else u_ext[0])
     try:
-        return _core.simulate_robot(robot._core, d["armature"], d["viscous"], d["coulomb"], d["offset"],
-                                    rec.core_controllers(), rec.qr, rec.dt, quantization=list(rec.encoder_step),
-                                    force0=list(rec.force[0]), substeps=substeps, coulomb_eps=list(law[1]),
-                                    coulomb_law=[law[0]] * len(law[1]), u_ext=rec.u_ext,
-                                    delay=list(rec.delay) or None, force_lag=list(rec.force_lag) or None)
+        sim = _core.simulate_robot(robot._core, d["armature"], d["viscous"], d["coulomb"], d["offset"],
+                                   rec.core_controllers(), qr, rec.dt, quantization=list(rec.encoder_step),
+                                   force0=list(map(float, force0)), substeps=substeps, coulomb_eps=list(law[1]),
+                                   coulomb_law=[law[0]] * len(law[1]), u_ext=u_ext,
+                                   delay=list(rec.delay) or None, force_lag=list(rec.force_lag) or None)
     except DataError as e:
         raise SimulationError(f"the robot's closed loop cannot be simulated with these parameters: {e}") from None
+    return {k: v[lead:] for k, v in sim.items()} if lead else sim
 
 
 def force_errors(rec: RobotRecording, force_sim: np.ndarray) -> Tuple[float, Dict[str, float]]:

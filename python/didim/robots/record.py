@@ -5,9 +5,10 @@ every joint, sampled together, with one controller per joint; read from CSV, Par
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
-from typing import List, Optional, Tuple
+from typing import Any, List, Optional, Tuple
 
 import numpy as np
 
@@ -89,6 +90,13 @@ class RobotRecording:
     #: empty for none.
     delay: Tuple[int, ...] = ()
     force_lag: Tuple[float, ...] = ()
+    #: The references before the first sample, for a log that begins in motion, as one axis's
+    #: (:attr:`didim.Recording.lead_in`): ``"auto"`` (default) reconstructs each joint's back to the rest it left where
+    #: its reference begins in the acceleration from rest (:func:`didim.recording.reconstruct_lead_in`), ``None`` for
+    #: none (the loop starts at rest on the first reference sample), or the samples themselves ((L, n), oldest first,
+    #: at ``dt``). The loop runs through them from rest, each controller's integrator holding the model's static
+    #: torque; nothing is compared there. :attr:`qr_lead` is the one in use.
+    lead_in: Any = "auto"
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -125,6 +133,17 @@ class RobotRecording:
             raise DataError(f"{len(self.controllers)} controllers for {n} joints: give one per joint")
         for c in self.controllers:
             c.transfer_function(self.dt)  # the same sample period, or a DataError saying so
+        lead = self.lead_in
+        if isinstance(lead, str):
+            if lead not in ("auto", "none"):
+                raise DataError(f"lead_in must be 'auto', None (or 'none') or the references before the first sample "
+                                f"(L, {n}), got {lead!r}")
+        elif lead is not None:
+            lead = np.asarray(lead, dtype=float)
+            if lead.ndim != 2 or lead.shape[1] != n or not np.all(np.isfinite(lead)) or lead.shape[0] >= len(self.qr):
+                raise DataError(f"lead_in must be finite references (L, {n}) before the first sample, fewer than the "
+                                f"record's {len(self.qr)} samples, got shape {lead.shape}")
+            object.__setattr__(self, "lead_in", lead)
 
     @property
     def n(self) -> int:
@@ -158,6 +177,53 @@ class RobotRecording:
                          position_resolution=self.encoder_step[j] or None,
                          name=f"{self.name or 'record'}, joint {self.joint_names[j]}", lead_in=None,
                          units=Units("rad", "N*m") if rotary else Units("m", "N"))
+
+    @functools.cached_property
+    def qr_lead(self) -> np.ndarray:
+        """The references before the first sample that the loop runs through from rest ((L, n), oldest first; L = 0
+        for none): the given ones, or with ``lead_in="auto"`` each joint's reconstructed back to the rest it left as
+        one axis's (:func:`didim.recording.reconstruct_lead_in`) when every joint whose reference moves at the first
+        samples has one, the longest setting L and the shorter ones held at rest before theirs. A joint that moves
+        without one (a log cut in its cruise or its deceleration: how long it cruised is not in the log) leaves the
+        record without a lead-in, as one axis's: holding it still through the others' lead-in and then moving it
+        would start it further from its state than the record's first sample does."""
+        if isinstance(self.lead_in, np.ndarray):
+            return self.lead_in
+        n = self.ndof
+        if self.lead_in != "auto":
+            return np.zeros((0, n))
+        from ..recording import LEAD_FIT_SAMPLES, reconstruct_lead_in
+
+        leads = [reconstruct_lead_in(self.qr[:, j], self.dt, self.qm[:, j], self.encoder_step[j] or None)
+                 for j in range(n)]
+        head = self.qr[:min(LEAD_FIT_SAMPLES, self.n)]
+        moving = np.ptp(head, axis=0) > np.maximum(np.asarray(self.encoder_step, dtype=float), 0.0)
+        if any(m and not len(x) for m, x in zip(moving, leads)):
+            return np.zeros((0, n))
+        size = max(len(x) for x in leads)
+        out = np.empty((size, n))
+        for j, x in enumerate(leads):
+            start = x[0] if len(x) else self.qr[0, j]
+            out[:, j] = np.concatenate([np.full(size - len(x), start), x])
+        out.setflags(write=False)
+        return out
+
+    def lead_in_signals(self) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+        """The references and the known feedforward the loop runs on: :attr:`qr_lead` then ``qr``, and ``u_ext`` held
+        at its first value through the lead-in. The record's own arrays when it has no lead-in."""
+        lead = self.qr_lead
+        if not len(lead):
+            return self.qr, self.u_ext
+        u = None if self.u_ext is None else np.concatenate([np.repeat(self.u_ext[:1], len(lead), axis=0), self.u_ext])
+        return np.ascontiguousarray(np.concatenate([lead, self.qr])), u
+
+    def lead_in_note(self) -> str:
+        """One sentence on the record's lead-in for a result's notes ("" without one)."""
+        if not len(self.qr_lead):
+            return ""
+        return (f"the record begins in motion: simulated from rest {1e3 * len(self.qr_lead) * self.dt:.0f} ms before its "
+                "first sample, through its references' lead-in (to start at the first sample: lead_in=None, on the "
+                "command line --lead-in none)")
 
     def applied_force(self) -> np.ndarray:
         """The force the joints receive (:func:`applied_force`): the logged one without delay nor lag."""
