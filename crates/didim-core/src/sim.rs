@@ -19,10 +19,12 @@ use crate::controller::Controller;
 use crate::error::{invalid, Error, Result};
 use crate::model::Model;
 
+pub(crate) mod closed_loop;
+pub(crate) mod drive;
 pub(crate) mod driver;
 mod expint;
 mod rk4;
-pub use driver::applied_force;
+pub use drive::applied_force;
 use driver::NoTangent;
 use expint::Exponential;
 pub use expint::StepStats;
