@@ -149,8 +149,10 @@ impl Dynamics<'_> {
 /// The arm as the loop's [`Plant`]: its dynamics, the state `(q, v)`, the acceleration at the last
 /// recorded state (the first RK4 stage of the next period), RK4's work buffers and the recorded
 /// positions, speeds and accelerations (`samples × n`, row-major).
-struct Arm<'a> {
-    dynamics: Dynamics<'a>,
+struct Arm<'a, 'b> {
+    /// Borrowed, not held: the dynamics go out of line (ABA), and a pointer into the arm would
+    /// keep the state and the stages' buffers out of registers.
+    dynamics: &'b mut Dynamics<'a>,
     q: Vec<f64>,
     v: Vec<f64>,
     a: Vec<f64>,
@@ -174,7 +176,7 @@ struct Arm<'a> {
     out_qdd: Vec<f64>,
 }
 
-impl Plant for Arm<'_> {
+impl Plant for Arm<'_, '_> {
     type Joints = Vec<f64>;
 
     fn joints(&self) -> Vec<f64> {
@@ -400,62 +402,66 @@ pub fn simulate_robot(
         });
         span[j] = (hi - lo) + 1.0;
     }
-    // each joint's drive: its controller on the departures from its first reference, holding the
-    // first force, which its actuator held before the record
-    let mut joint_drives: Vec<JointDrive> = (0..n)
-        .map(|j| {
-            JointDrive::new(
-                controllers[j],
-                opts.quantization[j],
-                opts.delay.get(j).copied().unwrap_or(0),
-                opts.force_lag.get(j).copied().unwrap_or(0.0),
-                opts.dt,
-                Start::Holding {
-                    qr0: qr[j],
-                    force0: opts.force0[j],
-                },
-            )
-        })
-        .collect();
-    let zeros = |what| crate::error::filled(samples * n, 0.0, what);
-    let mut arm = Arm {
-        dynamics: Dynamics {
-            robot,
-            drives,
-            ws: AbaWork::new(robot),
-            tau: vec![0.0; n],
-        },
-        q: qr[..n].to_vec(),
-        v: vec![0.0; n],
-        a: vec![0.0; n],
-        k1q: vec![0.0; n],
-        k1v: vec![0.0; n],
-        k2q: vec![0.0; n],
-        k2v: vec![0.0; n],
-        k3q: vec![0.0; n],
-        k3v: vec![0.0; n],
-        k4q: vec![0.0; n],
-        k4v: vec![0.0; n],
-        qs: vec![0.0; n],
-        vs: vec![0.0; n],
-        h: opts.dt / substeps as f64,
-        substeps,
-        dt: opts.dt,
-        out_q: zeros("the simulated positions")?,
-        out_qd: zeros("the simulated speeds")?,
-        out_qdd: zeros("the simulated accelerations")?,
-    };
-    let mut force = zeros("the simulated forces")?;
-    let u_ext = (!opts.u_ext.is_empty()).then_some(&opts.u_ext[..]);
-    // the loop in the processor's widest build (as one axis's: the same operations, the same results)
+    // the loop in the processor's widest build (as one axis's: the same operations, the same
+    // results), its state built inside it: locals there, not memory behind a pointer
     crate::sim::driver::simd(
         #[inline(always)]
-        || closed_loop::run(&mut arm, &mut joint_drives, qr, u_ext, &span, &mut force),
-    )?;
-    Ok(RobotLoopOutput {
-        q: arm.out_q,
-        qd: arm.out_qd,
-        qdd: arm.out_qdd,
-        force,
-    })
+        move || {
+            // each joint's drive: its controller on the departures from its first reference, holding the
+            // first force, which its actuator held before the record
+            let mut joint_drives: Vec<JointDrive> = (0..n)
+                .map(|j| {
+                    JointDrive::new(
+                        controllers[j],
+                        opts.quantization[j],
+                        opts.delay.get(j).copied().unwrap_or(0),
+                        opts.force_lag.get(j).copied().unwrap_or(0.0),
+                        opts.dt,
+                        Start::Holding {
+                            qr0: qr[j],
+                            force0: opts.force0[j],
+                        },
+                    )
+                })
+                .collect();
+            let zeros = |what| crate::error::filled(samples * n, 0.0, what);
+            let mut dynamics = Dynamics {
+                robot,
+                drives,
+                ws: AbaWork::new(robot),
+                tau: vec![0.0; n],
+            };
+            let mut arm = Arm {
+                dynamics: &mut dynamics,
+                q: qr[..n].to_vec(),
+                v: vec![0.0; n],
+                a: vec![0.0; n],
+                k1q: vec![0.0; n],
+                k1v: vec![0.0; n],
+                k2q: vec![0.0; n],
+                k2v: vec![0.0; n],
+                k3q: vec![0.0; n],
+                k3v: vec![0.0; n],
+                k4q: vec![0.0; n],
+                k4v: vec![0.0; n],
+                qs: vec![0.0; n],
+                vs: vec![0.0; n],
+                h: opts.dt / substeps as f64,
+                substeps,
+                dt: opts.dt,
+                out_q: zeros("the simulated positions")?,
+                out_qd: zeros("the simulated speeds")?,
+                out_qdd: zeros("the simulated accelerations")?,
+            };
+            let mut force = zeros("the simulated forces")?;
+            let u_ext = (!opts.u_ext.is_empty()).then_some(&opts.u_ext[..]);
+            closed_loop::run(&mut arm, &mut joint_drives, qr, u_ext, &span, &mut force)?;
+            Ok(RobotLoopOutput {
+                q: arm.out_q,
+                qd: arm.out_qd,
+                qdd: arm.out_qdd,
+                force,
+            })
+        },
+    )
 }

@@ -184,40 +184,65 @@ impl<const N: usize, S: Stepper<N>, T: Tangent<N, S>> Plant for Axis<'_, N, S, T
         finite(&self.q, &self.v)
     }
 
-    #[cold]
+    /// Out of line with the values it reports, not the plant: a pointer to the plant would keep
+    /// its state out of registers throughout the loop.
+    #[inline(always)]
     fn diverged(&self, k: usize, qr: &[f64], bound: &[f64]) -> Error {
-        let (opts, err, bound) = (self.opts, (self.q[0] - qr[0]).abs(), bound[0]);
-        Error::Simulation(format!(
-            "closed-loop simulation diverged at {}: motor tracking error {:.3e} m \
-             (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller \
-             gains{}{}",
-            {
-                // samples of the record from 0; a lead-in's are negative
-                let j = k as f64 - opts.lead as f64;
-                format!(
-                    "sample {j} (t = {:.6} s{})",
-                    j * opts.dt,
-                    if j < 0.0 {
-                        ", in the lead-in before the record"
-                    } else {
-                        ""
-                    }
-                )
-            },
-            err,
-            bound,
-            describe(self.model, self.chi),
-            if opts.force_lag > 0.0 {
-                format!(
-                    ", and the force lag of {} s (a current loop's is a fraction of a millisecond)",
-                    opts.force_lag
-                )
-            } else {
-                String::new()
-            },
+        diverged(
+            self.model,
+            self.chi,
+            self.opts,
+            k,
+            (self.q[0] - qr[0]).abs(),
+            bound[0],
             S::DIVERGENCE_HINT,
-        ))
+        )
     }
+}
+
+/// The error of one axis's loop found diverged at sample `k` (of the simulation, the lead-in's
+/// included), its motor `err` from its reference beyond `bound`; `hint` the integrator's advice.
+#[cold]
+#[inline(never)]
+fn diverged<const N: usize>(
+    model: &Model<N>,
+    chi: &[f64],
+    opts: &SimOptions,
+    k: usize,
+    err: f64,
+    bound: f64,
+    hint: &str,
+) -> Error {
+    Error::Simulation(format!(
+        "closed-loop simulation diverged at {}: motor tracking error {:.3e} m \
+         (bound {:.3e} m) with parameters {}; check the parameter values and units and the controller \
+         gains{}{}",
+        {
+            // samples of the record from 0; a lead-in's are negative
+            let j = k as f64 - opts.lead as f64;
+            format!(
+                "sample {j} (t = {:.6} s{})",
+                j * opts.dt,
+                if j < 0.0 {
+                    ", in the lead-in before the record"
+                } else {
+                    ""
+                }
+            )
+        },
+        err,
+        bound,
+        describe(model, chi),
+        if opts.force_lag > 0.0 {
+            format!(
+                ", and the force lag of {} s (a current loop's is a fraction of a millisecond)",
+                opts.force_lag
+            )
+        } else {
+            String::new()
+        },
+        hint,
+    ))
 }
 
 /// The closed-loop simulation of `model` with parameters `chi` (already checked, with
