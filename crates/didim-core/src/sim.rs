@@ -19,10 +19,12 @@ use crate::controller::Controller;
 use crate::error::{invalid, Error, Result};
 use crate::model::Model;
 
+pub(crate) mod closed_loop;
+pub(crate) mod drive;
 pub(crate) mod driver;
 mod expint;
 mod rk4;
-pub use driver::applied_force;
+pub use drive::applied_force;
 use driver::NoTangent;
 use expint::Exponential;
 pub use expint::StepStats;
@@ -46,14 +48,14 @@ pub enum Integrator {
 /// stroke (see [`SimOptions::tol`]).
 pub const DEFAULT_TOL: f64 = 1e-9;
 
-/// Options of the simulator.
 /// The actuation options a model carries, by name (the Python layer's `didim.Model`
 /// fields of the same names): how the commanded force reaches the plant. A new one is a
 /// field of [`SimOptions`] with its default, its check and its arm in
-/// [`SimOptions::set_actuation`], and its physics in the driver; the binding and the Python
+/// [`SimOptions::set_actuation`], and its physics in the drive (`sim::drive`); the binding and the Python
 /// layer pass them through by name.
 pub const ACTUATION: &[&str] = &["delay", "force_lag"];
 
+/// Options of the simulator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SimOptions {
     /// Sample period of the controller and of the outputs (s).

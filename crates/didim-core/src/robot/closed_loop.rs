@@ -1,12 +1,14 @@
-//! The closed loop of a robot: one digital controller per joint, run once per sample on the
-//! quantized positions, its torque held over the sample while the rigid-body dynamics, the rotor
-//! inertias and the joint friction move the arm (RK4 on fixed substeps).
+//! The closed loop of a robot: one drive per joint (`sim::drive::JointDrive`: its digital
+//! controller run once per sample on the quantized position, its delay and force lag), its force
+//! held over the sample while the rigid-body dynamics, the rotor inertias and the joint friction
+//! move the arm (RK4 on fixed substeps). The arm is a `sim::closed_loop::Plant` under the same
+//! loop as one axis's; only the dynamics and their integration are its own.
 
-use crate::controller::{FilterState, TransferFunction};
+use crate::controller::TransferFunction;
 use crate::error::{invalid, Error, Result};
-use crate::interrupt;
 use crate::model::FrictionLaw;
-use crate::sim::driver::ForceLag;
+use crate::sim::closed_loop::{self, Plant};
+use crate::sim::drive::{JointDrive, Start};
 
 use super::{AbaWork, Robot};
 
@@ -122,14 +124,17 @@ pub struct RobotLoopOutput {
     pub force: Vec<f64>,
 }
 
-struct Plant<'a> {
+/// The arm's dynamics: the chain and its drives' inertia and friction, and their work buffers.
+struct Dynamics<'a> {
     robot: &'a Robot,
     drives: &'a Drives,
     ws: AbaWork,
+    /// The joint torques of the last acceleration.
     tau: Vec<f64>,
 }
 
-impl Plant<'_> {
+impl Dynamics<'_> {
+    /// The accelerations at `(q, v)` under the drives' forces `u`, into `out`.
     #[inline(always)]
     fn accel(&mut self, q: &[f64], v: &[f64], u: &[f64], out: &mut [f64]) -> Result<()> {
         self.drives.resist(v, &mut self.tau);
@@ -138,6 +143,137 @@ impl Plant<'_> {
         }
         self.robot
             .aba_into(q, v, &self.tau, Some(&self.drives.armature), &mut self.ws, out)
+    }
+}
+
+/// The arm as the loop's [`Plant`]: its dynamics, the state `(q, v)`, the acceleration at the last
+/// recorded state (the first RK4 stage of the next period), RK4's work buffers and the recorded
+/// positions, speeds and accelerations (`samples × n`, row-major).
+struct Arm<'a, 'b> {
+    /// Borrowed, not held: the dynamics go out of line (ABA), and a pointer into the arm would
+    /// keep the state and the stages' buffers out of registers.
+    dynamics: &'b mut Dynamics<'a>,
+    q: Vec<f64>,
+    v: Vec<f64>,
+    a: Vec<f64>,
+    /// RK4's stages and the state at a stage.
+    k1q: Vec<f64>,
+    k1v: Vec<f64>,
+    k2q: Vec<f64>,
+    k2v: Vec<f64>,
+    k3q: Vec<f64>,
+    k3v: Vec<f64>,
+    k4q: Vec<f64>,
+    k4v: Vec<f64>,
+    qs: Vec<f64>,
+    vs: Vec<f64>,
+    /// The RK4 step (s) and the steps per sample.
+    h: f64,
+    substeps: usize,
+    dt: f64,
+    out_q: Vec<f64>,
+    out_qd: Vec<f64>,
+    out_qdd: Vec<f64>,
+}
+
+impl Plant for Arm<'_, '_> {
+    type Joints = Vec<f64>;
+
+    fn joints(&self) -> Vec<f64> {
+        vec![0.0; self.q.len()]
+    }
+
+    #[inline(always)]
+    fn position(&self, j: usize) -> f64 {
+        self.q[j]
+    }
+
+    #[inline(always)]
+    fn record(&mut self, k: usize, applied: &[f64]) -> Result<()> {
+        let n = self.q.len();
+        self.dynamics.accel(&self.q, &self.v, applied, &mut self.a)?;
+        let row = k * n;
+        self.out_q[row..row + n].copy_from_slice(&self.q);
+        self.out_qd[row..row + n].copy_from_slice(&self.v);
+        self.out_qdd[row..row + n].copy_from_slice(&self.a);
+        Ok(())
+    }
+
+    /// `substeps` RK4 steps with the forces held.
+    #[inline(always)]
+    fn advance(&mut self, applied: &[f64]) -> Result<()> {
+        let n = self.q.len();
+        let h = self.h;
+        let Self {
+            dynamics,
+            q,
+            v,
+            a,
+            k1q,
+            k1v,
+            k2q,
+            k2v,
+            k3q,
+            k3v,
+            k4q,
+            k4v,
+            qs,
+            vs,
+            ..
+        } = self;
+        let mut accel = |q: &[f64], v: &[f64], out: &mut [f64]| dynamics.accel(q, v, applied, out);
+        for s in 0..self.substeps {
+            // the first stage of the first substep is the acceleration just recorded
+            if s == 0 {
+                k1v.copy_from_slice(a);
+            } else {
+                accel(q, v, k1v)?;
+            }
+            k1q.copy_from_slice(v);
+            for j in 0..n {
+                qs[j] = q[j] + 0.5 * h * k1q[j];
+                vs[j] = v[j] + 0.5 * h * k1v[j];
+            }
+            k2q.copy_from_slice(vs);
+            accel(qs, vs, k2v)?;
+            for j in 0..n {
+                qs[j] = q[j] + 0.5 * h * k2q[j];
+                vs[j] = v[j] + 0.5 * h * k2v[j];
+            }
+            k3q.copy_from_slice(vs);
+            accel(qs, vs, k3v)?;
+            for j in 0..n {
+                qs[j] = q[j] + h * k3q[j];
+                vs[j] = v[j] + h * k3v[j];
+            }
+            k4q.copy_from_slice(vs);
+            accel(qs, vs, k4v)?;
+            for j in 0..n {
+                q[j] += h / 6.0 * (k1q[j] + 2.0 * k2q[j] + 2.0 * k3q[j] + k4q[j]);
+                v[j] += h / 6.0 * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j]);
+            }
+        }
+        Ok(())
+    }
+
+    #[inline(always)]
+    fn finite(&self) -> bool {
+        self.q.iter().chain(&self.v).all(|x| x.is_finite())
+    }
+
+    #[cold]
+    fn diverged(&self, k: usize, qr: &[f64], bound: &[f64]) -> Error {
+        // the first joint off its reference or not finite
+        let j = (0..self.q.len())
+            .find(|&j| !((self.q[j] - qr[j]).abs() <= bound[j] && self.v[j].is_finite()))
+            .unwrap_or(0);
+        Error::Simulation(format!(
+            "the robot's closed loop diverged at sample {k} (t = {:.6} s): joint {} ({}) is {:.3e} away from its reference",
+            k as f64 * self.dt,
+            j + 1,
+            self.dynamics.robot.joints[j].name,
+            self.q[j] - qr[j]
+        ))
     }
 }
 
@@ -253,18 +389,6 @@ pub fn simulate_robot(
             opts.force_lag[j]
         ));
     }
-    let mut out = RobotLoopOutput {
-        q: crate::error::filled(samples * n, 0.0, "the simulated positions")?,
-        qd: crate::error::filled(samples * n, 0.0, "the simulated speeds")?,
-        qdd: crate::error::filled(samples * n, 0.0, "the simulated accelerations")?,
-        force: crate::error::filled(samples * n, 0.0, "the simulated forces")?,
-    };
-    let mut plant = Plant {
-        robot,
-        drives,
-        ws: AbaWork::new(robot),
-        tau: vec![0.0; n],
-    };
     let substeps = if opts.substeps == 0 {
         auto_substeps(robot, drives, &qr[..n], opts.dt)?
     } else {
@@ -278,147 +402,66 @@ pub fn simulate_robot(
         });
         span[j] = (hi - lo) + 1.0;
     }
-    // the loop in the processor's widest build (as the one-axis loop: the same operations, the same results)
-    #[cfg(target_arch = "x86_64")]
-    if crate::sim::driver::wide_simd() {
-        // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
-        unsafe { run_wide(&mut plant, controllers, qr, opts, substeps, &span, &mut out)? };
-        return Ok(out);
-    }
-    run(&mut plant, controllers, qr, opts, substeps, &span, &mut out)?;
-    Ok(out)
-}
-
-/// [`run`] compiled with AVX2 and FMA.
-///
-/// # Safety
-/// The processor must support AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn run_wide(
-    plant: &mut Plant,
-    controllers: &[TransferFunction],
-    qr: &[f64],
-    opts: &RobotLoopOptions,
-    substeps: usize,
-    span: &[f64],
-    out: &mut RobotLoopOutput,
-) -> Result<()> {
-    run(plant, controllers, qr, opts, substeps, span, out)
-}
-
-/// The closed loop from rest at the first reference: the controllers on the quantized positions
-/// once per sample, then `substeps` RK4 steps with their torques held (inlined into each build).
-#[inline(always)]
-fn run(
-    plant: &mut Plant,
-    controllers: &[TransferFunction],
-    qr: &[f64],
-    opts: &RobotLoopOptions,
-    substeps: usize,
-    span: &[f64],
-    out: &mut RobotLoopOutput,
-) -> Result<()> {
-    let robot = plant.robot;
-    let n = robot.ndof();
-    let samples = qr.len() / n;
-    let qr0 = &qr[..n];
-    let mut z: Vec<FilterState> = controllers.iter().map(|c| c.rest_state(0.0, 0.0)).collect();
-    let (mut q, mut v): (Vec<f64>, Vec<f64>) = (qr0.to_vec(), vec![0.0; n]);
-    let (mut u, mut a) = (vec![0.0; n], vec![0.0; n]);
-    // RK4 stages
-    let (mut k1q, mut k1v, mut k2q, mut k2v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    let (mut k3q, mut k3v, mut k4q, mut k4v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    let (mut qs, mut vs) = (vec![0.0; n], vec![0.0; n]);
-    let h = opts.dt / substeps as f64;
-    // each joint's commands on their way to the plant: `delay` samples late (the first command held
-    // before the record), then through the force lag over each period (its mean applied)
-    let mut pending: Vec<Vec<f64>> = (0..n)
-        .map(|j| vec![0.0; opts.delay.get(j).copied().unwrap_or(0)])
-        .collect();
-    let lags: Vec<Option<ForceLag>> = (0..n)
-        .map(|j| ForceLag::new(opts.force_lag.get(j).copied().unwrap_or(0.0), opts.dt))
-        .collect();
-    let mut lagged: Vec<f64> = vec![0.0; n]; // each lag's output at the start of the period
-    let mut applied = vec![0.0; n];
-    for k in 0..samples {
-        if k % interrupt::EVERY == 0 {
-            interrupt::check()?;
-        }
-        let row = k * n;
-        for j in 0..n {
-            let step = opts.quantization[j];
-            let qm = if step > 0.0 {
-                (q[j] / step).round() * step
-            } else {
-                q[j]
+    // the loop in the processor's widest build (as one axis's: the same operations, the same
+    // results), its state built inside it: locals there, not memory behind a pointer
+    crate::sim::driver::simd(
+        #[inline(always)]
+        move || {
+            // each joint's drive: its controller on the departures from its first reference, holding the
+            // first force, which its actuator held before the record
+            let mut joint_drives: Vec<JointDrive> = (0..n)
+                .map(|j| {
+                    JointDrive::new(
+                        controllers[j],
+                        opts.quantization[j],
+                        opts.delay.get(j).copied().unwrap_or(0),
+                        opts.force_lag.get(j).copied().unwrap_or(0.0),
+                        opts.dt,
+                        Start::Holding {
+                            qr0: qr[j],
+                            force0: opts.force0[j],
+                        },
+                    )
+                })
+                .collect();
+            let zeros = |what| crate::error::filled(samples * n, 0.0, what);
+            let mut dynamics = Dynamics {
+                robot,
+                drives,
+                ws: AbaWork::new(robot),
+                tau: vec![0.0; n],
             };
-            let ext = opts.force0[j] + opts.u_ext.get(row + j).copied().unwrap_or(0.0);
-            let (f, _) = controllers[j].step(&mut z[j], qr[row + j] - qr0[j], qm - qr0[j], ext);
-            u[j] = f;
-            if k == 0 {
-                // the drive held the first command before the record
-                pending[j].iter_mut().for_each(|p| *p = f);
-                lagged[j] = f;
-            }
-            let held = match pending[j].len() {
-                0 => f,
-                d => std::mem::replace(&mut pending[j][k % d], f),
+            let mut arm = Arm {
+                dynamics: &mut dynamics,
+                q: qr[..n].to_vec(),
+                v: vec![0.0; n],
+                a: vec![0.0; n],
+                k1q: vec![0.0; n],
+                k1v: vec![0.0; n],
+                k2q: vec![0.0; n],
+                k2v: vec![0.0; n],
+                k3q: vec![0.0; n],
+                k3v: vec![0.0; n],
+                k4q: vec![0.0; n],
+                k4v: vec![0.0; n],
+                qs: vec![0.0; n],
+                vs: vec![0.0; n],
+                h: opts.dt / substeps as f64,
+                substeps,
+                dt: opts.dt,
+                out_q: zeros("the simulated positions")?,
+                out_qd: zeros("the simulated speeds")?,
+                out_qdd: zeros("the simulated accelerations")?,
             };
-            applied[j] = match lags[j] {
-                None => held,
-                Some(lag) => {
-                    let (mean, end) = lag.period(lagged[j], held);
-                    lagged[j] = end;
-                    mean
-                }
-            };
-            if (q[j] - qr[row + j]).abs() > span[j] || !q[j].is_finite() || !v[j].is_finite() {
-                return Err(Error::Simulation(format!(
-                "the robot's closed loop diverged at sample {k} (t = {:.6} s): joint {} ({}) is {:.3e} away from its reference",
-                k as f64 * opts.dt,
-                j + 1,
-                robot.joints[j].name,
-                q[j] - qr[row + j]
-            )));
-            }
-        }
-        plant.accel(&q, &v, &applied, &mut a)?;
-        out.q[row..row + n].copy_from_slice(&q);
-        out.qd[row..row + n].copy_from_slice(&v);
-        out.qdd[row..row + n].copy_from_slice(&a);
-        out.force[row..row + n].copy_from_slice(&u);
-        for s in 0..substeps {
-            // the first stage of the first substep is the acceleration just computed
-            if s == 0 {
-                k1v.copy_from_slice(&a);
-            } else {
-                plant.accel(&q, &v, &applied, &mut k1v)?;
-            }
-            k1q.copy_from_slice(&v);
-            for j in 0..n {
-                qs[j] = q[j] + 0.5 * h * k1q[j];
-                vs[j] = v[j] + 0.5 * h * k1v[j];
-            }
-            k2q.copy_from_slice(&vs);
-            plant.accel(&qs, &vs, &applied, &mut k2v)?;
-            for j in 0..n {
-                qs[j] = q[j] + 0.5 * h * k2q[j];
-                vs[j] = v[j] + 0.5 * h * k2v[j];
-            }
-            k3q.copy_from_slice(&vs);
-            plant.accel(&qs, &vs, &applied, &mut k3v)?;
-            for j in 0..n {
-                qs[j] = q[j] + h * k3q[j];
-                vs[j] = v[j] + h * k3v[j];
-            }
-            k4q.copy_from_slice(&vs);
-            plant.accel(&qs, &vs, &applied, &mut k4v)?;
-            for j in 0..n {
-                q[j] += h / 6.0 * (k1q[j] + 2.0 * k2q[j] + 2.0 * k3q[j] + k4q[j]);
-                v[j] += h / 6.0 * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j]);
-            }
-        }
-    }
-    Ok(())
+            let mut force = zeros("the simulated forces")?;
+            let u_ext = (!opts.u_ext.is_empty()).then_some(&opts.u_ext[..]);
+            closed_loop::run(&mut arm, &mut joint_drives, qr, u_ext, &span, &mut force)?;
+            Ok(RobotLoopOutput {
+                q: arm.out_q,
+                qd: arm.out_qd,
+                qdd: arm.out_qdd,
+                force,
+            })
+        },
+    )
 }

@@ -193,3 +193,122 @@ fn each_unit_force_is_the_inertia_of_that_parameter_alone() {
         }
     }
 }
+
+/// A cart on a horizontal rail: one prismatic joint along x (gravity along −z does no work), a
+/// point mass `m`.
+fn cart(m: f64) -> Robot {
+    let mut r = pendulum(m, 0.0, 0.0);
+    r.joints[0].kind = JointKind::Prismatic;
+    r.joints[0].axis = Vector3::x();
+    r
+}
+
+/// The rigid axis's parameters as a one-joint robot's: mass, viscous and Coulomb friction, offset.
+const AXIS: [f64; 4] = [95.1089, 203.5034, 20.3935, -3.1648];
+
+fn cart_drives() -> Drives {
+    Drives {
+        armature: vec![0.0],
+        viscous: vec![AXIS[1]],
+        coulomb: vec![AXIS[2]],
+        offset: vec![AXIS[3]],
+        laws: vec![crate::model::FrictionLaw::algebraic(1e-4)],
+    }
+}
+
+/// The force that the recorded states answer: the inverse dynamics of the cart with its drive.
+fn cart_idm(out: &RobotLoopOutput, k: usize) -> f64 {
+    let sign = crate::model::FrictionLaw::algebraic(1e-4).sign(out.qd[k]);
+    AXIS[0] * out.qdd[k] + AXIS[1] * out.qd[k] + AXIS[2] * sign + AXIS[3]
+}
+
+#[test]
+fn a_one_joint_robot_is_one_axis_under_the_same_drive_delay_and_force_lag() {
+    use crate::model::rigid;
+    use crate::sim::{applied_force, simulate, Integrator, SimOptions};
+    use crate::Controller;
+    let (dt, n, delay, lag) = (1e-3, 3000, 2, 1e-3);
+    // from 0.1 m (the robot's controller works on departures from it, one axis's on positions)
+    let qr: Vec<f64> = (0..n)
+        .map(|k| {
+            let t = k as f64 * dt;
+            0.1 + 0.1 * (1.0 - (2.0 * std::f64::consts::PI * t / (n as f64 * dt)).cos())
+        })
+        .collect();
+    let law = Controller::EMPS.law(dt).unwrap();
+    let axis_opts = SimOptions {
+        integrator: Integrator::Rk4,
+        substeps: 10,
+        delay,
+        force_lag: lag,
+        ..SimOptions::new(dt)
+    };
+    let robot_opts = RobotLoopOptions {
+        delay: vec![delay],
+        force_lag: vec![lag],
+        ..RobotLoopOptions::new(dt, 10, vec![0.0], vec![0.0])
+    };
+    let model = rigid(true, 1e-4).unwrap();
+    let (r, drives) = (cart(AXIS[0]), cart_drives());
+    let axis = simulate(&model, &AXIS, &Controller::EMPS, &qr, None, &axis_opts).unwrap();
+    let arm = simulate_robot(&r, &drives, &[law], &qr, &robot_opts).unwrap();
+    // the same loop: the same commands and states but for the rounding of two plants' arithmetic
+    let scale = axis.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    assert!(scale > 50.0, "the move should need force: {scale}");
+    for k in 0..n {
+        assert!(
+            (axis.force[k] - arm.force[k]).abs() < 1e-7 * scale,
+            "sample {k}: {} vs {}",
+            axis.force[k],
+            arm.force[k]
+        );
+        assert!((axis.q[0][k] - arm.q[k]).abs() < 1e-12, "sample {k}");
+    }
+    // and both plants receive the logged commands as `applied_force` replays them (the loop
+    // from rest held 0 before the record, its first command here)
+    assert_eq!(arm.force[0], 0.0);
+    let want = applied_force(&arm.force, delay, lag, dt, arm.force[0]);
+    let want_axis = applied_force(&axis.force, delay, lag, dt, 0.0);
+    for k in 0..n {
+        let got_axis = AXIS[0] * axis.qdd[0][k]
+            + AXIS[1] * axis.qd[0][k]
+            + AXIS[2] * crate::model::FrictionLaw::algebraic(1e-4).sign(axis.qd[0][k])
+            + AXIS[3];
+        assert!((cart_idm(&arm, k) - want[k]).abs() < 1e-9 * scale, "sample {k}");
+        assert!((got_axis - want_axis[k]).abs() < 1e-9 * scale, "sample {k}");
+    }
+}
+
+#[test]
+fn a_robot_drive_holds_its_first_command_through_its_delay_and_lag() {
+    // an external force from the first sample makes the first command non-zero: the robot's
+    // drive applied it before the record, as `applied_force` with it held replays
+    let (dt, n) = (1e-3, 800);
+    let qr = vec![0.0; n];
+    let u_ext: Vec<f64> = (0..n).map(|k| if k < 300 { 40.0 } else { -25.0 }).collect();
+    let law = crate::Controller::EMPS.law(dt).unwrap();
+    let (r, drives) = (cart(AXIS[0]), cart_drives());
+    for (delay, lag) in [(0, 0.0), (3, 0.0), (0, 2e-3), (4, 1e-3)] {
+        let opts = RobotLoopOptions {
+            delay: vec![delay],
+            force_lag: vec![lag],
+            u_ext: u_ext.clone(),
+            ..RobotLoopOptions::new(dt, 8, vec![0.0], vec![5.0])
+        };
+        let out = simulate_robot(&r, &drives, &[law], &qr, &opts).unwrap();
+        assert!(
+            (out.force[0] - 45.0).abs() < 1e-12,
+            "force0 plus the external force: {}",
+            out.force[0]
+        );
+        let want = crate::sim::applied_force(&out.force, delay, lag, dt, out.force[0]);
+        for k in 0..n {
+            assert!(
+                (cart_idm(&out, k) - want[k]).abs() < 1e-9 * 50.0,
+                "delay {delay}, lag {lag}, sample {k}: {} vs {}",
+                cart_idm(&out, k),
+                want[k]
+            );
+        }
+    }
+}
