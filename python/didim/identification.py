@@ -1103,9 +1103,7 @@ def _step2(rec: Recording, r1: IdentificationResult, variant: str, *, lambda0: f
 def _mass_split_drift(r: IdentificationResult) -> str:
     """Says so when step 3's second half of iterations slid M2 and K12 together (by over 5 %, the same way): the load
     row keeps their ratio, the mode, and nothing on the record pins the split of the mass ('' otherwise)."""
-    if r.structure is None or r.structure.kind != "flexible":
-        return ""
-    h = [it.params for it in r.history if "M2" in it.params and "K12" in it.params]  # K12 or M2 may be frozen
+    h = [it.params for it in r.history if "M2" in it.params and "K12" in it.params]
     if len(h) < 6:
         return ""
     a, b = h[len(h) // 2], h[-1]
