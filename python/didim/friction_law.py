@@ -35,11 +35,11 @@ REACH = 2
 SHAPES = ("algebraic", "tanh", "atan", "exp")
 
 
-def parabola_min(x: np.ndarray, e: np.ndarray) -> float:
-    """The lowest of ``e`` on the sorted grid ``x``, moved to the vertex of the parabola through it and its neighbours
-    when that opens upward (kept between them)."""
+def _parabola(x: np.ndarray, e: np.ndarray) -> Tuple[float, float]:
+    """The lowest of ``e`` on the sorted grid ``x`` and its value, moved to the vertex of the parabola through it and
+    its neighbours when that opens upward (kept between them), with the parabola's value there."""
     i = int(np.argmin(e))
-    xi = float(x[i])
+    xi, ei = float(x[i]), float(e[i])
     if 0 < i < len(x) - 1 and np.all(np.isfinite(e[i - 1:i + 2])):
         (x0, x1, x2), (e0, e1, e2) = x[i - 1:i + 2], e[i - 1:i + 2]
         # Newton's form e0 + d01 (x − x0) + c2 (x − x0)(x − x1), its vertex
@@ -47,21 +47,22 @@ def parabola_min(x: np.ndarray, e: np.ndarray) -> float:
         c2 = (d12 - d01) / (x2 - x0)
         if c2 > 0:
             c1 = d01 - c2 * (x0 + x1)  # e = c2 x² + c1 x + c0
-            xi = float(np.clip(-c1 / (2 * c2), x0, x2))
-    return xi
+            xv = float(np.clip(-c1 / (2 * c2), x0, x2))
+            if xv != xi:
+                xi, ei = xv, float(e0 + d01 * (xv - x0) + c2 * (xv - x0) * (xv - x1))
+    return xi, ei
+
+
+def parabola_min(x: np.ndarray, e: np.ndarray) -> float:
+    """The lowest of ``e`` on the sorted grid ``x``, moved to the vertex of the parabola through it and its neighbours
+    when that opens upward (kept between them)."""
+    return _parabola(x, e)[0]
 
 
 def _vertex_value(x: np.ndarray, e: np.ndarray) -> float:
     """The value at :func:`parabola_min`'s point: the vertex of the parabola through the lowest of ``e`` and its
     neighbours where that opens upward, else the lowest of ``e``."""
-    i = int(np.argmin(e))
-    xv = parabola_min(x, e)
-    if xv == x[i]:
-        return float(e[i])
-    (x0, x1, x2), (e0, e1, e2) = x[i - 1:i + 2], e[i - 1:i + 2]
-    d01, d12 = (e1 - e0) / (x1 - x0), (e2 - e1) / (x2 - x1)
-    c2 = (d12 - d01) / (x2 - x0)
-    return float(e0 + d01 * (xv - x0) + c2 * (xv - x0) * (xv - x1))
+    return _parabola(x, e)[1]
 
 
 def _lower_bound(x: np.ndarray, e: np.ndarray) -> float:
