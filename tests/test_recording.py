@@ -1,5 +1,7 @@
 """Loading and validating recordings."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.io
@@ -62,3 +64,55 @@ def test_recording_validates_signals():
         didim.Recording(**{**ok, "dt": 0.0})
     with pytest.raises(didim.DataError, match="kp"):
         didim.PD(kp=-1.0, kd=1.0)
+
+
+def _columns(emps, joints=("j1", "j2")):
+    """A robot-shaped record whose joints are the EMPS's log and the same log shifted: (samples, joints) signals."""
+    cut = slice(0, 4000)
+    k = len(joints)
+    stack = lambda x: np.column_stack([x[cut] + 0.01 * i for i in range(k)])  # noqa: E731
+    return didim.Recording(dt=emps.dt, qr=stack(emps.qr), force=stack(emps.force), qm=stack(emps.qm),
+                           controller=(emps.controller,) * k, position_resolution=(emps.position_resolution,) * k,
+                           joint_names=joints, joint_kinds=("prismatic",) * k, name="twin")
+
+
+def test_one_recording_type_holds_one_axis_and_a_robots_joints(emps):
+    rec = _columns(emps)
+    assert rec.has_joint_columns and rec.ndof == 2 and rec.qr.shape == (4000, 2)
+    assert not emps.has_joint_columns and emps.ndof == 1 and emps.controllers == (emps.controller,)
+    # each joint is a one-axis record of its own column, units and encoder step
+    j2 = rec.joint("j2")
+    assert not j2.has_joint_columns and j2.axis == "linear" and j2.position_resolution == emps.position_resolution
+    np.testing.assert_array_equal(j2.qr, emps.qr[:4000] + 0.01)
+    # the lead-in is reconstructed the same way for a joint column as for one axis
+    one = didim.Recording(dt=emps.dt, qr=emps.qr[:4000], force=emps.force[:4000], qm=emps.qm[:4000],
+                          controller=emps.controller, position_resolution=emps.position_resolution)
+    assert one.qr_lead.size == 16  # tests/test_lead_in.py: the EMPS log begins 16 ms after the move
+    np.testing.assert_allclose(rec.qr_lead[:, 0], one.qr_lead, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(rec.qr_lead[:, 1], one.qr_lead + 0.01, rtol=0, atol=1e-15)
+    qr, _ = rec.lead_in_signals()
+    assert qr.shape == (4016, 2)
+
+
+def test_a_robots_record_refuses_what_does_not_fit_its_joints(emps):
+    rec = _columns(emps)
+    with pytest.raises(didim.DataError, match="joint 'j1' appears twice"):
+        _columns(emps, joints=("j1", "j1"))
+    with pytest.raises(didim.DataError, match="one controller per joint"):
+        dataclasses.replace(rec, controller=emps.controller)
+    with pytest.raises(didim.DataError, match="1 controllers for 2 joints"):
+        dataclasses.replace(rec, controller=(emps.controller,))
+    bad = np.array(rec.force)
+    bad[7, 1] = np.nan
+    with pytest.raises(didim.DataError, match="force of joint j2 is not finite at sample 7"):
+        dataclasses.replace(rec, force=bad)
+    with pytest.raises(didim.DataError, match="must be \\(samples, 2\\)"):
+        dataclasses.replace(rec, qm=rec.qm[:, :1])
+    # a given lead-in must join each joint's first reference, named in the error
+    lead = np.array(rec.qr_lead)
+    lead[:, 1] += 0.05
+    with pytest.raises(didim.DataError, match="joint j2's lead_in ends at .* m but the reference's first sample"):
+        dataclasses.replace(rec, lead_in=lead)
+    assert dataclasses.replace(rec, lead_in=np.array(rec.qr_lead)).qr_lead.shape == rec.qr_lead.shape
+    with pytest.raises(didim.DataError, match="take it on one joint, record.joint"):
+        rec.diagnose()

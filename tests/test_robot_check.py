@@ -22,7 +22,7 @@ def _controllers(robots_dir, robot="pendulum"):
 
 def _record(robots_dir, spec, robot="pendulum", force=None, tmp_path=None):
     bot = didim.Robot.from_urdf(robots_dir / f"{robot}_cad.urdf")
-    ctl = didim.robots.load_joint_controllers(_write(tmp_path / "ctl.json", spec))
+    ctl = didim.load_joint_controllers(_write(tmp_path / "ctl.json", spec))
     rec = didim.load_record(robots_dir / f"{robot}_train.csv", robot=bot, controller=ctl)
     if force is not None:
         import dataclasses

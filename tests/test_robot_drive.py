@@ -3,7 +3,7 @@
 in the joint's entry of the controllers' file). The core's loop is checked against two other computations: the
 controllers' replay of the logged positions (the one-axis law in Python, through scipy's lfilter form) for the
 commands, and the inverse dynamics of the simulated states (Newton-Euler) for the force the joints received, which
-must be the commands delayed and lagged as :func:`didim.robots.record.applied_force` writes them. DIDIM recovers the
+must be the commands delayed and lagged as :func:`didim.recording.applied_force` writes them. DIDIM recovers the
 truth from a record with a delay and a lag when the file declares them."""
 
 import json
@@ -13,7 +13,7 @@ import pytest
 
 import didim
 from didim import _core
-from didim.robots.record import applied_force
+from didim.recording import applied_force
 
 
 @pytest.fixture(scope="module")

@@ -27,7 +27,7 @@ def test_didim_estimates_the_smoothing_speed_of_a_long_tailed_law(robots_dir, tm
     urdf = robots_dir / "pendulum_cad.urdf"
     robot = didim.Robot.from_urdf(urdf)
     model = pin.buildModelFromUrdf(str(urdf))
-    ctl = didim.robots.load_joint_controllers(robots_dir / "pendulum_controller.json")
+    ctl = didim.load_joint_controllers(robots_dir / "pendulum_controller.json")
     dt, seconds, n = 1e-3, 20.0, robot.ndof
     Ia, Fv, Fc, vs = np.array([0.05, 0.02]), np.array([0.8, 0.3]), np.array([1.5, 0.6]), 0.02
     t = np.arange(int(seconds / dt)) * dt

@@ -5,7 +5,7 @@ simulation, parallel decimation and QR least squares. SI units on the load side 
 """
 
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
-from .controllers import PD, EmpsCascade, TransferFunction, load_controller
+from .controllers import PD, EmpsCascade, TransferFunction, load_controller, load_joint_controllers
 from .recording import Recording
 from .loaders import from_dataframe, load_mat, load_record
 from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, INTEGRATORS, BatchResult, SimResult, coulomb_sign, param_names,
@@ -16,7 +16,7 @@ from .api import METHODS, identify
 from . import scenarios
 from .doctor import Diagnosis, Finding, doctor
 from .model import Model, Term
-from .robots import Robot, RobotRecording, load_joint_controllers
+from .robots import Robot
 from .result import load_result
 from .check import check_controller
 from .controller_fit import fit_controller
@@ -36,7 +36,6 @@ __all__ = [
     "load_controller",
     "Recording",
     "Robot",
-    "RobotRecording",
     "load_joint_controllers",
     "load_mat",
     "from_dataframe",

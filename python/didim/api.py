@@ -108,9 +108,9 @@ def identify(
     not, naming the likely mistake, "warn" goes on with a :class:`DidimWarning`, "off" skips the check. The check is
     in the result's ``options["controller_check"]``.
     """
-    from .robots import Robot, RobotRecording
+    from .robots import Robot
 
-    if isinstance(model, Robot) or isinstance(recording, RobotRecording):
+    if isinstance(model, Robot) or _has_joint_columns(recording):
         return _identify_robot(recording, model, method, offset=offset, apM=apM, initial=initial, criterion=criterion,
                                progress=progress, controller_check=controller_check, **options)
     if not isinstance(model, Model) and (not isinstance(model, str) or model not in MODELS):
@@ -267,15 +267,20 @@ POOR_FORCE_ERROR = 0.5
 __all__ = ["identify", "METHODS"]
 
 
+def _has_joint_columns(recording) -> bool:
+    """A robot's record: a :class:`Recording` whose signals are (samples, joints)."""
+    return isinstance(recording, Recording) and recording.has_joint_columns
+
+
 def _identify_robot(recording, robot, method: str, *, offset, apM, initial, criterion, progress, controller_check,
                     **options):
-    """:func:`identify` of a robot's record (:class:`didim.RobotRecording`) with its :class:`didim.Robot`: "didim"
+    """:func:`identify` of a robot's record (a :class:`didim.Recording` with joint columns) with its :class:`didim.Robot`: "didim"
     (from the URDF's values) or "idim-ls"; ``offset`` (default True) fits a constant torque per joint; ``max_iter``
     and ``tol`` go to DIDIM; ``controller_check`` as for one axis, on each joint."""
     from .check import enforce
-    from .robots import Robot, RobotRecording, didim as robot_didim, idim_ls as robot_idim_ls
+    from .robots import Robot, didim as robot_didim, idim_ls as robot_idim_ls
 
-    if not isinstance(recording, RobotRecording):
+    if not _has_joint_columns(recording):
         raise DataError(f"a robot is identified on a robot's record (didim.load_record(path, robot=robot)), got "
                         f"{type(recording).__name__}")
     if not isinstance(robot, Robot):

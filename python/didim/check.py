@@ -246,7 +246,7 @@ class RobotControllerCheck:
 
 
 def check_robot_controllers(rec) -> RobotControllerCheck:
-    """:func:`check_controller` on each joint of a robot's record (:meth:`RobotRecording.joint`); a joint whose
+    """:func:`check_controller` on each joint of a robot's record (:meth:`didim.Recording.joint`); a joint whose
     controller fails is tried with the other joints' controllers, and two joints that replay each other's logs are
     named as swapped."""
     n = len(rec.joint_names)
@@ -283,7 +283,7 @@ def enforce(rec, mode: str = "error"):
     _checks.one_of("controller_check", mode, CHECK_MODES)
     if mode == "off":
         return None
-    robot = hasattr(rec, "joint_names")
+    robot = rec.has_joint_columns
     chk = check_robot_controllers(rec) if robot else check_controller(rec)
     if not chk.passed:
         what = (f"the described controller of joint{'s' if len(chk.failed()) > 1 else ''} {', '.join(chk.failed())} "

@@ -381,7 +381,7 @@ def controller_from_dict(spec: Dict[str, Any], where: str = "controller") -> Con
         raise DataError(f"{where}: \"type\" must be one of {', '.join(_FILE_TYPES)}, got {kind!r}")
     allowed = _FILE_TYPES[kind]
     # "units" belongs to the record the controller ran (read by the loaders: didim.units); a robot joint's "delay"
-    # and "force_lag" to its drive (read by didim.robots.load_joint_controllers)
+    # and "force_lag" to its drive (read by didim.load_joint_controllers)
     args = {k: v for k, v in spec.items() if k not in ("type", "units", "delay", "force_lag")
             and not k.startswith(("note", "_", "comment"))}
     unknown = sorted(set(args) - set(allowed))
@@ -464,5 +464,35 @@ def load_controller(path: Union[str, "os.PathLike[str]"]) -> Controller:
     return controller_from_dict(spec, str(p))
 
 
+def load_joint_controllers(path) -> Tuple[Controller, ...]:
+    """One controller per joint from a JSON or TOML file ``{"type": "joints", "joints": [c_1, ..., c_n]}`` whose
+    entries are single-axis controllers (:func:`didim.load_controller`'s form), in the robot's joint order."""
+    p, spec = _spec(path)
+    if not isinstance(spec, dict) or spec.get("type") != "joints" or not isinstance(spec.get("joints"), list):
+        raise DataError(f"{p}: a robot's controller file is {{\"type\": \"joints\", \"joints\": [one controller per "
+                        f"joint]}}, got type {spec.get('type') if isinstance(spec, dict) else type(spec).__name__!r}")
+    if not spec["joints"]:
+        raise DataError(f"{p}: \"joints\" is empty: give one controller per joint")
+    return tuple(controller_from_dict(c, f"{p}: joint {i + 1}") for i, c in enumerate(spec["joints"]))
+
+
+def load_joint_drives(path) -> Tuple[Tuple[int, ...], Tuple[float, ...]]:
+    """Each joint's actuation delay (samples) and force lag (s) from the entries of a robot's controller file
+    (``"delay"``, ``"force_lag"``; 0 where absent): the drive between the controller's command and the force on the
+    joint, which the closed loop simulates and the least squares regress on (:func:`applied_force`)."""
+    from . import _checks
+
+    p, spec = _spec(path)
+    entries = spec.get("joints") if isinstance(spec, dict) and isinstance(spec.get("joints"), list) else []
+    delay, lag = [], []
+    for i, e in enumerate(entries):
+        e = e if isinstance(e, dict) else {}
+        delay.append(_checks.whole(f"{p}: joint {i + 1}'s delay", e.get("delay", 0), hint=" (samples)"))
+        lag.append(_checks.real(f"{p}: joint {i + 1}'s force_lag", e.get("force_lag", 0.0), "s", lo=0.0,
+                                lo_open=False))
+    return tuple(delay), tuple(lag)
+
+
+
 __all__ = ["EmpsCascade", "PD", "TransferFunction", "Controller", "load_controller", "controller_from_dict", "in_units",
-           "controller_file_units"]
+           "controller_file_units", "load_joint_controllers", "load_joint_drives"]

@@ -21,9 +21,9 @@ import numpy as np
 from . import _checks
 from ._errors import DataError
 from ._io import beside, check_input
-from .controllers import Controller, EmpsCascade, controller_file_units, in_units, load_controller
+from .controllers import (Controller, EmpsCascade, controller_file_units, in_units, load_controller,
+                          load_joint_controllers, load_joint_drives)
 from .robots.chain import Robot
-from .robots.record import RobotRecording, load_joint_controllers, load_joint_drives
 from .recording import Recording, _check_expected_dt, _number, _signal, _time_step
 from .units import SI, Units, check_stroke, from_header, parse as parse_units
 
@@ -250,10 +250,10 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
                 position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None,
                 pulses_gain: Union[float, str] = "log", lead_in: Union[str, None, np.ndarray] = "auto",
                 units: Union[None, str, Units] = None, beside_controller: bool = True,
-                robot: Optional["Robot"] = None) -> Union[Recording, "RobotRecording"]:
+                robot: Optional["Robot"] = None) -> Recording:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
 
-    With ``robot`` (a :class:`didim.Robot` or a URDF's path): a robot's record (:class:`didim.RobotRecording`),
+    With ``robot`` (a :class:`didim.Robot` or a URDF's path): a robot's record (a :class:`didim.Recording` with joint columns),
     columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n`` in the robot's joint order (or ``qr_<joint name>``…),
     in rad (m) and N·m (N) unless ``units`` (``"deg"``, ``"deg,mm"``, one per joint), the header or the controllers'
     file says otherwise (:func:`load_robot_record`), the controller a ``{"type": "joints", ...}`` file (by default
@@ -423,7 +423,7 @@ OTHER_READING = {"rad": ("deg", math.pi / 180), "deg": ("rad", 180 / math.pi),
                  "m": ("mm", 1e-3), "mm": ("m", 1e3)}
 
 
-def _check_position_units(p, robot, rec: RobotRecording) -> None:
+def _check_position_units(p, robot, rec: Recording) -> None:
     """Refuses a record whose positions fit the URDF's dynamics :data:`UNITS_RATIO` times better in the other unit
     than in the one they were read in, for the revolute joints (rad or degrees) and the prismatic ones (m or mm) each
     as a group (a record in rad declared in degrees, in degrees declared in nothing, a quill in m declared in mm):
@@ -482,7 +482,7 @@ def _robot_file_units(path, kinds) -> Optional[list]:
 
 
 def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Optional[str] = None,
-                      units: Any = None, beside_controller: bool = True, lead_in: Any = "auto") -> RobotRecording:
+                      units: Any = None, beside_controller: bool = True, lead_in: Any = "auto") -> Recording:
     """A robot record from a CSV, Parquet or HDF5 file with columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``
     in ``robot``'s joint order (or ``qr_<joint name>``…), positions in rad (prismatic joints: m), forces in N·m (N),
     unless the record declares other units: ``units`` (``"deg"``, ``"deg,mm"``, one per joint:
@@ -491,7 +491,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     controllers are converted to SI once. ``controller``: the joints' controllers (a sequence, one per joint) or
     the path of their file; by default ``NAME_controller.json`` beside the record (unless ``beside_controller`` is
     False), and without one each joint's linear law is fitted from its log (:func:`didim.fit_controller`;
-    ``RobotRecording.controller_origin`` says so)."""
+    ``Recording.controller_origin`` says so)."""
     from .units import for_joints
 
     p = check_input(path, "robot record")
@@ -620,7 +620,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     steps = tuple(steps)
     label = name if name is not None else os.path.splitext(os.path.basename(p))[0]
     try:
-        rec = RobotRecording(dt=dt, joint_names=tuple(names), controllers=controllers, encoder_step=steps, name=label,
+        rec = Recording(dt=dt, joint_names=tuple(names), controller=controllers, position_resolution=steps, name=label,
                              joint_kinds=tuple(kinds), **signals, delay=delay, force_lag=force_lag,
                              units=tuple(u) if u is not None else (), controller_origin=origin,
                              lead_in=lead_in)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import os
@@ -57,6 +58,50 @@ def _signal(name: str, x, n: Optional[int] = None) -> np.ndarray:
     return a
 
 
+def _joint_signals(name: str, x, joints: Tuple[str, ...], n: Optional[int] = None) -> np.ndarray:
+    """A robot's signal: (samples, joints) real numbers, finite, or a DataError naming the joint and the sample."""
+    ndof = len(joints)
+    if x is None:
+        raise DataError(f"{name} is missing (None): give one value per sample and joint")
+    if np.iscomplexobj(x) or (isinstance(x, np.ndarray) and x.dtype.kind not in "biuf"):
+        raise DataError(f"{name} must be an array of real numbers, got {getattr(x, 'dtype', type(x).__name__)}")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError, OverflowError, Warning) as e:
+        raise DataError(f"{name} must be an array of real numbers: {e}") from None
+    if a.ndim != 2 or a.shape[1] != ndof:
+        raise DataError(f"{name} must be (samples, {ndof}) for joints {', '.join(joints)}, got shape {a.shape}")
+    if n is not None and a.shape[0] != n:
+        raise DataError(f"{name} has {a.shape[0]} samples but the reference has {n}: all signals must have the same length")
+    bad = np.argwhere(~np.isfinite(a))
+    if len(bad):
+        k, j = bad[0]
+        raise DataError(f"{name} of joint {joints[j]} is not finite at sample {k}: clean or cut the record")
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
+
+
+def applied_force(force: np.ndarray, delay: Tuple[int, ...], force_lag: Tuple[float, ...], dt: float) -> np.ndarray:
+    """The force each joint's plant receives, as its mean over each sample period, when the drive logs the commands
+    ``force`` (samples × joints): the command of ``delay`` samples earlier (the first one before the record: the
+    drive held it), through a first-order lag of ``force_lag`` s started at it, as the closed loop applies them (the
+    core's arithmetic). The least squares regress on it: the simulated states answer it, not the logged command."""
+    from . import _core
+
+    out = np.array(force, dtype=float)
+    cols = out if out.ndim == 2 else out[:, None]
+    for j in range(cols.shape[1]):
+        d = delay[j] if j < len(delay) else 0
+        lag = force_lag[j] if j < len(force_lag) else 0.0
+        if d or lag > 0:
+            cols[:, j] = _core.applied_force(np.ascontiguousarray(cols[:, j]), int(d), float(lag), dt,
+                                             held=float(cols[0, j]))
+    return out
+
+
 #: Sample periods didim accepts (s): a drive logs between 10 MHz and 0.1 Hz; outside, the time unit is wrong.
 DT_RANGE = (1e-7, 10.0)
 
@@ -83,15 +128,16 @@ LEAD_MAX_S = 2.0
 LEAD_JOIN_STEPS = 3.0
 
 
-def _check_join(lead: np.ndarray, qr: np.ndarray) -> None:
-    """A given lead-in ends where the record's reference begins (the samples just before it, in the same unit)."""
+def _check_join(lead: np.ndarray, qr: np.ndarray, where: str = "", unit: str = "m") -> None:
+    """A given lead-in ends where the record's reference begins (the samples just before it, in the same unit);
+    ``where`` names the joint ("joint j2's ")."""
     steps = [abs(qr[1] - qr[0])] + ([abs(lead[-1] - lead[-2])] if lead.size > 1 else [])
     scale = max(float(np.max(np.abs(qr))), float(np.ptp(qr)), 1e-12)
     tol = LEAD_JOIN_STEPS * max(steps) + 1e-9 * scale
     if not abs(lead[-1] - qr[0]) <= tol:
-        raise DataError(f"lead_in ends at {lead[-1]:.6g} m but the reference's first sample is {qr[0]:.6g} m: give the "
-                        "reference's samples just before the first one (oldest first, in m, at the record's dt), so "
-                        "that the simulation runs through them into the record")
+        raise DataError(f"{where}lead_in ends at {lead[-1]:.6g} {unit} but the reference's first sample is "
+                        f"{qr[0]:.6g} {unit}: give the reference's samples just before the first one (oldest first, "
+                        f"in {unit}, at the record's dt), so that the simulation runs through them into the record")
 
 
 def reconstruct_lead_in(qr: np.ndarray, dt: float, qm: Optional[np.ndarray] = None,
@@ -156,51 +202,90 @@ def _lead_in(qr: np.ndarray, dt: float, qm: Optional[np.ndarray], resolution: Op
 
 @dataclass(frozen=True)
 class Recording:
-    """A record of a position-controlled axis, validated on construction. SI units on the load side.
+    """A record of a position-controlled plant of one or several joints, validated on construction; SI units on the
+    load side (m and N, or rad and N·m).
+
+    One axis holds 1-D signals (one value per sample); a robot holds (samples, joints) arrays in ``joint_names``'
+    order, and then each per-joint field (``controller``, ``position_resolution``, ``units``, ``controller_origin``)
+    holds one entry per joint. Every method that reads one joint's log takes :meth:`joint`.
 
     Attributes:
         dt: sample period (s).
-        qr: position reference fed to the controller (m).
-        force: measured motor force (N), e.g. ``gtau·vir`` on the EMPS.
-        qm: measured motor position (m).
+        qr: position reference fed to the controller (m or rad).
+        force: measured motor force (N or N·m), e.g. ``gtau·vir`` on the EMPS; a robot's controllers' commands.
+        qm: measured motor position (m or rad).
         controller: the controller that ran the axis (:class:`TransferFunction`, :class:`EmpsCascade` or :class:`PD`;
-            :func:`didim.load_controller` reads one from a file). Required.
-        ql: measured load position (m) when the axis has a second encoder, else None.
-        u_ext: known external force added to the command (N), e.g. the EMPS pulses, else None.
-        position_resolution: resolution of the motor encoder (m), used to quantize the simulated measurement, or None.
+            :func:`didim.load_controller` reads one from a file), or a robot's, one per joint
+            (:func:`didim.load_joint_controllers`). Required.
+        ql: measured load position (m or rad) when the plant has a second encoder, else None.
+        u_ext: known external force added to the command (N or N·m), e.g. the EMPS pulses or a robot's feedforward,
+            else None.
+        position_resolution: resolution of the motor encoder (m or rad), used to quantize the simulated measurement,
+            or None; per joint for a robot (None or 0 where unknown).
         name: a label for reports.
         lead_in: the reference before the first sample, for a log that begins in motion: ``"auto"`` (default)
             reconstructs it back to rest when the reference begins moving (:func:`reconstruct_lead_in`), ``None``
             for none (the simulation starts at rest on the first reference sample, as in the paper), or the samples
-            themselves (m, oldest first, at ``dt``, e.g. from a pre-trigger buffer). The simulation runs through it
-            from rest, with ``u_ext`` held at its first value; nothing is compared there. :attr:`qr_lead` is the one
-            in use.
-        units: the units the record was logged in (:class:`didim.units.Units`); the arrays hold SI (m or rad, N or
-            N·m), converted by the loaders. It says whether the axis is linear or rotary (:attr:`axis`), for every
+            themselves (oldest first, at ``dt``, e.g. from a pre-trigger buffer; (L, joints) for a robot). The
+            simulation runs through it from rest, with ``u_ext`` held at its first value; nothing is compared there.
+            :attr:`qr_lead` is the one in use.
+        units: the units the record was logged in (:class:`didim.units.Units`, per joint for a robot); the arrays
+            hold SI, converted by the loaders. It says whether an axis is linear or rotary (:attr:`axis`), for every
             unit didim prints.
+        controller_origin: where the controller comes from when nobody described it (the fit's summary,
+            :func:`didim.fit_controller`; per joint for a robot), else empty.
+        joint_names: a robot's joints, in the columns' order (``("axis",)`` for one axis).
+        joint_kinds: ``"revolute"`` or ``"prismatic"`` per joint (rad and N·m, or m and N).
+        delay, force_lag: each joint's actuation delay (samples) and force lag (s) between its command and the force
+            on the joint, read from a robot's controller file; empty for none.
     """
 
     dt: float
     qr: np.ndarray
     force: np.ndarray
     qm: np.ndarray
-    controller: Optional[Controller] = None
+    controller: Union[Controller, Tuple[Controller, ...], None] = None
     ql: Optional[np.ndarray] = None
     u_ext: Optional[np.ndarray] = None
-    position_resolution: Optional[float] = None
+    position_resolution: Union[float, Tuple[Optional[float], ...], None] = None
     name: str = ""
     lead_in: Union[str, None, np.ndarray] = "auto"
-    units: Units = SI
-    #: Where the controller comes from when nobody described it: the fit's summary (:func:`didim.fit_controller`),
-    #: else empty.
-    controller_origin: str = ""
+    units: Union[Units, Tuple[Units, ...]] = SI
+    controller_origin: Union[str, Tuple[str, ...]] = ""
+    joint_names: Tuple[str, ...] = ()
+    joint_kinds: Tuple[str, ...] = ()
+    delay: Tuple[int, ...] = ()
+    force_lag: Tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         dt = _number("sample period dt", self.dt, "s")
         if not (math.isfinite(dt) and dt > 0):
             raise DataError(f"sample period dt must be a finite number of seconds > 0, got {self.dt}")
         object.__setattr__(self, "dt", dt)
-        qr = _signal("qr (position reference)", self.qr)
+        names = self.joint_names
+        if isinstance(names, str) or not isinstance(names, (tuple, list)):
+            raise DataError(f"joint_names must be a tuple of names, one per column, got {names!r}")
+        raw = self.qr
+        shape = np.shape(raw) if isinstance(raw, (np.ndarray, list, tuple)) else ()
+        columns = len(shape) == 2 and (bool(names) and tuple(names) != ("axis",) or shape[1] > 1)
+        if columns:
+            ndof = shape[1]
+            names = tuple(str(x) for x in names) or tuple(str(j + 1) for j in range(ndof))
+            if len(names) != ndof:
+                raise DataError(f"joint_names has {len(names)} names for the record's {ndof} joint columns")
+            if len(set(names)) != ndof:
+                twice = sorted({x for x in names if names.count(x) > 1})
+                raise DataError(f"joint {twice[0]!r} appears twice in joint_names: each joint needs its own name")
+        else:
+            ndof, names = 1, tuple(str(x) for x in names) or ("axis",)
+            if len(names) != 1:
+                raise DataError(f"joint_names has {len(names)} names for a record of one axis (1-D signals)")
+        object.__setattr__(self, "joint_names", names)
+
+        def sig(label: str, x, n: Optional[int] = None) -> np.ndarray:
+            return _joint_signals(label, x, names, n) if columns else _signal(label, x, n)
+
+        qr = sig("qr (position reference)", raw)
         n = qr.shape[0]
         if n < 3:
             raise DataError(f"the record has {n} samples; at least 3 are needed")
@@ -210,44 +295,110 @@ class Recording:
                 f"{1 / DT_RANGE[1]:g} Hz and {1e-6 / DT_RANGE[0]:g} MHz): check the time column's unit (ns, us or ms "
                 "read as seconds?) or the dt you gave")
         object.__setattr__(self, "qr", qr)
-        object.__setattr__(self, "force", _signal("force", self.force, n))
-        object.__setattr__(self, "qm", _signal("qm (motor position)", self.qm, n))
+        object.__setattr__(self, "force", sig("force", self.force, n))
+        object.__setattr__(self, "qm", sig("qm (motor position)", self.qm, n))
         if self.ql is not None:
-            object.__setattr__(self, "ql", _signal("ql (load position)", self.ql, n))
+            object.__setattr__(self, "ql", sig("ql (load position)", self.ql, n))
         if self.u_ext is not None:
-            object.__setattr__(self, "u_ext", _signal("u_ext (external force)", self.u_ext, n))
+            object.__setattr__(self, "u_ext", sig("u_ext (external force)", self.u_ext, n))
+
+        ctrls = self.controller if columns else (self.controller,)
         if self.controller is None:
             raise DataError("the recording has no controller: didim simulates the closed loop, so it needs the law that "
                             "ran the axis; give controller=didim.EmpsCascade() for the EMPS, didim.PD(kp, kd), "
                             "didim.TransferFunction(...) or .cascade(...), or didim.load_controller('controller.json') "
-                            "(on the command line: --controller FILE)")
-        if not isinstance(self.controller, (EmpsCascade, PD, TransferFunction)):
-            raise DataError("controller must be a didim.TransferFunction, EmpsCascade or PD, got "
-                            f"{type(self.controller).__name__}"
-                            + ("; read a controller file with didim.load_controller(path)"
-                               if isinstance(self.controller, (str, bytes, os.PathLike)) else ""))
-        self.controller.transfer_function(dt)  # a transfer function designed for another sample period is refused
-        if self.position_resolution is not None:
-            r = _number("position_resolution", self.position_resolution, "m")
+                            "(on the command line: --controller FILE)" + (
+                                "; a robot takes one per joint: didim.load_joint_controllers('joints.json')"
+                                if columns else ""))
+        if columns and not isinstance(ctrls, (tuple, list)):
+            raise DataError(f"a robot's record takes one controller per joint ({ndof}: {', '.join(names)}), as a "
+                            f"tuple, got one {type(ctrls).__name__}; read them with "
+                            "didim.load_joint_controllers('joints.json')")
+        if len(ctrls) != ndof:
+            raise DataError(f"{len(ctrls)} controllers for {ndof} joints ({', '.join(names)}): give one per joint")
+        for j, c in enumerate(ctrls):
+            if not isinstance(c, (EmpsCascade, PD, TransferFunction)):
+                raise DataError(("controller" if not columns else f"joint {names[j]}'s controller")
+                                + " must be a didim.TransferFunction, EmpsCascade or PD, got " + type(c).__name__
+                                + ("; read a controller file with didim.load_controller(path)"
+                                   if isinstance(c, (str, bytes, os.PathLike)) else ""))
+            c.transfer_function(dt)  # a transfer function designed for another sample period is refused
+        if columns:
+            object.__setattr__(self, "controller", tuple(ctrls))
+
+        res = self.position_resolution
+        if columns:
+            res = (None,) * ndof if res is None else res
+            if not isinstance(res, (tuple, list, np.ndarray)) or len(res) != ndof:
+                raise DataError(f"position_resolution needs one encoder step per joint ({ndof}; None or 0 where "
+                                f"unknown), got {res!r}")
+            steps = []
+            for j, r in enumerate(res):
+                r = 0.0 if r is None else _number(f"joint {names[j]}'s position_resolution", r, "m or rad")
+                if not (math.isfinite(r) and r >= 0):
+                    raise DataError(f"joint {names[j]}'s position_resolution must be a finite step >= 0 (0 for "
+                                    f"unknown), got {r}")
+                steps.append(r)
+            object.__setattr__(self, "position_resolution", tuple(steps))
+        elif res is not None:
+            r = _number("position_resolution", res, "m")
             if not (math.isfinite(r) and r > 0):
                 raise DataError(f"position_resolution must be a finite length > 0 m (or None), got {r}")
             object.__setattr__(self, "position_resolution", r)
         if not isinstance(self.name, str):
             raise DataError(f"name must be a string, got {type(self.name).__name__}")
-        if not isinstance(self.units, Units):
-            object.__setattr__(self, "units", parse_units(self.units) or SI)
+
+        kinds = tuple(self.joint_kinds)
+        if columns:
+            kinds = kinds or ("revolute",) * ndof
+            if len(kinds) != ndof or any(k not in ("revolute", "prismatic") for k in kinds):
+                raise DataError(f"joint_kinds needs 'revolute' or 'prismatic' for each of the {ndof} joints, got "
+                                f"{kinds!r}")
+            units = self.units
+            if isinstance(units, (tuple, list)) and units:
+                if len(units) != ndof:
+                    raise DataError(f"units needs one entry per joint ({ndof}), got {len(units)}")
+                units = tuple(u if isinstance(u, Units) else (parse_units(u) or SI) for u in units)
+            else:
+                units = tuple(Units("m", "N") if k == "prismatic" else Units("rad", "N*m") for k in kinds)
+            object.__setattr__(self, "units", units)
+            origin = self.controller_origin
+            origin = tuple(origin) if isinstance(origin, (tuple, list)) else ((origin,) if origin else ())
+            object.__setattr__(self, "controller_origin", origin)
+        else:
+            if not isinstance(self.units, Units):
+                object.__setattr__(self, "units", parse_units(self.units) or SI)
+            kinds = kinds or ("prismatic" if self.units.axis == "linear" else "revolute",)
+            if len(kinds) != 1:
+                raise DataError(f"joint_kinds has {len(kinds)} entries for a record of one axis")
+        object.__setattr__(self, "joint_kinds", kinds)
+
+        for key in ("delay", "force_lag"):
+            got = tuple(getattr(self, key))
+            if got and len(got) != ndof:
+                raise DataError(f"{key} needs one value per joint ({ndof}), got {len(got)}")
+            object.__setattr__(self, key, got)
+        if any(d < 0 or d >= n or int(d) != d for d in self.delay):
+            raise DataError(f"each joint's delay must be a whole number of samples, >= 0 and shorter than the record "
+                            f"({n} samples), got {self.delay}")
+        if any(not (math.isfinite(x) and x >= 0) for x in self.force_lag):
+            raise DataError(f"each joint's force lag must be finite and >= 0 s, got {self.force_lag}")
+
         lead = self.lead_in
         if isinstance(lead, str):
             if lead not in ("auto", "none"):
                 raise DataError(f"lead_in must be 'auto', None (or 'none') or the reference's samples before the "
                                 f"first one, got {lead!r}")
         elif lead is not None:
-            lead = _signal("lead_in (the reference before the first sample)", lead)
+            lead = sig("lead_in (the reference before the first sample)", lead)
             if lead.shape[0] >= n:
                 raise DataError(f"lead_in has {lead.shape[0]} samples, not fewer than the record's {n}: give only "
                                 "the stretch before the log, from rest")
-            if lead.size:
-                _check_join(lead, qr)
+            if lead.shape[0]:
+                for j in range(ndof):
+                    _check_join(lead[:, j] if columns else lead, qr[:, j] if columns else qr,
+                                f"joint {names[j]}'s " if columns else "",
+                                "rad" if self.joint_units[j].rotary else "m")
             object.__setattr__(self, "lead_in", lead)
 
     @classmethod
@@ -266,6 +417,57 @@ class Recording:
         """Number of samples."""
         return int(self.qr.shape[0])
 
+    @property
+    def ndof(self) -> int:
+        """Number of joints (1 for one axis)."""
+        return len(self.joint_names)
+
+    @property
+    def has_joint_columns(self) -> bool:
+        """True for a robot's record ((samples, joints) arrays), False for one axis's 1-D signals."""
+        return self.qr.ndim == 2
+
+    @property
+    def controllers(self) -> Tuple[Controller, ...]:
+        """The controller of each joint."""
+        return self.controller if self.has_joint_columns else (self.controller,)  # type: ignore[return-value]
+
+    @property
+    def encoder_step(self) -> Tuple[float, ...]:
+        """Each joint's encoder step (m or rad; 0 where unknown)."""
+        r = self.position_resolution
+        return tuple(r) if self.has_joint_columns else (float(r or 0.0),)  # type: ignore[arg-type]
+
+    @property
+    def joint_units(self) -> Tuple[Units, ...]:
+        """The units each joint was logged in."""
+        return self.units if self.has_joint_columns else (self.units,)  # type: ignore[return-value]
+
+    def column(self, x: Optional[np.ndarray], j: int) -> Optional[np.ndarray]:
+        """Joint ``j``'s samples of a signal of this record (``x`` itself for one axis; None stays None)."""
+        if x is None or not self.has_joint_columns:
+            return x
+        return x[:, j]
+
+    def joint(self, j, controller: Optional[Controller] = None) -> "Recording":
+        """Joint ``j`` (an index or a name) as a one-axis record: its reference, force and measured position with its
+        controller (or ``controller``) and encoder step, in its units, from rest on its first sample as the robot's
+        loop starts. Every one-axis method that reads one joint's log (the controller check, the controller fitted
+        from the log) takes it. One axis's own record for one axis (with ``controller`` when given)."""
+        if isinstance(j, str):
+            if j not in self.joint_names:
+                raise DataError(f"no joint {j!r} in the record: its joints are {', '.join(self.joint_names)}")
+            j = self.joint_names.index(j)
+        if not self.has_joint_columns:
+            return self if controller is None else dataclasses.replace(self, controller=controller)
+        rotary = self.joint_kinds[j] != "prismatic"
+        return Recording(dt=self.dt, qr=self.qr[:, j], force=self.force[:, j], qm=self.qm[:, j],
+                         ql=self.column(self.ql, j), u_ext=self.column(self.u_ext, j),
+                         controller=controller if controller is not None else self.controllers[j],
+                         position_resolution=self.encoder_step[j] or None,
+                         name=f"{self.name or 'record'}, joint {self.joint_names[j]}", lead_in=None,
+                         units=Units("rad", "N*m") if rotary else Units("m", "N"), joint_names=(self.joint_names[j],))
+
     @functools.cached_property
     def t(self) -> np.ndarray:
         """Time of each sample (s), from 0 (read-only; computed once, as the recording cannot change)."""
@@ -281,14 +483,33 @@ class Recording:
 
     @functools.cached_property
     def qr_lead(self) -> np.ndarray:
-        """The reference before the first sample that the simulation runs through from rest (m, oldest first; empty
-        for none): :attr:`lead_in` resolved (read-only; computed once)."""
+        """The reference before the first sample that the simulation runs through from rest (oldest first, (L,) or
+        (L, joints); L = 0 for none; read-only, computed once): the given one, or with ``lead_in="auto"`` each
+        joint's reconstructed back to the rest it left (:func:`reconstruct_lead_in`) when every joint whose
+        reference moves at the first samples has one, the longest setting L and the shorter ones held at rest before
+        theirs. A joint that moves without one (a log cut in its cruise or its deceleration: how long it cruised is
+        not in the log) leaves the record without a lead-in: holding it still through the others' lead-in and then
+        moving it would start it further from its state than the record's first sample does."""
+        cols = self.has_joint_columns
         if isinstance(self.lead_in, np.ndarray):
             lead = self.lead_in
-        elif self.lead_in == "auto":
-            lead = reconstruct_lead_in(self.qr, self.dt, self.qm, self.position_resolution)
+        elif self.lead_in != "auto":
+            lead = np.zeros((0, self.ndof) if cols else 0)
         else:
-            lead = np.zeros(0)
+            qr, qm = (self.qr, self.qm) if cols else (self.qr[:, None], self.qm[:, None])
+            steps = self.encoder_step
+            leads = [reconstruct_lead_in(qr[:, j], self.dt, qm[:, j], steps[j] or None) for j in range(self.ndof)]
+            head = qr[:min(LEAD_FIT_SAMPLES, self.n)]
+            moving = np.ptp(head, axis=0) > np.asarray(steps, dtype=float)
+            if any(m and not len(x) for m, x in zip(moving, leads)):
+                size = 0
+            else:
+                size = max(len(x) for x in leads)
+            lead = np.empty((size, self.ndof))
+            for j, x in enumerate(leads):
+                if size:
+                    lead[:, j] = np.concatenate([np.full(size - len(x), x[0] if len(x) else qr[0, j]), x])
+            lead = lead if cols else lead[:, 0]
         lead = np.ascontiguousarray(lead, dtype=float)
         lead.setflags(write=False)
         return lead
@@ -298,18 +519,32 @@ class Recording:
         ``u_ext`` held at its first value through the lead-in (a bias stays on; pulses that begin with the log begin
         at zero). The record's own arrays when it has no lead-in."""
         lead = self.qr_lead
-        if not lead.size:
+        if not len(lead):
             return self.qr, self.u_ext
-        u = None if self.u_ext is None else np.concatenate([np.full(lead.size, self.u_ext[0]), self.u_ext])
-        return np.concatenate([lead, self.qr]), u
+        u = None if self.u_ext is None else np.concatenate([np.repeat(self.u_ext[:1], len(lead), axis=0), self.u_ext])
+        return np.ascontiguousarray(np.concatenate([lead, self.qr])), u
 
     def lead_in_note(self) -> str:
         """One sentence on the record's lead-in for a result's notes or a command's output ("" without one)."""
-        if not self.qr_lead.size:
+        if not len(self.qr_lead):
             return ""
-        return (f"the record begins in motion: simulated from rest {1e3 * self.qr_lead.size * self.dt:.0f} ms before "
+        return (f"the record begins in motion: simulated from rest {1e3 * len(self.qr_lead) * self.dt:.0f} ms before "
                 "its first sample, through its reference's lead-in (to start at the first sample, as the paper: "
                 "lead_in=None, on the command line --lead-in none)")
+
+    def applied_force(self) -> np.ndarray:
+        """The force the joints receive (:func:`applied_force`): the logged one without delay nor lag."""
+        if not any(self.delay) and not any(self.force_lag):
+            return self.force
+        return applied_force(self.force, self.delay, self.force_lag, self.dt)
+
+    def core_controllers(self) -> List[Tuple[str, List[float]]]:
+        """The controllers as the core takes them: (kind, gains) per joint."""
+        return [(c.kind, list(c.gains)) for c in self.controllers]
+
+    def _one_axis(self, what: str) -> None:
+        if self.has_joint_columns:
+            raise DataError(f"{what} reads one axis's log: take it on one joint, record.joint(name)")
 
     @property
     def fs(self) -> float:
@@ -326,6 +561,7 @@ class Recording:
         """The record's speed scale (m/s or rad/s): the largest speed of the reference between two samples (of the
         motor position when the reference does not move). Every speed didim derives (the Coulomb smoothing, the
         Stribeck speeds it tries) is a fraction of it, so that a record gives the same answer in any unit."""
+        self._one_axis("the record's speed scale")
         for x in (self.qr, self.qm):
             v = float(np.max(np.abs(np.diff(x)))) / self.dt
             if math.isfinite(v) and v > 0:
@@ -335,6 +571,7 @@ class Recording:
     @functools.cached_property
     def stroke(self) -> float:
         """The span of the reference (m or rad), or of the motor position when the reference does not move."""
+        self._one_axis("the stroke")
         for x in (self.qr, self.qm):
             s = float(np.ptp(x))
             if math.isfinite(s) and s > 0:
@@ -344,12 +581,14 @@ class Recording:
     @property
     def force_limit(self) -> float:
         """The controller's saturation of the command in N (``gtau·vsat`` or ``tau_max``), ``inf`` for none."""
+        self._one_axis("the force limit")
         return self.controller.force_limit
 
     def implied_command(self) -> np.ndarray:
         """The force (N) the controller computes from the logged reference and motor position (and ``u_ext``), per
         sample, with the controller's saturation: the evidence :meth:`diagnose` compares the measured force with.
         The two samples before the start take the first position."""
+        self._one_axis("the implied command")
         return self.controller.transfer_function(self.dt).command(self.qr, self.qm, self.u_ext)
 
     def u_ext_gain(self) -> Tuple[float, float]:
@@ -359,6 +598,7 @@ class Recording:
         the command does not saturate. 1 when ``u_ext`` is what the drive applied; (nan, nan) without ``u_ext`` or
         when it is zero. On DATA_EMPS_PULSES, with ``gtau·pulses_N``: 1.0138 ± 4e-5 (the pulses enter ``vir`` 1.4 %
         larger than ``pulses_N``)."""
+        self._one_axis("the gain of u_ext")
         nan = (math.nan, math.nan)
         if self.u_ext is None:
             return nan
@@ -386,6 +626,7 @@ class Recording:
         check: a command that saturates for long stretches (the loop is open there), and a force whose scale does not
         match what the controller gains and the tracking error imply (volts instead of newtons, gtau applied twice,
         wrong gains). :func:`didim.identify` issues them as :class:`didim.DidimWarning`."""
+        self._one_axis("diagnose")
         out: List[str] = []
         n = self.n
         force = self.force
@@ -453,6 +694,10 @@ class Recording:
 
     def __repr__(self) -> str:
         extra = [k for k in ("ql", "u_ext") if getattr(self, k) is not None]
+        if self.has_joint_columns:
+            return (f"Recording({self.name or 'unnamed'}: {self.n} samples at {self.fs:g} Hz, {self.n * self.dt:g} s, "
+                    f"joints {', '.join(self.joint_names)}" + (f", with {', '.join(extra)}" if extra else "")
+                    + (f", lead-in {1e3 * len(self.qr_lead) * self.dt:g} ms" if len(self.qr_lead) else "") + ")")
         with np.errstate(over="ignore"):  # a force of 1e200 N has an RMS of inf here, not a warning
             rms = float(np.sqrt(np.mean(self.force**2)))
         return (
@@ -535,4 +780,4 @@ def _check_expected_dt(step: float, dt, where: str) -> None:
         )
 
 
-__all__ = ["Recording", "TIME_JITTER_RTOL"]
+__all__ = ["Recording", "TIME_JITTER_RTOL", "applied_force"]

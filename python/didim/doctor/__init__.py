@@ -859,10 +859,11 @@ def doctor(
     ``"fit"`` (default) to fit it with the base model before any effect is looked for
     (:func:`didim.doctor.fit.fit_friction_law`), None for didim's default. ``controller_check``: as for
     :func:`didim.identify`, on both records."""
-    from ..robots import Robot, RobotRecording
+    from ..api import _has_joint_columns
+    from ..robots import Robot
 
-    if isinstance(model, Robot) or isinstance(recording, RobotRecording):
-        if not isinstance(model, Robot) or not isinstance(recording, RobotRecording):
+    if isinstance(model, Robot) or _has_joint_columns(recording):
+        if not isinstance(model, Robot) or not _has_joint_columns(recording):
             raise DataError("a robot's record is diagnosed with its didim.Robot: didim.doctor(rec, robot, "
                             "validate=...) with rec = didim.load_record(path, robot=robot)")
         if apM is not None:

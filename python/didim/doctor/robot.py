@@ -17,6 +17,7 @@ from typing import Any, Callable, Dict, List, Optional
 import numpy as np
 
 from .._errors import DataError
+from ..recording import Recording
 
 #: Bands of each joint's speed (shares of its top reference speed) and of its stroke the residual is reported in.
 SPEED_EDGES = (0.0, 0.05, 0.25, 0.5, 1.0)
@@ -151,10 +152,9 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
     """:func:`didim.doctor` of a robot's record with its :class:`didim.Robot` (see the module's text)."""
     from ..api import identify
     from ..check import enforce
-    from ..robots import RobotRecording
     from ..robots.identify import force_errors, simulate_robot, top_speeds
 
-    if validate is not None and not isinstance(validate, RobotRecording):
+    if validate is not None and not (isinstance(validate, Recording) and validate.has_joint_columns):
         raise DataError(f"validate must be a robot's record like the training one, got {type(validate).__name__}")
     if validate is not None and list(validate.joint_names) != list(recording.joint_names):
         raise DataError("the validation record's joints are not the training record's")

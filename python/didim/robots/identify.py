@@ -23,7 +23,7 @@ from ..stats import diebold_mariano
 from .._errors import DataError, IdentifiabilityError, SimulationError
 from ..result import IdentificationResult, iterations_of, robot_result
 from .chain import BaseParameters, Robot
-from .record import RobotRecording
+from ..recording import Recording
 
 #: A regressor column is independent when its R diagonal, after the columns are scaled to unit norm, is above this
 #: share of the largest. Exact combinations cancel to rounding (~1e-15); URDFs print their angles and lengths to 4–6
@@ -173,7 +173,7 @@ def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, 
     return out
 
 
-def _decimation(rec: RobotRecording):
+def _decimation(rec: Recording):
     """The parallel decimation of a robot record: a zero-phase low-pass at ten times the reference's bandwidth (the
     frequency below which 99.9 % of its motion's power lies), within a tenth of the sample rate."""
     from ..signal import Decimation
@@ -187,7 +187,7 @@ def _decimation(rec: RobotRecording):
     return Decimation.lowpass(min(max(10 * band, 5 * f[1] if len(f) > 1 else 1.0), fs / 10), fs)
 
 
-def top_speeds(rec: RobotRecording) -> np.ndarray:
+def top_speeds(rec: Recording) -> np.ndarray:
     """Each joint's top reference speed: the scale of the speeds below which the fits leave rows out (the reference's,
     not the states': a simulated state that swings far off would move the threshold with it)."""
     return np.max(np.abs(np.diff(rec.qr, axis=0)), axis=0) / rec.dt
@@ -228,7 +228,7 @@ def _solve(y: np.ndarray, w: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.nda
 STATE_CUTOFF_RATIO = 4.0
 
 
-def _measured_states(rec: RobotRecording, dec) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _measured_states(rec: Recording, dec) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions, speeds and accelerations from the measured positions: a zero-phase low-pass at
     :data:`STATE_CUTOFF_RATIO` times the decimation's cutoff (within the Nyquist frequency), then central
     differences."""
@@ -269,7 +269,7 @@ class _InverseModel:
     speed) left out; a friction law only replaces each joint's Coulomb column (one column decimated per joint), so
     that the laws a search compares, and DIDIM's step of ε, cost a fraction of a fit each."""
 
-    def __init__(self, rec: RobotRecording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, dec,
+    def __init__(self, rec: Recording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, dec,
                  y: Optional[np.ndarray] = None):
         self.robot, self.base, self.offset, self.dec, self.v = robot, base, offset, dec, v
         n, nb = robot.ndof, len(base.names)
@@ -316,7 +316,7 @@ EPS_STEP = 1e-4
 EPS_SIGMA_MAX = 0.1
 
 
-def urdf_residual(rec: RobotRecording, robot: Robot, angle_factor: float = 1.0, length_factor: float = 1.0) -> float:
+def urdf_residual(rec: Recording, robot: Robot, angle_factor: float = 1.0, length_factor: float = 1.0) -> float:
     """The share of the force (each joint's scaled alike) that the URDF's bodies leave unexplained once each joint's
     own drive (rotor inertia, viscous and Coulomb friction, offset) is fitted to the rest, on the measured states
     (every ``n/2000``-th sample), the revolute joints' positions taken times ``angle_factor`` and the prismatic ones'
@@ -339,7 +339,7 @@ def urdf_residual(rec: RobotRecording, robot: Robot, angle_factor: float = 1.0, 
     return math.sqrt(left / total) if total > 0 else 0.0
 
 
-def _speed_scales(rec: RobotRecording) -> np.ndarray:
+def _speed_scales(rec: Recording) -> np.ndarray:
     """Each joint's speed scale: the median top reference speed of the joints of its kind (rad/s for revolute
     joints, m/s for prismatic ones), or, when none of them is driven, its encoder step per sample period. A friction
     law's smoothing speed belongs to the friction, not to how fast one joint's trajectory goes: joints of one kind
@@ -360,7 +360,7 @@ def _speed_scales(rec: RobotRecording) -> np.ndarray:
     return out
 
 
-def _default_law(rec: RobotRecording) -> Law:
+def _default_law(rec: Recording) -> Law:
     """didim's law for a robot's loop when none is fitted: algebraic, each joint's ε a share (:data:`EPS_SHARE`) of
     its speed scale (:func:`_speed_scales`)."""
     return ("algebraic", tuple(float(EPS_SHARE * s) for s in _speed_scales(rec)))
@@ -380,7 +380,7 @@ EPS_CHI2 = 10.83
 LAW_TIE = 1e-3
 
 
-def fit_law(rec: RobotRecording, inverse: "_InverseModel",
+def fit_law(rec: Recording, inverse: "_InverseModel",
             per_shape: Optional[Dict[str, Tuple[float, ...]]] = None) -> Law:
     """The friction law through zero speed that best explains the force: each shape with each joint's ε a share of the
     grid of its speed scale (:func:`_speed_scales`), in the weighted least squares of the inverse model ``inverse``
@@ -469,7 +469,7 @@ def fit_law(rec: RobotRecording, inverse: "_InverseModel",
     return (shape, laws[shape][0])
 
 
-def _first_half(rec: RobotRecording) -> RobotRecording:
+def _first_half(rec: Recording) -> Recording:
     import dataclasses
 
     m = max(rec.n // 2, 2)
@@ -486,7 +486,7 @@ def _first_half(rec: RobotRecording) -> RobotRecording:
 SHAPE_ALPHA = 0.05
 
 
-def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dict[str, List[float]]]], law: Law,
+def closed_loop_law(rec: Recording, refit: Callable[[Law], Tuple[Robot, Dict[str, List[float]]]], law: Law,
                     per_shape: Dict[str, Tuple[float, ...]], progress=None) -> Law:
     """The friction law through zero speed that the closed loop follows best (:func:`didim.friction_law.closed_loop_law`,
     every plant's search), by the joints' relative force errors on the first half of the record: each shape with the
@@ -537,7 +537,7 @@ def closed_loop_law(rec: RobotRecording, refit: Callable[[Law], Tuple[Robot, Dic
     return found.law
 
 
-def simulate_robot(rec: RobotRecording, result: IdentificationResult, substeps: int = 0) -> Dict[str, np.ndarray]:
+def simulate_robot(rec: Recording, result: IdentificationResult, substeps: int = 0) -> Dict[str, np.ndarray]:
     """The closed loop of ``rec`` (its references, controllers, encoders, first force) with the model of ``result``
     (its friction law)."""
     robot = result.robot.with_inertial_params(standard_of(result)[result.robot.ndof:])
@@ -546,10 +546,10 @@ def simulate_robot(rec: RobotRecording, result: IdentificationResult, substeps: 
     return _simulate(rec, robot, d, result.law if result.law is not None else _default_law(rec), substeps)
 
 
-def _simulate(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]], law: Law, substeps: int = 0):
+def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law, substeps: int = 0):
     """The closed loop of ``rec`` with the robot ``robot`` and drives ``d`` under ``law``: from rest at the first
     reference, each controller's integrator holding the logged first force; through the record's lead-in
-    (:attr:`RobotRecording.qr_lead`) when it begins in motion, from rest at the lead-in's start, each integrator then
+    (:attr:`Recording.qr_lead`) when it begins in motion, from rest at the lead-in's start, each integrator then
     holding the model's static torque there (gravity and offset, less the feedforward), the lead-in's samples dropped
     from the outputs."""
     qr, u_ext = rec.lead_in_signals()
@@ -569,7 +569,7 @@ def _simulate(rec: RobotRecording, robot: Robot, d: Dict[str, List[float]], law:
     return {k: v[lead:] for k, v in sim.items()} if lead else sim
 
 
-def force_errors(rec: RobotRecording, force_sim: np.ndarray) -> Tuple[float, Dict[str, float]]:
+def force_errors(rec: Recording, force_sim: np.ndarray) -> Tuple[float, Dict[str, float]]:
     """‖τ − τ_sim‖/‖τ‖ over all joints, and per joint."""
     total = float(np.linalg.norm(rec.force - force_sim) / np.linalg.norm(rec.force))
     per = {j: float(np.linalg.norm(rec.force[:, i] - force_sim[:, i]) / np.linalg.norm(rec.force[:, i]))
@@ -577,7 +577,7 @@ def force_errors(rec: RobotRecording, force_sim: np.ndarray) -> Tuple[float, Dic
     return total, per
 
 
-def _result(method: str, rec: RobotRecording, robot: Robot, base: BaseParameters, offset: bool, theta, cov,
+def _result(method: str, rec: Recording, robot: Robot, base: BaseParameters, offset: bool, theta, cov,
             **kw) -> IdentificationResult:
     names = _theta_names(robot, base, offset)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -655,7 +655,7 @@ def plausibility(res: IdentificationResult) -> List[str]:
     return out
 
 
-def idim_ls(rec: RobotRecording, robot: Robot, *, offset: bool = False) -> IdentificationResult:
+def idim_ls(rec: Recording, robot: Robot, *, offset: bool = False) -> IdentificationResult:
     """IDIM-LS: the inverse dynamic model on the measured positions (zero-phase low-passed, differentiated twice),
     weighted least squares per joint, the rows where a joint moves slowly left out; the friction law's tail fitted
     with it (:func:`fit_law`), its shape through zero speed chosen in closed loop (:func:`closed_loop_law`) for the
@@ -817,7 +817,7 @@ def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, t
     return didim_loop(plant, theta, max_iter=max_iter, progress=say)
 
 
-def didim(rec: RobotRecording, robot: Robot, *, offset: bool = False, max_iter: int = 30, tol: float = 1e-3,
+def didim(rec: Recording, robot: Robot, *, offset: bool = False, max_iter: int = 30, tol: float = 1e-3,
           progress: Optional[Callable[[str], None]] = None) -> IdentificationResult:
     """DIDIM from the URDF's values (rotor inertias and friction 0): the closed loop simulated with the current
     estimate, weighted least squares of the measured force on the simulated states, until the regression's residual
@@ -952,7 +952,7 @@ class _PayloadPlant:
         return f"payload iteration {len(loop.history) - 1}: closed-loop force error {100 * loop.error:.3f} %"
 
 
-def payload(rec: RobotRecording, result: IdentificationResult, *, max_iter: int = 30, tol: float = 1e-3,
+def payload(rec: Recording, result: IdentificationResult, *, max_iter: int = 30, tol: float = 1e-3,
             progress: Optional[Callable[[str], None]] = None) -> PayloadResult:
     """The payload on the last link of the robot of ``result`` (identified without it) from ``rec`` (recorded with
     it): DIDIM on the parameters the payload adds to the last body, the rest of the model kept; the parameters the
@@ -1021,7 +1021,7 @@ def payload(rec: RobotRecording, result: IdentificationResult, *, max_iter: int 
                          elapsed_s=time.perf_counter() - t0, notes=notes)
 
 
-def _check(rec: RobotRecording, robot: Robot) -> None:
+def _check(rec: Recording, robot: Robot) -> None:
     if list(rec.joint_names) != robot.joint_names:
         raise DataError(f"the record's joints ({', '.join(rec.joint_names)}) are not the robot's "
                         f"({', '.join(robot.joint_names)}), in the same order")
