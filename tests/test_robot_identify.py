@@ -211,3 +211,33 @@ def test_a_record_cut_in_motion_runs_through_its_lead_in(data):
     # the true static torque there): the same loop, up to the encoder's rounding of a last bit
     assert e_given == pytest.approx(e_full, rel=0.01)
     assert e_none > 1.5 * e_given
+
+
+def test_the_robots_model_travels_whole_into_the_result_and_back(data, tmp_path):
+    """A robot's model (didim.Model with its robot) is what the fit takes and what the result carries: its offset
+    decides the OF parameters (not a guess from their names), the fitted friction law comes back in it, and a saved
+    result reads back with the same model."""
+    load, _ = data
+    robot, rec = load("pendulum", "train")
+    model = didim.Model(robot=robot, offset=False)
+    res = didim.identify(rec, model, "idim-ls")
+    assert res.structure.robot is robot and not res.offset
+    assert not [k for k in res.params if k.startswith("OF_")]
+    shape, eps = res.law
+    assert res.structure.coulomb_law == shape and len(eps) == robot.ndof and all(e > 0 for e in eps)
+    # the bare robot stands for its model with an offset per joint (the default a robot's record needs)
+    assert didim.model.as_model(robot).offset and didim.model.as_model(robot, offset=False) == model
+    res.save(tmp_path / "r.json")
+    back = didim.load_result(tmp_path / "r.json")
+    assert back.structure.law == res.law and back.offset is False
+    assert back.robot.joint_names == robot.joint_names
+    np.testing.assert_allclose(list(back.params.values()), list(res.params.values()), rtol=1e-15)
+    # what a robot's model cannot hold is refused by name
+    with pytest.raises(didim.DataError, match="rigid"):
+        didim.Model("flexible", robot=robot)
+    with pytest.raises(didim.DataError, match="takes no terms"):
+        didim.Model(robot=robot, terms=[didim.Term("Fs", "stribeck", vs=0.01)])
+    with pytest.raises(didim.DataError, match="one smoothing speed per joint"):
+        didim.Model(robot=robot, coulomb_eps=0.01)
+    with pytest.raises(didim.DataError, match="fitted from the record"):
+        didim.identify(rec, res.structure, "idim-ls")

@@ -110,7 +110,8 @@ def identify(
     """
     from .robots import Robot
 
-    if isinstance(model, Robot) or _has_joint_columns(recording):
+    if isinstance(model, Robot) or (isinstance(model, Model) and model.robot is not None) \
+            or _has_joint_columns(recording):
         return _identify_robot(recording, model, method, offset=offset, apM=apM, initial=initial, criterion=criterion,
                                progress=progress, controller_check=controller_check, **options)
     if not isinstance(model, Model) and (not isinstance(model, str) or model not in MODELS):
@@ -274,25 +275,28 @@ def _has_joint_columns(recording) -> bool:
 
 def _identify_robot(recording, robot, method: str, *, offset, apM, initial, criterion, progress, controller_check,
                     **options):
-    """:func:`identify` of a robot's record (a :class:`didim.Recording` with joint columns) with its :class:`didim.Robot`: "didim"
-    (from the URDF's values) or "idim-ls"; ``offset`` (default True) fits a constant torque per joint; ``max_iter``
-    and ``tol`` go to DIDIM; ``controller_check`` as for one axis, on each joint."""
+    """:func:`identify` of a robot's record (a :class:`didim.Recording` with joint columns) with a model of its
+    robot (a :class:`didim.Model` with ``robot``, or the :class:`didim.Robot`, whose model fits an offset per joint
+    unless ``offset=False``: :func:`didim.model.as_model`): "didim" (from the URDF's values) or "idim-ls";
+    ``max_iter`` and ``tol`` go to DIDIM; ``controller_check`` as for one axis, on each joint."""
     from .check import enforce
     from .robots import Robot, didim as robot_didim, idim_ls as robot_idim_ls
 
     if not _has_joint_columns(recording):
         raise DataError(f"a robot is identified on a robot's record (didim.load_record(path, robot=robot)), got "
                         f"{type(recording).__name__}")
-    if not isinstance(robot, Robot):
-        raise DataError(f"a robot's record is identified with its didim.Robot (didim.Robot.from_urdf(path)), got "
-                        f"{type(robot).__name__}")
+    if not isinstance(robot, Robot) and not (isinstance(robot, Model) and robot.robot is not None):
+        raise DataError(f"a robot's record is identified with its didim.Robot (didim.Robot.from_urdf(path)) or a "
+                        f"didim.Model of it, got {type(robot).__name__}")
     for name, value, why in (("apM", apM, "starts from the URDF's values"), ("initial", initial, "starts from the "
                              "URDF's values"), ("criterion", None if criterion == "force" else criterion, "fits the force")):
         if value is not None:
             raise DataError(f"{name} does not apply to a robot: DIDIM on a robot {why}")
-    # a robot's joints carry a constant torque (a cable, what gravity compensation leaves): fitted unless refused,
-    # since without it the friction takes it (on the data folder's UR5, Fv 7.8 % off instead of 0.24 %)
-    offset = bool(_checks.flag("offset", offset)) if offset is not None else True
+    model = as_model(robot, offset=None if offset is None else _checks.flag("offset", offset))
+    if model.law is not None:
+        raise DataError("a robot's friction law through zero speed is fitted from the record: give its model without "
+                        "coulomb_eps")
+    robot = model.robot
     if method not in ("didim", "idim-ls"):
         raise DataError(f"method {method!r} is not available for robots: use 'didim' or 'idim-ls'")
     allowed = {"max_iter", "tol"} if method == "didim" else set()
@@ -305,9 +309,9 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
                         f"({', '.join(robot.joint_names)}), in the same order")
     chk = enforce(recording, controller_check)
     if method == "didim":
-        res = robot_didim(recording, robot, offset=offset, progress=progress, **options)
+        res = robot_didim(recording, model, progress=progress, **options)
     else:
-        res = robot_idim_ls(recording, robot, offset=offset)
+        res = robot_idim_ls(recording, model)
     if chk is not None:
         res.options["controller_check"] = chk.to_dict()
         res.notes.insert(0, chk.summary())

@@ -104,8 +104,11 @@ def cmd_identify_robot(args) -> int:
     opts = {k: v for k, v in (("max_iter", args.max_iter), ("tol", args.tol)) if v is not None}
     if opts and args.method != "didim":
         raise DataError("--max-iter and --tol apply to DIDIM")
-    res = identify(rec, robot, args.method, offset=args.offset, progress=_progress(args.quiet),
-                   controller_check=args.controller_check, **opts)
+    from .model import as_model
+
+    model = as_model(robot, offset=args.offset)  # the robot's model, carried whole to the fit
+    res = identify(rec, model, args.method, progress=_progress(args.quiet), controller_check=args.controller_check,
+                   **opts)
     print(res.summary())
     if args.json:
         import json

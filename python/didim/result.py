@@ -88,26 +88,30 @@ class IdentificationResult:
     #: "linear" (m, N, kg) or "rotary" (rad, N·m, kg·m²): the axis of the record the result was identified on; the
     #: numbers are SI either way, and :attr:`units` names them for this axis.
     axis: str = "linear"
-    #: A robot's result (the plant of n joints; None for one axis, a plant of one joint described by
-    #: :attr:`structure`): the robot (:class:`didim.Robot`, its URDF) the parameters belong to, with its base map
-    #: (:class:`didim.robots.BaseParameters`: what each base parameter combines), each joint's closed-loop force
-    #: error and its friction law through zero speed (shape, each joint's ε in rad/s or m/s). ``options["offset"]``
-    #: says whether each joint's constant torque was fitted, ``options["controller_check"]`` holds each joint's
-    #: controller check. :mod:`didim.robots.identify` reads and writes them.
-    robot: Optional[Any] = None
+    #: A robot's result (its :attr:`structure` a model of a :class:`didim.Robot`): the base map
+    #: (:class:`didim.robots.BaseParameters`: what each base parameter combines) and each joint's closed-loop force
+    #: error; ``options["controller_check"]`` holds each joint's controller check. :mod:`didim.robots.identify`
+    #: reads and writes them.
     base: Optional[Any] = None
     force_error_per_joint: Dict[str, float] = field(default_factory=dict)
-    law: Optional[Tuple[str, Tuple[float, ...]]] = None
 
     def __post_init__(self):
-        if self.structure is None and self.robot is None:
+        if self.structure is None:
             self.structure = Model.of_result(self.model, self.all_params, self.options)
+
+    @property
+    def robot(self):
+        """The robot (:class:`didim.Robot`, its URDF) a robot's parameters belong to: its model's; None for one axis."""
+        return None if self.structure is None else self.structure.robot
+
+    @property
+    def law(self) -> Optional[Tuple[str, Tuple[float, ...]]]:
+        """A robot's friction law through zero speed (shape, each joint's ε in rad/s or m/s): its model's."""
+        return None if self.structure is None else self.structure.law
 
     @property
     def offset(self) -> bool:
         """Whether the model has a constant force (torque) per joint."""
-        if self.robot is not None:
-            return bool(self.options.get("offset", False))
         return bool(self.structure is not None and self.structure.offset)
 
     @property
@@ -116,7 +120,7 @@ class IdentificationResult:
         result's axis (kg·m², N·m·s/rad, N·m on a rotary one)."""
         from .units import label
 
-        known = self.structure.units() if self.structure is not None else {}
+        known = self.structure.units() if self.structure is not None and self.robot is None else {}
         return {k: label(known.get(k, UNITS.get(k, "")), self.axis) for k in (*self.params, *self.frozen)}
 
     def set_axis(self, axis: str) -> None:
@@ -129,7 +133,7 @@ class IdentificationResult:
     def all_params(self) -> Dict[str, float]:
         """Every parameter of the model, the frozen ones included, in the order of the parameter vector."""
         full = {**self.frozen, **self.params}
-        if self.structure is not None:
+        if self.structure is not None and self.robot is None:
             return {n: full[n] for n in self.structure.param_names() if n in full}
         return full
 
@@ -387,15 +391,15 @@ def _robot_summary(res: IdentificationResult) -> str:
     return "\n".join(lines)
 
 
-def robot_result(method: str, params: Dict[str, float], std: Dict[str, float], robot, base, offset: bool,
+def robot_result(method: str, params: Dict[str, float], std: Dict[str, float], model: Model, base,
                  **kw) -> IdentificationResult:
-    """A robot's :class:`didim.IdentificationResult` (every plant's result type)."""
+    """A robot's :class:`didim.IdentificationResult` (every plant's result type) of its ``model`` (a
+    :class:`didim.Model` of a robot, with the friction law it was fitted with)."""
     pct = {k: 100 * std[k] / abs(v) if v else math.inf for k, v in params.items() if k in std}
-    options = {"offset": bool(offset), **kw.pop("options", {})}
     fields = dict(relative_error=math.nan, iterations=0, simulations=0, elapsed_s=0.0)
     fields.update(kw)
-    return IdentificationResult(model="robot", method=method, params=params, std=std, rel_std_pct=pct, robot=robot,
-                                base=base, options=options, **fields)
+    return IdentificationResult(model="robot", method=method, params=params, std=std, rel_std_pct=pct,
+                                structure=model, base=base, **fields)
 
 
 def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
@@ -406,13 +410,15 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
     b = d["base"]
     base = BaseParameters(tuple(b["standard_names"]), tuple(b["names"]), np.array(b["K"], dtype=float),
                           tuple(b["independent"]))
-    return robot_result(d["method"], dict(d["params"]), dict(d["std"]), robot, base, bool(d["offset"]),
+    law = None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof)
+    model = Model("rigid", robot=robot, offset=bool(d["offset"]), coulomb_law=law[0] if law else "algebraic",
+                  coulomb_eps=law[1] if law else None)
+    return robot_result(d["method"], dict(d["params"]), dict(d["std"]), model, base,
                          force_error=d.get("force_error", math.nan),
                          force_error_per_joint=dict(d.get("force_error_per_joint", {})),
                          converged=bool(d.get("converged", True)), iterations=int(d.get("iterations", 0)),
                          message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
                          notes=list(d.get("notes", [])), history=iterations_of(d.get("history", [])),
-                         law=None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof),
                          options={"controller_check": d.get("controller_check")})
 
 

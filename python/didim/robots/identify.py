@@ -23,6 +23,7 @@ from ..stats import diebold_mariano
 from .._errors import DataError, IdentifiabilityError, SimulationError
 from ..result import IdentificationResult, iterations_of, robot_result
 from .chain import BaseParameters, Robot
+from ..model import Model
 from ..recording import Recording
 
 #: A regressor column is independent when its R diagonal, after the columns are scaled to unit norm, is above this
@@ -577,8 +578,9 @@ def force_errors(rec: Recording, force_sim: np.ndarray) -> Tuple[float, Dict[str
     return total, per
 
 
-def _result(method: str, rec: Recording, robot: Robot, base: BaseParameters, offset: bool, theta, cov,
+def _result(method: str, rec: Recording, model: Model, base: BaseParameters, theta, cov,
             **kw) -> IdentificationResult:
+    robot, offset = model.robot, model.offset
     names = _theta_names(robot, base, offset)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     params = dict(zip(names, map(float, theta)))
@@ -604,7 +606,7 @@ def _result(method: str, rec: Recording, robot: Robot, base: BaseParameters, off
     ordered = {k: params[k] for k in [f"{p}_{j}" for p in ("Ia", "Fv", "Fc") + (("OF",) if offset else ())
                                       for j in robot.joint_names]}
     ordered.update({k: v for k, v in params.items() if k not in ordered})
-    res = robot_result(method, ordered, stds, robot, base, offset, notes=notes, **kw)
+    res = robot_result(method, ordered, stds, model, base, notes=notes, **kw)
     res.notes += plausibility(res)
     return res
 
@@ -655,13 +657,13 @@ def plausibility(res: IdentificationResult) -> List[str]:
     return out
 
 
-def idim_ls(rec: Recording, robot: Robot, *, offset: bool = False) -> IdentificationResult:
+def idim_ls(rec: Recording, model: Model) -> IdentificationResult:
     """IDIM-LS: the inverse dynamic model on the measured positions (zero-phase low-passed, differentiated twice),
     weighted least squares per joint, the rows where a joint moves slowly left out; the friction law's tail fitted
     with it (:func:`fit_law`), its shape through zero speed chosen in closed loop (:func:`closed_loop_law`) for the
     simulations of the result."""
     t0 = time.perf_counter()
-    _check(rec, robot)
+    robot, offset = _check(rec, model)
     base = base_parameters(robot)
     dec = _decimation(rec)
     q, v, a = _measured_states(rec, dec)
@@ -684,7 +686,7 @@ def idim_ls(rec: Recording, robot: Robot, *, offset: bool = False) -> Identifica
     # the held-out 1 kHz Panda's slow fourth joint came out 17 % off: the closed loop of the regression's estimate,
     # itself a few percent off, chose exp for a truth of algebraic, which the inverse model had chosen
     theta, cov, _ = inverse.fit(law)
-    res = _result("idim-ls", rec, robot, base, offset, theta, cov, law=sim_law)
+    res = _result("idim-ls", rec, model.with_law(sim_law), base, theta, cov)
     try:
         sim = simulate_robot(rec, res)
         res.force_error, res.force_error_per_joint = force_errors(rec, sim["force"])
@@ -817,7 +819,7 @@ def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, t
     return didim_loop(plant, theta, max_iter=max_iter, progress=say)
 
 
-def didim(rec: Recording, robot: Robot, *, offset: bool = False, max_iter: int = 30, tol: float = 1e-3,
+def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
           progress: Optional[Callable[[str], None]] = None) -> IdentificationResult:
     """DIDIM from the URDF's values (rotor inertias and friction 0): the closed loop simulated with the current
     estimate, weighted least squares of the measured force on the simulated states, until the regression's residual
@@ -831,7 +833,7 @@ def didim(rec: Recording, robot: Robot, *, offset: bool = False, max_iter: int =
     training record better. The result says so.
     """
     t0 = time.perf_counter()
-    _check(rec, robot)
+    robot, offset = _check(rec, model)
     _checks.options(max_iter=max_iter, tol=tol)
     say = progress or (lambda s: None)
     base = base_parameters(robot)
@@ -868,10 +870,9 @@ def didim(rec: Recording, robot: Robot, *, offset: bool = False, max_iter: int =
     if run.best[2] is None:
         raise SimulationError(f"DIDIM could not simulate the robot's closed loop: {run.message}")
     err, theta, sol, _ = run.best
-    res = _result("didim", rec, robot, base, offset, theta, sol["covariance"], converged=run.converged,
+    res = _result("didim", rec, model.with_law(sol["law"]), base, theta, sol["covariance"], converged=run.converged,
                   iterations=len(run.history), message="" if run.converged else run.message,
-                  history=iterations_of(run.errors),
-                  notes=notes + run.notes, law=sol["law"])
+                  history=iterations_of(run.errors), notes=notes + run.notes)
     res.force_error, res.force_error_per_joint = sol["force_errors"]
     res.elapsed_s = time.perf_counter() - t0
     return res
@@ -960,7 +961,7 @@ def payload(rec: Recording, result: IdentificationResult, *, max_iter: int = 30,
     combinations of the others) are left out and reported as NaN."""
     t0 = time.perf_counter()
     robot, n = result.robot, result.robot.ndof
-    _check(rec, robot)
+    _check(rec, result.structure)
     say = progress or (lambda s: None)
     pi = standard_of(result)
     drives = drives_of(result)
@@ -1021,10 +1022,16 @@ def payload(rec: Recording, result: IdentificationResult, *, max_iter: int = 30,
                          elapsed_s=time.perf_counter() - t0, notes=notes)
 
 
-def _check(rec: Recording, robot: Robot) -> None:
-    if list(rec.joint_names) != robot.joint_names:
+def _check(rec: Recording, model: Model) -> Tuple[Robot, bool]:
+    """The model's robot and offset, once the record is checked to be of its joints."""
+    if not isinstance(model, Model) or model.robot is None:
+        raise DataError(f"a robot's record is identified with a model of its robot (didim.Model(robot=...) or the "
+                        f"didim.Robot itself), got {type(model).__name__}")
+    robot = model.robot
+    if not rec.has_joint_columns or list(rec.joint_names) != robot.joint_names:
         raise DataError(f"the record's joints ({', '.join(rec.joint_names)}) are not the robot's "
                         f"({', '.join(robot.joint_names)}), in the same order")
+    return robot, model.offset
 
 
 __all__ = ["BaseParameters", "PayloadResult", "payload", "base_parameters", "idim_ls", "didim", "simulate_robot", "force_errors",
