@@ -608,8 +608,13 @@ START_LEAK = 0.01
 def settled_row(rec: Recording, q_sim: np.ndarray, dec: Decimation) -> int:
     """The first decimated row past the start of a record that began away from the simulated initial state (0 when it
     began where the simulation does): the samples before the simulation (motor position ``q_sim``) has joined the
-    record (:func:`didim.simulation.settling_samples`) weigh less than ``START_LEAK`` in it and every later row."""
-    k = settling_samples(rec.qm, q_sim, rec.dt, rec.position_resolution)
+    record (:func:`didim.simulation.settling_samples`) weigh less than ``START_LEAK`` in it and every later row. On a
+    robot's record (``q_sim`` (samples, joints)), the last joint to join sets it."""
+    if rec.has_joint_columns:
+        k = max(settling_samples(rec.qm[:, j], q_sim[:, j], rec.dt, rec.encoder_step[j] or None)
+                for j in range(rec.ndof))
+    else:
+        k = settling_samples(rec.qm, q_sim, rec.dt, rec.position_resolution)
     if k == 0:
         return 0
     ind = np.zeros(rec.n)
@@ -618,15 +623,17 @@ def settled_row(rec: Recording, q_sim: np.ndarray, dec: Decimation) -> int:
     return int(heavy[-1]) + 1 if heavy.size else 0
 
 
-def start_notes(skip: int, dec: Decimation, rec: Recording, left_out_of: str) -> List[str]:
-    """The note of a fit that left a record's start out (``skip`` decimated rows) of ``left_out_of``; none without."""
+def start_notes(skip: int, dec: Decimation, rec: Recording, left_out_of: str, option: bool = True) -> List[str]:
+    """The note of a fit that left a record's start out (``skip`` decimated rows) of ``left_out_of``; none without.
+    ``option``: the method has ``start='keep'``."""
     if not skip:
         return []
-    where = (f"at rest {1e3 * rec.qr_lead.size * rec.dt:.0f} ms before the record, through its lead-in"
-             if rec.qr_lead.size else "at rest on the reference")
+    where = (f"at rest {1e3 * len(rec.qr_lead) * rec.dt:.0f} ms before the record, through its lead-in"
+             if len(rec.qr_lead) else "at rest on the reference")
     return [f"the record begins away from the simulation's start ({where}): the first {skip} decimated samples "
             f"({1e3 * skip * dec.factor * rec.dt:.0f} ms: the samples before the simulation joins the record, and the "
-            f"decimation filter's reach) are left out of {left_out_of}; start='keep' uses them, as the paper does"]
+            f"decimation filter's reach) are left out of {left_out_of}"
+            + ("; start='keep' uses them, as the paper does" if option else "")]
 
 
 def start_row_of(rec: Recording, pb, chi: np.ndarray, dec: Decimation, start: str) -> int:

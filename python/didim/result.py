@@ -364,6 +364,7 @@ def _robot_dict(res: IdentificationResult) -> Dict[str, Any]:
 
     return jsonable({"kind": "robot", "method": res.method, "params": res.params, "std": res.std,
                      "std_pct": res.rel_std_pct, "offset": res.offset, "force_error": res.force_error,
+                     "start_s": res.start_s, "force_error_after_start": res.force_error_after_start,
                      "force_error_per_joint": res.force_error_per_joint, "converged": res.converged,
                      "iterations": res.iterations, "message": res.message, "elapsed_s": res.elapsed_s,
                      "notes": res.notes, "history": [h.output_error for h in res.history],
@@ -379,7 +380,9 @@ def _robot_summary(res: IdentificationResult) -> str:
     with their %σ, the notes."""
     lines = [f"{res.method} on a {res.robot.ndof}-joint robot ({res.robot.name}): "
              + ("converged" if res.converged else "NOT converged") + f" in {res.iterations} iteration(s), "
-             f"{res.elapsed_s:.1f} s; closed-loop force error {100 * res.force_error:.2f} %"]
+             f"{res.elapsed_s:.1f} s; closed-loop force error {100 * res.force_error:.2f} %"
+             + (f" ({100 * res.force_error_after_start:.2f} % after the first {1e3 * res.start_s:.0f} ms, where the "
+                "simulation joins a record that began in motion)" if res.start_s > 0 else "")]
     lines += [f"  {j}: force error {100 * e:.2f} %" for j, e in res.force_error_per_joint.items()]
     if res.law is not None:
         eps = ", ".join(f"{j} {e:.4g} {'m/s' if k == 'prismatic' else 'rad/s'}"
@@ -416,6 +419,8 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
     return robot_result(d["method"], dict(d["params"]), dict(d["std"]), model, base,
                          force_error=d.get("force_error", math.nan),
                          force_error_per_joint=dict(d.get("force_error_per_joint", {})),
+                         start_s=float(d.get("start_s") or 0.0),
+                         force_error_after_start=float(d.get("force_error_after_start") or math.nan),
                          converged=bool(d.get("converged", True)), iterations=int(d.get("iterations", 0)),
                          message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
                          notes=list(d.get("notes", [])), history=iterations_of(d.get("history", [])),

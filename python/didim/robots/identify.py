@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import _checks, _core, friction_law
 from ..didim_loop import didim_loop, residual_settled
+from ..identification import start_notes
 from ..stats import diebold_mariano
 from .._errors import DataError, IdentifiabilityError, SimulationError
 from ..result import IdentificationResult, iterations_of, robot_result
@@ -243,9 +244,11 @@ def _measured_states(rec: Recording, dec) -> Tuple[np.ndarray, np.ndarray, np.nd
 
 
 def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray,
-          vmax: np.ndarray) -> List[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+          vmax: np.ndarray, start_row: int = 0) -> List[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Each joint's force and regressor rows decimated, the rows where it moves slowly (below :data:`SLOW_SHARE` of
-    its top reference speed ``vmax``) left out: (force, regressor, the decimated rows kept) per joint."""
+    its top reference speed ``vmax``) and the ``start_row`` first ones (a simulation joining a record that began
+    elsewhere: :func:`didim.identification.settled_row`) left out: (force, regressor, the decimated rows kept) per
+    joint."""
     out = []
     # only the columns that act on a joint (a chain's joint feels the bodies beyond it and its own drive: half of a
     # 6-joint arm's columns are zero on its rows); zero columns decimate to zero
@@ -257,6 +260,7 @@ def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray,
         else:
             yd, wa = dec(np.ascontiguousarray(y[:, j])), None
         keep = np.abs(dec(np.ascontiguousarray(v[:, j]))) > SLOW_SHARE * vmax[j]
+        keep[:start_row] = False
         wd = np.zeros((int(keep.sum()), w.shape[2]))
         if wa is not None:
             wd[:, act] = wa[keep]
@@ -271,13 +275,13 @@ class _InverseModel:
     that the laws a search compares, and DIDIM's step of ε, cost a fraction of a fit each."""
 
     def __init__(self, rec: Recording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, dec,
-                 y: Optional[np.ndarray] = None):
+                 y: Optional[np.ndarray] = None, start_row: int = 0):
         self.robot, self.base, self.offset, self.dec, self.v = robot, base, offset, dec, v
         n, nb = robot.ndof, len(base.names)
         self.n, self.nb = n, nb
         w = _model_regressor(robot, base, q, v, a, offset, ("algebraic", (0.0,) * n))
         w[:, np.arange(n), nb + n + np.arange(n)] = 0.0  # each joint's Coulomb column is the law's (see rows)
-        got = _rows(dec, rec.applied_force() if y is None else y, w, v, top_speeds(rec))
+        got = _rows(dec, rec.applied_force() if y is None else y, w, v, top_speeds(rec), start_row)
         self.parts = [(yd, wd) for yd, wd, _ in got]
         self.keep = [keep for _, _, keep in got]
 
@@ -728,7 +732,24 @@ class _RobotPlant:
         self.inverses: List[Tuple[np.ndarray, _InverseModel]] = []
         self.last: Optional[Tuple[np.ndarray, Law, Any]] = None  # the last simulation (θ, law, its outputs)
         self.free = list(range(len(base.names) + (3 if offset else 2) * self.n))
+        self.start_row = 0  # the decimated rows before the simulation joins the record, left out (set_start)
+        self.skip = 0  # the same, in samples, left out of the output error
         self.norm = float(np.linalg.norm(rec.force))
+
+    def set_start(self, theta: np.ndarray) -> None:
+        """Leaves out of the fits and the output error the samples the simulation of ``theta`` takes to join a record
+        that began elsewhere than at rest on its first reference (a log cut in a cruise: how long the arm cruised is
+        not in the log; :func:`didim.identification.settled_row`, the last joint to join setting it), as one axis's
+        DIDIM does."""
+        from ..identification import settled_row
+
+        try:
+            q = self.simulate(theta)["q"]
+        except (SimulationError, DataError):
+            return
+        self.start_row = settled_row(self.rec, q, self.dec)
+        self.skip = min(self.start_row * self.dec.factor, self.rec.n - 2)
+        self.norm = float(np.linalg.norm(self.rec.force[self.skip:]))
 
     def model(self, theta: np.ndarray):
         """The robot with θ's standard parameters and its drives."""
@@ -744,7 +765,7 @@ class _RobotPlant:
         return sim
 
     def output_error(self, sim) -> float:
-        return float(np.linalg.norm(self.rec.force - sim["force"]) / self.norm)
+        return float(np.linalg.norm((self.rec.force - sim["force"])[self.skip:]) / self.norm)
 
     def inverse(self, theta: np.ndarray, sim) -> _InverseModel:
         """The inverse model on the simulated states of θ (the last few kept: the law's search refits on the best
@@ -752,7 +773,8 @@ class _RobotPlant:
         for th, im in self.inverses:
             if np.array_equal(th, theta):
                 return im
-        im = _InverseModel(self.rec, self.robot, self.base, sim["q"], sim["qd"], sim["qdd"], self.offset, self.dec)
+        im = _InverseModel(self.rec, self.robot, self.base, sim["q"], sim["qd"], sim["qdd"], self.offset, self.dec,
+                           start_row=self.start_row)
         self.inverses = [(theta.copy(), im)] + self.inverses[:3]
         return im
 
@@ -785,8 +807,16 @@ class _RobotPlant:
         if self.law_chosen:
             return "accept"
         self.law_chosen = True
-        # each shape with the parameters one least squares gives with it on the best iterate's simulated states
         best = loop.best[1]
+        # where the simulation joins a record that began in motion, judged again on the settled estimate: the start's
+        # (the URDF's values, no friction) can be too far off everywhere for its start to stand out
+        start = self.start_row
+        self.set_start(best)
+        if self.start_row != start:
+            self.inverses = []
+            self.say(f"the simulation joins the record after {1e3 * self.skip * self.rec.dt:.0f} ms: the samples "
+                     "before are left out of the fits")
+        # each shape with the parameters one least squares gives with it on the best iterate's simulated states
         inverse = next((im for th, im in self.inverses if np.array_equal(th, best)), None)
         if inverse is None:
             inverse = self.inverse(best, self.simulate(best))
@@ -795,7 +825,7 @@ class _RobotPlant:
             return self.model(inverse.fit(lw)[0])
 
         new_law = closed_loop_law(self.rec, refit, self.law, self.per_shape, self.say)
-        if new_law != self.law:
+        if new_law != self.law or self.start_row != start:
             self.law = new_law
             return "restart"
         return "continue"
@@ -814,9 +844,11 @@ def _start_error(plant: _RobotPlant, theta: np.ndarray) -> float:
 
 
 def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, tol, say, plant=None):
-    """DIDIM's iterations on the robot (:class:`_RobotPlant`) from ``theta``."""
-    plant = plant or _RobotPlant(rec, robot, base, dec, offset, law, per_shape, tol, say)
-    return didim_loop(plant, theta, max_iter=max_iter, progress=say)
+    """DIDIM's iterations on the robot (:class:`_RobotPlant`) from ``theta``: the loop's outcome and the plant."""
+    if plant is None:
+        plant = _RobotPlant(rec, robot, base, dec, offset, law, per_shape, tol, say)
+        plant.set_start(theta)
+    return didim_loop(plant, theta, max_iter=max_iter, progress=say), plant
 
 
 def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
@@ -849,31 +881,36 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     # a start whose closed loop is worse than predicting no force (or cannot be simulated) is no start: DIDIM begins
     # at IDIM-LS's estimate instead, without iterating from it first
     first = _RobotPlant(rec, robot, base, dec, offset, law, per_shape, tol, say)
+    first.set_start(theta0)
     e0 = _start_error(first, theta0)
     if e0 > ABSURD_ERROR:
         why = (f"their closed-loop force error is {100 * e0:.0f} %" if math.isfinite(e0)
                else "their closed loop cannot be simulated")
         say(f"DIDIM starts from IDIM-LS's estimate: not from the URDF's values ({why})")
         notes.append(f"DIDIM started from IDIM-LS's estimate, not from the URDF's values ({why})")
-        run = _didim_run(rec, robot, base, dec, offset, measured.fit(law)[0], law, per_shape, max_iter, tol, say)
+        run, plant = _didim_run(rec, robot, base, dec, offset, measured.fit(law)[0], law, per_shape, max_iter, tol,
+                                say)
     else:
-        run = _didim_run(rec, robot, base, dec, offset, theta0, law, per_shape, max_iter, tol, say, plant=first)
+        run, plant = _didim_run(rec, robot, base, dec, offset, theta0, law, per_shape, max_iter, tol, say, plant=first)
         failed = run.best[2] is None or (not run.converged and not run.message.startswith("no convergence"))
         if failed:
             say(f"DIDIM from the URDF's values failed ({run.message}): again from IDIM-LS's estimate")
-            again = _didim_run(rec, robot, base, dec, offset, measured.fit(law)[0], law, per_shape, max_iter, tol,
-                               say)
+            again, plant_again = _didim_run(rec, robot, base, dec, offset, measured.fit(law)[0], law, per_shape,
+                                            max_iter, tol, say)
             if again.best[2] is not None and (run.best[2] is None or again.best[0] < run.best[0]):
                 notes.append(f"DIDIM from the URDF's values failed ({run.message}); it started from IDIM-LS's "
                              "estimate")
-                run = again
+                run, plant = again, plant_again
     if run.best[2] is None:
         raise SimulationError(f"DIDIM could not simulate the robot's closed loop: {run.message}")
     err, theta, sol, _ = run.best
     res = _result("didim", rec, model.with_law(sol["law"]), base, theta, sol["covariance"], converged=run.converged,
                   iterations=len(run.history), message="" if run.converged else run.message,
-                  history=iterations_of(run.errors), notes=notes + run.notes)
+                  history=iterations_of(run.errors), notes=notes + start_notes(plant.start_row, dec, rec, "the fits", option=False)
+                  + run.notes)
     res.force_error, res.force_error_per_joint = sol["force_errors"]
+    if plant.skip:
+        res.start_s, res.force_error_after_start = plant.skip * rec.dt, err
     res.elapsed_s = time.perf_counter() - t0
     return res
 
