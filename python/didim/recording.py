@@ -13,6 +13,7 @@ from typing import List, Optional, Tuple, Union
 
 import numpy as np
 
+from . import _checks
 from ._errors import DataError
 from .controllers import PD, Controller, EmpsCascade, TransferFunction
 from .units import SI, Units, parse as parse_units
@@ -61,16 +62,9 @@ def _signal(name: str, x, n: Optional[int] = None) -> np.ndarray:
 def _joint_signals(name: str, x, joints: Tuple[str, ...], n: Optional[int] = None) -> np.ndarray:
     """A robot's signal: (samples, joints) real numbers, finite, or a DataError naming the joint and the sample."""
     ndof = len(joints)
-    if x is None:
-        raise DataError(f"{name} is missing (None): give one value per sample and joint")
-    if np.iscomplexobj(x) or (isinstance(x, np.ndarray) and x.dtype.kind not in "biuf"):
-        raise DataError(f"{name} must be an array of real numbers, got {getattr(x, 'dtype', type(x).__name__)}")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            a = np.asarray(x, dtype=float)
-    except (TypeError, ValueError, OverflowError, Warning) as e:
-        raise DataError(f"{name} must be an array of real numbers: {e}") from None
+    if isinstance(x, np.ndarray) and x.dtype.kind not in "biufc":
+        raise DataError(f"{name} must be an array of real numbers, got an array of {x.dtype} (text or objects)")
+    a = _checks.real_array(name, x, ndims=None)
     if a.ndim != 2 or a.shape[1] != ndof:
         raise DataError(f"{name} must be (samples, {ndof}) for joints {', '.join(joints)}, got shape {a.shape}")
     if n is not None and a.shape[0] != n:
