@@ -115,4 +115,15 @@ def test_a_robots_record_refuses_what_does_not_fit_its_joints(emps):
         dataclasses.replace(rec, lead_in=lead)
     assert dataclasses.replace(rec, lead_in=np.array(rec.qr_lead)).qr_lead.shape == rec.qr_lead.shape
     with pytest.raises(didim.DataError, match="take it on one joint, record.joint"):
-        rec.diagnose()
+        rec.implied_command()
+
+
+def test_a_robots_record_is_diagnosed_joint_by_joint(emps):
+    """The one-axis record checks serve each joint, naming it: a force logged in volts on the second joint is said
+    to be so on that joint only (the EMPS's gtau = 35.15 N/V)."""
+    rec = _columns(emps)
+    assert rec.diagnose() == []
+    volts = np.array(rec.force)
+    volts[:, 1] /= emps.controller.gtau
+    found = dataclasses.replace(rec, force=volts).diagnose()
+    assert len(found) == 1 and found[0].startswith("joint j2: the force looks like volts")

@@ -155,8 +155,7 @@ def identify(
     from .check import enforce
 
     chk = enforce(recording, controller_check)
-    for finding in recording.diagnose():
-        warnings.warn(f"{recording.name or 'record'}: {finding}", DidimWarning, stacklevel=2)
+    _warn_findings(recording)
     if method == "idim-ls":
         return _with_check(_with_force_error(recording, idim_ls(recording, structure, **options)), chk)
     if method == "didim":
@@ -268,6 +267,12 @@ POOR_FORCE_ERROR = 0.5
 __all__ = ["identify", "METHODS"]
 
 
+def _warn_findings(recording: Recording) -> None:
+    """Each finding of :meth:`Recording.diagnose` (one axis's or each joint's) as a :class:`DidimWarning`."""
+    for finding in recording.diagnose():
+        warnings.warn(f"{recording.name or 'record'}: {finding}", DidimWarning, stacklevel=3)
+
+
 def _has_joint_columns(recording) -> bool:
     """A robot's record: a :class:`Recording` whose signals are (samples, joints)."""
     return isinstance(recording, Recording) and recording.has_joint_columns
@@ -308,6 +313,7 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
         raise DataError(f"the record's joints ({', '.join(recording.joint_names)}) are not the robot's "
                         f"({', '.join(robot.joint_names)}), in the same order")
     chk = enforce(recording, controller_check)
+    _warn_findings(recording)
     if method == "didim":
         res = robot_didim(recording, model, progress=progress, **options)
     else:

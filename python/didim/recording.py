@@ -619,8 +619,10 @@ class Recording:
         """Things in the record that look wrong but need not be, each as a sentence with the evidence and what to
         check: a command that saturates for long stretches (the loop is open there), and a force whose scale does not
         match what the controller gains and the tracking error imply (volts instead of newtons, gtau applied twice,
-        wrong gains). :func:`didim.identify` issues them as :class:`didim.DidimWarning`."""
-        self._one_axis("diagnose")
+        wrong gains). :func:`didim.identify` issues them as :class:`didim.DidimWarning`. A robot's: each joint's,
+        naming it."""
+        if self.has_joint_columns:
+            return [f"joint {j}: {m}" for j in self.joint_names for m in self.joint(j).diagnose()]
         out: List[str] = []
         n = self.n
         force = self.force
