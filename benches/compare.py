@@ -40,7 +40,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 import didim  # noqa: E402
 from didim import _core  # noqa: E402
 from didim import scenarios as sc  # noqa: E402
-from didim._io import write_text  # noqa: E402
+from didim.formats._io import write_text  # noqa: E402
 from didim.signal import Decimation  # noqa: E402
 
 EMPS_DIR = pathlib.Path(os.environ.get("DIDIM_EMPS_DIR", ROOT.parent / "shared" / "data" / "emps"))

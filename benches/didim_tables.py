@@ -136,7 +136,7 @@ def main(argv):
     for k in m2[a]:
         doc.append(f"| {k} | {m2[b][k] - m2[a][k]:.2f} | {m2[e][k] - m2[c][k]:.2f} |")
     path = os.path.join(HERE, "..", "docs", "didim_tables.md")
-    from didim._io import write_text
+    from didim.formats._io import write_text
 
     write_text(path, "\n".join(doc) + "\n")
     print(f"wrote {path}", file=sys.stderr)

@@ -63,7 +63,7 @@ def hidden(effect: str, level: float) -> dict:
         return dict(truth=dict(BASE), model="rigid", kw=dict(delay=int(level)), param={"delay_samples": level})
     if effect == "flexibility":
         lam, m = 0.63, BASE["M"]
-        p = didim.identification.flexible_from_mode(m, lam, level)
+        p = didim.methods.identification.flexible_from_mode(m, lam, level)
         return dict(truth=dict(M1=p["M1"], Fv1=BASE["Fv"], Fc1=BASE["Fc"], M2=p["M2"], Fv2=0.0, Fc2=0.0, K12=p["K12"]),
                     model="flexible", kw={}, param={"f_n_flex": level})
     raise ValueError(effect)
@@ -200,7 +200,7 @@ def main(argv=None) -> int:
                   file=sys.stderr, flush=True)
     s = summarize(rows)
     if not a.small:
-        from didim._io import write_text
+        from didim.formats._io import write_text
 
         write_text(a.out + ".md", markdown(s))
         write_text(a.out + ".json", json.dumps(dict(summary=s, rows=rows), indent=1, default=float))

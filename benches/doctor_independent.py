@@ -184,7 +184,7 @@ def main(argv=None) -> int:
                      f"{100 * r['valid_before']:.2f} % → {100 * r['valid_after']:.2f} % |")
     here = os.path.dirname(os.path.abspath(__file__))
     sys.path.insert(0, os.path.join(here, "..", "python"))
-    from didim._io import write_text
+    from didim.formats._io import write_text
 
     out = args.out or (os.path.join(here, "..", "docs", "doctor_independent.md") if seeds == (1, 2) else None)
     if out:

@@ -67,7 +67,7 @@ def main() -> None:
     for n, r in res.items():
         got = ", ".join(r["named"]) + (" + unnamed" if r.get("unnamed") else "") if r["ok"] else f"**crash**: {r['error'][:80]}"
         lines.append(f"| {n} | {r['model']} | {', '.join(r['truth']) or '-'} | {got or '-'} | {r['time_s']:.1f} |")
-    from didim._io import write_text
+    from didim.formats._io import write_text
 
     write_text(os.path.join(HERE, "..", "docs", "doctor_truthbench.md"), "\n".join(lines) + "\n")
     write_text(os.path.join(HERE, "..", "docs", "doctor_truthbench.json"), json.dumps(res, indent=1, default=str) + "\n")

@@ -94,7 +94,7 @@ def main() -> None:
               + (", ".join(f"{r.effect} ({100 * r.fit.get('valid_before', float('nan')):.2f} % -> "
                            f"{100 * r.fit.get('valid_after', float('nan')):.2f} % decimated)"
                            for r in d.rejected if r.fit) or "nothing") + "."]
-    from didim._io import write_text
+    from didim.formats._io import write_text
 
     out = os.path.join(HERE, "..", "docs", "emps")
     write_text(os.path.join(out, "ladder.md"), "\n".join(lines) + "\n")

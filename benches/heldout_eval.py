@@ -22,7 +22,7 @@ import numpy as np
 
 import didim
 from didim.robots import payload
-from didim.robots.identify import force_errors, simulate_robot
+from didim.methods.robot import force_errors, simulate_robot
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 SHARED = pathlib.Path(os.environ.get("DIDIM_ROBOTS_DIR", ROOT.parent / "shared" / "data" / "robots"))

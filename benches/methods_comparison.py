@@ -56,7 +56,7 @@ def main() -> int:
         gn = res["OE-GN"]
         notes.append("- OE-GN %σ: " + ", ".join(f"{k} {v:.2g}" for k, v in gn.rel_std_pct.items()))
         lines += notes + [""]
-    from didim._io import write_text
+    from didim.formats._io import write_text
 
     path = os.path.join(os.path.dirname(__file__), "..", "docs", "methods_comparison.md")
     write_text(path, "\n".join(lines) + "\n")

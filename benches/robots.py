@@ -27,7 +27,7 @@ import pinocchio as pin  # noqa: E402
 
 import didim  # noqa: E402
 from didim import _core  # noqa: E402
-from didim.robots.identify import force_errors, simulate_robot  # noqa: E402
+from didim.methods.robot import force_errors, simulate_robot  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 DATA = pathlib.Path(os.environ.get("DIDIM_ROBOTS_DIR", ROOT.parent / "shared" / "data" / "robots"))

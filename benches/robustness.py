@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT / "python"))
 
 import numpy as np  # noqa: E402
 
-from didim._io import save_figure, write_text  # noqa: E402
+from didim.formats._io import save_figure, write_text  # noqa: E402
 from didim.sweep import SCENARIOS, grid_points, step_truth, sweep  # noqa: E402
 
 EMPS = pathlib.Path(os.environ.get("DIDIM_EMPS_DIR", ROOT.parent / "shared" / "data" / "emps")) / "DATA_EMPS.mat"

@@ -75,9 +75,27 @@ def test_the_model_module_imports_only_the_core_the_checks_and_the_errors():
     core, the checks and the errors); nothing of the methods."""
     g = _graph(_modules())
     assert set(g["didim.model"]) <= {"didim._checks", "didim._errors", "didim.robots.chain"}, g["didim.model"]
-    assert set(g["didim.robots.chain"]) <= {"didim._checks", "didim._errors"}, g["didim.robots.chain"]
+    assert set(g["didim.robots.chain"]) <= {"didim._checks", "didim._errors", "didim.formats._io"}, \
+        g["didim.robots.chain"]
 
 
 def test_the_record_imports_no_file_format():
     g = _graph(_modules())
-    assert not set(g["didim.recording"]) & {"didim.loaders", "didim._io"}, g["didim.recording"]
+    assert not set(g["didim.recording"]) & {"didim.formats.loaders", "didim.formats._io"}, g["didim.recording"]
+
+
+def test_the_layers_plant_methods_doctor_command_line():
+    """The way the README's layout section shows: the plant's vocabulary (model, record, chain, controllers, units)
+    imports no method; the methods (``didim.methods``) import neither the doctor nor the entry points; the doctor
+    does not import the command line."""
+    g = _graph(_modules())
+    upper = lambda m: m.startswith(("didim.methods", "didim.doctor")) or m in ("didim.api", "didim.cli")  # noqa: E731
+    for m in ("didim.model", "didim.recording", "didim.robots.chain", "didim.controllers", "didim.units"):
+        assert not [x for x in g[m] if upper(x)], (m, g[m])
+    methods = [m for m in g if m.startswith("didim.methods")]
+    assert {"didim.methods.identification", "didim.methods.oe", "didim.methods.didim_loop",
+            "didim.methods.friction_law", "didim.methods.robot"} <= set(methods)
+    for m in methods:
+        assert not [x for x in g[m] if x.startswith("didim.doctor") or x in ("didim.api", "didim.cli")], (m, g[m])
+    for m in [m for m in g if m.startswith("didim.doctor")]:
+        assert "didim.cli" not in g[m], m

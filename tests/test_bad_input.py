@@ -61,12 +61,12 @@ def test_unreadable_file_says_permission(tmp_path, emps_path):
 
 
 def test_unreadable_file_says_permission_even_as_root(tmp_path, emps_path, monkeypatch):
-    import didim.loaders  # the MAT parser's module
+    import didim.formats.loaders  # the MAT parser's module
 
     def denied(*a, **k):
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(didim.loaders, "open", denied, raising=False)  # the module's `open` shadows the builtin
+    monkeypatch.setattr(didim.formats.loaders, "open", denied, raising=False)  # the module's `open` shadows the builtin
     with pytest.raises(didim.DataError, match=r"DATA_EMPS\.mat: cannot be read \(Permission denied\): check its permissions"):
         didim.load_mat(emps_path)
 
@@ -354,7 +354,7 @@ def test_rank_deficient_regressor_names_the_dependent_columns(emps):
     with pytest.raises(didim.IdentifiabilityError, match=r"rank 6 < 7: column K12 is zero \(K12 has no effect on this "
                                                           r"record\)\. K12 cannot be identified separately"):
         didim.identify(rigid_load, "flexible", "idim-ls")
-    from didim.identification import _solve
+    from didim.methods.identification import _solve
 
     rng = np.random.default_rng(0)
     w = rng.normal(size=(50, 3))

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import didim
-from didim.robots.identify import _full_regressor, base_parameters, random_states
+from didim.methods.robot import _full_regressor, base_parameters, random_states
 
 
 def _xarm7():

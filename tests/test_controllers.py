@@ -80,7 +80,7 @@ def test_cascade_helper_with_two_denominators_and_a_notch_matches_scipy():
 def test_sensitivities_through_a_pi_controller_match_finite_differences():
     """The controller's states enter the sensitivity equations: exact ∂τ/∂χ against central differences (RK4: a fixed
     step sequence, so the differences see the same scheme the tangent differentiates)."""
-    from didim.oe import check_sensitivities
+    from didim.methods.oe import check_sensitivities
 
     c = TransferFunction.cascade(kp=80.0, kv=2500.0, ti=0.04, kff=1.0, f_lp=250.0, dt=1e-3)
     rec = _rec(c, _moves(1500))

@@ -8,8 +8,8 @@ import pytest
 
 import didim
 from didim import scenarios as sc
-from didim.identification import didim_rigid
-from didim.oe import oe_lm, pseudo_regular_initial
+from didim.methods.identification import didim_rigid
+from didim.methods.oe import oe_lm, pseudo_regular_initial
 
 
 @pytest.fixture(scope="module")

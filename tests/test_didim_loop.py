@@ -1,4 +1,4 @@
-"""DIDIM's one loop (didim.didim_loop), on a plant small enough to follow by hand: the safeguards act where they
+"""DIDIM's one loop (didim.methods.didim_loop), on a plant small enough to follow by hand: the safeguards act where they
 should and never where an iteration goes well."""
 
 import math
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from didim._errors import SimulationError
-from didim.didim_loop import MAX_BACKTRACKS, didim_loop
+from didim.methods.didim_loop import MAX_BACKTRACKS, didim_loop
 
 
 class Toy:

@@ -8,7 +8,7 @@ import scipy.signal as ss
 import didim
 from didim.simulation import default_coulomb_eps
 from didim import scenarios as sc
-from didim.identification import didim_rigid, nelder_mead_simplex, prefetch
+from didim.methods.identification import didim_rigid, nelder_mead_simplex, prefetch
 from didim.signal import Decimation
 
 TABLE3 = np.array([68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5])
@@ -164,7 +164,7 @@ def test_identification_results_do_not_depend_on_the_integrator(emps):
 
 
 def test_exact_sensitivities_agree_with_central_differences_from_one_batch(emps_plain):
-    from didim.oe import check_sensitivities
+    from didim.methods.oe import check_sensitivities
 
     err = check_sensitivities(emps_plain, TABLE3, "flexible")
     assert max(err.values()) < 1e-3, err
@@ -173,7 +173,7 @@ def test_exact_sensitivities_agree_with_central_differences_from_one_batch(emps_
 
 
 def test_step_2_grid_start_finds_the_mode_from_a_start_where_nelder_mead_alone_fails():
-    from didim.identification import fit_flexible_mode
+    from didim.methods.identification import fit_flexible_mode
 
     rec = sc.make_recording(dict(sc.TABLE3_TRUTH, Fv1=200.5, Fc1=19.5, Fv2=0.0, Fc2=0.0), "flexible", force_noise=1.0,
                             seed=0)

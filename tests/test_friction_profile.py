@@ -12,8 +12,8 @@ import pytest
 import didim
 from didim import scenarios as sc
 from didim.doctor.effects import spline_profile
-from didim.identification import didim_iterate
-from didim.oe import check_sensitivities
+from didim.methods.identification import didim_iterate
+from didim.methods.oe import check_sensitivities
 
 from conftest import bench_module
 

@@ -13,7 +13,7 @@ import pytest
 
 import didim
 from didim.robots import payload
-from didim.robots.identify import force_errors, simulate_robot
+from didim.methods.robot import force_errors, simulate_robot
 
 from conftest import bench_module
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import didim
-from didim.identification import idim_cross_test, idim_ls
+from didim.methods.identification import idim_cross_test, idim_ls
 
 
 def test_emps_golden_idim_ls_reproduces_the_published_values(emps):

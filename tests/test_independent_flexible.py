@@ -54,7 +54,7 @@ def test_three_step_didim_sees_a_10_kg_payload_on_an_independent_plant(plant):
 def test_a_mass_split_sliding_in_step_3_is_named_in_the_message():
     from types import SimpleNamespace
 
-    from didim.identification import _mass_split_drift
+    from didim.methods.identification import _mass_split_drift
 
     def run(m2s):
         hist = [SimpleNamespace(params={"M2": m, "K12": 1e6 * m / 30.0}) for m in m2s]

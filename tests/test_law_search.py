@@ -1,4 +1,4 @@
-"""The friction law's search in closed loop (:func:`didim.friction_law.closed_loop_law`), every plant's: on error
+"""The friction law's search in closed loop (:func:`didim.methods.friction_law.closed_loop_law`), every plant's: on error
 surfaces whose minimum is known (each joint's error a parabola in log ε about its own best speed, each shape offset),
 it finds the shape, each joint's speed to a fraction of its grid's step, and stops where the error has turned."""
 
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from didim.friction_law import QUARTER, REACH, closed_loop_law
+from didim.methods.friction_law import QUARTER, REACH, closed_loop_law
 
 #: each shape's error floor; each joint's best ε (a joint's error a parabola in log ε, a curvature per joint)
 FLOOR = {"algebraic": 0.010, "tanh": 0.012, "exp": 0.015}

@@ -17,7 +17,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import didim  # noqa: E402
-from didim import _io  # noqa: E402
+from didim.formats import _io  # noqa: E402
 
 
 def sha256(path) -> str:

@@ -6,7 +6,7 @@ import pytest
 
 import didim
 from didim import scenarios as sc
-from didim.oe import check_sensitivities, oe_lm
+from didim.methods.oe import check_sensitivities, oe_lm
 
 ASYM = [didim.Term("dFv", "abs_viscous")]
 TRUTH = dict(M=95.0, Fv=200.0, Fc=20.0, dFv=-30.0)

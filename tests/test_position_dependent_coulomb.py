@@ -10,8 +10,8 @@ import pytest
 import didim
 from conftest import resolved
 from didim import scenarios as sc
-from didim.identification import didim_iterate
-from didim.oe import check_sensitivities, oe_lm
+from didim.methods.identification import didim_iterate
+from didim.methods.oe import check_sensitivities, oe_lm
 
 P = 0.05
 TERMS = [didim.Term("Aq_sin", "coulomb_ripple_sin", P), didim.Term("Aq_cos", "coulomb_ripple_cos", P)]

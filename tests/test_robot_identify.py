@@ -12,7 +12,7 @@ import pytest
 
 import didim
 from didim.robots import base_parameters, payload
-from didim.robots.identify import force_errors, simulate_robot
+from didim.methods.robot import force_errors, simulate_robot
 
 ROBOTS = ("pendulum", "ur5")
 
@@ -113,7 +113,7 @@ def test_base_parameters_reproduce_the_torques_and_say_what_they_combine(data):
     ur5, _ = load("ur5", "train")
     assert len(base_parameters(ur5).names) == 40  # 52 with the friction, as the README counts
     # W·π = W[:, independent]·(K·π) at other random states, for any π
-    from didim.robots.identify import _full_regressor
+    from didim.methods.robot import _full_regressor
 
     rng = np.random.default_rng(3)
     q, v, a = rng.uniform(-2, 2, (50, 2)), rng.normal(size=(50, 2)), rng.normal(size=(50, 2))
@@ -190,7 +190,7 @@ def test_a_record_cut_in_motion_runs_through_its_lead_in(data):
     the full record's loop again. ``"auto"`` gives none here: most joints are not in an acceleration from rest."""
     import dataclasses
 
-    from didim.robots.identify import _simulate
+    from didim.methods.robot import _simulate
 
     load, truth = data
     t = truth["ur5"]

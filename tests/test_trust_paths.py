@@ -11,7 +11,7 @@ import sys
 import pytest
 
 import didim
-from didim import _io
+from didim.formats import _io
 
 
 def run_cli(*args, timeout=120):

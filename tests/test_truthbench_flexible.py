@@ -156,7 +156,7 @@ def test_cli_variant_option(truthbench):
 def test_the_coarse_grid_ranks_step_2_starts_as_the_fine_one(truthbench, name):
     """Step 2's grid is simulated at GRID_SIM_TOL to rank its points only: its best points are those the default
     tolerance ranks best, and its criterion is within 10 % of the fine one."""
-    from didim import identification as I
+    from didim.methods import identification as I
     from didim.signal import Decimation
 
     rec = truthbench[0](f"flexible/{name}")
@@ -176,7 +176,7 @@ def test_the_coarse_grid_ranks_step_2_starts_as_the_fine_one(truthbench, name):
 def test_step_2_at_its_coarser_tolerance_finds_the_same_mode(truthbench, name, monkeypatch):
     """Step 2's Nelder-Mead simulates at MODE_SIM_TOL; step 3 keeps its f_n_flex, so that must be the mode the default
     tolerance finds, to 0.1 % (0.2 % in K12), on the records played at rest, where the simulator refines most."""
-    from didim import identification as I
+    from didim.methods import identification as I
 
     rec = truthbench[0](f"flexible/{name}")
     r1 = I.didim_rigid(rec)

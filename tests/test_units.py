@@ -16,7 +16,7 @@ import pytest
 
 import didim
 from didim.controllers import in_units
-from didim.friction_law import QUARTER
+from didim.methods.friction_law import QUARTER
 from didim.units import parse
 
 from conftest import TRUTHBENCH_DIR

@@ -7,7 +7,7 @@ simulation, parallel decimation and QR least squares. SI units on the load side 
 from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from .controllers import PD, EmpsCascade, TransferFunction, load_controller, load_joint_controllers
 from .recording import Recording
-from .loaders import from_dataframe, load_mat, load_record
+from .formats.loaders import from_dataframe, load_mat, load_record
 from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, INTEGRATORS, BatchResult, SimResult, coulomb_sign, param_names,
                          simulate, simulate_batch)
 from .signal import Decimation

@@ -12,9 +12,9 @@ import numpy as np
 from . import _checks
 from ._errors import DataError, DidimWarning
 from .model import STRUCTURE_FIELDS, Model, as_model
-from .identification import (Progress, a_priori_mass, didim_flexible, didim_iterate, didim_rigid, idim_ls,
+from .methods.identification import (Progress, a_priori_mass, didim_flexible, didim_iterate, didim_rigid, idim_ls,
                              method_supports, supports)
-from .oe import CRITERIA, oe_lm, oe_nm, pseudo_regular_initial
+from .methods.oe import CRITERIA, oe_lm, oe_nm, pseudo_regular_initial
 from .recording import Recording
 from .result import IdentificationResult
 from .simulation import MODELS
@@ -93,7 +93,7 @@ def identify(
     The output-error methods start, unless ``initial`` is given, from (apM, 0, 0) for the rigid model; for the flexible
     one oe-nm starts from the pseudo-regular values of eq. (33) built on a rigid DIDIM (as the paper) and oe-lm from
     the three-step DIDIM estimate (eq. (33) when DIDIM does not converge); their simulations are counted.
-    ``apM`` is the a priori total mass (kg); by default :func:`didim.identification.a_priori_mass` estimates it from
+    ``apM`` is the a priori total mass (kg); by default :func:`didim.methods.identification.a_priori_mass` estimates it from
     the data (a rigid fit on low-passed signals). Other keyword
     options go to the method's function (e.g. ``cutoff_hz``, ``tol``, ``max_iter``, ``substeps``).
 

@@ -19,8 +19,8 @@ def _progress(quiet: bool):
 
 def _load(args, path: str):
     """The record at ``path`` with the command's --controller, --columns and --force-scale."""
-    from ._io import beside
-    from .loaders import load_record, parse_columns
+    from .formats._io import beside
+    from .formats.loaders import load_record, parse_columns
 
     controller = getattr(args, "controller", None) or None  # a path: load_record reads its "units" too
     if controller is None and not path.lower().endswith(".mat") and beside(path) and not getattr(args, "quiet", False):
@@ -71,7 +71,7 @@ def _record_options(p) -> None:
 def _robot_record(args, path: str, robot):
     """A robot's record at ``path`` with the command's --controller (default: NAME_controller.json beside it)."""
     from ._errors import DataError
-    from .loaders import load_record
+    from .formats.loaders import load_record
 
     for flag, value, default in (("--columns", getattr(args, "columns", None), None),
                                  ("--force-scale", getattr(args, "force_scale", 1.0), 1.0)):
@@ -85,7 +85,7 @@ def _robot_record(args, path: str, robot):
 
 def cmd_identify_robot(args) -> int:
     from ._errors import DataError
-    from ._io import save_figure, write_text
+    from .formats._io import save_figure, write_text
     from .api import identify
     from .robots import Robot
 
@@ -117,7 +117,7 @@ def cmd_identify_robot(args) -> int:
         print(f"wrote {args.json}")
     if args.plot:
         from .plots import plot_robot_forces
-        from .robots.identify import simulate_robot
+        from .methods.robot import simulate_robot
 
         save_figure(plot_robot_forces(rec, simulate_robot(rec, res)["force"], title=f"{res.method}: {rec.name}"),
                     args.plot, dpi=110)
@@ -129,7 +129,7 @@ def cmd_identify_robot(args) -> int:
 
 
 def cmd_identify(args) -> int:
-    from ._io import save_figure, write_text
+    from .formats._io import save_figure, write_text
     from .api import identify
     from .plots import plot_fit
 
@@ -186,7 +186,7 @@ def cmd_simulate(args) -> int:
     force (the paper's cross-test, Fig. 6)."""
     import json
 
-    from ._io import save_figure, write_text
+    from .formats._io import save_figure, write_text
     from .result import load_result
     from .simulation import simulate
 
@@ -237,9 +237,9 @@ def _simulate_robot(args, result) -> int:
     joint."""
     import json
 
-    from ._io import save_figure, write_text
+    from .formats._io import save_figure, write_text
     from .check import enforce
-    from .robots.identify import force_errors, simulate_robot
+    from .methods.robot import force_errors, simulate_robot
 
     rec = _robot_record(args, args.file, result.robot)
     chk = enforce(rec, args.controller_check)
@@ -273,7 +273,7 @@ def cmd_payload(args) -> int:
     import json
 
     from ._errors import DataError
-    from ._io import write_text
+    from .formats._io import write_text
     from .result import load_result
     from .robots import payload
 
@@ -298,7 +298,7 @@ def cmd_payload(args) -> int:
 
 def _check_outputs(inputs, outputs) -> None:
     """Fails before any work when an output cannot be written, is an input or another output (see _io.check_outputs)."""
-    from ._io import check_outputs
+    from .formats._io import check_outputs
 
     check_outputs([inputs] if isinstance(inputs, str) else inputs, outputs)
 
@@ -332,12 +332,12 @@ def cmd_controller_fit(args) -> int:
     """Fits the controller of a record from its log and writes it as a controller file."""
     import json
 
-    from ._io import write_text
+    from .formats._io import write_text
     from .controller_fit import fit_controller
 
     _check_outputs([args.file], [args.json])
     if args.urdf:  # a robot's record: each joint's law from its own log, written as a joints file
-        from .loaders import load_record
+        from .formats.loaders import load_record
         from .robots import Robot
 
         if args.columns or args.force_scale != 1.0:
@@ -421,7 +421,7 @@ class _NumberedJoints:
 
 def _load_plain(args, path: str):
     """A record whose controller is fitted from its own log (no --controller): its signals, in SI."""
-    from .loaders import load_record, parse_columns
+    from .formats.loaders import load_record, parse_columns
 
     return load_record(path, controller=None, columns=parse_columns(getattr(args, "columns", None)),
                        force_scale=getattr(args, "force_scale", 1.0), units=getattr(args, "units", None),
@@ -429,7 +429,7 @@ def _load_plain(args, path: str):
 
 
 def cmd_demo(args) -> int:
-    from ._io import write_text
+    from .formats._io import write_text
     from .demo import demo_report, run_demo, run_rest_case
 
     _check_outputs([], [args.json])
@@ -445,7 +445,7 @@ def cmd_demo(args) -> int:
 
 
 def cmd_doctor(args) -> int:
-    from ._io import write_text
+    from .formats._io import write_text
     from .doctor import doctor
 
     _check_outputs([args.file, args.validate, args.controller, args.urdf], [args.json, args.html, args.result])
@@ -514,7 +514,7 @@ def _keyvals(items, parse) -> dict:
 
 def cmd_sweep(args) -> int:
     from ._errors import DataError
-    from ._io import save_figure, write_text
+    from .formats._io import save_figure, write_text
     from .sweep import grid_points, parse_values, random_points, sweep
 
     _check_outputs([args.record, args.controller], [args.json, args.plot])
@@ -525,7 +525,7 @@ def cmd_sweep(args) -> int:
         load_controller(args.controller)  # a bad file fails here, once, with its reason
         fixed["controller"] = args.controller
     if args.record:
-        from ._io import check_input
+        from .formats._io import check_input
 
         fixed["record"] = check_input(args.record, "record (CSV, Parquet, HDF5 or MAT file)")
     elif args.scenario:

@@ -422,7 +422,7 @@ def in_units(c: Controller, dt: float, position_factor: float, force_factor: flo
 
 
 def _spec(path) -> Any:
-    from ._io import check_input
+    from .formats._io import check_input
 
     p = check_input(path, "controller file")
     ext = os.path.splitext(str(p))[1].lower()

@@ -1,5 +1,5 @@
-"""Recordings of a position-controlled axis: the data type, validated on construction (the file formats are in
-:mod:`didim.loaders`)."""
+"""Recordings of a position-controlled plant, one axis or a robot's joints: the one data type, validated on
+construction (the file formats are in :mod:`didim.formats.loaders`)."""
 
 from __future__ import annotations
 

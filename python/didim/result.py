@@ -12,7 +12,7 @@ import numpy as np
 
 from . import _checks
 from ._errors import DataError
-from ._io import check_input, jsonable
+from .formats._io import check_input, jsonable
 from .model import Model
 
 #: Units of the paper's parameters (SI, load side) and of step 2's mode parameters; a result with a model structure
@@ -90,7 +90,7 @@ class IdentificationResult:
     axis: str = "linear"
     #: A robot's result (its :attr:`structure` a model of a :class:`didim.Robot`): the base map
     #: (:class:`didim.robots.BaseParameters`: what each base parameter combines) and each joint's closed-loop force
-    #: error; ``options["controller_check"]`` holds each joint's controller check. :mod:`didim.robots.identify`
+    #: error; ``options["controller_check"]`` holds each joint's controller check. :mod:`didim.methods.robot`
     #: reads and writes them.
     base: Optional[Any] = None
     force_error_per_joint: Dict[str, float] = field(default_factory=dict)
@@ -269,7 +269,7 @@ class IdentificationResult:
     def save(self, path) -> None:
         """Writes the result to ``path``: JSON for ``.json`` (the contract of :meth:`to_dict`), the summary table for
         ``.txt``. Atomic: a failed write leaves the old file as it was."""
-        from ._io import write_text
+        from .formats._io import write_text
 
         ext = os.path.splitext(os.fspath(path))[1].lower()
         if ext == ".json":

@@ -50,7 +50,7 @@ def _record(scenario: Optional[str], record: Optional[str], seed: int, force_noi
             controller: Optional[str] = None):
     from . import scenarios as sc
     from .controllers import load_controller
-    from .loaders import load_record
+    from .formats.loaders import load_record
 
     if record is not None:
         return load_record(record, controller=load_controller(controller) if controller else None), None

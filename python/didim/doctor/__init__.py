@@ -33,8 +33,8 @@ import numpy as np
 
 from .. import _checks, units
 from .._errors import DataError, DidimError
-from .._io import jsonable as _clean
-from ..identification import a_priori_mass
+from ..formats._io import jsonable as _clean
+from ..methods.identification import a_priori_mass
 from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
@@ -472,7 +472,7 @@ def _base_fit(data: Data, model: str, apM: Optional[float], progress,
     if model == "rigid":
         return refit(data, State(Model("rigid", coulomb_eps=eps), {"M": m0, "Fv": 0.0, "Fc": 0.0}, {}, axis=axis), {},
                      progress)
-    from ..identification import didim_flexible
+    from ..methods.identification import didim_flexible
 
     fl = didim_flexible(data.rec, m0, variant="paper", reversals="keep")
     if fl.model != "flexible":

@@ -12,7 +12,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .._errors import DidimError, SimulationError
-from ..identification import fit_flexible_mode, flexible_from_mode
+from ..methods.identification import fit_flexible_mode, flexible_from_mode
 from ..result import IdentificationResult
 from ..signal import diffcent
 from ..model import knot_weights
@@ -541,7 +541,7 @@ def _load_friction_candidates(state: State, sim: SimResult, data: Data) -> List[
 def _load_friction_lm(data: Data, st: State, init: Dict[str, float]) -> IdentificationResult:
     """Levenberg-Marquardt with exact sensitivities on the training samples: load friction is where the two frictions
     trade against the mode's damping, which DIDIM's load row does not separate."""
-    from ..oe import oe_lm
+    from ..methods.oe import oe_lm
 
     # its sensitivities do not cover a force lag: the lag's few tenths of a millisecond are left out of this one fit.
     # It runs with didim's default friction law, as it always has, not the state's fitted one (the fit and its
@@ -627,7 +627,7 @@ def _gravity_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
     to stand in for a sine of the angle: on a pendulum whose m·g·l is 40 times its Coulomb friction, an inertia 600
     times too small and a negative Coulomb friction) is no start for the refit. The model's own parameters are the
     start where IDIM-LS cannot fit it."""
-    from ..identification import idim_ls
+    from ..methods.identification import idim_ls
 
     st = state.with_(terms=state.model.terms + GRAVITY_TERMS)
     names = [t.name for t in GRAVITY_TERMS]

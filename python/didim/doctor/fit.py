@@ -10,7 +10,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..identification import didim_iterate
+from ..methods.identification import didim_iterate
 from ..model import Model
 from ..recording import Recording
 from ..result import IdentificationResult
@@ -75,7 +75,7 @@ class Data:
         simulated initial state (a log started while the axis moved): there the simulation answers a start the axis
         never had, whatever the model, and those rows would dominate the tests and the held-out comparison
         (on the EMPS, 47-61 % of the residual energy in the first 33-56 ms)."""
-        from ..identification import settled_row
+        from ..methods.identification import settled_row
 
         sim = state.simulate(self.rec)
         self.t0 = min(settled_row(self.rec, sim.q[0], self.dec), self.m_train // 2)
@@ -223,12 +223,12 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
     shows up as a "low-speed effect" that is only the law's shape.
 
     The start: ε on ``EPS_GRID_REL`` with the algebraic law (or the first of ``shapes``), its best point (or, given
-    ``around``, that smoothing speed in m/s or rad/s); then every plant's search (:func:`didim.friction_law.
+    ``around``, that smoothing speed in m/s or rad/s); then every plant's search (:func:`didim.methods.friction_law.
     closed_loop_law`) from it, for each shape (``shapes``, all by default), each law a DIDIM refit, a batch of them
     on the cores of the machine."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from .. import friction_law
+    from ..methods import friction_law
     from .._errors import DidimError
     scale = data.rec.speed_scale
     say = progress or (lambda s: None)

@@ -95,7 +95,7 @@ class RobotDiagnosis:
         return self.base
 
     def to_dict(self) -> Dict[str, Any]:
-        from .._io import jsonable
+        from ..formats._io import jsonable
 
         return jsonable({"kind": "robot", "record": self.record, "validate": self.validate,
                          "findings": self.findings, "ambiguities": self.ambiguities,
@@ -152,7 +152,7 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
     """:func:`didim.doctor` of a robot's record with its :class:`didim.Robot` (see the module's text)."""
     from ..api import identify
     from ..check import enforce
-    from ..robots.identify import force_errors, simulate_robot, top_speeds
+    from ..methods.robot import force_errors, simulate_robot, top_speeds
 
     if validate is not None and not (isinstance(validate, Recording) and validate.has_joint_columns):
         raise DataError(f"validate must be a robot's record like the training one, got {type(validate).__name__}")

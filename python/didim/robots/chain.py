@@ -40,7 +40,7 @@ class Robot:
     def from_urdf(cls, path, joints: Optional[Sequence[str]] = None) -> "Robot":
         """The robot of the URDF file at ``path``; ``joints``: the actuated joints' names (default: every revolute,
         continuous and prismatic joint of the chain)."""
-        from .._io import check_input
+        from ..formats._io import check_input
 
         shown = check_input(path, "URDF file")
         try:

@@ -10,15 +10,15 @@ from typing import Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _checks, _core
-from ._errors import DataError, DidimError, SimulationError
+from .. import _checks, _core
+from .._errors import DataError, DidimError, SimulationError
 from .identification import (FLEXIBLE_CUTOFF_HZ, OE_LM_SUPPORTS, SIMULATING_SUPPORTS, Progress, _say, nelder_mead_simplex, prefetch,
                              start_notes, start_row_of, supports)
-from .model import Model
-from .recording import Recording
-from .result import IdentificationResult, Iteration
-from .signal import Decimation
-from .simulation import DEFAULT_TOL, Term, coulomb_eps_of, entry_model, params_vector, problem
+from ..model import Model
+from ..recording import Recording
+from ..result import IdentificationResult, Iteration
+from ..signal import Decimation
+from ..simulation import DEFAULT_TOL, Term, coulomb_eps_of, entry_model, params_vector, problem
 
 CRITERIA = ("force", "position")
 
@@ -68,7 +68,7 @@ def oe_nm(
     decimated signals. Variables are scaled by their initial values (all nonzero with eq. (33)), so ``xatol`` is
     relative; ``fatol`` is relative to the initial criterion. ``terms``, ``backlash_gap``, ``delay`` and ``force_lag``
     extend the model as for :func:`didim.simulate` (a derivative-free method needs nothing more). ``start``: as for
-    DIDIM (:func:`didim.identification.didim_iterate`), the decimated rows of a record's start that the simulation
+    DIDIM (:func:`didim.methods.identification.didim_iterate`), the decimated rows of a record's start that the simulation
     has not joined yet are left out of the criterion ("auto") or kept ("keep")."""
     from scipy.optimize import minimize
 
@@ -302,9 +302,9 @@ def check_sensitivities(
     difference relative to the largest sensitivity. With the exponential integrator a perturbation that changes the
     integrator's step sequence shows up as a local spike; ``rel_step`` of 1e-6 rarely does.
     """
-    from .simulation import simulate_batch
+    from ..simulation import simulate_batch
 
-    from .simulation import NUMERICS
+    from ..simulation import NUMERICS
 
     numerics = {k: sim_kw.pop(k) for k in NUMERICS if k in sim_kw}
     model = entry_model(model, params, offset=offset, terms=tuple(terms), backlash_gap=backlash_gap, **sim_kw)

@@ -26,13 +26,13 @@ from typing import Callable, Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _checks, _core
-from ._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
-from .recording import Recording
-from .result import IdentificationResult, Iteration
-from .model import STRUCTURE_FIELDS, Model, as_model, knot_weights
-from .signal import Decimation, decimation_matches, diffcent, lowpass
-from .simulation import DEFAULT_TOL, coulomb_eps_of, params_vector, problem, settling_samples, simulate
+from .. import _checks, _core
+from .._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
+from ..recording import Recording
+from ..result import IdentificationResult, Iteration
+from ..model import STRUCTURE_FIELDS, Model, as_model, knot_weights
+from ..signal import Decimation, decimation_matches, diffcent, lowpass
+from ..simulation import DEFAULT_TOL, coulomb_eps_of, params_vector, problem, settling_samples, simulate
 from .didim_loop import DIVERGENCE_FACTOR, DidimLoop, didim_loop, residual_settled
 
 Progress = Optional[Callable[[str], None]]
@@ -275,7 +275,7 @@ def prefetch(cost, cost_batch, points) -> Callable:
 
 #: Masses and stiffness must stay positive for the closed loop to be simulated.
 _POSITIVE = ("M", "M1", "M2", "K12")
-# DIDIM's divergence test and pull-backs are the shared loop's (didim.didim_loop)
+# DIDIM's divergence test and pull-backs are the shared loop's (didim.methods.didim_loop)
 #: Largest factor by which one DIDIM step may change a mass or the stiffness. The regression is only valid while the
 #: simulated loop's bandwidth stays near the real one (eqs. (17)-(18)); from a far a priori mass (1000 kg for a 100 kg
 #: axis) the first LS step can overshoot by orders of magnitude (to 1 kg, where the simulated loop chatters and the
@@ -302,7 +302,7 @@ def _physical(names: Sequence[str], chi: np.ndarray, ref: Optional[np.ndarray] =
 
 
 class _AxisPlant:
-    """One axis as DIDIM's loop (:func:`didim.didim_loop.didim_loop`) sees it: the core's problem simulates χ and
+    """One axis as DIDIM's loop (:func:`didim.methods.didim_loop.didim_loop`) sees it: the core's problem simulates χ and
     builds the decimated regressor of the simulated states in one call; the least squares leave out the samples
     around reversals (the rows follow each iterate's velocity; an alternation between two sets freezes both out) and
     the start the simulation takes to join the record; a mass or the stiffness must stay positive and change by at

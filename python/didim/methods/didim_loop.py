@@ -2,7 +2,7 @@
 refit the inverse model by least squares on the simulated states, until the estimate settles; with the safeguards
 the paper does not have, which never act on an iteration that goes well.
 
-A plant says how (:class:`DidimPlant`): a single axis (:func:`didim.identification.didim_iterate`), a robot
+A plant says how (:class:`DidimPlant`): a single axis (:func:`didim.methods.identification.didim_iterate`), a robot
 (:func:`didim.robots.didim`) or a payload on a robot's last body (:func:`didim.robots.payload`) each give their
 simulation, their least squares, what a physical estimate is and when they have settled; this loop does the rest:
 
@@ -24,7 +24,7 @@ from typing import Any, Callable, Dict, List, Optional, Protocol, Sequence
 
 import numpy as np
 
-from ._errors import DataError, DidimError, IdentifiabilityError, SimulationError
+from .._errors import DataError, DidimError, IdentifiabilityError, SimulationError
 
 #: Pull-backs toward the best iterate before an iteration is declared divergent.
 MAX_BACKTRACKS = 6

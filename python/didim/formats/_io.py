@@ -79,7 +79,7 @@ def _special(target: str) -> str:
 def check_input(path, what: str = "input file") -> str:
     """The path of an input that is a regular file; a FIFO (which would block), a device, a socket or a folder is a
     DataError naming it, before anything opens it."""
-    from ._errors import DataError
+    from .._errors import DataError
 
     if isinstance(path, bytes):
         path = os.fsdecode(path)
@@ -110,7 +110,7 @@ def check_outputs(inputs, outputs) -> None:
     """The one guard of every command, run before any work: an output is never an input (same file through any
     spelling, symbolic or hard link), two outputs are never the same file, an output is never a FIFO, a socket or a
     folder (a device such as /dev/null is written in place), and each output's folder is writable."""
-    from ._errors import DataError
+    from .._errors import DataError
 
     def same(a: str, b: str) -> bool:
         try:
@@ -167,7 +167,7 @@ def atomic_path(path) -> Iterator[str]:
                 pass
         return
     if kind:
-        from ._errors import DataError
+        from .._errors import DataError
 
         raise DataError(f"cannot write {shown}: it is a {kind}; choose a file name")
     folder = os.path.dirname(target)

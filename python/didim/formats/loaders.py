@@ -18,14 +18,14 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from . import _checks
-from ._errors import DataError
+from .. import _checks
+from .._errors import DataError
 from ._io import beside, check_input
-from .controllers import (Controller, EmpsCascade, controller_file_units, in_units, load_controller,
+from ..controllers import (Controller, EmpsCascade, controller_file_units, in_units, load_controller,
                           load_joint_controllers, load_joint_drives)
-from .robots.chain import Robot
-from .recording import Recording, _check_expected_dt, _number, _signal, _time_step
-from .units import SI, Units, check_stroke, from_header, parse as parse_units
+from ..robots.chain import Robot
+from ..recording import Recording, _check_expected_dt, _number, _signal, _time_step
+from ..units import SI, Units, check_stroke, from_header, parse as parse_units
 
 #: The columns of a record: required, then optional.
 REQUIRED = ("t", "qr", "force", "qm")
@@ -148,7 +148,7 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
                            hint=" (the encoder step, in SI: m or rad; None for none, 'auto' to detect it)")
     origin = ""
     if controller is None:  # nobody described it: the linear law that ran the axis, from the log itself
-        from .controller_fit import fit_controller
+        from ..controller_fit import fit_controller
 
         t = signals["t"]
         period = dt if dt is not None else _time_step(t, f"{where}: ")
@@ -427,9 +427,9 @@ def _check_position_units(p, robot, rec: Recording) -> None:
     """Refuses a record whose positions fit the URDF's dynamics :data:`UNITS_RATIO` times better in the other unit
     than in the one they were read in, for the revolute joints (rad or degrees) and the prismatic ones (m or mm) each
     as a group (a record in rad declared in degrees, in degrees declared in nothing, a quill in m declared in mm):
-    :func:`didim.robots.identify.urdf_residual`. The limits catch a reference beyond the URDF's range; this catches
+    :func:`didim.methods.robot.urdf_residual`. The limits catch a reference beyond the URDF's range; this catches
     the rest, in either direction."""
-    from .robots.identify import urdf_residual
+    from ..methods.robot import urdf_residual
 
     if not hasattr(robot, "rnea"):  # joints known by number only (no dynamics)
         return
@@ -455,8 +455,8 @@ def _check_position_units(p, robot, rec: Recording) -> None:
 def _robot_file_units(path, kinds) -> Optional[list]:
     """The units a robot's controller file declares: ``"units"`` beside ``"joints"`` (all joints) and in each joint's
     entry (that joint), per joint (None when it declares none)."""
-    from .controllers import _spec
-    from .units import for_joints
+    from ..controllers import _spec
+    from ..units import for_joints
 
     _, spec = _spec(path)
     if not isinstance(spec, dict):
@@ -492,7 +492,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     the path of their file; by default ``NAME_controller.json`` beside the record (unless ``beside_controller`` is
     False), and without one each joint's linear law is fitted from its log (:func:`didim.fit_controller`;
     ``Recording.controller_origin`` says so)."""
-    from .units import for_joints
+    from ..units import for_joints
 
     p = check_input(path, "robot record")
     ext = os.path.splitext(p)[1].lower()
@@ -578,7 +578,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
                                 f"{got[j].describe()} by {where}: declare its units once")
     origin: Tuple[str, ...] = ()
     if controllers is None:  # nobody described them: each joint's linear law from its own log, in SI
-        from .controller_fit import fit_controller
+        from ..controller_fit import fit_controller
 
         fits = []
         for j in range(len(names)):

@@ -17,13 +17,14 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .. import _checks, _core, friction_law
-from ..didim_loop import didim_loop, residual_settled
-from ..identification import start_notes
+from .. import _checks, _core
+from . import friction_law
+from .didim_loop import didim_loop, residual_settled
+from .identification import start_notes
 from ..stats import diebold_mariano
 from .._errors import DataError, IdentifiabilityError, SimulationError
 from ..result import IdentificationResult, iterations_of, robot_result
-from .chain import BaseParameters, Robot
+from ..robots.chain import BaseParameters, Robot
 from ..model import Model
 from ..recording import Recording
 
@@ -136,7 +137,7 @@ def _theta_names(robot: Robot, base: BaseParameters, offset: bool) -> List[str]:
     return names
 
 
-#: A friction law through zero speed (:data:`didim.friction_law.Law`): its shape, shared by the joints, and each
+#: A friction law through zero speed (:data:`didim.methods.friction_law.Law`): its shape, shared by the joints, and each
 #: joint's smoothing speed ε in the joint's units (rad/s or m/s: a prismatic quill and a revolute shoulder have no
 #: common speed); ε = 0 is the hard sign.
 Law = friction_law.Law
@@ -247,7 +248,7 @@ def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray,
           vmax: np.ndarray, start_row: int = 0) -> List[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Each joint's force and regressor rows decimated, the rows where it moves slowly (below :data:`SLOW_SHARE` of
     its top reference speed ``vmax``) and the ``start_row`` first ones (a simulation joining a record that began
-    elsewhere: :func:`didim.identification.settled_row`) left out: (force, regressor, the decimated rows kept) per
+    elsewhere: :func:`didim.methods.identification.settled_row`) left out: (force, regressor, the decimated rows kept) per
     joint."""
     out = []
     # only the columns that act on a joint (a chain's joint feels the bodies beyond it and its own drive: half of a
@@ -493,7 +494,7 @@ SHAPE_ALPHA = 0.05
 
 def closed_loop_law(rec: Recording, refit: Callable[[Law], Tuple[Robot, Dict[str, List[float]]]], law: Law,
                     per_shape: Dict[str, Tuple[float, ...]], progress=None) -> Law:
-    """The friction law through zero speed that the closed loop follows best (:func:`didim.friction_law.closed_loop_law`,
+    """The friction law through zero speed that the closed loop follows best (:func:`didim.methods.friction_law.closed_loop_law`,
     every plant's search), by the joints' relative force errors on the first half of the record: each shape with the
     model's other parameters refitted for it (``refit(law)``: the robot and its drives; parameters fitted with one
     shape have taken its tail into their viscous friction, and would favour it), starting from the smoothing speeds
@@ -715,7 +716,7 @@ def _model_of(robot: Robot, base: BaseParameters, offset: bool, theta: np.ndarra
 
 
 class _RobotPlant:
-    """A robot as DIDIM's loop (:func:`didim.didim_loop.didim_loop`) sees it: θ holds the base parameters, each
+    """A robot as DIDIM's loop (:func:`didim.methods.didim_loop.didim_loop`) sees it: θ holds the base parameters, each
     joint's viscous and Coulomb friction (and offset); the closed loop of the arm with the standard parameters
     closest to the URDF's that give θ's base parameters; the least squares weighted per joint on the rows where
     each joint moves; an estimate whose loop cannot be simulated (an articulated inertia not positive) is pulled
@@ -739,9 +740,9 @@ class _RobotPlant:
     def set_start(self, theta: np.ndarray) -> None:
         """Leaves out of the fits and the output error the samples the simulation of ``theta`` takes to join a record
         that began elsewhere than at rest on its first reference (a log cut in a cruise: how long the arm cruised is
-        not in the log; :func:`didim.identification.settled_row`, the last joint to join setting it), as one axis's
+        not in the log; :func:`didim.methods.identification.settled_row`, the last joint to join setting it), as one axis's
         DIDIM does."""
-        from ..identification import settled_row
+        from .identification import settled_row
 
         try:
             q = self.simulate(theta)["q"]
@@ -855,7 +856,7 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
           progress: Optional[Callable[[str], None]] = None) -> IdentificationResult:
     """DIDIM from the URDF's values (rotor inertias and friction 0): the closed loop simulated with the current
     estimate, weighted least squares of the measured force on the simulated states, until the regression's residual
-    changes by less than ``tol`` of itself over a step (the paper's criterion (21), every plant's); the iterations and their safeguards are those of every plant (:func:`didim.didim_loop.didim_loop`): an iterate whose
+    changes by less than ``tol`` of itself over a step (the paper's criterion (21), every plant's); the iterations and their safeguards are those of every plant (:func:`didim.methods.didim_loop.didim_loop`): an iterate whose
     loop cannot be simulated, or whose error rises above 1.5 times the best, is pulled back toward the best.
 
     When the URDF's values are no start (their closed loop cannot be simulated or is worse than predicting no force:
@@ -935,7 +936,7 @@ class PayloadResult:
     notes: List[str] = field(default_factory=list)
 
     def to_dict(self) -> Dict[str, Any]:
-        from .._io import jsonable
+        from ..formats._io import jsonable
 
         return jsonable(dict(self.__dict__))
 
