@@ -172,3 +172,45 @@ def test_a_prismatic_joint_and_tilted_axes_agree_with_pinocchio(tmp_path):
         _close(robot.mass_matrix(q), np.triu(mm) + np.triu(mm, 1).T, "mass matrix")
         _close(robot.aba(q, v, tau), pin.aba(m, d, q, v, tau), "aba")
         _close(robot.regressor(q, v, a), pin.computeJointTorqueRegressor(m, d, q, v, a), "regressor")
+
+
+def test_a_urdf_that_is_not_one_tree_is_refused_from_the_api_a_saved_result_and_the_command_line(tmp_path):
+    """A URDF whose joints form a loop (a fixed joint back to an earlier link, a joint from a link to itself), NaN in
+    an <origin>, XML nested 100,000 deep: each a DataError naming the link or joint (these crashed the interpreter:
+    the walk of the tree recursed without end, the XML parser exhausted the stack), also inside a saved result and
+    from the command line (exit 2, one line). Run in a child process so that a crash fails the test, not the run."""
+    import json
+    import subprocess
+    import sys
+
+    tree = MIXED.replace("</robot>", '<joint name="back" type="fixed"><parent link="fore"/><child link="upper"/>'
+                         "</joint></robot>")
+    own = MIXED.replace("</robot>", '<joint name="own" type="fixed"><parent link="fore"/><child link="fore"/>'
+                        "</joint></robot>")
+    nan = MIXED.replace('<origin xyz="0.4 0.02 0" rpy="0.1 0.2 -0.3"/>', '<origin xyz="0.4 nan 0" rpy="0.1 0.2 -0.3"/>')
+    deep = "<robot name='d'>" + "<a>" * 100_000 + "</a>" * 100_000 + "</robot>"
+    cases = {"loop": (tree, "link upper is the child of two joints (shoulder and back)"),
+             "own": (own, "joint own joins link fore to itself"),
+             "nan": (nan, "joint elbow's <origin> holds NaN"),
+             "deep": (deep, "nested 100001 elements deep")}
+    good = didim.Robot.from_urdf_string(MIXED)
+    for name, (text, message) in cases.items():
+        path = tmp_path / f"{name}.urdf"
+        path.write_text(text)
+        code = (f"import didim\ntry:\n    didim.Robot.from_urdf({str(path)!r})\nexcept didim.DataError as e:\n"
+                "    print(e)\n")
+        p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0 and message in p.stdout, (name, p.returncode, p.stdout, p.stderr[-500:])
+        # the same URDF inside a saved robot result
+        saved = {"kind": "robot", "method": "didim", "params": {}, "std": {}, "offset": True,
+                 "robot": {"name": "mixed", "joints": good.joint_names, "urdf": text},
+                 "base": {"names": [], "standard_names": [], "K": [], "independent": []}}
+        rpath = tmp_path / f"{name}.json"
+        rpath.write_text(json.dumps(saved))
+        p = subprocess.run([sys.executable, "-m", "didim", "simulate", str(tmp_path / "none.csv"), str(rpath)],
+                           capture_output=True, text=True, timeout=120)
+        assert p.returncode == 2 and "Traceback" not in p.stderr and len(p.stderr.strip().splitlines()) == 1, \
+            (name, p.returncode, p.stderr[-500:])
+        p = subprocess.run([sys.executable, "-c", f"import didim\ntry:\n    didim.load_result({str(rpath)!r})\n"
+                            "except didim.DataError as e:\n    print(e)\n"], capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0 and message in p.stdout, (name, p.returncode, p.stdout, p.stderr[-500:])

@@ -173,6 +173,51 @@ fn bad_urdfs_and_inputs_are_refused_by_name() {
 }
 
 #[test]
+fn a_urdf_that_is_not_one_tree_is_refused_naming_the_link_or_joint() {
+    let e = |text: &str| Robot::from_urdf(text, None).unwrap_err().to_string();
+    let add = |extra: &str| CHAIN.replace("</robot>", &format!("{extra}</robot>"));
+    // a fixed joint back from l2 to l1: l1 hangs from two joints (the walk used to recurse forever)
+    let back = add(r#"<joint name="back" type="fixed"><parent link="l2"/><child link="l1"/></joint>"#);
+    let m = e(&back);
+    assert!(
+        m.contains("link l1 is the child of two joints (j1 and back)"),
+        "{m}"
+    );
+    let own = add(r#"<joint name="own" type="fixed"><parent link="l2"/><child link="l2"/></joint>"#);
+    assert!(e(&own).contains("joint own joins link l2 to itself"));
+    // two links joined to each other only: a loop away from the root
+    let island = add(r#"<link name="a"/><link name="b"/>
+  <joint name="ab" type="fixed"><parent link="a"/><child link="b"/></joint>
+  <joint name="ba" type="fixed"><parent link="b"/><child link="a"/></joint>"#);
+    assert!(e(&island).contains("links a, b form a loop"));
+    assert!(
+        e(&CHAIN.replace(r#"<child link="l3"/>"#, r#"<child link="l4"/>"#))
+            .contains("joint j3's child link l4 is not defined")
+    );
+    assert!(e(&CHAIN.replace(r#"name="j2""#, r#"name="j1""#)).contains("joint j1 is defined twice"));
+    assert!(
+        e(&CHAIN.replace(r#"<link name="l3">"#, r#"<link name="l2">"#)).contains("link l2 is defined twice")
+    );
+    assert!(e(r#"<robot name="empty"></robot>"#).contains("defines no link"));
+    assert!(
+        e(&CHAIN.replace(r#"<origin xyz="0 0 0.2"/>"#, r#"<origin xyz="0 nan 0.2"/>"#))
+            .contains("joint j3's <origin> holds NaN")
+    );
+    assert!(
+        e(&CHAIN.replace(r#"<mass value="2.0"/>"#, r#"<mass value="inf"/>"#))
+            .contains("link l2's <mass> holds inf")
+    );
+    // XML nested far deeper than a robot description: refused before the parser's recursion
+    let deep = format!(
+        "<robot name=\"d\">{}{}</robot>",
+        "<a>".repeat(100_000),
+        "</a>".repeat(100_000)
+    );
+    assert!(e(&deep).contains("nested 100001 elements deep"));
+    assert_eq!(super::urdf::xml_depth(CHAIN), 3); // robot, link, inertial (the rest self-closing)
+}
+
+#[test]
 fn each_unit_force_is_the_inertia_of_that_parameter_alone() {
     use super::spatial::{inertia_apply, unit_forces, Motion};
     use nalgebra::Vector3;

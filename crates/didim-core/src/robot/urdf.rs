@@ -119,8 +119,166 @@ impl<'a> Walk<'a> {
     }
 }
 
+/// The deepest element nesting a URDF may have: a robot description is a few levels deep (robot,
+/// link, inertial, inertia); a document nested deeper is not one, and its parse would exhaust the
+/// stack.
+pub const MAX_XML_DEPTH: usize = 64;
+
+/// The nesting depth of the XML elements of `text` (a scan of its tags: comments, processing
+/// instructions, declarations and CDATA are skipped; self-closing tags do not nest).
+pub(super) fn xml_depth(text: &str) -> usize {
+    let b = text.as_bytes();
+    let (mut i, mut depth, mut deepest) = (0usize, 0usize, 0usize);
+    while i < b.len() {
+        if b[i] != b'<' {
+            i += 1;
+            continue;
+        }
+        let rest = &text[i..];
+        let skip_to = |end: &str| rest.find(end).map_or(b.len(), |k| i + k + end.len());
+        if rest.starts_with("<!--") {
+            i = skip_to("-->");
+        } else if rest.starts_with("<![CDATA[") {
+            i = skip_to("]]>");
+        } else if rest.starts_with("<?") {
+            i = skip_to("?>");
+        } else if rest.starts_with("<!") {
+            i = skip_to(">");
+        } else if rest.starts_with("</") {
+            depth = depth.saturating_sub(1);
+            i = skip_to(">");
+        } else {
+            let end = skip_to(">");
+            if !text[i..end].ends_with("/>") {
+                depth += 1;
+                deepest = deepest.max(depth);
+            }
+            i = end;
+        }
+    }
+    deepest
+}
+
+/// The document's links and joints form one tree: links and joints named once, every joint between
+/// two defined links, each link the child of one joint at most and none of its own, every link
+/// reached from the one root; the error names the link or the joint and what to change.
+fn check_tree(doc: &urdf_rs::Robot) -> Result<()> {
+    if doc.links.is_empty() {
+        return Err(invalid!(
+            "the URDF defines no link: a robot is <link> elements joined by <joint> elements"
+        ));
+    }
+    let mut seen: HashMap<&str, usize> = HashMap::new();
+    for l in &doc.links {
+        if seen.insert(l.name.as_str(), 0).is_some() {
+            return Err(invalid!(
+                "link {} is defined twice: each <link> needs its own name",
+                l.name
+            ));
+        }
+    }
+    let mut names: HashMap<&str, ()> = HashMap::new();
+    let mut parent_of: HashMap<&str, &str> = HashMap::new();
+    for j in &doc.joints {
+        if names.insert(j.name.as_str(), ()).is_some() {
+            return Err(invalid!(
+                "joint {} is defined twice: each <joint> needs its own name",
+                j.name
+            ));
+        }
+        for (role, link) in [("parent", &j.parent.link), ("child", &j.child.link)] {
+            if !seen.contains_key(link.as_str()) {
+                return Err(invalid!(
+                    "joint {}'s {role} link {link} is not defined: add <link name=\"{link}\"> or correct the name",
+                    j.name
+                ));
+            }
+        }
+        if j.parent.link == j.child.link {
+            return Err(invalid!(
+                "joint {} joins link {} to itself: its parent and child must be two links",
+                j.name,
+                j.child.link
+            ));
+        }
+        if let Some(other) = parent_of.insert(j.child.link.as_str(), j.name.as_str()) {
+            return Err(invalid!(
+                "link {} is the child of two joints ({other} and {}): a URDF is a tree, each link hangs from one joint; \
+                 a closed chain cannot be written in URDF (remove one of the two joints)",
+                j.child.link,
+                j.name
+            ));
+        }
+    }
+    // every link reached from a root: links whose joints form a loop among themselves hang from none
+    let mut reached: std::collections::HashSet<&str> = std::collections::HashSet::new();
+    let mut todo: Vec<&str> = doc
+        .links
+        .iter()
+        .map(|l| l.name.as_str())
+        .filter(|l| !parent_of.contains_key(l))
+        .collect();
+    while let Some(l) = todo.pop() {
+        if reached.insert(l) {
+            todo.extend(
+                doc.joints
+                    .iter()
+                    .filter(|j| j.parent.link == l)
+                    .map(|j| j.child.link.as_str()),
+            );
+        }
+    }
+    let cut: Vec<&str> = doc
+        .links
+        .iter()
+        .map(|l| l.name.as_str())
+        .filter(|l| !reached.contains(l))
+        .collect();
+    if !cut.is_empty() {
+        return Err(invalid!(
+            "the joints between links {} form a loop: a URDF is a tree from one root link (a closed chain cannot be \
+             written in URDF: remove one joint of the loop)",
+            cut.join(", ")
+        ));
+    }
+    let finite = |what: String, v: &[f64]| -> Result<()> {
+        match v.iter().find(|x| !x.is_finite()) {
+            None => Ok(()),
+            Some(x) => Err(invalid!(
+                "{what} holds {x}: every number of a URDF must be finite"
+            )),
+        }
+    };
+    let pose = |p: &urdf_rs::Pose| [p.xyz[0], p.xyz[1], p.xyz[2], p.rpy[0], p.rpy[1], p.rpy[2]];
+    for j in &doc.joints {
+        finite(format!("joint {}'s <origin>", j.name), &pose(&j.origin))?;
+        finite(
+            format!("joint {}'s <axis>", j.name),
+            &[j.axis.xyz[0], j.axis.xyz[1], j.axis.xyz[2]],
+        )?;
+    }
+    for l in &doc.links {
+        let i = &l.inertial;
+        finite(format!("link {}'s <inertial> <origin>", l.name), &pose(&i.origin))?;
+        finite(format!("link {}'s <mass>", l.name), &[i.mass.value])?;
+        let t = &i.inertia;
+        finite(
+            format!("link {}'s <inertia>", l.name),
+            &[t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz],
+        )?;
+    }
+    Ok(())
+}
+
 pub fn parse(text: &str, picked: Option<&[String]>) -> Result<Robot> {
+    let depth = xml_depth(text);
+    if depth > MAX_XML_DEPTH {
+        return Err(invalid!(
+            "not a URDF robot description: its XML is nested {depth} elements deep (a URDF is a few levels deep)"
+        ));
+    }
     let doc = urdf_rs::read_from_string(text).map_err(|e| invalid!("not a URDF robot description: {e}"))?;
+    check_tree(&doc)?;
     let links: HashMap<&str, &urdf_rs::Link> = doc.links.iter().map(|l| (l.name.as_str(), l)).collect();
     let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
     for j in &doc.joints {
