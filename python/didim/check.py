@@ -193,6 +193,9 @@ def check_controller(rec) -> ControllerCheck:
                      else f"the force gain ({tf.gain:.4g} → {tf.gain * a:.4g})")
             cands.append((f"the command's scale is off by a factor {a:.4g}{f' ({unit})' if unit else ''}: {scale}, or "
                           f"a force logged in other units (force_scale {1 / a:.4g})", a * c))
+    with np.errstate(all="ignore"):
+        cands.append(("the reference and the measured position are swapped (qr read as qm and qm as qr: check the "
+                      "columns' names or the mapping)", tf.command(rec.qm, rec.qr, rec.u_ext)))
     for lag in (1, 2):
         cands.append((f"the logged force is {lag} sample{'s' if lag > 1 else ''} late against the logged positions "
                       "(a delay in the drive's log, or the positions logged early)", np.r_[np.full(lag, c[0]), c[:-lag]]))

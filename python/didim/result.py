@@ -216,6 +216,8 @@ class IdentificationResult:
         if isinstance(d, dict) and d.get("kind") == "robot":  # a robot's result carries its robot
             try:
                 return _robot_from_dict(d)
+            except DataError as e:
+                raise DataError(f"not a readable robot result: {e}") from None
             except (KeyError, TypeError, ValueError) as e:
                 raise DataError(f"not a readable robot result ({type(e).__name__}: {e})") from None
         if not isinstance(d, dict) or "params" not in d or "model" not in d:
@@ -413,6 +415,7 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
     b = d["base"]
     base = BaseParameters(tuple(b["standard_names"]), tuple(b["names"]), np.array(b["K"], dtype=float),
                           tuple(b["independent"]))
+    _check_robot_parts(d, robot, base)
     law = None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof)
     model = Model("rigid", robot=robot, offset=bool(d["offset"]), coulomb_law=law[0] if law else "algebraic",
                   coulomb_eps=law[1] if law else None)
@@ -425,6 +428,31 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
                          message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
                          notes=list(d.get("notes", [])), history=iterations_of(d.get("history", [])),
                          options={"controller_check": d.get("controller_check")})
+
+
+def _check_robot_parts(d: Dict[str, Any], robot, base) -> None:
+    """A saved robot result's base map and parameters fit its robot: the base map's shape (each base parameter a
+    combination of the robot's standard parameters: its rotor inertias and ten per body), and every parameter the
+    robot's model has, a finite number (a DataError naming the first that is not)."""
+    n = robot.ndof
+    ns, nb = len(base.standard_names), len(base.names)
+    if ns != 11 * n or base.K.shape != (nb, ns) or len(base.independent) != nb or not np.all(np.isfinite(base.K)) \
+            or any(not isinstance(i, int) or not 0 <= i < ns for i in base.independent):
+        raise DataError(f"its base map does not fit its {n}-joint robot: {nb} base parameters, {ns} standard ones "
+                        f"(expected {11 * n}), K of shape {base.K.shape}, {len(base.independent)} independent columns")
+    params = d.get("params")
+    if not isinstance(params, dict):
+        raise DataError("its params are not an object of name: value")
+    names = list(base.names) + [f"{p}_{j}" for p in ("Ia", "Fv", "Fc") + (("OF",) if d.get("offset") else ())
+                                for j in robot.joint_names]
+    missing = [k for k in names if k not in params]
+    if missing:
+        raise DataError(f"its params lack {', '.join(missing[:4])}{' …' if len(missing) > 4 else ''} (a parameter "
+                        "of its robot's model removed or renamed): save the result again")
+    for k in names:
+        v = params[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise DataError(f"its parameter {k} is {v!r}, not a finite number")
 
 
 def _law_from(d: Dict[str, Any], n: int) -> Tuple[str, Tuple[float, ...]]:

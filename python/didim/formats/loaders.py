@@ -65,7 +65,11 @@ def detect_resolution(qm: np.ndarray) -> Optional[float]:
     smallest = float(np.min(np.abs(d)))
     for parts in range(1, 21):
         for step in (float(f"{smallest / parts:.6g}"), smallest / parts):  # a rounded decimal step first: 5e-8
+            if not (math.isfinite(step) and step > 0):
+                continue  # a change below the smallest float's resolution: no step to try
             few = d[np.abs(d) <= 20 * step]  # small changes first: the step's error grows with the count
+            if not few.size:
+                continue
             n = np.round(few / step)
             if np.max(np.abs(few / step - n)) > 1e-2:
                 continue

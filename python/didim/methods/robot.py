@@ -546,6 +546,8 @@ def closed_loop_law(rec: Recording, refit: Callable[[Law], Tuple[Robot, Dict[str
 def simulate_robot(rec: Recording, result: IdentificationResult, substeps: int = 0) -> Dict[str, np.ndarray]:
     """The closed loop of ``rec`` (its references, controllers, encoders, first force) with the model of ``result``
     (its friction law)."""
+    _robot_result(result)
+    substeps = _checks.whole("substeps", substeps, lo=0, hi=1024, hint=" (RK4 steps per sample; 0 chooses)")
     robot = result.robot.with_inertial_params(standard_of(result)[result.robot.ndof:])
     d = drives_of(result)
     d["armature"] = list(standard_of(result)[:result.robot.ndof])
@@ -998,6 +1000,7 @@ def payload(rec: Recording, result: IdentificationResult, *, max_iter: int = 30,
     joints' torques do not depend on (the regressor's columns of the last body, at random states, that are zero or
     combinations of the others) are left out and reported as NaN."""
     t0 = time.perf_counter()
+    _robot_result(result)
     robot, n = result.robot, result.robot.ndof
     _check(rec, result.structure)
     say = progress or (lambda s: None)
@@ -1058,6 +1061,14 @@ def payload(rec: Recording, result: IdentificationResult, *, max_iter: int = 30,
                          delta_std={k: float(std[i]) for i, k in enumerate(pnames)}, force_error=err,
                          force_error_without=err0, converged=converged, iterations=len(history),
                          elapsed_s=time.perf_counter() - t0, notes=notes)
+
+
+def _robot_result(result) -> None:
+    """Refuses what is not a robot's result (a one-axis result, another object), naming what was given."""
+    if not isinstance(result, IdentificationResult) or result.robot is None:
+        what = ("a one-axis result" if isinstance(result, IdentificationResult) else type(result).__name__)
+        raise DataError(f"a robot's result is needed (didim.identify on a robot's record, or didim.load_result of one), "
+                        f"got {what}")
 
 
 def _check(rec: Recording, model: Model) -> Tuple[Robot, bool]:

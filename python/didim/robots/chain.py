@@ -113,6 +113,9 @@ class Robot:
     def with_inertial_params(self, params) -> "Robot":
         """The same chain with other inertial parameters (as :attr:`inertial_params`)."""
         p = _checks.real_array("params", params, (1,))
+        bad = np.flatnonzero(~np.isfinite(p))
+        if bad.size:
+            raise DataError(f"inertial parameter {bad[0]} is {p[bad[0]]}: every inertial parameter must be finite")
         return Robot(self._core.with_inertial_params(np.ascontiguousarray(p)), self.urdf, self.source)
 
     def __repr__(self) -> str:

@@ -1,0 +1,90 @@
+"""Issue 38's bad inputs on the robot surfaces, each a clear DataError naming what to change (or handled right):
+positions off any encoder grid, a record with qr and qm swapped, non-finite inertial parameters, a one-axis result
+or a negative substep count where a robot's is due, saved robot results with a parameter missing, renamed, null or a
+string, or a base map of the wrong shape. (URDFs that are not one tree: tests/test_robot.py.)"""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import didim
+
+D_NAME = "pendulum"
+
+
+@pytest.fixture(scope="module")
+def pendulum(robots_dir):
+    robot = didim.Robot.from_urdf(robots_dir / f"{D_NAME}_cad.urdf")
+    ctl = robots_dir / f"{D_NAME}_controller.json"
+    rec = didim.load_record(robots_dir / f"{D_NAME}_train.csv", robot=robot, controller=ctl)
+    return robot, ctl, rec, pd.read_csv(robots_dir / f"{D_NAME}_train.csv")
+
+
+def test_positions_off_any_encoder_grid_read_without_a_step(pendulum, tmp_path):
+    """An analog or filtered encoder (every position off any grid) is a record without an encoder step, not a
+    traceback (it was "zero-size array" in detect_resolution)."""
+    robot, ctl, rec, df = pendulum
+    rng = np.random.default_rng(0)
+    for c in ("qm_1", "qm_2"):
+        df = df.assign(**{c: df[c] + rng.normal(0, 1e-5, len(df))})
+    df.to_csv(tmp_path / "analog.csv", index=False)
+    got = didim.load_record(tmp_path / "analog.csv", robot=robot, controller=ctl)
+    assert got.encoder_step == (0.0, 0.0)
+    np.testing.assert_allclose(got.qm, df[["qm_1", "qm_2"]].to_numpy(), rtol=0, atol=1e-12)
+
+
+def test_a_record_with_qr_and_qm_swapped_is_refused_naming_the_swap(pendulum, tmp_path):
+    robot, ctl, rec, df = pendulum
+    swapped = df.rename(columns={"qr_1": "qm_1", "qr_2": "qm_2", "qm_1": "qr_1", "qm_2": "qr_2"})
+    swapped.to_csv(tmp_path / "swapped.csv", index=False)
+    got = didim.load_record(tmp_path / "swapped.csv", robot=robot, controller=ctl)
+    with pytest.raises(didim.DataError, match="likely: the reference and the measured position are swapped"):
+        didim.identify(got, robot, "idim-ls")
+
+
+def test_wrong_objects_and_numbers_are_refused_by_name(pendulum, emps):
+    robot, ctl, rec, _ = pendulum
+    with pytest.raises(didim.DataError, match="inertial parameter 3 is nan"):
+        robot.with_inertial_params(np.where(np.arange(robot.inertial_params.size) == 3, np.nan, robot.inertial_params))
+    res = didim.identify(rec, robot, "idim-ls")
+    axis = didim.identify(emps, "rigid", "idim-ls")
+    with pytest.raises(didim.DataError, match="a robot's result is needed .* got a one-axis result"):
+        didim.robots.payload(rec, axis)
+    with pytest.raises(didim.DataError, match="a robot's result is needed .* got str"):
+        didim.robots.simulate_robot(rec, "r.json")
+    with pytest.raises(didim.DataError, match="substeps must be between 0 and 1024, got -1"):
+        didim.robots.simulate_robot(rec, res, substeps=-1)
+    with pytest.raises(didim.DataError, match="max_iter must be a whole number, got 1.5"):
+        didim.identify(rec, robot, "didim", max_iter=1.5)
+    with pytest.raises(didim.DataError, match="tol must be a finite number > 0, got nan"):
+        didim.identify(rec, robot, "didim", tol=float("nan"))
+
+
+@pytest.mark.parametrize("mutation, message", [
+    ("missing", "its params lack Ia_joint1"),
+    ("renamed", "its params lack Ia_joint1"),
+    ("null", "its parameter Ia_joint1 is None, not a finite number"),
+    ("string", "its parameter Ia_joint1 is 'abc', not a finite number"),
+    ("base", "its base map does not fit its 2-joint robot"),
+])
+def test_a_saved_robot_result_that_does_not_fit_its_robot_is_refused(pendulum, tmp_path, mutation, message):
+    robot, ctl, rec, _ = pendulum
+    res = didim.identify(rec, didim.Model(robot=robot, offset=True), "idim-ls")
+    res.save(tmp_path / "r.json")
+    d = json.loads((tmp_path / "r.json").read_text())
+    assert didim.load_result(tmp_path / "r.json").params == pytest.approx(res.params, rel=1e-15)
+    if mutation == "missing":
+        del d["params"]["Ia_joint1"]
+    elif mutation == "renamed":
+        d["params"]["Ia_1"] = d["params"].pop("Ia_joint1")
+    elif mutation == "null":
+        d["params"]["Ia_joint1"] = None
+    elif mutation == "string":
+        d["params"]["Ia_joint1"] = "abc"
+    else:
+        d["base"]["K"] = [[1.0]]
+    (tmp_path / "bad.json").write_text(json.dumps(d))
+    with pytest.raises(didim.DataError, match=f"bad.json: not a readable robot result: {message}"):
+        didim.load_result(tmp_path / "bad.json")
