@@ -377,6 +377,10 @@ def controller_from_dict(spec: Dict[str, Any], where: str = "controller") -> Con
     if not isinstance(spec, dict):
         raise DataError(f"{where}: a controller is an object with a \"type\" key, got {type(spec).__name__}")
     kind = spec.get("type")
+    if kind == "joints":
+        raise DataError(f"{where}: a robot's controller file (one controller per joint) where one axis's controller is "
+                        "expected: for a robot's record give its URDF too (CLI: --urdf ROBOT.urdf; Python: "
+                        "didim.load_record(path, robot=didim.Robot.from_urdf(...)))")
     if not isinstance(kind, str) or kind not in _FILE_TYPES:
         raise DataError(f"{where}: \"type\" must be one of {', '.join(_FILE_TYPES)}, got {kind!r}")
     allowed = _FILE_TYPES[kind]

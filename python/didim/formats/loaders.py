@@ -511,6 +511,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     declared = []  # (where, per-joint units)
     delay: Tuple[int, ...] = ()
     force_lag: Tuple[float, ...] = ()
+    controller_file = controller if isinstance(controller, (str, os.PathLike)) else None
     if isinstance(controller, (str, os.PathLike)):
         file_units = _robot_file_units(controller, kinds)
         if file_units is not None:
@@ -600,7 +601,10 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     else:
         converted = False
     if len(controllers) != len(names):
-        raise DataError(f"{p}: {len(controllers)} controllers for the robot's {len(names)} joints")
+        where = f"{controller_file}: " if controller_file is not None else ""
+        raise DataError(f"{where}{len(controllers)} controllers for the {len(names)} joints of the robot of {p} "
+                        f"({', '.join(names)}): give one per joint, in the URDF's order (is it another robot's "
+                        "controller file?)")
     if u is not None:
         for j in range(len(names)):
             k, ff = u[j].position_factor, u[j].force_factor
