@@ -88,3 +88,23 @@ def test_a_saved_robot_result_that_does_not_fit_its_robot_is_refused(pendulum, t
     (tmp_path / "bad.json").write_text(json.dumps(d))
     with pytest.raises(didim.DataError, match=f"bad.json: not a readable robot result: {message}"):
         didim.load_result(tmp_path / "bad.json")
+
+
+def test_ambiguous_columns_and_wrapped_encoders_are_refused_by_name(pendulum, tmp_path):
+    """Both column forms at once (qr_1.. and qr_<joint>, which one holds a joint's signal would be a guess), an
+    encoder that wraps a whole turn between two samples (it read as the units' fault: "probably in deg"), and a
+    joint picked out of a record that logged more: each refused naming the columns or the joint."""
+    robot, ctl, rec, df = pendulum
+    both = df.assign(qr_joint1=df["qr_1"] + 0.1, qr_joint2=df["qr_2"])
+    both.to_csv(tmp_path / "both.csv", index=False)
+    with pytest.raises(didim.DataError, match="both qr_1 … qr_2 and qr_<joint name> columns"):
+        didim.load_record(tmp_path / "both.csv", robot=robot, controller=ctl)
+    q = df["qm_2"].to_numpy().copy()
+    q[12345:] += 2 * np.pi
+    df.assign(qm_2=q).to_csv(tmp_path / "wrap.csv", index=False)
+    with pytest.raises(didim.DataError, match="joint joint2's qm jumps by 6.28. rad between samples 12344 and 12345, "
+                                              "a whole turn: its encoder wraps"):
+        didim.load_record(tmp_path / "wrap.csv", robot=robot, controller=ctl)
+    one = didim.Robot.from_urdf(robot.source, ["joint2"])
+    with pytest.raises(didim.DataError, match="columns for 2 joints .* but the robot has 1 .joint2.: .* --joints picks"):
+        didim.load_record(tmp_path / "wrap.csv", robot=one)

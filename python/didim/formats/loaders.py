@@ -352,9 +352,12 @@ def _encoder_step(qm: np.ndarray) -> float:
 def _columns(available: Sequence[str], names: Sequence[str], key: str, where: str) -> List[str]:
     """The file's columns of signal ``key`` for each joint: ``key_1 … key_n`` or ``key_<joint name>``."""
     forms = ([f"{key}_{i + 1}" for i in range(len(names))], [f"{key}_{j}" for j in names])
-    for form in forms:
-        if all(c in available for c in form):
-            return form
+    complete = [form for form in forms if all(c in available for c in form)]
+    if len(complete) == 2 and complete[0] != complete[1]:
+        raise DataError(f"{where}: both {key}_1 … {key}_{len(names)} and {key}_<joint name> columns are in the file: "
+                        f"keep one form (which one holds each joint's {key} would be a guess)")
+    for form in complete:
+        return form
     # the form the file comes closest to says which columns it lacks
     closest = max(forms, key=lambda f: sum(c in available for c in f))
     lacking = [c for c in closest if c not in available]
@@ -389,6 +392,32 @@ def _canonical(x, grid: float):
 #: A reference beyond a joint's URDF limits by more than this share of their range is in other units than the
 #: URDF's (degrees read as radians, mm as m).
 LIMIT_MARGIN = 0.1
+
+
+#: A jump of a revolute joint's position between two samples within this share of a whole turn (2π, in SI) is an
+#: encoder's wrap, when it also exceeds :data:`WRAP_JUMP_RATIO` times the joint's largest other step.
+WRAP_TURN_RTOL = 0.05
+WRAP_JUMP_RATIO = 20.0
+
+
+def _check_wraps(p, names, kinds, signals) -> None:
+    """Refuses a revolute joint's position that jumps by a whole turn between two samples (an encoder that wraps at
+    ±π or 0..2π, logged as is): the closed loop would read it as a turn in one sample period."""
+    for key in ("qm", "qr"):
+        for j, kind in enumerate(kinds):
+            if kind == "prismatic":
+                continue
+            d = np.diff(signals[key][:, j])
+            if d.size < 2:
+                continue
+            k = int(np.argmax(np.abs(d)))
+            jump = float(d[k])
+            rest = float(np.max(np.abs(np.delete(d, k))))
+            if abs(abs(jump) / (2 * math.pi) - round(abs(jump) / (2 * math.pi))) <= WRAP_TURN_RTOL \
+                    and abs(jump) > math.pi and abs(jump) > WRAP_JUMP_RATIO * rest:
+                raise DataError(f"{p}: joint {names[j]}'s {key} jumps by {jump:.4g} rad between samples {k} and "
+                                f"{k + 1}, a whole turn: its encoder wraps; unwrap the positions (numpy.unwrap) "
+                                "before identifying")
 
 
 def _check_limits(p, robot, qr: np.ndarray, declared: bool) -> None:
@@ -617,6 +646,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
                 controllers = controllers[:j] + (in_units(controllers[j], dt, k, ff),) + controllers[j + 1:]
             except DataError as e:
                 raise DataError(f"{p}: joint {names[j]}: {e}") from None
+    _check_wraps(p, names, kinds, signals)
     _check_limits(p, robot, signals["qr"], u is not None)
     steps = []
     for j in range(len(names)):
