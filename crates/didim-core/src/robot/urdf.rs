@@ -161,8 +161,8 @@ pub(super) fn xml_depth(text: &str) -> usize {
 
 /// The document's links and joints form one tree: links and joints named once, every joint between
 /// two defined links, each link the child of one joint at most and none of its own, every link
-/// reached from the one root; the error names the link or the joint and what to change.
-fn check_tree(doc: &urdf_rs::Robot) -> Result<()> {
+/// reached from the one root (returned); the error names the link or the joint and what to change.
+fn check_tree(doc: &urdf_rs::Robot) -> Result<&str> {
     if doc.links.is_empty() {
         return Err(invalid!(
             "the URDF defines no link: a robot is <link> elements joined by <joint> elements"
@@ -211,13 +211,14 @@ fn check_tree(doc: &urdf_rs::Robot) -> Result<()> {
         }
     }
     // every link reached from a root: links whose joints form a loop among themselves hang from none
-    let mut reached: std::collections::HashSet<&str> = std::collections::HashSet::new();
-    let mut todo: Vec<&str> = doc
+    let roots: Vec<&str> = doc
         .links
         .iter()
         .map(|l| l.name.as_str())
         .filter(|l| !parent_of.contains_key(l))
         .collect();
+    let mut reached: std::collections::HashSet<&str> = std::collections::HashSet::new();
+    let mut todo = roots.clone();
     while let Some(l) = todo.pop() {
         if reached.insert(l) {
             todo.extend(
@@ -267,7 +268,13 @@ fn check_tree(doc: &urdf_rs::Robot) -> Result<()> {
             &[t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz],
         )?;
     }
-    Ok(())
+    match roots.as_slice() {
+        [r] => Ok(r),
+        _ => Err(invalid!(
+            "the URDF has several root links ({}): one tree is expected",
+            roots.join(", ")
+        )),
+    }
 }
 
 pub fn parse(text: &str, picked: Option<&[String]>) -> Result<Robot> {
@@ -278,30 +285,12 @@ pub fn parse(text: &str, picked: Option<&[String]>) -> Result<Robot> {
         ));
     }
     let doc = urdf_rs::read_from_string(text).map_err(|e| invalid!("not a URDF robot description: {e}"))?;
-    check_tree(&doc)?;
+    let root = check_tree(&doc)?;
     let links: HashMap<&str, &urdf_rs::Link> = doc.links.iter().map(|l| (l.name.as_str(), l)).collect();
     let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
     for j in &doc.joints {
         children.entry(j.parent.link.as_str()).or_default().push(j);
     }
-    let is_child: std::collections::HashSet<&str> =
-        doc.joints.iter().map(|j| j.child.link.as_str()).collect();
-    let roots: Vec<&str> = doc
-        .links
-        .iter()
-        .map(|l| l.name.as_str())
-        .filter(|l| !is_child.contains(l))
-        .collect();
-    let root = match roots.as_slice() {
-        [r] => *r,
-        [] => return Err(invalid!("the URDF has no root link (its joints form a loop)")),
-        _ => {
-            return Err(invalid!(
-                "the URDF has several root links ({}): one tree is expected",
-                roots.join(", ")
-            ))
-        }
-    };
     if let Some(p) = picked {
         let known: Vec<&str> = doc.joints.iter().map(|j| j.name.as_str()).collect();
         for name in p {
