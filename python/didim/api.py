@@ -110,8 +110,7 @@ def identify(
     """
     from .robots import Robot
 
-    if isinstance(model, Robot) or (isinstance(model, Model) and model.robot is not None) \
-            or _has_joint_columns(recording):
+    if _robot_plant(model, recording):
         return _identify_robot(recording, model, method, offset=offset, apM=apM, initial=initial, criterion=criterion,
                                progress=progress, controller_check=controller_check, **options)
     if not isinstance(model, Model) and (not isinstance(model, str) or model not in MODELS):
@@ -271,6 +270,15 @@ def _warn_findings(recording: Recording) -> None:
     """Each finding of :meth:`Recording.diagnose` (one axis's or each joint's) as a :class:`DidimWarning`."""
     for finding in recording.diagnose():
         warnings.warn(f"{recording.name or 'record'}: {finding}", DidimWarning, stacklevel=3)
+
+
+def _robot_plant(model, recording) -> bool:
+    """Whether a call is a robot's: a :class:`didim.Robot`, a model of one, or a record of joint columns (every entry
+    point asks this one question)."""
+    from .robots import Robot
+
+    return isinstance(model, Robot) or (isinstance(model, Model) and model.robot is not None) \
+        or _has_joint_columns(recording)
 
 
 def _has_joint_columns(recording) -> bool:

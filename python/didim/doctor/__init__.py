@@ -859,10 +859,13 @@ def doctor(
     ``"fit"`` (default) to fit it with the base model before any effect is looked for
     (:func:`didim.doctor.fit.fit_friction_law`), None for didim's default. ``controller_check``: as for
     :func:`didim.identify`, on both records."""
-    from ..api import _has_joint_columns
+    from ..api import _has_joint_columns, _robot_plant
     from ..robots import Robot
 
-    if isinstance(model, Robot) or _has_joint_columns(recording):
+    if _robot_plant(model, recording):
+        offset = None  # a bare robot: its model's default (an offset per joint)
+        if isinstance(model, Model) and model.robot is not None:  # a robot's model: its robot and offset
+            model, offset = model.robot, model.offset
         if not isinstance(model, Robot) or not _has_joint_columns(recording):
             raise DataError("a robot's record is diagnosed with its didim.Robot: didim.doctor(rec, robot, "
                             "validate=...) with rec = didim.load_record(path, robot=robot)")
@@ -871,7 +874,7 @@ def doctor(
         from .robot import doctor_robot
 
         return doctor_robot(recording, model, validate, progress=progress,  # type: ignore[return-value]
-                            controller_check=controller_check)
+                            controller_check=controller_check, offset=offset)
     apM, alpha, max_findings = _check_arguments(recording, model, validate, apM, alpha, max_findings, cutoff_hz,
                                                 holdout, progress)
     from ..check import enforce
