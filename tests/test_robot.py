@@ -85,6 +85,12 @@ def test_the_dynamics_agree_with_pinocchio(robots_dir, case):
     _close(many, np.array([pin.rnea(m, d, *x).copy() for x in zip(q, v, a)]), "rnea of many states")
     assert robot.mass_matrix(q).shape == (40, robot.ndof, robot.ndof)
     assert robot.regressor(q, v, a).shape == (40, robot.ndof, 10 * robot.ndof)
+    # only some standard parameters' columns: those of the whole regressor, bit for bit
+    cols = [3, 0, 10 * robot.ndof - 1, 3]
+    assert np.array_equal(robot.regressor(q, v, a, columns=cols), robot.regressor(q, v, a)[..., cols])
+    assert np.array_equal(robot.regressor(q[0], v[0], a[0], columns=cols), robot.regressor(q[0], v[0], a[0])[:, cols])
+    with pytest.raises(didim.DataError, match="standard parameters"):
+        robot.regressor(q, v, a, columns=[10 * robot.ndof])
     # rotor inertia on the diagonal, as Pinocchio's armature
     arm = np.linspace(0.1, 0.3, m.nv)
     m.armature = arm

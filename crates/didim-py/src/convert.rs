@@ -2,7 +2,8 @@
 
 use std::borrow::Cow;
 
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use didim_core::filter::Decimation;
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyOverflowError, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyComplex, PyInt};
@@ -33,6 +34,44 @@ pub fn columns2(a: &PyReadonlyArray2<'_, f64>) -> (Vec<f64>, usize, usize) {
         out.extend(col.iter().copied());
     }
     (out, n, p)
+}
+
+/// A 2-D array (n, p) to decimate column by column: borrowed row-major when C-contiguous,
+/// borrowed column-major when Fortran-contiguous, copied column-major otherwise.
+pub enum Matrix<'a> {
+    RowMajor(&'a [f64]),
+    ColMajor(Cow<'a, [f64]>),
+}
+
+impl<'a> Matrix<'a> {
+    /// The matrix of `a`, with its shape (n, p).
+    pub fn of(a: &'a PyReadonlyArray2<'_, f64>) -> (Self, usize, usize) {
+        let (n, p) = (a.shape()[0], a.shape()[1]);
+        if let Ok(s) = a.as_slice() {
+            if a.is_c_contiguous() {
+                return (Matrix::RowMajor(s), n, p);
+            }
+            if a.is_fortran_contiguous() {
+                return (Matrix::ColMajor(Cow::Borrowed(s)), n, p);
+            }
+        }
+        let (c, n, p) = columns2(a);
+        (Matrix::ColMajor(Cow::Owned(c)), n, p)
+    }
+
+    /// `dec`'s parallel decimation of `y` and the `p` columns of this matrix: (y_dec, w_dec
+    /// column-major).
+    pub fn decimate(
+        &self,
+        dec: &Decimation,
+        y: &[f64],
+        p: usize,
+    ) -> Result<(Vec<f64>, Vec<f64>), didim_core::Error> {
+        match self {
+            Matrix::RowMajor(w) => dec.apply_parallel_rows(y, w, p),
+            Matrix::ColMajor(w) => dec.apply_parallel(y, w, p),
+        }
+    }
 }
 
 /// A column-major (n, p) buffer -> a 2-D numpy array (n, p).

@@ -488,9 +488,9 @@ fn decimate<'py>(
     let (cutoff_hz, fs_hz) = (cutoff_hz.map(|r| r.0), fs_hz.map(|r| r.0));
     let y = slice1(&y);
     let y: &[f64] = &y;
-    let (wc, n, p) = match &w {
-        Some(w) => columns2(w),
-        None => (Vec::new(), y.len(), 0),
+    let (wm, n, p) = match &w {
+        Some(w) => Matrix::of(w),
+        None => (Matrix::ColMajor(Vec::new().into()), y.len(), 0),
     };
     let (yd, wd) = run(py, || {
         let dec = problem::make_decimation(factor, kind, order, cutoff_hz, fs_hz, form)?;
@@ -500,7 +500,7 @@ fn decimate<'py>(
                 y.len()
             )));
         }
-        dec.apply_parallel(y, &wc, p)
+        wm.decimate(&dec, y, p)
     })?;
     let m = yd.len();
     let wd = if w.is_some() {

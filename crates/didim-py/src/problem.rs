@@ -90,9 +90,9 @@ impl Decimation {
     ) -> PyResult<Decimated<'py>> {
         let y = slice1(&y);
         let y: &[f64] = &y;
-        let (wc, n, p) = match &w {
-            Some(w) => columns2(w),
-            None => (Vec::new(), y.len(), 0),
+        let (wm, n, p) = match &w {
+            Some(w) => Matrix::of(w),
+            None => (Matrix::ColMajor(Vec::new().into()), y.len(), 0),
         };
         let (yd, wd) = run(py, || {
             if p > 0 && n != y.len() {
@@ -101,7 +101,7 @@ impl Decimation {
                     y.len()
                 )));
             }
-            self.inner.apply_parallel(y, &wc, p)
+            wm.decimate(&self.inner, y, p)
         })?;
         let m = yd.len();
         let wd = match w {

@@ -4,13 +4,19 @@
 use didim_core::error::Error;
 use didim_core::model::{FrictionLaw, LawShape};
 use didim_core::robot::{
-    map_rows, simulate_robot as simulate_robot_core, Drives, JointKind, Robot as CoreRobot, RobotLoopOptions,
-    BODY_PARAMS,
+    map_rows_into, regressor_rows, simulate_robot as simulate_robot_core, Drives, JointKind,
+    Robot as CoreRobot, RobotLoopOptions, BODY_PARAMS,
 };
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 
 use crate::run;
+
+/// One row's outputs, computed, copied into its place.
+fn put(dst: &mut [f64], got: Result<Vec<f64>, Error>) -> Result<(), Error> {
+    dst.copy_from_slice(&got?);
+    Ok(())
+}
 
 /// A row-major copy of an (N, n) array.
 fn flat(a: &PyReadonlyArray2<'_, f64>) -> Vec<f64> {
@@ -31,12 +37,12 @@ impl PyRobot {
         inputs: Vec<Vec<f64>>,
         width: usize,
         shape: Vec<usize>,
-        f: impl Fn(&CoreRobot, &[&[f64]]) -> Result<Vec<f64>, Error> + Sync + Send,
+        f: impl Fn(&CoreRobot, &[&[f64]], &mut [f64]) -> Result<(), Error> + Sync + Send,
     ) -> PyResult<Bound<'py, PyAny>> {
         let robot = &self.inner;
         let out = run(py, || {
             let refs: Vec<&[f64]> = inputs.iter().map(|v| v.as_slice()).collect();
-            map_rows(robot, &refs, width, |row| f(robot, row))
+            map_rows_into(robot, &refs, width, |row, dst| f(robot, row, dst))
         })?;
         Ok(PyArray1::from_vec(py, out).reshape(shape)?.into_any())
     }
@@ -135,7 +141,7 @@ impl PyRobot {
             vec![flat(&q), flat(&v), flat(&a)],
             n,
             vec![rows, n],
-            |r, x| r.rnea(x[0], x[1], x[2]),
+            |r, x, dst| put(dst, r.rnea(x[0], x[1], x[2])),
         )
     }
 
@@ -156,15 +162,15 @@ impl PyRobot {
             vec![flat(&q), flat(&v), flat(&tau)],
             n,
             vec![rows, n],
-            move |r, x| r.aba(x[0], x[1], x[2], armature.as_deref()),
+            move |r, x, dst| put(dst, r.aba(x[0], x[1], x[2], armature.as_deref())),
         )
     }
 
     /// Gravity torques of N positions (N, n) -> (N, n).
     fn gravity<'py>(&self, py: Python<'py>, q: PyReadonlyArray2<'py, f64>) -> PyResult<Bound<'py, PyAny>> {
         let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
-        self.batch(py, vec![flat(&q)], n, vec![rows, n], |r, x| {
-            r.gravity_torque(x[0])
+        self.batch(py, vec![flat(&q)], n, vec![rows, n], |r, x, dst| {
+            put(dst, r.gravity_torque(x[0]))
         })
     }
 
@@ -175,30 +181,30 @@ impl PyRobot {
         q: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
-        self.batch(py, vec![flat(&q)], n * n, vec![rows, n, n], |r, x| {
+        self.batch(py, vec![flat(&q)], n * n, vec![rows, n, n], |r, x, dst| {
             // nalgebra is column-major; the matrix is symmetric
-            r.mass_matrix(x[0]).map(|m| m.as_slice().to_vec())
+            put(dst, r.mass_matrix(x[0]).map(|m| m.as_slice().to_vec()))
         })
     }
 
     /// The inverse-dynamics regressor of N states (N, n) -> (N, n, 10 n), linear in
-    /// `inertial_params`.
+    /// `inertial_params`; with `columns`, only those standard parameters' columns
+    /// (N, n, len(columns)), the others never stored.
+    #[pyo3(signature = (q, v, a, columns=None))]
     fn regressor<'py>(
         &self,
         py: Python<'py>,
         q: PyReadonlyArray2<'py, f64>,
         v: PyReadonlyArray2<'py, f64>,
         a: PyReadonlyArray2<'py, f64>,
+        columns: Option<Vec<usize>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
-        let p = BODY_PARAMS * n;
-        self.batch(
-            py,
-            vec![flat(&q), flat(&v), flat(&a)],
-            n * p,
-            vec![rows, n, p],
-            |r, x| r.regressor(x[0], x[1], x[2]),
-        )
+        let robot = &self.inner;
+        let (n, rows) = (robot.ndof(), q.as_array().nrows());
+        let m = columns.as_ref().map_or(BODY_PARAMS * n, Vec::len);
+        let (q, v, a) = (flat(&q), flat(&v), flat(&a));
+        let out = run(py, || regressor_rows(robot, &q, &v, &a, columns.as_deref()))?;
+        Ok(PyArray1::from_vec(py, out).reshape(vec![rows, n, m])?.into_any())
     }
 }
 

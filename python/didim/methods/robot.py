@@ -162,10 +162,10 @@ def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, 
     out = np.zeros((len(q), n, nb + (3 if offset else 2) * n))
     ind = np.asarray(base.independent)
     arm, body = ind[ind < n], ind[ind >= n]  # rotor inertias' columns, then the bodies'
-    y = robot.regressor(q, v, a)  # (N, n, 10 n)
     pos = np.arange(nb)
-    # the independent columns are sorted, the rotor inertias' first: the bodies' fill one slice
-    out[:, :, len(arm):nb] = np.take(y, body - n, axis=2)
+    # the independent columns are sorted, the rotor inertias' first: the bodies' fill one slice (the core writes
+    # only those of the (N, n, 10 n) regressor)
+    out[:, :, len(arm):nb] = robot.regressor(q, v, a, columns=body - n)
     idx = np.arange(n)
     for k, col in zip(pos[:len(arm)], arm):
         out[:, col, k] = a[:, col]  # a rotor inertia acts on its own joint's row, times its acceleration
@@ -257,7 +257,9 @@ def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray,
     for j in range(y.shape[1]):
         act = np.flatnonzero(acting[j])
         if len(act):
-            yd, wa = dec.apply(np.ascontiguousarray(y[:, j]), np.ascontiguousarray(w[:, j, act]))
+            # w[:, j, act] is gathered Fortran-ordered: the core reads its columns in place (a C-ordered copy
+            # transposed it twice, 3x the cost of its decimation)
+            yd, wa = dec.apply(np.ascontiguousarray(y[:, j]), w[:, j, act])
         else:
             yd, wa = dec(np.ascontiguousarray(y[:, j])), None
         keep = np.abs(dec(np.ascontiguousarray(v[:, j]))) > SLOW_SHARE * vmax[j]

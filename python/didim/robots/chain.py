@@ -173,11 +173,19 @@ class Robot:
         out = self._core.mass_matrix(q)
         return out[0] if one else out
 
-    def regressor(self, q, v, a) -> np.ndarray:
+    def regressor(self, q, v, a, columns=None) -> np.ndarray:
         """The inverse-dynamics regressor: (n, 10 n), or (N, n, 10 n), with
-        ``rnea(q, v, a) = regressor(q, v, a) @ inertial_params``."""
+        ``rnea(q, v, a) = regressor(q, v, a) @ inertial_params``; with ``columns`` (indices of standard
+        parameters), only their columns, ``regressor(q, v, a)[..., columns]`` without storing the others."""
         (q, v, a), one = self._states(q=q, v=v, a=a)
-        out = self._core.regressor(q, v, a)
+        cols = None
+        if columns is not None:
+            c = np.asarray(columns).ravel()
+            p = 10 * self.ndof
+            if c.size and (not np.issubdtype(c.dtype, np.integer) or np.any((c < 0) | (c >= p))):
+                raise DataError(f"regressor columns must be indices of the {p} standard parameters, got {columns!r}")
+            cols = [int(x) for x in c]
+        out = self._core.regressor(q, v, a, cols)
         return out[0] if one else out
 
 

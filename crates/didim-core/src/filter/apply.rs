@@ -1,6 +1,7 @@
 //! Applying a filter: causal (`lfilter`, `sosfilt` and their steady states) and zero-phase (`filtfilt`, `sosfiltfilt`).
 
 use super::*;
+use super::{lanes, Prepared};
 
 /// Filters `x` with `tf` (direct form II transposed), like
 /// `scipy.signal.lfilter(tf.b, tf.a, x, zi=zi)` (returns `y` only).
@@ -215,7 +216,7 @@ pub fn filtfilt(tf: &Tf, x: &[f64], padlen: Option<usize>) -> Result<Vec<f64>> {
     )?;
     let zi = lfilter_zi_checked(&tf.b, &tf.a)?;
     let (b, a) = normalized_ba(&tf.b, &tf.a).ok_or_else(|| invalid!("filter coefficients are malformed"))?;
-    finite_output(filtfilt_core(&b, &a, &zi, x, edge), "x")
+    finite_output(lanes::filtfilt_one(&Prepared::Ba { b, a, zi }, x, edge), "x")
 }
 
 /// The filtered signal, or an error when it is not finite: the filter is unstable or its gain (after dividing by
@@ -244,7 +245,10 @@ pub fn sosfiltfilt(sos: &Sos, x: &[f64], padlen: Option<usize>) -> Result<Vec<f6
     let edge = padlen.unwrap_or_else(|| sos_default_padlen(&norm));
     check_record(x, edge, "x", &format!("{} second-order sections", norm.len()))?;
     let zi = sosfilt_zi_checked(sos)?;
-    finite_output(sosfiltfilt_core(&norm, &zi, x, edge), "x")
+    finite_output(
+        lanes::filtfilt_one(&Prepared::Sos { sos: norm, zi }, x, edge),
+        "x",
+    )
 }
 
 pub(super) fn sos_default_padlen(sos: &[[f64; 6]]) -> usize {
@@ -315,7 +319,11 @@ pub(super) fn check_record(x: &[f64], edge: usize, name: &str, filter: &str) -> 
     Ok(())
 }
 
+// The one-column reference of the zero-phase filters: what the kernels of `lanes` compute,
+// lane by lane, in the same operation order (the tests compare them bit for bit).
+
 /// scipy's `odd_ext(x, n)`.
+#[cfg(test)]
 pub(super) fn odd_ext(x: &[f64], n: usize) -> Vec<f64> {
     let len = x.len();
     if n == 0 || len == 0 {
@@ -330,6 +338,7 @@ pub(super) fn odd_ext(x: &[f64], n: usize) -> Vec<f64> {
 }
 
 /// Forward-backward pass; `b`, `a` normalised, `x.len() > edge`.
+#[cfg(test)]
 pub(super) fn filtfilt_core(b: &[f64], a: &[f64], zi: &[f64], x: &[f64], edge: usize) -> Vec<f64> {
     let ext = odd_ext(x, edge);
     let x0 = ext.first().copied().unwrap_or(0.0);
@@ -346,6 +355,7 @@ pub(super) fn filtfilt_core(b: &[f64], a: &[f64], zi: &[f64], x: &[f64], edge: u
 }
 
 /// Forward-backward pass through sections; `x.len() > edge`.
+#[cfg(test)]
 pub(super) fn sosfiltfilt_core(sos: &[[f64; 6]], zi: &[[f64; 2]], x: &[f64], edge: usize) -> Vec<f64> {
     let ext = odd_ext(x, edge);
     let x0 = ext.first().copied().unwrap_or(0.0);

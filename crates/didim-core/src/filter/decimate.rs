@@ -27,7 +27,7 @@ pub(super) enum Prepared {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Decimation {
     filter: Option<ZeroPhase>,
-    prepared: Prepared,
+    pub(super) prepared: Prepared,
     factor: usize,
     order: usize,
     padlen: usize,
@@ -214,7 +214,7 @@ impl Decimation {
     }
 
     pub(super) fn apply_named(&self, x: &[f64], name: &str) -> Result<Vec<f64>> {
-        let filtered = match &self.prepared {
+        let desc = match &self.prepared {
             Prepared::Identity => {
                 if x.is_empty() {
                     return Err(invalid!("{name} is empty; the decimator needs at least 1 sample"));
@@ -222,29 +222,23 @@ impl Decimation {
                 check_record(x, 0, name, "identity")?;
                 return Ok(x.to_vec());
             }
-            Prepared::Ba { b, a, zi } => {
-                let desc = format!("order-{} ba filter, padlen {}", self.order, self.padlen);
-                check_record(x, self.padlen, name, &desc)?;
-                finite_output(filtfilt_core(b, a, zi, x, self.padlen), name)?
-            }
-            Prepared::Sos { sos, zi } => {
-                let desc = format!("order-{} sos filter, padlen {}", self.order, self.padlen);
-                check_record(x, self.padlen, name, &desc)?;
-                finite_output(sosfiltfilt_core(sos, zi, x, self.padlen), name)?
-            }
+            Prepared::Ba { .. } => format!("order-{} ba filter, padlen {}", self.order, self.padlen),
+            Prepared::Sos { .. } => format!("order-{} sos filter, padlen {}", self.order, self.padlen),
         };
-        let n = filtered.len();
-        let r = self.factor;
-        let start = match self.alignment {
-            Alignment::First => 0,
-            // MATLAB: nbeg (1-based) = r - (r*nout - n), i.e. the last sample
-            // n - 1 is kept and the first is (n - 1) - (nout - 1) r.
-            Alignment::Last => {
-                let skipped = self.output_len(n).saturating_sub(1).saturating_mul(r);
-                n.saturating_sub(1).saturating_sub(skipped)
-            }
-        };
-        Ok(filtered.iter().skip(start).step_by(r).copied().collect())
+        check_record(x, self.padlen, name, &desc)?;
+        let start = self.start_index(x.len());
+        let out = lanes::filtfilt_slice(
+            &self.prepared,
+            1,
+            x.len(),
+            |_, i| x[i],
+            self.padlen,
+            start,
+            self.factor,
+        )
+        .pop()
+        .unwrap_or_default();
+        finite_output(out, name)
     }
 
     /// Parallel decimation of paper section III: the same filter and slicing
@@ -259,29 +253,43 @@ impl Decimation {
     /// non-finite values.
     pub fn apply_parallel(&self, y: &[f64], w: &[f64], ncols: usize) -> Result<(Vec<f64>, Vec<f64>)> {
         let n = y.len();
-        let expected = n.checked_mul(ncols).ok_or_else(|| {
-            invalid!("w: n = {n} rows times ncols = {ncols} columns overflows; check ncols")
-        })?;
-        if w.len() != expected {
-            return Err(invalid!(
-                "w has {} values but y has n = {n} samples and ncols = {ncols}: w must be the column-major n x ncols regressor ({expected} values); check ncols and that y and the columns of w have the same length",
-                w.len()
-            ));
-        }
+        check_matrix(w, n, ncols, "column-major")?;
         let mut cols: Vec<&[f64]> = Vec::with_capacity(ncols + 1);
         cols.push(y);
         if n > 0 {
             cols.extend(w.chunks(n));
         }
-        let mut out = self.apply_columns(&cols, |j| {
-            if j == 0 {
-                "y".into()
-            } else {
-                format!("w column {}", j - 1)
-            }
-        })?;
+        let mut out = self.apply_columns(&cols, y_or_column)?;
         let yd = out.remove(0);
         Ok((yd, out.concat()))
+    }
+
+    /// [`Decimation::apply_parallel`] with `w` stored row-major (`w[i*ncols + j]` is row `i`
+    /// of column `j`, a C-ordered `n × ncols` array): the columns are read in place, without
+    /// a transposed copy. The same result, bit for bit, and the same errors; `w_dec` is
+    /// column-major as there.
+    pub fn apply_parallel_rows(&self, y: &[f64], w: &[f64], ncols: usize) -> Result<(Vec<f64>, Vec<f64>)> {
+        let n = y.len();
+        check_matrix(w, n, ncols, "row-major")?;
+        let column = |j: usize| -> Vec<f64> { w.iter().skip(j).step_by(ncols.max(1)).copied().collect() };
+        self.check_column(y, &y_or_column(0))?;
+        if w.iter().any(|v| !v.is_finite()) {
+            // the first column (in column order) with a non-finite value is named, as apply_parallel does
+            for j in 0..ncols {
+                self.check_column(&column(j), &y_or_column(j + 1))?;
+            }
+        }
+        let at = |j: usize, i: usize| if j == 0 { y[i] } else { w[i * ncols + (j - 1)] };
+        let mut out = self.decimate(ncols + 1, n, at);
+        let yd = out.remove(0);
+        let wd = out.concat();
+        // never NaN silently: an overflowing pass is an error naming the column
+        let m = yd.len();
+        let yd = finite_output(yd, "y")?;
+        if let Some(j) = wd.iter().position(|v| !v.is_finite()).map(|i| i / m.max(1)) {
+            finite_output(wd[j * m..(j + 1) * m].to_vec(), &y_or_column(j + 1))?;
+        }
+        Ok((yd, wd))
     }
 
     /// Decimates equal-length columns alike, [`lanes::LANES`] columns at a time through
@@ -291,10 +299,6 @@ impl Decimation {
         let Some(n) = cols.first().map(|c| c.len()) else {
             return Ok(Vec::new());
         };
-        let edge = match self.prepared {
-            Prepared::Identity => 0,
-            _ => self.padlen,
-        };
         for (j, c) in cols.iter().enumerate() {
             if c.len() != n {
                 return Err(invalid!(
@@ -303,43 +307,67 @@ impl Decimation {
                     c.len()
                 ));
             }
-            match &self.prepared {
-                Prepared::Identity => {
-                    if c.is_empty() {
-                        return Err(invalid!(
-                            "{} is empty; the decimator needs at least 1 sample",
-                            name(j)
-                        ));
-                    }
-                    check_record(c, 0, &name(j), "identity")?;
-                }
-                Prepared::Ba { .. } => check_record(
-                    c,
-                    edge,
-                    &name(j),
-                    &format!("order-{} ba filter, padlen {}", self.order, self.padlen),
-                )?,
-                Prepared::Sos { .. } => check_record(
-                    c,
-                    edge,
-                    &name(j),
-                    &format!("order-{} sos filter, padlen {}", self.order, self.padlen),
-                )?,
-            }
+            self.check_column(c, &name(j))?;
         }
-        let start = self.start_index(n);
-        let r = self.factor;
-        let groups: Vec<Vec<Vec<f64>>> = cols
-            .par_chunks(lanes::LANES)
-            .map(|g| lanes::filtfilt_slice(&self.prepared, g, edge, start, r))
-            .collect();
         // never NaN silently: an overflowing pass is an error naming the column
-        groups
+        self.decimate(cols.len(), n, |j, i| cols[j][i])
             .into_iter()
-            .flatten()
             .enumerate()
             .map(|(j, c)| finite_output(c, &name(j)))
             .collect()
+    }
+
+    /// Length and finiteness of one column (`check_record` with this decimator's padding).
+    fn check_column(&self, c: &[f64], name: &str) -> Result<()> {
+        match &self.prepared {
+            Prepared::Identity => {
+                if c.is_empty() {
+                    return Err(invalid!("{name} is empty; the decimator needs at least 1 sample"));
+                }
+                check_record(c, 0, name, "identity")
+            }
+            Prepared::Ba { .. } => check_record(
+                c,
+                self.padlen,
+                name,
+                &format!("order-{} ba filter, padlen {}", self.order, self.padlen),
+            ),
+            Prepared::Sos { .. } => check_record(
+                c,
+                self.padlen,
+                name,
+                &format!("order-{} sos filter, padlen {}", self.order, self.padlen),
+            ),
+        }
+    }
+
+    /// The decimated columns `0..ncols` of `n` validated samples, column `j`'s sample `i`
+    /// being `at(j, i)`: groups of [`lanes::LANES`] columns in parallel.
+    fn decimate(&self, ncols: usize, n: usize, at: impl Fn(usize, usize) -> f64 + Sync) -> Vec<Vec<f64>> {
+        let edge = match self.prepared {
+            Prepared::Identity => 0,
+            _ => self.padlen,
+        };
+        let start = self.start_index(n);
+        let r = self.factor;
+        let at = &at;
+        let group = |g: usize| {
+            let j0 = g * lanes::LANES;
+            let k = lanes::LANES.min(ncols - j0);
+            lanes::filtfilt_slice(&self.prepared, k, n, |c, i| at(j0 + c, i), edge, start, r)
+        };
+        match ncols.div_ceil(lanes::LANES) {
+            // one group (one to four columns) on this thread: handing it to the pool would add a
+            // thread hand-off to a fraction of a millisecond of filtering
+            1 => group(0),
+            groups => (0..groups)
+                .into_par_iter()
+                .map(group)
+                .collect::<Vec<_>>()
+                .into_iter()
+                .flatten()
+                .collect(),
+        }
     }
 
     /// First kept sample of a filtered record of `n` samples.
@@ -354,6 +382,29 @@ impl Decimation {
             }
         }
     }
+}
+
+/// Names `y` (column 0) and the columns of `w` in the errors of the parallel decimation.
+fn y_or_column(j: usize) -> String {
+    if j == 0 {
+        "y".into()
+    } else {
+        format!("w column {}", j - 1)
+    }
+}
+
+/// `w` holds `n × ncols` values.
+fn check_matrix(w: &[f64], n: usize, ncols: usize, layout: &str) -> Result<()> {
+    let expected = n
+        .checked_mul(ncols)
+        .ok_or_else(|| invalid!("w: n = {n} rows times ncols = {ncols} columns overflows; check ncols"))?;
+    if w.len() != expected {
+        return Err(invalid!(
+            "w has {} values but y has n = {n} samples and ncols = {ncols}: w must be the {layout} n x ncols regressor ({expected} values); check ncols and that y and the columns of w have the same length",
+            w.len()
+        ));
+    }
+    Ok(())
 }
 
 pub(super) fn check_factor(factor: usize) -> Result<()> {

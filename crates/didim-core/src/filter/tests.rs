@@ -648,3 +648,152 @@ fn zero_phase_output_has_no_lag_and_unit_dc_gain() {
         .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
     assert!(err < 1e-6, "{err}");
 }
+
+/// Bitwise equality of two results, or the same error.
+fn same_bits(got: &Result<Vec<f64>>, want: &Result<Vec<f64>>) -> bool {
+    match (got, want) {
+        (Ok(g), Ok(w)) => g.len() == w.len() && g.iter().zip(w).all(|(a, b)| a.to_bits() == b.to_bits()),
+        (Err(g), Err(w)) => format!("{g}") == format!("{w}"),
+        _ => false,
+    }
+}
+
+#[test]
+fn zero_phase_kernels_equal_the_one_column_reference_bit_for_bit() {
+    // every number of sections and of states, unrolled kernels and the general loops alike
+    let x = &x_ref()[..400];
+    for order in 1..=20 {
+        for (kind, wn) in [(0.0, 0.3), (0.0, 0.05), (1.0, 0.2)] {
+            let sos = design_sos(kind, order as f64, 0.5, wn);
+            let norm = validate_sos(&sos).unwrap();
+            let zi = sosfilt_zi_checked(&sos).unwrap();
+            for padlen in [None, Some(0), Some(7)] {
+                let edge = padlen.unwrap_or_else(|| sos_default_padlen(&norm));
+                let want = finite_output(sosfiltfilt_core(&norm, &zi, x, edge), "x");
+                let got = sosfiltfilt(&sos, x, padlen);
+                assert!(
+                    same_bits(&got, &want),
+                    "sos order {order} kind {kind} wn {wn} padlen {padlen:?}"
+                );
+            }
+            if order <= 12 {
+                let tf = design_ba(kind, order as f64, 0.5, wn);
+                let zi = lfilter_zi_checked(&tf.b, &tf.a).unwrap();
+                let (b, a) = normalized_ba(&tf.b, &tf.a).unwrap();
+                for padlen in [None, Some(0), Some(5)] {
+                    let edge = padlen.unwrap_or(3 * tf.a.len().max(tf.b.len()));
+                    let want = finite_output(filtfilt_core(&b, &a, &zi, x, edge), "x");
+                    let got = filtfilt(&tf, x, padlen);
+                    assert!(
+                        same_bits(&got, &want),
+                        "ba order {order} kind {kind} wn {wn} padlen {padlen:?}"
+                    );
+                }
+            }
+        }
+    }
+    // a gain alone (one coefficient each): y = x · b0 · b0
+    let tf = Tf {
+        b: vec![0.5],
+        a: vec![2.0],
+    };
+    let want: Vec<f64> = x.iter().map(|v| v * 0.25 * 0.25).collect();
+    assert!(same_bits(&filtfilt(&tf, x, None), &Ok(want)));
+}
+
+#[test]
+fn decimated_groups_of_any_size_equal_the_one_column_reference() {
+    let x = x_ref();
+    let n = 700;
+    let cols: Vec<Vec<f64>> = (0..9)
+        .map(|j| {
+            (0..n)
+                .map(|i| x[(i * (j + 2) + 5 * j) % x.len()] * (j as f64 - 3.5))
+                .collect()
+        })
+        .collect();
+    for d in [
+        Decimation::butterworth(4, 40.0, 1000.0, 5, FilterForm::Sos).unwrap(),
+        Decimation::butterworth(11, 90.0, 1000.0, 3, FilterForm::Sos).unwrap(),
+        Decimation::butterworth(4, 40.0, 1000.0, 5, FilterForm::Ba).unwrap(),
+        Decimation::matlab(10).unwrap(),
+        Decimation::matlab(1).unwrap(),
+    ] {
+        let reference = |c: &[f64]| -> Vec<f64> {
+            let full = match &d.prepared {
+                Prepared::Identity => c.to_vec(),
+                Prepared::Ba { b, a, zi } => filtfilt_core(b, a, zi, c, d.padlen()),
+                Prepared::Sos { sos, zi } => sosfiltfilt_core(sos, zi, c, d.padlen()),
+            };
+            full.iter()
+                .skip(d.start_index(n))
+                .step_by(d.factor())
+                .copied()
+                .collect()
+        };
+        for k in 1..=cols.len() {
+            let refs: Vec<&[f64]> = cols[..k].iter().map(Vec::as_slice).collect();
+            let got = d.apply_columns(&refs, |j| format!("c{j}")).unwrap();
+            for (j, g) in got.into_iter().enumerate() {
+                assert!(
+                    same_bits(&Ok(g), &Ok(reference(&cols[j]))),
+                    "{d:?}: {k} columns, column {j}"
+                );
+            }
+        }
+        assert!(same_bits(&d.apply(&cols[3]), &Ok(reference(&cols[3]))));
+    }
+}
+
+#[test]
+fn row_major_parallel_decimation_equals_column_major() {
+    let x = x_ref();
+    let n = 500;
+    let y = &x[..n];
+    for d in [
+        Decimation::butterworth(4, 40.0, 1000.0, 5, FilterForm::Sos).unwrap(),
+        Decimation::butterworth(4, 40.0, 1000.0, 5, FilterForm::Ba).unwrap(),
+        Decimation::matlab(10).unwrap(),
+        Decimation::matlab(1).unwrap(),
+    ] {
+        for ncols in 0..=7 {
+            let colmajor: Vec<f64> = (0..ncols)
+                .flat_map(|j| (0..n).map(move |i| x[(i * (j + 1) + 3 * j) % x.len()] * (j as f64 + 0.5)))
+                .collect();
+            let rowmajor: Vec<f64> = (0..n)
+                .flat_map(|i| (0..ncols).map(move |j| (i, j)))
+                .map(|(i, j)| colmajor[j * n + i])
+                .collect();
+            let (yc, wc) = d.apply_parallel(y, &colmajor, ncols).unwrap();
+            let (yr, wr) = d.apply_parallel_rows(y, &rowmajor, ncols).unwrap();
+            assert!(same_bits(&Ok(yr), &Ok(yc)), "{d:?} {ncols}");
+            assert!(same_bits(&Ok(wr), &Ok(wc)), "{d:?} {ncols}");
+            if ncols >= 3 {
+                // the same errors: the first column (in column order) with a non-finite value
+                let (mut c2, mut r2) = (colmajor.clone(), rowmajor.clone());
+                for (i, j) in [(40, 2), (9, 1)] {
+                    c2[j * n + i] = f64::INFINITY;
+                    r2[i * ncols + j] = f64::INFINITY;
+                }
+                let ec = msg(d.apply_parallel(y, &c2, ncols).unwrap_err());
+                let er = msg(d.apply_parallel_rows(y, &r2, ncols).unwrap_err());
+                assert_eq!(ec, er);
+                assert!(
+                    ec.contains("w column 1 has a non-finite value at index 9 (inf)"),
+                    "{ec}"
+                );
+                let mut ybad = y.to_vec();
+                ybad[3] = f64::NAN;
+                assert_eq!(
+                    msg(d.apply_parallel(&ybad, &c2, ncols).unwrap_err()),
+                    msg(d.apply_parallel_rows(&ybad, &r2, ncols).unwrap_err())
+                );
+            }
+        }
+    }
+    let d = Decimation::matlab(10).unwrap();
+    let m = msg(d.apply_parallel_rows(&y[..20], &[0.0; 40], 2).unwrap_err());
+    assert!(m.contains("too short"), "{m}");
+    let m = msg(d.apply_parallel_rows(y, &[0.0; 999], 2).unwrap_err());
+    assert!(m.contains("row-major") && m.contains("999"), "{m}");
+}

@@ -310,13 +310,29 @@ impl Robot {
     /// The inverse-dynamics regressor at one state: `Y` (n × 10n, row-major) with
     /// `rnea(q, v, a) = Y · inertial_params()`, gravity included.
     pub fn regressor(&self, q: &[f64], v: &[f64], a: &[f64]) -> Result<Vec<f64>> {
+        let n = self.ndof();
+        let mut y = vec![0.0; n * BODY_PARAMS * n];
+        self.regressor_into(q, v, a, &mut y)?;
+        Ok(y)
+    }
+
+    /// [`Robot::regressor`] written into `y` (`n × 10n` values, row-major), without allocating
+    /// it: for many states in a row ([`map_rows_into`]).
+    pub fn regressor_into(&self, q: &[f64], v: &[f64], a: &[f64], y: &mut [f64]) -> Result<()> {
         self.check("q", q)?;
         self.check("v", v)?;
         self.check("a", a)?;
         let n = self.ndof();
         let p = BODY_PARAMS * n;
+        if y.len() != n * p {
+            return Err(invalid!(
+                "the regressor of a {n}-joint robot has {} values, got room for {}",
+                n * p,
+                y.len()
+            ));
+        }
         let (poses, vel, acc) = self.forward(q, v, a, true);
-        let mut y = vec![0.0; n * p];
+        y.fill(0.0);
         // joint j's torque from body i's force f is s_j · X*_{j<-i} f = (X_{i<-j} s_j) · f: the
         // ancestors' axes carried out to each body (one motion transform per pair), rather than
         // each body's ten unit forces carried in to every ancestor (ten force transforms per pair)
@@ -335,7 +351,7 @@ impl Robot {
                 }
             }
         }
-        Ok(y)
+        Ok(())
     }
 }
 
@@ -348,6 +364,82 @@ pub fn map_rows(
     width: usize,
     f: impl Fn(&[&[f64]]) -> Result<Vec<f64>> + Sync,
 ) -> Result<Vec<f64>> {
+    map_rows_into(robot, inputs, width, |row, dst| {
+        let got = f(row)?;
+        if got.len() != dst.len() {
+            return Err(invalid!(
+                "the function gave {} outputs per row, {} expected",
+                got.len(),
+                dst.len()
+            ));
+        }
+        dst.copy_from_slice(&got);
+        Ok(())
+    })
+}
+
+/// [`map_rows`] with `f` writing each row's `width` outputs in place (`f(row, dst)`): no
+/// allocation per row.
+pub fn map_rows_into(
+    robot: &Robot,
+    inputs: &[&[f64]],
+    width: usize,
+    f: impl Fn(&[&[f64]], &mut [f64]) -> Result<()> + Sync,
+) -> Result<Vec<f64>> {
+    map_rows_with(robot, inputs, width, || (), |_, row, dst| f(row, dst))
+}
+
+/// The regressor ([`Robot::regressor`]) of many states, `q`, `v`, `a` row-major (`rows × n`
+/// values each), keeping only the standard parameters `columns` (indices into the `10 n`,
+/// in any order; all of them for `None`): `rows × n × columns.len()` values, row-major. The
+/// columns left out are never stored: a fit on a robot's base parameters keeps about half
+/// of them, and the full array of a long record is tens of megabytes written afresh.
+pub fn regressor_rows(
+    robot: &Robot,
+    q: &[f64],
+    v: &[f64],
+    a: &[f64],
+    columns: Option<&[usize]>,
+) -> Result<Vec<f64>> {
+    let n = robot.ndof();
+    let p = BODY_PARAMS * n;
+    let inputs = [q, v, a];
+    let Some(cols) = columns else {
+        return map_rows_into(robot, &inputs, n * p, |x, dst| {
+            robot.regressor_into(x[0], x[1], x[2], dst)
+        });
+    };
+    if let Some(&c) = cols.iter().find(|&&c| c >= p) {
+        return Err(invalid!(
+            "regressor column {c} is out of range: a {n}-joint robot has {p} standard parameters"
+        ));
+    }
+    let m = cols.len();
+    map_rows_with(
+        robot,
+        &inputs,
+        n * m,
+        || vec![0.0; n * p],
+        |full, x, dst| {
+            robot.regressor_into(x[0], x[1], x[2], full)?;
+            for (d, src) in dst.chunks_exact_mut(m.max(1)).zip(full.chunks_exact(p)) {
+                for (o, &c) in d.iter_mut().zip(cols) {
+                    *o = src[c];
+                }
+            }
+            Ok(())
+        },
+    )
+}
+
+/// [`map_rows_into`] with a scratch value per task (`init()`), passed to `f` with each row.
+fn map_rows_with<S>(
+    robot: &Robot,
+    inputs: &[&[f64]],
+    width: usize,
+    init: impl Fn() -> S + Sync + Send,
+    f: impl Fn(&mut S, &[&[f64]], &mut [f64]) -> Result<()> + Sync,
+) -> Result<Vec<f64>> {
     use rayon::prelude::*;
     let n = robot.ndof();
     let rows = inputs.first().map_or(0, |x| x.len() / n);
@@ -359,17 +451,17 @@ pub fn map_rows(
         }
     }
     let mut out = crate::error::filled(rows * width, 0.0, "the robot's outputs")?;
-    out.par_chunks_mut(width.max(1))
-        .enumerate()
-        .try_for_each(|(r, dst)| {
-            let row: Vec<&[f64]> = inputs.iter().map(|x| &x[r * n..(r + 1) * n]).collect();
-            let got = f(&row).map_err(|e| match e {
+    out.par_chunks_mut(width.max(1)).enumerate().try_for_each_init(
+        || (Vec::with_capacity(inputs.len()), init()),
+        |(row, scratch): &mut (Vec<&[f64]>, S), (r, dst)| {
+            row.clear();
+            row.extend(inputs.iter().map(|x| &x[r * n..(r + 1) * n]));
+            f(scratch, row, dst).map_err(|e| match e {
                 crate::Error::InvalidInput(m) => invalid!("row {r}: {m}"),
                 other => other,
-            })?;
-            dst.copy_from_slice(&got);
-            Ok(())
-        })?;
+            })
+        },
+    )?;
     Ok(out)
 }
 

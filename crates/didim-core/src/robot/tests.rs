@@ -97,6 +97,37 @@ fn the_regressor_times_the_parameters_is_newton_euler() {
 }
 
 #[test]
+fn the_regressor_of_many_states_keeps_the_columns_asked_for() {
+    let r = Robot::from_urdf(CHAIN, None).unwrap();
+    let (n, p, rows) = (3, 30, 7);
+    let (q, v, a) = (state(n * rows, 1), state(n * rows, 2), state(n * rows, 3));
+    let full = regressor_rows(&r, &q, &v, &a, None).unwrap();
+    assert_eq!(full.len(), rows * n * p);
+    let cols = [29, 0, 7, 7, 12];
+    let some = regressor_rows(&r, &q, &v, &a, Some(&cols)).unwrap();
+    assert_eq!(some.len(), rows * n * cols.len());
+    for row in 0..rows {
+        let one = r
+            .regressor(&q[row * n..][..n], &v[row * n..][..n], &a[row * n..][..n])
+            .unwrap();
+        assert_eq!(&full[row * n * p..][..n * p], &one[..]);
+        for j in 0..n {
+            for (c, &col) in cols.iter().enumerate() {
+                assert_eq!(
+                    some[(row * n + j) * cols.len() + c].to_bits(),
+                    one[j * p + col].to_bits()
+                );
+            }
+        }
+    }
+    assert!(regressor_rows(&r, &q, &v, &a, Some(&[])).unwrap().is_empty());
+    let e = regressor_rows(&r, &q, &v, &a, Some(&[3, 30])).unwrap_err();
+    assert!(format!("{e}").contains("column 30 is out of range"), "{e}");
+    let e = regressor_rows(&r, &q, &v, &a[1..], None).unwrap_err();
+    assert!(format!("{e}").contains("same number of rows"), "{e}");
+}
+
+#[test]
 fn forward_dynamics_inverts_inverse_dynamics() {
     let r = Robot::from_urdf(CHAIN, None).unwrap();
     for seed in 0..20 {
