@@ -43,6 +43,33 @@ def test_added_regressor_test_detects_a_real_effect():
     assert t.p_value < 1e-6 and t.beta[0] == pytest.approx(0.6, abs=0.1)
 
 
+def test_the_statistics_written_without_scipy_signal_equal_scipys():
+    """welch, the AR prewhitening and the distributions' tails are SciPy's (its signal and stats modules cost more
+    to import than a doctor's round): equal to rounding, on signals of several lengths and segment sizes."""
+    import scipy.signal as ss
+    import scipy.stats as st
+
+    from didim.signal import welch
+    from didim.stats import ar_fit, prewhiten
+
+    rng = np.random.default_rng(11)
+    for n, nperseg, fs in ((5000, 512, 166.7), (24841, 1024, 1000.0), (300, 512, 100.0), (1001, 63, 1.0)):
+        x = np.cumsum(rng.standard_normal(n))
+        f, pxx = welch(x, fs, nperseg)
+        f_ref, pxx_ref = ss.welch(x, fs=fs, nperseg=min(nperseg, n))
+        np.testing.assert_allclose(f, f_ref, rtol=1e-12)
+        np.testing.assert_allclose(pxx, pxx_ref, rtol=1e-9, atol=1e-12 * pxx_ref.max())
+    x = lfilter([1.0], [1.0, -0.6, 0.2], rng.standard_normal(3000))
+    a = ar_fit(x)
+    np.testing.assert_allclose(a, [1.0, -0.6, 0.2], atol=0.06)  # Yule-Walker on 3000 samples: ±2/√n per coefficient
+    cols = np.column_stack([x, rng.standard_normal(3000)])
+    np.testing.assert_allclose(prewhiten(a, cols)[0], lfilter(a, [1.0], cols, axis=0)[len(a) - 1:], atol=1e-12)
+    t = wald_added(x, rng.standard_normal((3000, 2)), a)
+    assert t.p_value == pytest.approx(st.f.sf(t.statistic / 2, 2, 3000 - (len(a) - 1) - 2), rel=1e-9)
+    stat, p, _ = diebold_mariano(x, 0.97 * x + 0.05 * rng.standard_normal(3000))
+    assert p == pytest.approx(st.norm.sf(stat), rel=1e-9, abs=1e-300)
+
+
 def test_holm_and_diebold_mariano():
     np.testing.assert_allclose(holm([0.01, 0.04, 0.03]), [0.03, 0.06, 0.06])
     rng = np.random.default_rng(9)

@@ -47,6 +47,24 @@ def _wn(cutoff_hz: float, fs_hz: float) -> float:
     return cutoff_hz / (fs_hz / 2)
 
 
+def welch(x, fs: float, nperseg: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Welch's power spectral density of a 1-D signal (unit²/Hz): Hann-windowed segments of ``nperseg`` samples
+    overlapping by half, each with its mean removed, one-sided; SciPy's ``scipy.signal.welch`` with its defaults
+    (the doctor's only use of ``scipy.signal``, whose import costs more than a doctor's round). Returns (f, psd)."""
+    x = np.asarray(x, float)
+    nperseg = int(min(nperseg, len(x)))
+    if nperseg < 1:
+        raise DataError("welch needs at least one sample")
+    step = nperseg - nperseg // 2
+    starts = np.arange(0, len(x) - nperseg + 1, step)
+    win = 0.5 - 0.5 * np.cos(2 * np.pi * np.arange(nperseg) / nperseg)  # periodic Hann
+    seg = x[starts[:, None] + np.arange(nperseg)]
+    seg = (seg - seg.mean(axis=1, keepdims=True)) * win
+    pxx = np.abs(np.fft.rfft(seg, axis=1)) ** 2 / (fs * float(win @ win))
+    pxx[:, 1:(nperseg + 1) // 2] *= 2  # one-sided: the negative frequencies' power, not at 0 Hz nor at Nyquist
+    return np.fft.rfftfreq(nperseg, 1 / fs), pxx.mean(axis=0)
+
+
 def diffcent(x, dt: float) -> np.ndarray:
     """Central difference ``(x[k+1] − x[k−1]) / (2·dt)``, one-sided at both ends (the EMPS benchmark's ``diffcent``)."""
     x = _checks.real_array("the signal to differentiate", x, (1, 2))

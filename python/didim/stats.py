@@ -17,11 +17,10 @@ def ar_fit(x: np.ndarray, max_order: int = 8) -> np.ndarray:
     max_order = max(0, min(max_order, n // 4))  # a short residual supports only a low order
     r = np.correlate(x, x, "full")[n - 1 : n + max_order] / n
     best, best_aic = np.array([1.0]), n * math.log(max(r[0], 1e-300))
+    lags = np.abs(np.subtract.outer(np.arange(max_order), np.arange(max_order)))
     for p in range(1, max_order + 1):
-        from scipy.linalg import solve_toeplitz
-
-        try:
-            phi = solve_toeplitz(r[:p], r[1 : p + 1])
+        try:  # the Yule-Walker equations: a p × p Toeplitz system (p ≤ 8), solved directly
+            phi = np.linalg.solve(r[lags[:p, :p]], r[1 : p + 1])
         except np.linalg.LinAlgError:
             break
         s2 = r[0] - phi @ r[1 : p + 1]
@@ -34,11 +33,19 @@ def ar_fit(x: np.ndarray, max_order: int = 8) -> np.ndarray:
 
 
 def prewhiten(a: np.ndarray, *arrays: np.ndarray) -> List[np.ndarray]:
-    """Filters each array (along axis 0) by the AR polynomial ``a`` and drops the first len(a) − 1 samples."""
+    """Filters each array (along axis 0) by the AR polynomial ``a`` and drops the first len(a) − 1 samples: the FIR
+    filter e[t] = Σ a[i] x[t − i] on the samples t ≥ len(a) − 1, whose past is all in the record."""
+    a = np.asarray(a, float)
     k = len(a) - 1
-    from scipy.signal import lfilter  # scipy is imported where it is used: `import didim` stays fast
-
-    return [lfilter(a, [1.0], np.asarray(x, float), axis=0)[k:] for x in arrays]
+    out = []
+    for x in arrays:
+        x = np.asarray(x, float)
+        n = len(x)
+        e = a[0] * x[k:]
+        for i in range(1, k + 1):
+            e = e + a[i] * x[k - i:n - i]
+        out.append(e)
+    return out
 
 
 def newey_west_lag(n: int) -> int:
@@ -95,9 +102,9 @@ def wald_whitened(rw: np.ndarray, xw: np.ndarray) -> WaldTest:
     cov = np.zeros((xw.shape[1], xw.shape[1]))
     cov[np.ix_(keep, keep)] = cov_s / np.outer(scale[keep], scale[keep])
     explained = 1.0 - float(e @ e) / float(rw @ rw) if rw @ rw > 0 else 0.0
-    from scipy import stats as sst
+    from scipy.special import fdtrc  # the F distribution's survival function (scipy.stats' own), without its import
 
-    return WaldTest(beta, cov, stat, k, float(sst.f.sf(stat / k, k, max(n - k, 1))), explained)
+    return WaldTest(beta, cov, stat, k, float(fdtrc(k, max(n - k, 1), stat / k)), explained)
 
 
 def holm(p_values: Sequence[float]) -> np.ndarray:
@@ -130,10 +137,10 @@ def diebold_mariano(e_before: np.ndarray, e_after: np.ndarray, loss: str = "squa
     if s <= 0:
         return 0.0, 1.0, 0.0
     stat = d.mean() / math.sqrt(s / n)
-    from scipy import stats as sst
+    from scipy.special import ndtr  # the normal distribution's survival function is ndtr(−x), as in scipy.stats
 
     gain = np.mean(np.asarray(e_before, float) ** 2 - np.asarray(e_after, float) ** 2)
-    return float(stat), float(sst.norm.sf(stat)), float(gain / np.mean(np.asarray(e_before, float) ** 2))
+    return float(stat), float(ndtr(-stat)), float(gain / np.mean(np.asarray(e_before, float) ** 2))
 
 
 def orthogonalize(x: np.ndarray, w: np.ndarray) -> np.ndarray:

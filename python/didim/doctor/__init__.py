@@ -37,7 +37,7 @@ from ..formats._io import jsonable as _clean
 from ..methods.identification import a_priori_mass
 from ..recording import Recording
 from ..result import IdentificationResult
-from ..signal import Decimation
+from ..signal import Decimation, welch
 from ..model import Model
 from ..simulation import SimResult, coulomb_eps_of, default_coulomb_eps, param_names
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
@@ -327,8 +327,6 @@ def _locate(data: Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:
     out["position"] = {"forward": binned(q, moving & (v > 0), qe), "backward": binned(q, moving & (v < 0), qe)}
     t = (data.t0 + np.arange(len(r))) / fs
     out["time"] = binned(t, np.ones(len(r), bool), np.linspace(t[0], t[-1] + 1e-9, 21))
-    from scipy.signal import welch
-
     f, pxx = welch(r, fs=fs, nperseg=min(1024, len(r)))
     out["spectrum"] = {"f": f.tolist(), "psd": pxx.tolist()}
     return out

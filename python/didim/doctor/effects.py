@@ -14,7 +14,7 @@ import numpy as np
 from .._errors import DidimError, SimulationError
 from ..methods.identification import fit_flexible_mode, flexible_from_mode
 from ..result import IdentificationResult
-from ..signal import diffcent
+from ..signal import diffcent, welch
 from ..model import knot_weights
 from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign
 from .. import units
@@ -507,8 +507,6 @@ def _flexibility_adopt(c: Candidate, state: State, data: Data, progress) -> Adop
         model="rigid", method="didim", params={k: p0[k] for k in ("M", "Fv", "Fc", "OF") if k in p0}, std={},
         rel_std_pct={}, relative_error=math.nan, iterations=0, simulations=0, elapsed_s=0.0)
     # start the mode search at the residual's spectral peak (the rigid model cannot follow the resonance)
-    from scipy.signal import welch
-
     rt, _, _ = data.errors(state)
     fs_d = data.rec.fs / data.dec.factor
     fr, pxx = welch(rt, fs=fs_d, nperseg=min(512, len(rt)))
