@@ -244,27 +244,54 @@ def _measured_states(rec: Recording, dec) -> Tuple[np.ndarray, np.ndarray, np.nd
     return q, v, a
 
 
-def _rows(dec, y: np.ndarray, w: np.ndarray, v: np.ndarray,
-          vmax: np.ndarray, start_row: int = 0) -> List[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Each joint's force and regressor rows decimated, the rows where it moves slowly (below :data:`SLOW_SHARE` of
-    its top reference speed ``vmax``) and the ``start_row`` first ones (a simulation joining a record that began
-    elsewhere: :func:`didim.methods.identification.settled_row`) left out: (force, regressor, the decimated rows kept) per
-    joint."""
-    out = []
-    # only the columns that act on a joint (a chain's joint feels the bodies beyond it and its own drive: half of a
-    # 6-joint arm's columns are zero on its rows); zero columns decimate to zero
+def _joint_columns(w: np.ndarray) -> List[Tuple[np.ndarray, np.ndarray]]:
+    """A (N, n, p) regressor as each joint's acting columns: (their indices, the N × k matrix)."""
     acting = np.any(w != 0, axis=0)
-    for j in range(y.shape[1]):
-        act = np.flatnonzero(acting[j])
+    return [(act, w[:, j, act]) for j, act in enumerate(map(np.flatnonzero, acting))]
+
+
+def _model_columns(robot: Robot, base: BaseParameters, q, v, a, offset: bool) -> List[Tuple[np.ndarray, np.ndarray]]:
+    """:func:`_model_regressor` with a zero Coulomb column (a law's is put in later), as each joint's acting columns
+    (:func:`_joint_columns`) built one joint at a time: no (N, n, p) array of mostly zeros (on a 4 kHz UR10 record,
+    111 MB written, then read again to find the columns that act)."""
+    n, nb = robot.ndof, len(base.independent)
+    ind = np.asarray(base.independent)
+    arm, body = ind[ind < n], ind[ind >= n]  # rotor inertias' columns, then the bodies'
+    yb = robot.regressor(q, v, a, columns=body - n)  # (N, n, len(body))
+    out = []
+    for j in range(n):
+        bodies = np.flatnonzero(np.any(yb[:, j, :] != 0, axis=0))
+        rotor = np.flatnonzero(arm == j)
+        act = np.concatenate([rotor, len(arm) + bodies, [nb + j], [nb + 2 * n + j] if offset else []]).astype(int)
+        m = np.empty((len(q), len(act)), order="F")
+        m[:, :len(rotor)] = a[:, [j] * len(rotor)]  # a rotor inertia acts on its own joint's row, times its acceleration
+        m[:, len(rotor):len(rotor) + len(bodies)] = yb[:, j, bodies]
+        m[:, len(rotor) + len(bodies)] = v[:, j]
+        if offset:
+            m[:, -1] = 1.0
+        out.append((act, m))
+    return out
+
+
+def _rows(dec, y: np.ndarray, columns: List[Tuple[np.ndarray, np.ndarray]], p: int, v: np.ndarray,
+          vmax: np.ndarray, start_row: int = 0) -> List[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Each joint's force and regressor rows decimated (``columns``: each joint's acting columns among ``p``, as
+    :func:`_joint_columns` gives them; a chain's joint feels the bodies beyond it and its own drive: half of a
+    6-joint arm's columns are zero on its rows, and zero columns decimate to zero), the rows where it moves slowly
+    (below :data:`SLOW_SHARE` of its top reference speed ``vmax``) and the ``start_row`` first ones (a simulation
+    joining a record that began elsewhere: :func:`didim.methods.identification.settled_row`) left out: (force,
+    regressor, the decimated rows kept) per joint."""
+    out = []
+    for j, (act, mat) in enumerate(columns):
         if len(act):
-            # w[:, j, act] is gathered Fortran-ordered: the core reads its columns in place (a C-ordered copy
-            # transposed it twice, 3x the cost of its decimation)
-            yd, wa = dec.apply(np.ascontiguousarray(y[:, j]), w[:, j, act])
+            # the core reads a C- or Fortran-ordered matrix's columns in place (numpy's gather w[:, j, act] is
+            # Fortran-ordered; a C-ordered copy transposed it twice, 3x the cost of its decimation)
+            yd, wa = dec.apply(np.ascontiguousarray(y[:, j]), mat)
         else:
             yd, wa = dec(np.ascontiguousarray(y[:, j])), None
         keep = np.abs(dec(np.ascontiguousarray(v[:, j]))) > SLOW_SHARE * vmax[j]
         keep[:start_row] = False
-        wd = np.zeros((int(keep.sum()), w.shape[2]))
+        wd = np.zeros((int(keep.sum()), p))
         if wa is not None:
             wd[:, act] = wa[keep]
         out.append((yd[keep], wd, keep))
@@ -282,9 +309,9 @@ class _InverseModel:
         self.robot, self.base, self.offset, self.dec, self.v = robot, base, offset, dec, v
         n, nb = robot.ndof, len(base.names)
         self.n, self.nb = n, nb
-        w = _model_regressor(robot, base, q, v, a, offset, ("algebraic", (0.0,) * n))
-        w[:, np.arange(n), nb + n + np.arange(n)] = 0.0  # each joint's Coulomb column is the law's (see rows)
-        got = _rows(dec, rec.applied_force() if y is None else y, w, v, top_speeds(rec), start_row)
+        # each joint's Coulomb column is left out here: it is the law's (see rows)
+        got = _rows(dec, rec.applied_force() if y is None else y, _model_columns(robot, base, q, v, a, offset),
+                    nb + (3 if offset else 2) * n, v, top_speeds(rec), start_row)
         self.parts = [(yd, wd) for yd, wd, _ in got]
         self.keep = [keep for _, _, keep in got]
 
@@ -978,7 +1005,7 @@ class _PayloadPlant:
         q, v, a = sim["q"], sim["qd"], sim["qdd"]
         known = np.einsum("kjp,p->kj", _model_regressor(res.robot, res.base, q, v, a, res.offset, self.law), self.theta)
         w = res.robot.regressor(q, v, a)[:, :, -10:][:, :, self.free]
-        rows = _rows(self.dec, rec.applied_force() - known, w, v, top_speeds(rec))
+        rows = _rows(self.dec, rec.applied_force() - known, _joint_columns(w), w.shape[2], v, top_speeds(rec))
         est, cov, fit = _weighted_fit([(yd, wd) for yd, wd, _ in rows])
         return {"params": est, "covariance": cov, "std": np.sqrt(np.maximum(np.diag(cov), 0.0)), **fit}
 
