@@ -7,16 +7,17 @@ the Panda (example-robot-data's URDFs; the Panda's fingers locked) and the data 
     python benches/pinocchio_compare.py --repeats 9 --rounds 40 --states 500
 
 Pinocchio's side is benches/pinocchio/bench.cpp, compiled here with g++ -O3 -march=native -DNDEBUG against the
-headers and shared libraries of the `pin` wheel (its cmeel.prefix): the algorithms are templates, instantiated in
-that file for this processor, as a user building Pinocchio gets them. didim's side is the Rust example
-crates/didim-core/examples/pinocchio_compare.rs (cargo build --release, the build users get). Both read the same
-states, write their results, which are checked against each other (1e-9 of the largest entry, as
-tests/test_robot.py), and only then time each algorithm: ns per call over the states, best and median of the
-rounds; the two programs alternate `--repeats` times so that a busy spell of the machine falls on both.
+headers of the `pin` wheel (its cmeel.prefix): the algorithms are templates, instantiated in that file for this
+processor, as a user building Pinocchio gets them. Its model is the one pin's URDF parser builds (from Python),
+handed over as joint types, placements and inertias and rebuilt there (Model::addJoint): the wheel's compiled parser
+returns a Model laid out for its own build, which a -march=native program cannot share. didim's side is the Rust
+example crates/didim-core/examples/pinocchio_compare.rs (cargo build --release, the build users get), reading the
+URDF itself. Both read the same states, write their results, which are checked against each other (1e-9 of the
+largest entry, as tests/test_robot.py), and only then time each algorithm: ns per call over the states, best and
+median of the rounds; the two programs alternate `--repeats` times so that a busy spell of the machine falls on both.
 
-Needs: g++ (apt-get install -y g++), cargo, and the `pin` wheel with the headers it was built against: Eigen
-(pip install cmeel-eigen, or apt-get install -y libeigen3-dev) and urdfdom's headers (pip install
-cmeel-urdfdom-headers, or apt-get install -y liburdfdom-headers-dev); example-robot-data (pip install
+Needs: g++ (apt-get install -y g++), cargo, the `pin` wheel (pip install pin) and Eigen's headers, which the wheel
+does not ship (pip install cmeel-eigen, or apt-get install -y libeigen3-dev); example-robot-data (pip install
 example-robot-data) for the URDFs. What is missing is named and the benchmark is skipped (exit status 0).
 """
 
@@ -44,15 +45,14 @@ PANDA_ARM = [f"panda_joint{i}" for i in range(1, 8)]
 #: the issue's bound, as tests/test_robot.py: relative to the largest entry of Pinocchio's result
 RTOL = 1e-9
 ALGORITHMS = ("aba", "rnea", "regressor")
-#: the compile definitions of pinocchio::pinocchio_parsers (the wheel's lib/cmake/pinocchio/pinocchioTargets.cmake),
-#: without PINOCCHIO_ENABLE_TEMPLATE_INSTANTIATION: the algorithms are compiled here, for this processor
+#: the compile definitions of pinocchio::pinocchio_headers (the wheel's lib/cmake/pinocchio/pinocchioTargets.cmake);
+#: without PINOCCHIO_ENABLE_TEMPLATE_INSTANTIATION the algorithms are compiled in bench.cpp, for this processor
 DEFINES = ["BOOST_MPL_LIMIT_LIST_SIZE=30", "BOOST_MPL_LIMIT_VECTOR_SIZE=30", "BOOST_MPL_CFG_NO_PREPROCESSED_HEADERS",
-           "BOOST_FUSION_INVOKE_MAX_ARITY=12", "PINOCCHIO_WITH_URDFDOM", "PINOCCHIO_URDFDOM_HEADERS_MAJOR_VERSION=3",
-           "PINOCCHIO_URDFDOM_HEADERS_MINOR_VERSION=0", "PINOCCHIO_URDFDOM_HEADERS_PATCH_VERSION=0"]
-#: EIGEN_MAX_ALIGN_BYTES=16: the wheel's libraries are built for any x86-64 (16-byte alignment, plain malloc); with
-#: AVX this file's Eigen would otherwise align to 32 bytes by a hand-made allocator, and free the libraries' vectors
-#: (the URDF parser's) as its own: a crash. AVX and FMA are still used, with unaligned loads.
-CXXFLAGS = ["-std=c++17", "-O3", "-march=native", "-DNDEBUG", "-DEIGEN_MAX_ALIGN_BYTES=16"]
+           "BOOST_FUSION_INVOKE_MAX_ARITY=12"]
+CXXFLAGS = ["-std=c++17", "-O3", "-march=native", "-DNDEBUG"]
+#: pin's joint models as bench.cpp builds them
+JOINT_TYPES = {"JointModelRX": "RX", "JointModelRY": "RY", "JointModelRZ": "RZ", "JointModelRevoluteUnaligned": "RU",
+               "JointModelPX": "PX", "JointModelPY": "PY", "JointModelPZ": "PZ", "JointModelPrismaticUnaligned": "PU"}
 
 
 class Missing(Exception):
@@ -74,8 +74,7 @@ def _prefixes() -> list[pathlib.Path]:
 def _find(prefixes, relative: str, what: str, how: str) -> pathlib.Path:
     """The first prefix holding `relative` (returns the prefix's directory that holds it)."""
     for p in prefixes:
-        for base in (p / "include", p / "include" / "eigen3", p / "include" / "urdfdom_headers", p / "lib",
-                     p / "lib" / "x86_64-linux-gnu"):
+        for base in (p / "include", p / "include" / "eigen3"):
             if (base / relative).exists():
                 return base
     raise Missing(f"{what} not found ({relative} in {', '.join(str(p) for p in prefixes)}): {how}")
@@ -94,20 +93,13 @@ def compile_pinocchio(build: pathlib.Path) -> pathlib.Path:
     incs = [_find(pre, "pinocchio/algorithm/aba.hpp", "Pinocchio's headers", "pip install pin"),
             _find(pre, "boost/variant.hpp", "boost's headers", "pip install cmeel-boost"),
             _find(pre, "Eigen/Core", "Eigen's headers",
-                  "pip install cmeel-eigen (or apt-get install -y libeigen3-dev)"),
-            _find(pre, "urdf_model/model.h", "urdfdom's headers",
-                  "pip install cmeel-urdfdom-headers (or apt-get install -y liburdfdom-headers-dev)")]
-    libs = [_find(pre, "libpinocchio_parsers.so", "Pinocchio's libraries", "pip install pin"),
-            _find(pre, "liburdfdom_model.so", "urdfdom's library", "pip install cmeel-urdfdom")]
+                  "pip install cmeel-eigen (or apt-get install -y libeigen3-dev)")]
     exe = build / f"pinocchio_bench-{version}"
     if exe.exists() and exe.stat().st_mtime > max(SOURCE.stat().st_mtime, pathlib.Path(__file__).stat().st_mtime):
         return exe
     build.mkdir(parents=True, exist_ok=True)
     cmd = [gxx, *CXXFLAGS, *(f"-D{d}" for d in DEFINES), *(f"-I{i}" for i in dict.fromkeys(incs)),
            str(SOURCE), "-o", str(exe)]
-    for lib in dict.fromkeys(libs):
-        cmd += [f"-L{lib}", f"-Wl,-rpath,{lib}"]
-    cmd += ["-lpinocchio_parsers", "-lpinocchio_default", "-lurdfdom_model"]
     print("compiling Pinocchio's side:", " ".join(cmd), file=sys.stderr)
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode:
@@ -148,14 +140,32 @@ def robots() -> list[tuple[str, str, list[str] | None]]:
     return out
 
 
-def write_states(path: pathlib.Path, urdf: str, joints, k: int, seed: int) -> int:
-    """K random states within the joints' limits (±π where there are none), speeds and accelerations N(0, 1),
-    torques 10·N(0, 1), and an armature 0.01..0.3 per joint; returns the number of joints."""
-    import pinocchio as pin  # the pin wheel's Python side: the model's limits, reduced as tests/test_robot.py
+def write_model(path: pathlib.Path, urdf: str, joints) -> "pin.Model":
+    """The model that pin's URDF parser builds (reduced to `joints` as tests/test_robot.py does), written for
+    bench.cpp: per joint its type, parent, axis, placement, mass, centre of mass and inertia about it."""
+    import pinocchio as pin
 
     m = pin.buildModelFromUrdf(urdf)
     if joints is not None:
         m = pin.buildReducedModel(m, [m.getJointId(j) for j in m.names[1:] if j not in joints], pin.neutral(m))
+    lines = [str(m.njoints - 1)]
+    for i in range(1, m.njoints):
+        kind = m.joints[i].shortname()
+        if kind not in JOINT_TYPES:
+            raise Missing(f"joint {m.names[i]} is a {kind}, which bench.cpp does not build")
+        axis = m.joints[i].extract().axis if kind.endswith("Unaligned") else np.zeros(3)
+        body, place = m.inertias[i], m.jointPlacements[i]
+        ii = body.inertia
+        nums = [*axis, *place.rotation.reshape(-1), *place.translation, body.mass, *body.lever,
+                ii[0, 0], ii[0, 1], ii[1, 1], ii[0, 2], ii[1, 2], ii[2, 2]]
+        lines.append(f"{JOINT_TYPES[kind]} {m.parents[i]} " + " ".join(repr(float(x)) for x in nums))
+    path.write_text("\n".join(lines) + "\n")
+    return m
+
+
+def write_states(path: pathlib.Path, m, k: int, seed: int) -> int:
+    """K random states within the joints' limits (±π where there are none), speeds and accelerations N(0, 1),
+    torques 10·N(0, 1), and an armature 0.01..0.3 per joint; returns the number of joints."""
     n = m.nv
     lo = np.where(np.isfinite(m.lowerPositionLimit), m.lowerPositionLimit, -np.pi)
     hi = np.where(np.isfinite(m.upperPositionLimit), m.upperPositionLimit, np.pi)
@@ -187,8 +197,10 @@ def check(didim_out, pin_out) -> dict[str, float]:
     return errs
 
 
-def run(exe, urdf, states, out, rounds, joints) -> dict[str, tuple[float, float]]:
-    cmd = [str(exe), urdf, str(states), str(out), str(rounds)] + ([",".join(joints)] if joints else [])
+def run(exe, inputs, states, out, rounds) -> dict[str, tuple[float, float]]:
+    """One program run: `exe MODEL STATES OUT ROUNDS` (Pinocchio's) or `exe URDF STATES OUT ROUNDS [JOINTS]`
+    (didim's); its times per algorithm, best and median pass."""
+    cmd = [str(exe), inputs[0], str(states), str(out), str(rounds), *inputs[1:]]
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{r.stderr}")
@@ -243,10 +255,12 @@ def main(argv=None) -> int:
     rows = []
     for label, urdf, joints in cases:
         states, pin_res, didim_res = build / "states.txt", build / "pinocchio.txt", build / "didim.txt"
-        n = write_states(states, urdf, joints, args.states, args.seed)
+        model = build / "model.txt"
+        n = write_states(states, write_model(model, urdf, joints), args.states, args.seed)
+        inputs = {"pin": [str(model)], "didim": [urdf] + ([",".join(joints)] if joints else [])}
         # the first run of each writes its results: compared before anything is timed
-        best = {"pin": run(pin_exe, urdf, states, pin_res, 1, joints),
-                "didim": run(didim_exe, urdf, states, didim_res, 1, joints)}
+        run(pin_exe, inputs["pin"], states, pin_res, 1)
+        run(didim_exe, inputs["didim"], states, didim_res, 1)
         errs = check(read_results(didim_res, n), read_results(pin_res, n))
         bad = {k: e for k, e in errs.items() if not e < RTOL}
         if bad:
@@ -254,7 +268,7 @@ def main(argv=None) -> int:
         runs = {"pin": [], "didim": []}
         for rep in range(args.repeats):
             for side, exe in (("pin", pin_exe), ("didim", didim_exe))[:: 1 if rep % 2 == 0 else -1]:
-                runs[side].append(run(exe, urdf, states, build / f"{side}-timed.txt", args.rounds, joints))
+                runs[side].append(run(exe, inputs[side], states, build / f"{side}-timed.txt", args.rounds))
         for alg in ALGORITHMS:
             t = {s: (min(r[alg][0] for r in runs[s]), float(np.median([r[alg][1] for r in runs[s]])))
                  for s in runs}

@@ -1,26 +1,28 @@
 // Pinocchio's aba, rnea and joint-torque regressor timed on given states: the C++ half of
 // benches/pinocchio_compare.py, which builds this file against the `pin` wheel's headers and
-// libraries and runs it beside didim's own timing binary on the same URDF and the same states.
+// runs it beside didim's own timing binary on the same robot and the same states.
 //
-// bench URDF STATES OUT ROUNDS [JOINT,JOINT,...]
+// bench MODEL STATES OUT ROUNDS
+//   MODEL:  the model that pin's URDF parser built (the driver writes it from Python): the number
+//           of joints, then per joint its type (RX RY RZ RU PX PY PZ PU), parent, axis (3), placement
+//           rotation (9, row-major) and translation (3), mass, centre of mass (3) and inertia about
+//           it (Ixx Ixy Iyy Ixz Iyz Izz). Rebuilt here with Model::addJoint and appendBodyToJoint,
+//           all in this file (header-only): the wheel's compiled parser hands over a Model whose
+//           layout is not this -march=native build's.
 //   STATES: "n K", then K rows of q, K of v, K of a, K of tau (n values each), then the armature
 //           (n values: aba's only)
 //   OUT:    per state, aba's n values, rnea's n, the regressor's n x 10n (row-major), one per line
 //   prints: "<algorithm> <best ns per call> <median ns per call>" for aba, rnea, regressor
-// With joints given, the others are locked at zero (pinocchio::buildReducedModel), as didim does.
 #include <pinocchio/algorithm/aba.hpp>
-#include <pinocchio/algorithm/joint-configuration.hpp>
-#include <pinocchio/algorithm/model.hpp>
 #include <pinocchio/algorithm/regressor.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
-#include <pinocchio/parsers/urdf.hpp>
+#include <pinocchio/multibody.hpp>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -35,27 +37,66 @@ static std::vector<Vec> read_rows(std::istream & in, int rows, int n)
   return out;
 }
 
+static bool read_model(const char * path, pinocchio::Model & model)
+{
+  using namespace pinocchio;
+  std::ifstream in(path);
+  int joints;
+  in >> joints;
+  for (int i = 1; i <= joints && in; ++i)
+  {
+    std::string type;
+    int parent;
+    Eigen::Vector3d axis, p, com;
+    Eigen::Matrix3d r;
+    double mass, ixx, ixy, iyy, ixz, iyz, izz;
+    in >> type >> parent >> axis[0] >> axis[1] >> axis[2];
+    for (int k = 0; k < 9; ++k)
+      in >> r(k / 3, k % 3);
+    in >> p[0] >> p[1] >> p[2] >> mass >> com[0] >> com[1] >> com[2] >> ixx >> ixy >> iyy >> ixz
+      >> iyz >> izz;
+    const SE3 placement(r, p);
+    const std::string name = "joint" + std::to_string(i);
+    JointIndex id;
+    if (type == "RX")
+      id = model.addJoint(parent, JointModelRX(), placement, name);
+    else if (type == "RY")
+      id = model.addJoint(parent, JointModelRY(), placement, name);
+    else if (type == "RZ")
+      id = model.addJoint(parent, JointModelRZ(), placement, name);
+    else if (type == "RU")
+      id = model.addJoint(parent, JointModelRevoluteUnaligned(axis), placement, name);
+    else if (type == "PX")
+      id = model.addJoint(parent, JointModelPX(), placement, name);
+    else if (type == "PY")
+      id = model.addJoint(parent, JointModelPY(), placement, name);
+    else if (type == "PZ")
+      id = model.addJoint(parent, JointModelPZ(), placement, name);
+    else if (type == "PU")
+      id = model.addJoint(parent, JointModelPrismaticUnaligned(axis), placement, name);
+    else
+    {
+      std::cerr << "joint type " << type << " is not one this benchmark builds\n";
+      return false;
+    }
+    model.appendBodyToJoint(
+      id, Inertia(mass, com, Symmetric3(ixx, ixy, iyy, ixz, iyz, izz)), SE3::Identity());
+  }
+  return bool(in);
+}
+
 int main(int argc, char ** argv)
 {
   if (argc < 5)
   {
-    std::cerr << "usage: bench URDF STATES OUT ROUNDS [JOINT,JOINT,...]\n";
+    std::cerr << "usage: bench MODEL STATES OUT ROUNDS\n";
     return 2;
   }
-  pinocchio::Model full;
-  pinocchio::urdf::buildModel(argv[1], full);
-  pinocchio::Model model = full;
-  if (argc > 5)
+  pinocchio::Model model;
+  if (!read_model(argv[1], model))
   {
-    std::vector<std::string> keep;
-    std::stringstream ss(argv[5]);
-    for (std::string name; std::getline(ss, name, ',');)
-      keep.push_back(name);
-    std::vector<pinocchio::JointIndex> lock;
-    for (pinocchio::JointIndex j = 1; j < (pinocchio::JointIndex)full.njoints; ++j)
-      if (std::find(keep.begin(), keep.end(), full.names[j]) == keep.end())
-        lock.push_back(j);
-    model = pinocchio::buildReducedModel(full, lock, pinocchio::neutral(full));
+    std::cerr << "could not read the model\n";
+    return 2;
   }
   std::ifstream in(argv[2]);
   int n, k;
