@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import hashlib
 import importlib.metadata
 import os
 import pathlib
@@ -94,14 +95,15 @@ def compile_pinocchio(build: pathlib.Path) -> pathlib.Path:
             _find(pre, "boost/variant.hpp", "boost's headers", "pip install cmeel-boost"),
             _find(pre, "Eigen/Core", "Eigen's headers",
                   "pip install cmeel-eigen (or apt-get install -y libeigen3-dev)")]
-    exe = build / f"pinocchio_bench-{version}"
-    if exe.exists() and exe.stat().st_mtime > max(SOURCE.stat().st_mtime, pathlib.Path(__file__).stat().st_mtime):
+    flags = [*CXXFLAGS, *(f"-D{d}" for d in DEFINES), *(f"-I{i}" for i in dict.fromkeys(incs))]
+    key = hashlib.sha1(SOURCE.read_bytes() + " ".join([gxx, *flags]).encode()).hexdigest()[:10]
+    exe = build / f"pinocchio_bench-{version}-{key}"  # built again when the source or the flags change
+    if exe.exists():
         return exe
     build.mkdir(parents=True, exist_ok=True)
-    cmd = [gxx, *CXXFLAGS, *(f"-D{d}" for d in DEFINES), *(f"-I{i}" for i in dict.fromkeys(incs)),
-           str(SOURCE), "-o", str(exe)]
+    cmd = [gxx, *flags, str(SOURCE), "-o", str(exe)]
     print("compiling Pinocchio's side:", " ".join(cmd), file=sys.stderr)
-    r = subprocess.run(cmd, capture_output=True, text=True)
+    r = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if r.returncode:
         sys.stderr.write(r.stderr[-4000:])
         raise SystemExit("bench.cpp did not compile (above)")
@@ -140,7 +142,7 @@ def robots() -> list[tuple[str, str, list[str] | None]]:
     return out
 
 
-def write_model(path: pathlib.Path, urdf: str, joints) -> "pin.Model":
+def write_model(path: pathlib.Path, urdf: str, joints):
     """The model that pin's URDF parser builds (reduced to `joints` as tests/test_robot.py does), written for
     bench.cpp: per joint its type, parent, axis, placement, mass, centre of mass and inertia about it."""
     import pinocchio as pin
@@ -176,8 +178,7 @@ def write_states(path: pathlib.Path, m, k: int, seed: int) -> int:
     with open(path, "w") as f:
         f.write(f"{n} {k}\n")
         for block in (q, v, a, tau):
-            for row in block:
-                f.write(" ".join(repr(float(x)) for x in row) + "\n")
+            f.writelines(" ".join(repr(float(x)) for x in row) + "\n" for row in block)
         f.write(" ".join(repr(float(x)) for x in arm) + "\n")
     return n
 
@@ -201,7 +202,7 @@ def run(exe, inputs, states, out, rounds) -> dict[str, tuple[float, float]]:
     """One program run: `exe MODEL STATES OUT ROUNDS` (Pinocchio's) or `exe URDF STATES OUT ROUNDS [JOINTS]`
     (didim's); its times per algorithm, best and median pass."""
     cmd = [str(exe), inputs[0], str(states), str(out), str(rounds), *inputs[1:]]
-    r = subprocess.run(cmd, capture_output=True, text=True)
+    r = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if r.returncode:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{r.stderr}")
     times = {}
@@ -214,16 +215,14 @@ def run(exe, inputs, states, out, rounds) -> dict[str, tuple[float, float]]:
 def machine() -> dict[str, str]:
     cpu = "?"
     try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+        with open("/proc/cpuinfo") as f:
+            cpu = next((x.split(":", 1)[1].strip() for x in f if x.startswith("model name")), cpu)
     except OSError:
         pass
 
     def version(cmd):
         try:
-            return subprocess.run(cmd, capture_output=True, text=True).stdout.splitlines()[0]
+            return subprocess.run(cmd, capture_output=True, text=True, check=False).stdout.splitlines()[0]
         except (OSError, IndexError):
             return "?"
 
