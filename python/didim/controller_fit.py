@@ -208,6 +208,25 @@ def _lagged(x: np.ndarray, lags: range) -> np.ndarray:
     return out
 
 
+#: The least damping ratio a fitted law's oscillating poles may have. A drive's filters ring little (a low-pass's
+#: poles at ζ ≥ 0.5, a notch's at 0.1–1); a law with poles at ζ → 0 away from zero frequency is a resonator, which
+#: replays a sine or a multisine the drive added to its command (a dither, an injected excitation the controller did
+#: not make) from the positions' response to it: fitted on an EMPS-like log carrying a 30 Hz dither of 1 % of the
+#: force, such a law replayed it to 0.00 % and the right controller, which does not make the dither, was refused.
+MIN_POLE_DAMPING = 0.1
+
+
+def _resonant(poles: np.ndarray, dt: float) -> bool:
+    """Whether a pole oscillates (complex, or on the negative real axis) with a damping ratio below
+    :data:`MIN_POLE_DAMPING`: s = ln(z)/dt, ζ = −Re(s)/|s|."""
+    z = poles[(np.abs(poles.imag) > 1e-12) | (poles.real < 0)]
+    z = z[np.abs(z) > 1e-12]
+    if not z.size:
+        return False
+    s = np.log(z.astype(complex)) / dt
+    return bool(np.any(-s.real < MIN_POLE_DAMPING * np.abs(s)))
+
+
 def _fit(qr, qm, f, rows, na, nb, d, integral) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Equation-error least squares with a denominator of order ``na``, numerators of ``nb + 1`` taps and a delay of
     ``d`` samples on ``rows``: (b_r, b_y, a) or None. The law is regressed on the tracking error ``qr − qm`` (through
@@ -274,7 +293,10 @@ def fit_controller(rec_or_signals, *, holdout: float = 0.3, max_order: int = MAX
             if got is None:
                 continue
             b_r, b_y, a = got
-            if np.any(np.abs(np.roots(a)) > 1 + 1e-6):  # an unstable law is no drive's (an integrator: 1 to rounding)
+            poles = np.roots(a)
+            if np.any(np.abs(poles) > 1 + 1e-6):  # an unstable law is no drive's (an integrator: 1 to rounding)
+                continue
+            if _resonant(poles, dt):  # a law that rings is no drive's either: it replays an excitation, not a law
                 continue
             try:
                 tf = TransferFunction(tuple(b_r), tuple(a), tuple(b_y), tuple(a), dt, saturation=sat, gain=1.0)

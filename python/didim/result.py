@@ -453,6 +453,11 @@ def _check_robot_parts(d: Dict[str, Any], robot, base) -> None:
         v = params[k]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise DataError(f"its parameter {k} is {v!r}, not a finite number")
+        params[k] = float(v)  # a whole number written by hand reads as the float it means
+    extra = [k for k in params if k not in names]
+    if extra:
+        raise DataError(f"its params hold {', '.join(map(str, extra[:4]))}, which its robot's model does not have (a "
+                        "parameter added or renamed): save the result again")
 
 
 def _law_from(d: Dict[str, Any], n: int) -> Tuple[str, Tuple[float, ...]]:
