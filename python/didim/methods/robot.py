@@ -11,6 +11,7 @@ those combinations, β = K·π; their names say what each combines."""
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Tuple
@@ -583,12 +584,21 @@ def simulate_robot(rec: Recording, result: IdentificationResult, substeps: int =
     return _simulate(rec, robot, d, result.law if result.law is not None else _default_law(rec), substeps)
 
 
+#: How many closed loops this thread has simulated (a method's result reports the difference over its run).
+_count = threading.local()
+
+
+def _simulations() -> int:
+    return getattr(_count, "n", 0)
+
+
 def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law, substeps: int = 0):
     """The closed loop of ``rec`` with the robot ``robot`` and drives ``d`` under ``law``: from rest at the first
     reference, each controller's integrator holding the logged first force; through the record's lead-in
     (:attr:`Recording.qr_lead`) when it begins in motion, from rest at the lead-in's start, each integrator then
     holding the model's static torque there (gravity and offset, less the feedforward), the lead-in's samples dropped
     from the outputs."""
+    _count.n = _simulations() + 1
     qr, u_ext = rec.lead_in_signals()
     lead = len(qr) - rec.n
     force0 = rec.force[0]
@@ -698,7 +708,7 @@ def idim_ls(rec: Recording, model: Model) -> IdentificationResult:
     weighted least squares per joint, the rows where a joint moves slowly left out; the friction law's tail fitted
     with it (:func:`fit_law`), its shape through zero speed chosen in closed loop (:func:`closed_loop_law`) for the
     simulations of the result."""
-    t0 = time.perf_counter()
+    t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     base = base_parameters(robot)
     dec = _decimation(rec)
@@ -728,7 +738,7 @@ def idim_ls(rec: Recording, model: Model) -> IdentificationResult:
         res.force_error, res.force_error_per_joint = force_errors(rec, sim["force"])
     except SimulationError as e:
         res.notes.append(f"its closed loop cannot be simulated: {e}")
-    res.elapsed_s = time.perf_counter() - t0
+    res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
     return res
 
 
@@ -896,7 +906,7 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     even pulled back, or that is not physical), it runs again from IDIM-LS's estimate and keeps the run that fits the
     training record better. The result says so.
     """
-    t0 = time.perf_counter()
+    t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     _checks.options(max_iter=max_iter, tol=tol)
     say = progress or (lambda s: None)
@@ -943,7 +953,7 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     res.force_error, res.force_error_per_joint = sol["force_errors"]
     if plant.skip:
         res.start_s, res.force_error_after_start = plant.skip * rec.dt, err
-    res.elapsed_s = time.perf_counter() - t0
+    res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
     return res
 
 
