@@ -435,30 +435,23 @@ impl FrictionLaw {
             return (coulomb_sign(v, 0.0), 0.0);
         }
         match self.shape {
-            LawShape::Algebraic => coulomb_sign_and_derivative(v, eps),
-            LawShape::Tanh => {
-                // through one exponential (the C library's tanh goes through expm1: twice the time
-                // in a robot's closed loop), odd by construction, within 4 ulp of 1 of it
-                let x = v / eps;
-                let t = (1.0 - 2.0 / ((2.0 * x.abs()).exp() + 1.0)).copysign(x);
-                (t, (1.0 - t * t) / eps)
-            }
-            LawShape::Atan => {
-                let k = std::f64::consts::FRAC_PI_2 / eps;
-                let x = k * v;
-                (
-                    std::f64::consts::FRAC_2_PI * x.atan(),
-                    1.0 / (eps * (1.0 + x * x)),
-                )
-            }
-            LawShape::Exp => {
-                let e = (-(v.abs() / eps)).exp();
-                if v.is_infinite() {
-                    (v.signum(), 0.0)
-                } else {
-                    (coulomb_sign(v, 0.0) * (1.0 - e), e / eps)
-                }
-            }
+            LawShape::Algebraic => Algebraic::shape(v, eps),
+            LawShape::Tanh => Tanh::shape(v, eps),
+            LawShape::Atan => Atan::shape(v, eps),
+            LawShape::Exp => ExpRise::shape(v, eps),
+        }
+    }
+
+    /// Runs `f` with this law as a [`Law`] whose shape is a type: the shape is dispatched
+    /// here, once, and `f`'s loop is compiled for it (no branch on the shape per evaluation).
+    #[inline(always)]
+    pub(crate) fn dispatch<F: WithLaw>(self, f: F) -> F::Out {
+        let eps = self.eps;
+        match self.shape {
+            LawShape::Algebraic => f.call(Shaped::<Algebraic>::new(eps)),
+            LawShape::Tanh => f.call(Shaped::<Tanh>::new(eps)),
+            LawShape::Atan => f.call(Shaped::<Atan>::new(eps)),
+            LawShape::Exp => f.call(Shaped::<ExpRise>::new(eps)),
         }
     }
 
@@ -467,6 +460,140 @@ impl FrictionLaw {
     pub fn sign(&self, v: f64) -> f64 {
         self.sign_and_derivative(v).0
     }
+}
+
+/// A friction law as the hot loops read it: the smoothed sign of a velocity and its
+/// derivative. [`FrictionLaw`] chooses its shape at run time, per evaluation; a [`Shaped`] law
+/// has its shape in its type ([`FrictionLaw::dispatch`]), so a loop generic over the law is
+/// compiled once per shape without a branch on it. Both compute the same values, bit for bit
+/// (the same shape functions).
+pub(crate) trait Law: Copy {
+    /// The smoothed sign of `v` and its derivative with respect to `v`.
+    fn sign_and_derivative(&self, v: f64) -> (f64, f64);
+    /// The law as a value.
+    fn law(&self) -> FrictionLaw;
+}
+
+impl Law for FrictionLaw {
+    #[inline(always)]
+    fn sign_and_derivative(&self, v: f64) -> (f64, f64) {
+        FrictionLaw::sign_and_derivative(self, v)
+    }
+    #[inline(always)]
+    fn law(&self) -> FrictionLaw {
+        *self
+    }
+}
+
+/// One shape of the smoothed sign, for `eps > 0` (`eps` ≤ 0 or NaN is the hard sign for
+/// every shape, decided by the caller).
+pub(crate) trait Shape: Copy + Default {
+    const SHAPE: LawShape;
+    fn shape(v: f64, eps: f64) -> (f64, f64);
+}
+
+/// [`LawShape::Algebraic`].
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Algebraic;
+/// [`LawShape::Tanh`].
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Tanh;
+/// [`LawShape::Atan`].
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Atan;
+/// [`LawShape::Exp`].
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ExpRise;
+
+impl Shape for Algebraic {
+    const SHAPE: LawShape = LawShape::Algebraic;
+    #[inline(always)]
+    fn shape(v: f64, eps: f64) -> (f64, f64) {
+        coulomb_sign_and_derivative(v, eps)
+    }
+}
+
+impl Shape for Tanh {
+    const SHAPE: LawShape = LawShape::Tanh;
+    #[inline(always)]
+    fn shape(v: f64, eps: f64) -> (f64, f64) {
+        // through one exponential (the C library's tanh goes through expm1: twice the time
+        // in a robot's closed loop), odd by construction, within 4 ulp of 1 of it
+        let x = v / eps;
+        let t = (1.0 - 2.0 / ((2.0 * x.abs()).exp() + 1.0)).copysign(x);
+        (t, (1.0 - t * t) / eps)
+    }
+}
+
+impl Shape for Atan {
+    const SHAPE: LawShape = LawShape::Atan;
+    #[inline(always)]
+    fn shape(v: f64, eps: f64) -> (f64, f64) {
+        let k = std::f64::consts::FRAC_PI_2 / eps;
+        let x = k * v;
+        (
+            std::f64::consts::FRAC_2_PI * x.atan(),
+            1.0 / (eps * (1.0 + x * x)),
+        )
+    }
+}
+
+impl Shape for ExpRise {
+    const SHAPE: LawShape = LawShape::Exp;
+    #[inline(always)]
+    fn shape(v: f64, eps: f64) -> (f64, f64) {
+        let e = (-(v.abs() / eps)).exp();
+        if v.is_infinite() {
+            (v.signum(), 0.0)
+        } else {
+            (coulomb_sign(v, 0.0) * (1.0 - e), e / eps)
+        }
+    }
+}
+
+/// A [`FrictionLaw`] of shape `S`: the same values, the shape known at compile time.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Shaped<S: Shape> {
+    eps: f64,
+    /// `eps > 0` (else the hard sign): decided once.
+    smooth: bool,
+    shape: S,
+}
+
+impl<S: Shape> Shaped<S> {
+    #[inline(always)]
+    pub(crate) fn new(eps: f64) -> Self {
+        Self {
+            eps,
+            smooth: !(eps.is_nan() || eps <= 0.0),
+            shape: S::default(),
+        }
+    }
+}
+
+impl<S: Shape> Law for Shaped<S> {
+    #[inline(always)]
+    fn sign_and_derivative(&self, v: f64) -> (f64, f64) {
+        let _ = self.shape;
+        if !self.smooth {
+            return (coulomb_sign(v, 0.0), 0.0);
+        }
+        S::shape(v, self.eps)
+    }
+    #[inline(always)]
+    fn law(&self) -> FrictionLaw {
+        FrictionLaw {
+            shape: S::SHAPE,
+            eps: self.eps,
+        }
+    }
+}
+
+/// What runs with a [`Law`] of a static shape ([`FrictionLaw::dispatch`]): a generic
+/// function with its arguments.
+pub(crate) trait WithLaw {
+    type Out;
+    fn call<L: Law>(self, law: L) -> Self::Out;
 }
 
 /// The basis function multiplying one parameter, per degree of freedom.
@@ -675,7 +802,7 @@ impl Basis {
     /// physics of every term is here and nowhere else: the direct model, the regressor,
     /// both integrators and the sensitivities all read it.
     #[inline(always)]
-    pub(crate) fn local(&self, x: f64, xd: f64, law: FrictionLaw) -> (f64, f64, f64) {
+    pub(crate) fn local<L: Law>(&self, x: f64, xd: f64, law: L) -> (f64, f64, f64) {
         match *self {
             Basis::Inertia { .. } => (0.0, 0.0, 0.0),
             Basis::Viscous { .. } | Basis::Damper { .. } => (xd, 0.0, 1.0),
@@ -756,13 +883,13 @@ impl Basis {
 
     /// Adds `value · φ(q, q̇, q̈)` to `out`, one entry per dof.
     #[inline(always)]
-    pub(crate) fn accumulate<const N: usize>(
+    pub(crate) fn accumulate<const N: usize, L: Law>(
         &self,
         value: f64,
         q: &SVector<f64, N>,
         qd: &SVector<f64, N>,
         qdd: &SVector<f64, N>,
-        law: FrictionLaw,
+        law: L,
         out: &mut SVector<f64, N>,
     ) {
         let phi = match *self {

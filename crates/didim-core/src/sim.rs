@@ -17,7 +17,7 @@
 
 use crate::controller::Controller;
 use crate::error::{invalid, Error, Result};
-use crate::model::Model;
+use crate::model::{Law, Model, WithLaw};
 
 pub(crate) mod closed_loop;
 pub(crate) mod drive;
@@ -325,22 +325,63 @@ fn integrate<const N: usize>(
     stats: Option<&mut StepStats>,
 ) -> Result<SimOutput> {
     check_inputs(model, chi, controller, qr, u_ext, opts)?;
-    let nt = &mut NoTangent;
-    let out = match opts.integrator {
-        Integrator::Exponential => {
-            let stepper = Exponential::new(model, chi, qr, opts)?;
-            let (out, stepper) = driver::run(model, chi, controller, qr, u_ext, opts, states, stepper, nt)?;
-            if let Some(s) = stats {
-                *s = stepper.stats();
-            }
-            out
-        }
-        Integrator::Rk4 => {
-            let stepper = Rk4::new(model, chi, opts)?;
-            driver::run(model, chi, controller, qr, u_ext, opts, states, stepper, nt)?.0
-        }
-    };
+    // the loop compiled for the model's friction law: its shape dispatched once, here
+    let out = model.law().dispatch(Integrate {
+        model,
+        chi,
+        controller,
+        qr,
+        u_ext,
+        opts,
+        states,
+        stats,
+    })?;
     Ok(out.drop_front(opts.lead))
+}
+
+/// The arguments of [`integrate`], run with the model's friction law as a static shape.
+struct Integrate<'a, const N: usize> {
+    model: &'a Model<N>,
+    chi: &'a [f64],
+    controller: &'a Controller,
+    qr: &'a [f64],
+    u_ext: Option<&'a [f64]>,
+    opts: &'a SimOptions,
+    states: bool,
+    stats: Option<&'a mut StepStats>,
+}
+
+impl<const N: usize> WithLaw for Integrate<'_, N> {
+    type Out = Result<SimOutput>;
+
+    fn call<L: Law>(self, law: L) -> Result<SimOutput> {
+        let Self {
+            model,
+            chi,
+            controller,
+            qr,
+            u_ext,
+            opts,
+            states,
+            stats,
+        } = self;
+        let nt = &mut NoTangent;
+        Ok(match opts.integrator {
+            Integrator::Exponential => {
+                let stepper = Exponential::new(model, chi, law, qr, opts)?;
+                let (out, stepper) =
+                    driver::run(model, chi, controller, qr, u_ext, opts, states, stepper, nt)?;
+                if let Some(s) = stats {
+                    *s = stepper.stats();
+                }
+                out
+            }
+            Integrator::Rk4 => {
+                let stepper = Rk4::new(model, chi, law, opts)?;
+                driver::run(model, chi, controller, qr, u_ext, opts, states, stepper, nt)?.0
+            }
+        })
+    }
 }
 
 /// The commanded force of [`simulate`] alone: the states are integrated but not kept
@@ -468,12 +509,12 @@ pub fn simulate_sensitivity<const N: usize>(
     }
     let (sim, dforce, dq) = if opts.integrator == Integrator::Exponential {
         let mut t = expint::Sens::<N>::new(model, qr.len(), opts.delay)?;
-        let stepper = Exponential::new(model, chi, qr, opts)?;
+        let stepper = Exponential::new(model, chi, model.law(), qr, opts)?;
         let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
         (sim, t.cmd.dforce, t.dq)
     } else {
         let mut t = rk4::Sensitivity::<N>::new(model.n_params(), qr.len(), opts.delay)?;
-        let stepper = Rk4::new(model, chi, opts)?;
+        let stepper = Rk4::new(model, chi, model.law(), opts)?;
         let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
         (sim, t.cmd.dforce, t.dq)
     };

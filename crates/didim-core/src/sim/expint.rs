@@ -33,7 +33,7 @@ use super::driver::{CommandSens, Stepper, Tangent, V};
 use super::SimOptions;
 use crate::controller::TransferFunction;
 use crate::error::{filled, invalid, Error, Result};
-use crate::model::{Basis, FrictionLaw, Model};
+use crate::model::{Basis, FrictionLaw, Law, Model};
 use nalgebra::{DMatrix, SMatrix};
 
 type Mat<const N: usize> = SMatrix<f64, N, N>;
@@ -82,8 +82,10 @@ struct GTerm<const N: usize> {
     outer: Mat<N>,
 }
 
-/// The plant of one parameter set, split for the exponential integrator.
-pub(super) struct Plant<const N: usize> {
+/// The plant of one parameter set, split for the exponential integrator; `L` its friction
+/// law, a [`FrictionLaw`] or a [`crate::model::Shaped`] one whose shape is a type (a
+/// simulation's loop is compiled per shape, see [`FrictionLaw::dispatch`]).
+pub(super) struct Plant<const N: usize, L: Law = FrictionLaw> {
     pub inv_mass: V<N>,
     /// `q̈_affine = aq q + av q̇ + a0` (without the command).
     pub aq: Mat<N>,
@@ -91,7 +93,13 @@ pub(super) struct Plant<const N: usize> {
     pub a0: V<N>,
     /// The non-affine, non-inertial terms, each ready to add its acceleration.
     terms: Vec<GTerm<N>>,
-    pub law: FrictionLaw,
+    /// `Some(c)` when every term of `terms` is a plain Coulomb term, at most one per dof
+    /// (the rigid and flexible models): `c[d] = −Fc_d` (0 where dof `d` has none), and `g`
+    /// and its partials are read off the friction law per dof, without a loop over the terms
+    /// and a branch on each term's kind. The same operations as the loop's (see
+    /// [`Plant::g_and_partials`]).
+    coulomb: Option<V<N>>,
+    pub law: L,
     pub dt: f64,
     /// Absolute position tolerance of one step (m).
     pub atol: f64,
@@ -106,10 +114,12 @@ pub(super) struct Plant<const N: usize> {
     last_inv_h: std::cell::Cell<f64>,
 }
 
-impl<const N: usize> Plant<N> {
-    pub fn new(model: &Model<N>, chi: &[f64], dt: f64, atol: f64) -> Result<Self> {
+impl<const N: usize, L: Law> Plant<N, L> {
+    /// The plant of `model` with parameters `chi` and the friction law `law` (the model's,
+    /// with its shape static or not).
+    pub fn new(model: &Model<N>, chi: &[f64], law: L, dt: f64, atol: f64) -> Result<Self> {
+        debug_assert_eq!(law.law(), model.law());
         let inv_mass = model.masses(chi).map(|m| 1.0 / m);
-        let law = model.law();
         let zero = V::<N>::zeros();
         let affine: Vec<(Basis, f64)> = model
             .basis()
@@ -155,12 +165,26 @@ impl<const N: usize> Plant<N> {
             }
         }
         let a0 = -c.component_mul(&inv_mass);
+        let coulomb = {
+            let mut c = V::<N>::zeros();
+            let mut seen = [false; N];
+            let plain = terms.iter().all(|t| match t.basis {
+                Basis::Coulomb { dof } if !seen[dof] => {
+                    seen[dof] = true;
+                    c[dof] = t.dir[dof];
+                    true
+                }
+                _ => false,
+            });
+            plain.then_some(c)
+        };
         let plant = Self {
             inv_mass,
             aq,
             av,
             a0,
             terms,
+            coulomb,
             law,
             dt,
             atol,
@@ -270,6 +294,14 @@ impl<const N: usize> Plant<N> {
     #[inline(always)]
     pub fn g(&self, q: &V<N>, v: &V<N>) -> V<N> {
         let mut g = V::<N>::zeros();
+        if let Some(c) = &self.coulomb {
+            for d in 0..N {
+                // the loop's `0 + c_d·s` without the `0 +` (one addition less on the loop's
+                // critical path): the same value but for the sign of an exact zero
+                g[d] = c[d] * self.law.sign_and_derivative(v[d]).0;
+            }
+            return g.component_mul(&self.inv_mass);
+        }
         for t in &self.terms {
             let (x, xd) = t.basis.coordinates(q, v);
             g += t.dir * t.basis.local(x, xd, self.law).0;
@@ -283,12 +315,17 @@ impl<const N: usize> Plant<N> {
         let mut g = V::<N>::zeros();
         let mut dq = Mat::<N>::zeros();
         let mut dv = Mat::<N>::zeros();
-        for t in &self.terms {
-            let (x, xd) = t.basis.coordinates(q, v);
-            let (phi, px, pv) = t.basis.local(x, xd, self.law);
-            g += t.dir * phi;
-            dq += t.outer * px;
-            dv += t.outer * pv;
+        if let Some(c) = &self.coulomb {
+            // a Coulomb term of dof d adds `c_d·s(v_d)` to g_d and `c_d·s'(v_d)` to ∂g_d/∂q̇_d;
+            // the loop below adds the same to zeros, and ±0 everywhere else (its position
+            // partials are 0): the same values, up to the sign of an exact zero
+            for d in 0..N {
+                let (s, ds) = self.law.sign_and_derivative(v[d]);
+                g[d] = c[d] * s;
+                dv[(d, d)] = c[d] * ds;
+            }
+        } else {
+            self.accumulate_terms(q, v, &mut g, &mut dq, &mut dv);
         }
         for d in 0..N {
             for e in 0..N {
@@ -297,6 +334,18 @@ impl<const N: usize> Plant<N> {
             }
         }
         (g.component_mul(&self.inv_mass), dq, dv)
+    }
+
+    /// The general case of [`Plant::g_and_partials`]: the sums over the terms.
+    #[inline(always)]
+    fn accumulate_terms(&self, q: &V<N>, v: &V<N>, g: &mut V<N>, dq: &mut Mat<N>, dv: &mut Mat<N>) {
+        for t in &self.terms {
+            let (x, xd) = t.basis.coordinates(q, v);
+            let (phi, px, pv) = t.basis.local(x, xd, self.law);
+            *g += t.dir * phi;
+            *dq += t.outer * px;
+            *dv += t.outer * pv;
+        }
     }
 
     /// Whether `g`, with partials `(gq, gv)` at the end of a quick step of length `h`, is
@@ -631,14 +680,15 @@ pub(super) struct Accepted<const N: usize> {
 }
 
 /// The exponential integrator as a [`Stepper`]: the plant and `g` at the current state.
-pub(super) struct Exponential<const N: usize> {
-    plant: Plant<N>,
+pub(super) struct Exponential<const N: usize, L: Law = FrictionLaw> {
+    plant: Plant<N, L>,
     g: V<N>,
 }
 
-impl<const N: usize> Exponential<N> {
-    pub fn new(model: &Model<N>, chi: &[f64], qr: &[f64], opts: &SimOptions) -> Result<Self> {
-        let mut plant = Plant::new(model, chi, opts.dt, step_tolerance(qr, opts.tol))?;
+impl<const N: usize, L: Law> Exponential<N, L> {
+    /// The integrator of `model` with parameters `chi` and the model's friction law `law`.
+    pub fn new(model: &Model<N>, chi: &[f64], law: L, qr: &[f64], opts: &SimOptions) -> Result<Self> {
+        let mut plant = Plant::new(model, chi, law, opts.dt, step_tolerance(qr, opts.tol))?;
         plant.ensure(0)?;
         plant.ensure(1)?;
         Ok(Self {
@@ -656,12 +706,12 @@ impl<const N: usize> Exponential<N> {
     }
 }
 
-impl<const N: usize> Stepper<N> for Exponential<N> {
-    type Ctx = Plant<N>;
+impl<const N: usize, L: Law> Stepper<N> for Exponential<N, L> {
+    type Ctx = Plant<N, L>;
     type Step = Accepted<N>;
     const DIVERGENCE_HINT: &'static str = "";
 
-    fn ctx(&self) -> &Plant<N> {
+    fn ctx(&self) -> &Plant<N, L> {
         &self.plant
     }
 
@@ -811,7 +861,7 @@ impl<const N: usize> Sens<N> {
     }
 
     /// `∂g/∂χ_j` at `(q, v)` where `g = ge`, into `self.gchi`.
-    fn g_chi(&mut self, plant: &Plant<N>, q: &V<N>, v: &V<N>, ge: &V<N>) {
+    fn g_chi<L: Law>(&mut self, plant: &Plant<N, L>, q: &V<N>, v: &V<N>, ge: &V<N>) {
         let zero = V::<N>::zeros();
         for j in 0..self.p {
             self.gchi[j] = match self.role[j] {
@@ -830,7 +880,7 @@ impl<const N: usize> Sens<N> {
         }
     }
 
-    fn dlevel(&mut self, plant: &Plant<N>, l: usize) {
+    fn dlevel<L: Law>(&mut self, plant: &Plant<N, L>, l: usize) {
         if self.dlevels[l].is_none() {
             let h = plant.level(l).h;
             let d = self
@@ -846,8 +896,8 @@ impl<const N: usize> Sens<N> {
     }
 }
 
-impl<const N: usize> Tangent<N, Exponential<N>> for Sens<N> {
-    fn start(&mut self, plant: &Plant<N>, q: &V<N>, v: &V<N>) {
+impl<const N: usize, L: Law> Tangent<N, Exponential<N, L>> for Sens<N> {
+    fn start(&mut self, plant: &Plant<N, L>, q: &V<N>, v: &V<N>) {
         let g0 = &plant.g(q, v);
         let zero = V::<N>::zeros();
         for j in 0..self.p {
@@ -910,7 +960,7 @@ impl<const N: usize> Tangent<N, Exponential<N>> for Sens<N> {
         }
     }
 
-    fn step(&mut self, plant: &Plant<N>, acc: &Accepted<N>) -> Result<()> {
+    fn step(&mut self, plant: &Plant<N, L>, acc: &Accepted<N>) -> Result<()> {
         let (l, q, v, st) = (acc.l, &acc.q, &acc.v, &acc.step);
         self.dlevel(plant, l);
         let lv = *plant.level(l);

@@ -8,7 +8,7 @@ use super::expint::Plant;
 use super::SimOptions;
 use crate::controller::TransferFunction;
 use crate::error::{filled, Result};
-use crate::model::Model;
+use crate::model::{FrictionLaw, Law, Model};
 
 /// One RK4 stage of the state: position, velocity, acceleration.
 pub(super) type Stage<const N: usize> = (V<N>, V<N>, V<N>);
@@ -22,27 +22,28 @@ pub(super) struct Substep<const N: usize> {
 /// RK4 as a [`Stepper`]. The accelerations come from the model split into its affine
 /// part and the rest ([`Plant`]): per stage, a few small matrix products and the
 /// nonlinear terms only.
-pub(super) struct Rk4<'a, const N: usize> {
+pub(super) struct Rk4<'a, const N: usize, L: Law = FrictionLaw> {
     pub model: &'a Model<N>,
     pub chi: &'a [f64],
-    pub plant: Plant<N>,
+    pub plant: Plant<N, L>,
     h: f64,
     substeps: usize,
 }
 
-impl<'a, const N: usize> Rk4<'a, N> {
-    pub fn new(model: &'a Model<N>, chi: &'a [f64], opts: &SimOptions) -> Result<Self> {
+impl<'a, const N: usize, L: Law> Rk4<'a, N, L> {
+    /// RK4 on `model` with parameters `chi` and the model's friction law `law`.
+    pub fn new(model: &'a Model<N>, chi: &'a [f64], law: L, opts: &SimOptions) -> Result<Self> {
         Ok(Self {
             model,
             chi,
-            plant: Plant::new(model, chi, opts.dt, 0.0)?,
+            plant: Plant::new(model, chi, law, opts.dt, 0.0)?,
             h: opts.dt / opts.substeps as f64,
             substeps: opts.substeps,
         })
     }
 }
 
-impl<'a, const N: usize> Stepper<N> for Rk4<'a, N> {
+impl<'a, const N: usize, L: Law> Stepper<N> for Rk4<'a, N, L> {
     type Ctx = Self;
     type Step = Substep<N>;
     const DIVERGENCE_HINT: &'static str = ", and try more substeps";
@@ -69,10 +70,12 @@ impl<'a, const N: usize> Stepper<N> for Rk4<'a, N> {
     ) -> Result<()> {
         let h = self.h;
         let b = self.plant.input(tau); // held over the period
+                                       // the state in locals over the period (registers), not behind the references
+        let (mut q0, mut v0) = (*q, *v);
         for _ in 0..self.substeps {
             let plant = &self.plant;
             let accel = |q: &V<N>, v: &V<N>| plant.accel(q, v, &b, &plant.g(q, v));
-            let (q1, v1) = (*q, *v);
+            let (q1, v1) = (q0, v0);
             let a1 = accel(&q1, &v1);
             let (q2, v2) = (q1 + v1 * (0.5 * h), v1 + a1 * (0.5 * h));
             let a2 = accel(&q2, &v2);
@@ -85,9 +88,10 @@ impl<'a, const N: usize> Stepper<N> for Rk4<'a, N> {
                 h,
             };
             tangent.step(self, &step)?;
-            *q += (v1 + (v2 + v3) * 2.0 + v4) * (h / 6.0);
-            *v += (a1 + (a2 + a3) * 2.0 + a4) * (h / 6.0);
+            q0 += (v1 + (v2 + v3) * 2.0 + v4) * (h / 6.0);
+            v0 += (a1 + (a2 + a3) * 2.0 + a4) * (h / 6.0);
         }
+        (*q, *v) = (q0, v0);
         Ok(())
     }
 }
