@@ -108,3 +108,18 @@ def test_ambiguous_columns_and_wrapped_encoders_are_refused_by_name(pendulum, tm
     one = didim.Robot.from_urdf(robot.source, ["joint2"])
     with pytest.raises(didim.DataError, match="columns for 2 joints .* but the robot has 1 .joint2.: .* --joints picks"):
         didim.load_record(tmp_path / "wrap.csv", robot=one)
+
+
+def test_a_time_column_declared_in_ms_is_read_in_ms_and_an_unknown_unit_is_refused(pendulum, tmp_path):
+    """``t[ms]`` in the header: the record's time in milliseconds, read as such (it was refused with "convert it");
+    a unit didim does not know is refused naming the units it reads."""
+    robot, ctl, rec, frame = pendulum
+    x = frame.rename(columns={"t": "t[ms]"})
+    x["t[ms]"] = x["t[ms]"] * 1000
+    x.to_csv(tmp_path / "ms.csv", index=False)
+    got = didim.load_record(tmp_path / "ms.csv", robot=robot, controller=ctl)
+    assert got.dt == pytest.approx(rec.dt, rel=1e-9)
+    np.testing.assert_array_equal(got.force, rec.force)
+    frame.rename(columns={"t": "t[fortnight]"}).to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(didim.DataError, match=r"bad.csv: the time column's unit \[fortnight\] is not one didim reads"):
+        didim.load_record(tmp_path / "bad.csv", robot=robot, controller=ctl)

@@ -400,6 +400,10 @@ WRAP_TURN_RTOL = 0.05
 WRAP_JUMP_RATIO = 20.0
 
 
+#: The units a robot record's time column may declare in its header (``t[ms]``), in seconds.
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
+
+
 def _check_wraps(p, names, kinds, signals) -> None:
     """Refuses a revolute joint's position that jumps by a whole turn between two samples (an encoder that wraps at
     ±π or 0..2π, logged as is): the closed loop would read it as a turn in one sample period."""
@@ -573,9 +577,11 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
         get, available = (lambda c: raw_get(by_plain[c])), plain
     if "t" not in available:
         raise DataError(f"{p}: no time column t; the file has {', '.join(available)}")
-    if suffix.get("t", "s") != "s":
-        raise DataError(f"{p}: the time column is in {suffix['t']}: didim reads it in s; convert it (t / 1000 for ms)")
-    dt = _time_step(np.asarray(get("t"), dtype=float), f"{p}: ")
+    t_unit = suffix.get("t", "s")
+    if t_unit not in TIME_UNITS:
+        raise DataError(f"{p}: the time column's unit [{t_unit}] is not one didim reads: give it in "
+                        f"{', '.join(TIME_UNITS)} (t[ms], for instance)")
+    dt = _time_step(np.asarray(get("t"), dtype=float) * TIME_UNITS[t_unit], f"{p}: ")
     cols = {key: _columns(available, names, key, p) for key in ("qr", "force", "qm")}
     extra = [c for c in available if re.fullmatch(r"(qr|force|qm|u_ext)_\d+", c) and int(c.split("_")[-1]) > len(names)]
     if extra:

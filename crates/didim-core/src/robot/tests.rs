@@ -201,6 +201,23 @@ fn bad_urdfs_and_inputs_are_refused_by_name() {
         .to_string()
         .contains("3 joints"));
     assert!(r.gravity_torque(&[f64::NAN, 0.0, 0.0]).is_err());
+    // other formats than URDF are named, not read as an empty robot
+    let sdf = r#"<?xml version="1.0"?><!-- a Gazebo model --><sdf version="1.6"><model name="m"><link name="a"/></model></sdf>"#;
+    assert!(e(Robot::from_urdf(sdf, None)).contains("an SDF model"));
+    assert!(e(Robot::from_urdf("<mujoco model=\"m\"/>", None)).contains("root element is <mujoco>"));
+    let xacro = CHAIN
+        .replace(
+            "<robot ",
+            r#"<robot xmlns:xacro="http://www.ros.org/wiki/xacro" "#,
+        )
+        .replace("</robot>", r#"<xacro:property name="l" value="0.3"/></robot>"#);
+    assert!(e(Robot::from_urdf(&xacro, None)).contains("a xacro file"));
+    // the xacro namespace alone, as exported URDFs keep it, is a URDF
+    let exported = CHAIN.replace(
+        "<robot ",
+        r#"<robot xmlns:xacro="http://www.ros.org/wiki/xacro" "#,
+    );
+    assert!(Robot::from_urdf(&exported, None).is_ok());
 }
 
 #[test]

@@ -277,11 +277,51 @@ fn check_tree(doc: &urdf_rs::Robot) -> Result<&str> {
     }
 }
 
+/// The name of the document's root element, past the XML declaration, comments and doctype; None when the text
+/// holds no element.
+fn root_element(text: &str) -> Option<&str> {
+    let mut rest = text;
+    loop {
+        let i = rest.find('<')?;
+        rest = &rest[i..];
+        if let Some(r) = rest.strip_prefix("<!--") {
+            rest = &r[r.find("-->")? + 3..];
+        } else if rest.starts_with("<?") || rest.starts_with("<!") {
+            rest = &rest[rest.find('>')? + 1..];
+        } else {
+            let name = &rest[1..];
+            let end = name
+                .find(|c: char| c.is_whitespace() || c == '>' || c == '/')
+                .unwrap_or(name.len());
+            return Some(&name[..end]);
+        }
+    }
+}
+
 pub fn parse(text: &str, picked: Option<&[String]>) -> Result<Robot> {
     let depth = xml_depth(text);
     if depth > MAX_XML_DEPTH {
         return Err(invalid!(
             "not a URDF robot description: its XML is nested {depth} elements deep (a URDF is a few levels deep)"
+        ));
+    }
+    match root_element(text) {
+        Some("robot") | None => {}
+        Some("sdf") => {
+            return Err(invalid!(
+                "an SDF model (its root element is <sdf>), not a URDF: didim reads URDF (<robot>); convert it (e.g. \
+                 with the sdformat_urdf tools) or write the URDF"
+            ))
+        }
+        Some(other) => {
+            return Err(invalid!(
+                "not a URDF robot description: its root element is <{other}>, a URDF's is <robot>"
+            ))
+        }
+    }
+    if text.contains("<xacro:") || text.contains("${") {
+        return Err(invalid!(
+            "a xacro file (it holds xacro macros or ${{...}} expressions): expand it into a URDF first (xacro robot.urdf.xacro > robot.urdf)"
         ));
     }
     let doc = urdf_rs::read_from_string(text).map_err(|e| invalid!("not a URDF robot description: {e}"))?;
