@@ -235,8 +235,9 @@ def check_stroke(qr, units: Units, where: str) -> None:
         guess = "mm" if stroke / 1e3 <= MAX_LINEAR_STROKE_M else "um"
         raise DataError(f"{where}: the reference spans {stroke:.4g} m, more than any machine axis "
                         f"({MAX_LINEAR_STROKE_M:g} m): the positions are in another unit than {units.position}, "
-                        f"{guess} on a linear axis, or deg, rev or encoder counts on a rotary one; declare it, e.g. "
-                        f"units='{guess}' or units='deg' (CLI: --units {guess}, or a CSV header such as qm[{guess}])")
+                        f"{guess} on a linear axis, or rad, deg, rev or encoder counts on a rotary one; declare it, "
+                        f"e.g. units='{guess}', units='rad' or units='deg' (CLI: --units {guess}, or a CSV header such "
+                        f"as qm[{guess}])")
 
 
 def _kind_unit(u: Units, kind: str) -> bool:
