@@ -123,3 +123,40 @@ def test_a_time_column_declared_in_ms_is_read_in_ms_and_an_unknown_unit_is_refus
     frame.rename(columns={"t": "t[fortnight]"}).to_csv(tmp_path / "bad.csv", index=False)
     with pytest.raises(didim.DataError, match=r"bad.csv: the time column's unit \[fortnight\] is not one didim reads"):
         didim.load_record(tmp_path / "bad.csv", robot=robot, controller=ctl)
+
+
+def test_the_third_campaign_s_tracebacks_are_errors_naming_the_problem(pendulum, tmp_path):
+    """A constant record, a URDF whose numbers overflow, one controller for a two-joint robot, a fractional max_iter
+    or a negative tol for the payload, a one-axis record given to simulate_robot: each a DataError saying what to
+    change (each was a Python traceback)."""
+    robot, ctl, rec, frame = pendulum
+    still = frame.copy()
+    still.iloc[:, 1:] = still.iloc[0, 1:].to_numpy()
+    still.to_csv(tmp_path / "still.csv", index=False)
+    with pytest.raises(didim.DataError, match="no joint's reference moves"):
+        didim.identify(didim.load_record(tmp_path / "still.csv", robot=robot, controller=ctl), robot, "idim-ls")
+    assert 'xyz="0 0 -0.5"' in robot.urdf  # the second joint's origin
+    with pytest.raises(didim.DataError, match="out of scale"):
+        didim.identify(rec, didim.Robot.from_urdf_string(robot.urdf.replace('xyz="0 0 -0.5"', 'xyz="0 0 -1e200"')),
+                       "idim-ls")
+    one = rec.controller[0]
+    with pytest.raises(didim.DataError, match="one controller per joint"):
+        didim.load_record(tmp_path / "still.csv", robot=robot, controller=one)
+    res = didim.identify(rec, robot, "idim-ls")
+    for bad in (dict(max_iter=1.5), dict(tol=-1.0)):
+        with pytest.raises(didim.DataError):
+            didim.robots.payload(rec, res, **bad)
+    with pytest.raises(didim.DataError, match="are not the robot's"):
+        didim.robots.simulate_robot(rec.joint(0), res)
+
+
+def test_a_joint_that_never_moves_is_named_in_the_result(pendulum, tmp_path):
+    """A record in which one joint is held still: its friction cannot come from it, and the result says so (IDIM-LS
+    gave Fv 287 for a truth of 0.51, with no word)."""
+    robot, ctl, rec, frame = pendulum
+    held = frame.copy()
+    held["qr_2"] = held["qr_2"].iloc[0]
+    held.to_csv(tmp_path / "held.csv", index=False)
+    res = didim.identify(didim.load_record(tmp_path / "held.csv", robot=robot, controller=ctl), robot, "idim-ls",
+                         controller_check="off")
+    assert any("joint joint2 does not move in this record" in n for n in res.notes), res.notes

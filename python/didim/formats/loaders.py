@@ -551,6 +551,10 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
             declared.append((f"the controller file {controller}", file_units))
         delay, force_lag = load_joint_drives(controller)
         controller = load_joint_controllers(controller)
+    if controller is not None and not isinstance(controller, (list, tuple)):
+        raise DataError(f"{p}: a robot's record takes one controller per joint ({len(kinds)}: "
+                        f"{', '.join(robot.joint_names)}): give a joints file or a list of controllers, got one "
+                        f"{type(controller).__name__}")
     controllers = tuple(controller) if controller is not None else None
     arg_units = for_joints(units, kinds, "units")
     if arg_units is not None:

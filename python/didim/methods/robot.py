@@ -81,8 +81,12 @@ def base_parameters(robot: Robot, samples: int = 400, seed: int = 0) -> BasePara
     """The base parameters of ``robot`` from its regressor at ``samples`` random states (positions within the joint
     limits, or a turn for unlimited joints; speeds and accelerations of unit spread)."""
     q, v, a = random_states(robot, samples, seed)
-    w = _full_regressor(robot, q, v, a)
-    norms = np.linalg.norm(w, axis=0)
+    with np.errstate(all="ignore"):
+        w = _full_regressor(robot, q, v, a)
+        norms = np.linalg.norm(w, axis=0)
+    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(norms)) and norms.max() > 0):
+        raise DataError(f"robot {robot.name}: its regressor overflows or vanishes at ordinary speeds: a length, mass or "
+                        "inertia of its URDF is far out of scale (1e200 m?); check the URDF's numbers")
     # a column that is zero but for the rounding of the regressor's sums (the xArm7's mz of its second body: 7e-15
     # against 1e2) would be scaled to a unit column of noise and taken for independent
     alive = norms > ZERO_COLUMN * norms.max()
@@ -186,8 +190,10 @@ def _decimation(rec: Recording):
     x = rec.qr - rec.qr.mean(axis=0)
     p = np.sum(np.abs(np.fft.rfft(x, axis=0)) ** 2, axis=1)
     f = np.fft.rfftfreq(rec.n, rec.dt)
+    if not np.any(np.ptp(rec.qr, axis=0) > 0):
+        raise DataError(f"{rec.name or 'the record'}: no joint's reference moves: there is no motion to identify from")
     c = np.cumsum(p[1:]) / max(np.sum(p[1:]), 1e-300)
-    band = float(f[1:][np.searchsorted(c, 0.999)]) if len(c) else fs / 100
+    band = float(f[1:][min(np.searchsorted(c, 0.999), len(c) - 1)]) if len(c) else fs / 100
     return Decimation.lowpass(min(max(10 * band, 5 * f[1] if len(f) > 1 else 1.0), fs / 10), fs)
 
 
@@ -577,6 +583,7 @@ def simulate_robot(rec: Recording, result: IdentificationResult, substeps: int =
     """The closed loop of ``rec`` (its references, controllers, encoders, first force) with the model of ``result``
     (its friction law)."""
     _robot_result(result)
+    _check(rec, result.structure)
     substeps = _checks.whole("substeps", substeps, lo=0, hi=1024, hint=" (RK4 steps per sample; 0 chooses)")
     robot = result.robot.with_inertial_params(standard_of(result)[result.robot.ndof:])
     d = drives_of(result)
@@ -652,6 +659,11 @@ def _result(method: str, rec: Recording, model: Model, base: BaseParameters, the
     ordered = {k: params[k] for k in [f"{p}_{j}" for p in ("Ia", "Fv", "Fc") + (("OF",) if offset else ())
                                       for j in robot.joint_names]}
     ordered.update({k: v for k, v in params.items() if k not in ordered})
+    for jn, span in zip(robot.joint_names, np.ptp(rec.qr, axis=0)):
+        if not span > 0:
+            notes.append(f"joint {jn} does not move in this record (its reference is constant): its rotor inertia and "
+                         f"friction (Ia_{jn}, Fv_{jn}, Fc_{jn}) are not identified by it and their values mean nothing; "
+                         "record a move of every joint")
     res = robot_result(method, ordered, stds, model, base, notes=notes, **kw)
     res.notes += plausibility(res)
     return res
@@ -1040,6 +1052,7 @@ def payload(rec: Recording, result: IdentificationResult, *, max_iter: int = 30,
     combinations of the others) are left out and reported as NaN."""
     t0 = time.perf_counter()
     _robot_result(result)
+    _checks.options(max_iter=max_iter, tol=tol)
     robot, n = result.robot, result.robot.ndof
     _check(rec, result.structure)
     say = progress or (lambda s: None)

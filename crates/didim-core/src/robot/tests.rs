@@ -212,6 +212,27 @@ fn bad_urdfs_and_inputs_are_refused_by_name() {
         )
         .replace("</robot>", r#"<xacro:property name="l" value="0.3"/></robot>"#);
     assert!(e(Robot::from_urdf(&xacro, None)).contains("a xacro file"));
+    // a negative mass, an inertia with a negative principal moment
+    assert!(e(Robot::from_urdf(
+        &CHAIN.replace(r#"<mass value="3.0"/>"#, r#"<mass value="-3.0"/>"#),
+        None
+    ))
+    .contains("link l1's <mass> is -3"));
+    assert!(e(Robot::from_urdf(
+        &CHAIN.replace(r#"ixx="0.05""#, r#"ixx="-0.05""#),
+        None
+    ))
+    .contains("link l1's <inertia> has a negative principal moment"));
+    // a chain of 2,000 links (it overflowed the walk's stack: a segfault) is refused by its size
+    let mut long = String::from(r#"<robot name="long"><link name="l0"/>"#);
+    for i in 1..=2000 {
+        long += &format!(
+            r#"<joint name="j{i}" type="revolute"><parent link="l{}"/><child link="l{i}"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint><link name="l{i}"><inertial><mass value="0.1"/><inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial></link>"#,
+            i - 1
+        );
+    }
+    long += "</robot>";
+    assert!(e(Robot::from_urdf(&long, None)).contains("2001 links"));
     // the xacro namespace alone, as exported URDFs keep it, is a URDF
     let exported = CHAIN.replace(
         "<robot ",

@@ -124,6 +124,10 @@ impl<'a> Walk<'a> {
 /// stack.
 pub const MAX_XML_DEPTH: usize = 64;
 
+/// The most links a URDF may define: the walk from the root recurses once per link of a chain, and a chain of
+/// 2,000 links overflowed the stack (a segfault); robots have tens.
+pub const MAX_LINKS: usize = 512;
+
 /// The nesting depth of the XML elements of `text` (a scan of its tags: comments, processing
 /// instructions, declarations and CDATA are skipped; self-closing tags do not nest).
 pub(super) fn xml_depth(text: &str) -> usize {
@@ -166,6 +170,13 @@ fn check_tree(doc: &urdf_rs::Robot) -> Result<&str> {
     if doc.links.is_empty() {
         return Err(invalid!(
             "the URDF defines no link: a robot is <link> elements joined by <joint> elements"
+        ));
+    }
+    if doc.links.len() > MAX_LINKS {
+        return Err(invalid!(
+            "the URDF defines {} links: didim reads robots of up to {MAX_LINKS} links (an arm has tens); is this a \
+             generated or concatenated file?",
+            doc.links.len()
         ));
     }
     let mut seen: HashMap<&str, usize> = HashMap::new();
@@ -267,6 +278,22 @@ fn check_tree(doc: &urdf_rs::Robot) -> Result<&str> {
             format!("link {}'s <inertia>", l.name),
             &[t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz],
         )?;
+        if i.mass.value < 0.0 {
+            return Err(invalid!(
+                "link {}'s <mass> is {}: a mass is >= 0 kg",
+                l.name,
+                i.mass.value
+            ));
+        }
+        let m = Matrix3::new(t.ixx, t.ixy, t.ixz, t.ixy, t.iyy, t.iyz, t.ixz, t.iyz, t.izz);
+        let least = m.symmetric_eigenvalues().min();
+        if least < -1e-9 * m.abs().max() {
+            return Err(invalid!(
+                "link {}'s <inertia> has a negative principal moment ({least:.4e} kg·m²): an inertia matrix is \
+                 positive semi-definite (check the signs of ixx, iyy, izz and the size of ixy, ixz, iyz)",
+                l.name
+            ));
+        }
     }
     match roots.as_slice() {
         [r] => Ok(r),
