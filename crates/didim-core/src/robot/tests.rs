@@ -239,6 +239,9 @@ fn bad_urdfs_and_inputs_are_refused_by_name() {
         r#"<robot xmlns:xacro="http://www.ros.org/wiki/xacro" "#,
     );
     assert!(Robot::from_urdf(&exported, None).is_ok());
+    // nor are xacro expressions left in comments (example-robot-data's xArm7 keeps `${prefix}` links commented out)
+    let commented = CHAIN.replace("</robot>", r#"<!-- <link name="${prefix}eef"/> --></robot>"#);
+    assert!(Robot::from_urdf(&commented, None).is_ok());
 }
 
 #[test]

@@ -304,6 +304,21 @@ fn check_tree(doc: &urdf_rs::Robot) -> Result<&str> {
     }
 }
 
+/// The text outside its XML comments (a URDF exported from xacro may keep commented-out macros).
+fn without_comments(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(i) = rest.find("<!--") {
+        out.push_str(&rest[..i]);
+        match rest[i + 4..].find("-->") {
+            Some(j) => rest = &rest[i + 4 + j + 3..],
+            None => return out,
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
 /// The name of the document's root element, past the XML declaration, comments and doctype; None when the text
 /// holds no element.
 fn root_element(text: &str) -> Option<&str> {
@@ -346,7 +361,8 @@ pub fn parse(text: &str, picked: Option<&[String]>) -> Result<Robot> {
             ))
         }
     }
-    if text.contains("<xacro:") || text.contains("${") {
+    let live = without_comments(text);
+    if live.contains("<xacro:") || live.contains("${") {
         return Err(invalid!(
             "a xacro file (it holds xacro macros or ${{...}} expressions): expand it into a URDF first (xacro robot.urdf.xacro > robot.urdf)"
         ));
