@@ -160,3 +160,28 @@ def test_a_joint_that_never_moves_is_named_in_the_result(pendulum, tmp_path):
     res = didim.identify(didim.load_record(tmp_path / "held.csv", robot=robot, controller=ctl), robot, "idim-ls",
                          controller_check="off")
     assert any("joint joint2 does not move in this record" in n for n in res.notes), res.notes
+
+
+def test_units_declared_joint_by_joint_are_checked_joint_by_joint(pendulum, tmp_path):
+    """A joints file declaring one joint in degrees on a record in rad was read without a word (Ia 50.5 for 0.026):
+    each joint's declaration is judged on its own against the URDF's dynamics; a right mixed declaration reads the
+    same positions as the record in rad."""
+    import math
+
+    robot, ctl, rec, frame = pendulum
+    spec = json.loads(ctl.read_text())
+    spec["joints"][0]["units"] = "deg"
+    (tmp_path / "wrong.json").write_text(json.dumps(spec))
+    frame.to_csv(tmp_path / "rad.csv", index=False)
+    with pytest.raises(didim.DataError, match="joint joint1 is read in deg.*it is probably in rad"):
+        didim.load_record(tmp_path / "rad.csv", robot=robot, controller=tmp_path / "wrong.json")
+    k = 180 / math.pi
+    for key in ("b_r", "b_y"):  # the same law per degree
+        spec["joints"][0][key] = [x / k for x in spec["joints"][0][key]]
+    (tmp_path / "deg.json").write_text(json.dumps(spec))
+    deg = frame.copy()
+    deg["qr_1"] *= k
+    deg["qm_1"] *= k
+    deg.to_csv(tmp_path / "deg.csv", index=False, float_format="%.17g")
+    got = didim.load_record(tmp_path / "deg.csv", robot=robot, controller=tmp_path / "deg.json")
+    np.testing.assert_allclose(got.qm, rec.qm, rtol=1e-12, atol=1e-15)

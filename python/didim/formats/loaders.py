@@ -473,8 +473,11 @@ def _check_position_units(p, robot, rec: Recording) -> None:
     for kind, si in (("revolute", "rad"), ("prismatic", "m")):
         joints = [j for j, k in enumerate(rec.joint_kinds) if (k == "prismatic") == (kind == "prismatic")]
         read_as = {rec.units[j].position if rec.units else si for j in joints}
+        if len(read_as) > 1:  # joints of one kind declared in several units: each declaration judged on its joint
+            _check_joint_units(p, robot, rec, joints)
+            continue
         if len(read_as) != 1 or next(iter(read_as)) not in OTHER_READING:
-            continue  # no joint of the kind; revolutions, counts, µm or several units: no single other reading
+            continue  # no joint of the kind; revolutions, counts, µm: no single other reading
         read = next(iter(read_as))
         other, factor = OTHER_READING[read]
         key = "length_factor" if kind == "prismatic" else "angle_factor"
@@ -487,6 +490,27 @@ def _check_position_units(p, robot, rec: Recording) -> None:
                             f"{other}, a header such as qr_{joints[0] + 1}[{other}], or \"units\" in the controllers' "
                             "file), or "
                             "check that the URDF is this robot's")
+
+
+def _check_joint_units(p, robot, rec: Recording, joints: List[int]) -> None:
+    """:func:`_check_position_units` for joints of one kind declared in several units: each joint's positions read
+    in the other unit alone, the rest as declared (a joints file declaring one joint in degrees on a record in rad)."""
+    from ..methods.robot import urdf_residual
+
+    here = urdf_residual(rec, robot)
+    for j in joints:
+        read = rec.units[j].position
+        if read not in OTHER_READING:
+            continue
+        other, factor = OTHER_READING[read]
+        factors = np.ones(rec.ndof)
+        factors[j] = factor
+        there = urdf_residual(rec, robot, factors=factors)
+        if here > UNITS_RATIO * there:
+            raise DataError(f"{p}: joint {rec.joint_names[j]} is read in {read}, where its positions leave the URDF's "
+                            f"dynamics {100 * here:.0f} % of the force unexplained, read in {other} "
+                            f"{100 * there:.0f} %: it is probably in {other}; correct its declared units (the "
+                            "controllers' file's \"units\", the header or units=...)")
 
 
 def _robot_file_units(path, kinds) -> Optional[list]:

@@ -358,14 +358,17 @@ EPS_STEP = 1e-4
 EPS_SIGMA_MAX = 0.1
 
 
-def urdf_residual(rec: Recording, robot: Robot, angle_factor: float = 1.0, length_factor: float = 1.0) -> float:
+def urdf_residual(rec: Recording, robot: Robot, angle_factor: float = 1.0, length_factor: float = 1.0,
+                  factors: Optional[np.ndarray] = None) -> float:
     """The share of the force (each joint's scaled alike) that the URDF's bodies leave unexplained once each joint's
     own drive (rotor inertia, viscous and Coulomb friction, offset) is fitted to the rest, on the measured states
     (every ``n/2000``-th sample), the revolute joints' positions taken times ``angle_factor`` and the prismatic ones'
     times ``length_factor``: how well the record's position units fit the URDF's dynamics (its gravity and inertia
-    depend on the positions themselves, where units read wrong put them elsewhere)."""
+    depend on the positions themselves, where units read wrong put them elsewhere). ``factors``: one factor per
+    joint instead."""
     q, v, a = _measured_states(rec, _decimation(rec))
-    factors = np.array([length_factor if k == "prismatic" else angle_factor for k in rec.joint_kinds])
+    if factors is None:
+        factors = np.array([length_factor if k == "prismatic" else angle_factor for k in rec.joint_kinds])
     step = max(1, rec.n // 2000)
     q, v, a = (x[::step] * factors for x in (q, v, a))
     force = rec.force[::step]
