@@ -185,3 +185,21 @@ def test_units_declared_joint_by_joint_are_checked_joint_by_joint(pendulum, tmp_
     deg.to_csv(tmp_path / "deg.csv", index=False, float_format="%.17g")
     got = didim.load_record(tmp_path / "deg.csv", robot=robot, controller=tmp_path / "deg.json")
     np.testing.assert_allclose(got.qm, rec.qm, rtol=1e-12, atol=1e-15)
+
+
+def test_a_drive_unit_declared_on_a_force_already_in_newton_metres_is_refused(pendulum, tmp_path):
+    """`--units rad,A=2.5` on a record whose force is in N·m multiplied every parameter by 2.5 without a word; the
+    same record logged in amps (force / 2.5, the controllers' gain / 2.5) and declared so reads the N·m force."""
+    robot, ctl, rec, frame = pendulum
+    frame.to_csv(tmp_path / "nm.csv", index=False)
+    with pytest.raises(didim.DataError, match="the force is probably already in N·m"):
+        didim.load_record(tmp_path / "nm.csv", robot=robot, controller=ctl, units="rad,A=2.5")
+    amps = frame.copy()
+    amps[["force_1", "force_2"]] /= 2.5
+    amps.to_csv(tmp_path / "amps.csv", index=False, float_format="%.17g")
+    spec = json.loads(ctl.read_text())
+    for j in spec["joints"]:
+        j["gain"] = j.get("gain", 1.0) / 2.5
+    (tmp_path / "amps.json").write_text(json.dumps(spec))
+    got = didim.load_record(tmp_path / "amps.csv", robot=robot, controller=tmp_path / "amps.json", units="rad,A=2.5")
+    np.testing.assert_allclose(got.force, rec.force, rtol=1e-12, atol=1e-12 * np.abs(rec.force).max())

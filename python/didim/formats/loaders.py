@@ -473,6 +473,8 @@ def _check_position_units(p, robot, rec: Recording) -> None:
     for kind, si in (("revolute", "rad"), ("prismatic", "m")):
         joints = [j for j, k in enumerate(rec.joint_kinds) if (k == "prismatic") == (kind == "prismatic")]
         read_as = {rec.units[j].position if rec.units else si for j in joints}
+        if kind == "revolute":
+            _check_force_scale(p, robot, rec)
         if len(read_as) > 1:  # joints of one kind declared in several units: each declaration judged on its joint
             _check_joint_units(p, robot, rec, joints)
             continue
@@ -490,6 +492,25 @@ def _check_position_units(p, robot, rec: Recording) -> None:
                             f"{other}, a header such as qr_{joints[0] + 1}[{other}], or \"units\" in the controllers' "
                             "file), or "
                             "check that the URDF is this robot's")
+
+
+def _check_force_scale(p, robot, rec: Recording) -> None:
+    """A drive unit declared with its scale (``"A=2.5"``: N·m per unit) on a force already in N·m multiplies every
+    parameter by it (the URDF's masses 2.5 times): refused when the force read without the scale fits the URDF's
+    dynamics :data:`UNITS_RATIO` times better than with it."""
+    from ..methods.robot import urdf_residual
+
+    scales = np.array([u.force_factor for u in rec.units]) if rec.units else np.ones(rec.ndof)
+    if np.all(scales == 1.0):
+        return
+    here = urdf_residual(rec, robot)
+    there = urdf_residual(replace(rec, force=rec.force / scales,
+                                  u_ext=None if rec.u_ext is None else rec.u_ext / scales), robot)
+    if here > UNITS_RATIO * there:
+        raise DataError(f"{p}: the force read with its declared drive scale ({', '.join(f'{s:g}' for s in scales)} "
+                        f"N·m or N per unit) leaves the URDF's dynamics {100 * here:.0f} % of it unexplained, read as "
+                        f"it is {100 * there:.0f} %: the force is probably already in N·m (or N); leave the drive unit "
+                        "out of the declared units")
 
 
 def _check_joint_units(p, robot, rec: Recording, joints: List[int]) -> None:
