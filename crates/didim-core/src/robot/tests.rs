@@ -223,6 +223,13 @@ fn bad_urdfs_and_inputs_are_refused_by_name() {
         None
     ))
     .contains("link l1's <inertia> has a negative principal moment"));
+    // a tiny link whose rounded inertia is not quite positive (Tiago's antennas in example-robot-data) is read
+    let tiny = CHAIN.replace(
+        "</robot>",
+        r#"<link name="antenna"><inertial><mass value="0.000001"/><inertia ixx="0.00000002371" ixy="0.00000006119" ixz="0.00000001179" iyy="0.00000002833" iyz="0.00000000774" izz="0.00000003849"/></inertial></link>
+  <joint name="fix_antenna" type="fixed"><parent link="l1"/><child link="antenna"/></joint></robot>"#,
+    );
+    assert!(Robot::from_urdf(&tiny, None).is_ok());
     // a chain of 2,000 links (it overflowed the walk's stack: a segfault) is refused by its size
     let mut long = String::from(r#"<robot name="long"><link name="l0"/>"#);
     for i in 1..=2000 {

@@ -128,6 +128,10 @@ pub const MAX_XML_DEPTH: usize = 64;
 /// 2,000 links overflowed the stack (a segfault); robots have tens.
 pub const MAX_LINKS: usize = 512;
 
+/// A link's inertia is refused when a principal moment is negative by more than this share of the largest inertia
+/// entry of the robot's links (rounding in a URDF's small links stays far below it).
+pub const INERTIA_RTOL: f64 = 1e-6;
+
 /// The nesting depth of the XML elements of `text` (a scan of its tags: comments, processing
 /// instructions, declarations and CDATA are skipped; self-closing tags do not nest).
 pub(super) fn xml_depth(text: &str) -> usize {
@@ -285,9 +289,21 @@ fn check_tree(doc: &urdf_rs::Robot) -> Result<&str> {
                 i.mass.value
             ));
         }
-        let m = Matrix3::new(t.ixx, t.ixy, t.ixz, t.ixy, t.iyy, t.iyz, t.ixz, t.iyz, t.izz);
-        let least = m.symmetric_eigenvalues().min();
-        if least < -1e-9 * m.abs().max() {
+    }
+    // an inertia matrix with a negative principal moment that matters against the robot's inertias (real URDFs carry
+    // tiny links whose rounded inertias are not quite positive: Tiago's antennas, -3.5e-8 kg·m² at 1 mg)
+    let tensor = |l: &urdf_rs::Link| {
+        let t = &l.inertial.inertia;
+        Matrix3::new(t.ixx, t.ixy, t.ixz, t.ixy, t.iyy, t.iyz, t.ixz, t.iyz, t.izz)
+    };
+    let largest = doc
+        .links
+        .iter()
+        .map(|l| tensor(l).abs().max())
+        .fold(0.0, f64::max);
+    for l in &doc.links {
+        let least = tensor(l).symmetric_eigenvalues().min();
+        if least < -INERTIA_RTOL * largest {
             return Err(invalid!(
                 "link {}'s <inertia> has a negative principal moment ({least:.4e} kg·m²): an inertia matrix is \
                  positive semi-definite (check the signs of ixx, iyy, izz and the size of ixy, ixz, iyz)",
