@@ -473,8 +473,6 @@ def _check_position_units(p, robot, rec: Recording) -> None:
     for kind, si in (("revolute", "rad"), ("prismatic", "m")):
         joints = [j for j, k in enumerate(rec.joint_kinds) if (k == "prismatic") == (kind == "prismatic")]
         read_as = {rec.units[j].position if rec.units else si for j in joints}
-        if kind == "revolute":
-            _check_force_scale(p, robot, rec)
         if len(read_as) > 1:  # joints of one kind declared in several units: each declaration judged on its joint
             _check_joint_units(p, robot, rec, joints)
             continue
@@ -501,7 +499,7 @@ def _check_force_scale(p, robot, rec: Recording) -> None:
     from ..methods.robot import urdf_residual
 
     scales = np.array([u.force_factor for u in rec.units]) if rec.units else np.ones(rec.ndof)
-    if np.all(scales == 1.0):
+    if not hasattr(robot, "rnea") or np.all(scales == 1.0):  # joints known by number only, or no scale declared
         return
     here = urdf_residual(rec, robot)
     there = urdf_residual(replace(rec, force=rec.force / scales,
@@ -720,6 +718,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     except DataError as e:
         raise DataError(f"{p}: {e}") from None
     _check_position_units(p, robot, rec)
+    _check_force_scale(p, robot, rec)
     return rec
 
 
