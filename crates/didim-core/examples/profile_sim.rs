@@ -1,10 +1,26 @@
-//! Profiling harness (not a benchmark): simulates a flexible axis on a reference read from a raw little-endian f64
+//! Profiling harness (not a benchmark): simulates an axis on a reference read from a raw little-endian f64
 //! file many times and prints the step statistics, for `perf record`.
 //! `cargo run --release --example profile_sim -- qr.bin 5e-8 200 [rk4]`
-use didim_core::model::{flexible, DEFAULT_COULOMB_EPS};
+//!
+//! Environment: `DIDIM_CHI="M1,Fv1,Fc1,M2,Fv2,Fc2,K12[,OF]"` (or the rigid model's `M,Fv,Fc[,OF]`),
+//! `DIDIM_MODEL=rigid|flexible`, `DIDIM_OFFSET=1`, `DIDIM_EPS` (the algebraic law's ε, m/s),
+//! `DIDIM_LAG` (force lag, s), `DIDIM_TOL`.
+use didim_core::model::{flexible_with, rigid, DEFAULT_COULOMB_EPS};
 use didim_core::sim::{simulate_with_stats, Integrator};
 use didim_core::{Controller, SimOptions};
 use std::time::Instant;
+
+fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
+    std::env::var(name).ok().map(|s| s.parse().ok().expect(name))
+}
+
+/// Writes the force to the file `DIDIM_DUMP` names (raw little-endian f64), if any.
+fn dump(force: &[f64]) {
+    if let Ok(path) = std::env::var("DIDIM_DUMP") {
+        let bytes: Vec<u8> = force.iter().flat_map(|x| x.to_le_bytes()).collect();
+        std::fs::write(path, bytes).unwrap();
+    }
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -20,20 +36,38 @@ fn main() {
     if args.get(4).map(String::as_str) == Some("rk4") {
         opts.integrator = Integrator::Rk4;
     }
-    let model = flexible(DEFAULT_COULOMB_EPS).unwrap();
-    // DIDIM_CHI="M1,Fv1,Fc1,M2,Fv2,Fc2,K12" and DIDIM_TOL override the defaults.
-    let chi: Vec<f64> = std::env::var("DIDIM_CHI").map_or_else(
-        |_| vec![68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5],
-        |s| s.split(',').map(|x| x.parse().unwrap()).collect(),
-    );
-    if let Ok(t) = std::env::var("DIDIM_TOL") {
-        opts.tol = t.parse().unwrap();
+    if let Some(t) = env("DIDIM_TOL") {
+        opts.tol = t;
     }
+    if let Some(lag) = env("DIDIM_LAG") {
+        opts.force_lag = lag;
+    }
+    let eps = env("DIDIM_EPS").unwrap_or(DEFAULT_COULOMB_EPS);
+    let offset = env::<u8>("DIDIM_OFFSET").unwrap_or(0) == 1;
+    let chi = |default: &[f64]| -> Vec<f64> {
+        std::env::var("DIDIM_CHI").map_or_else(
+            |_| default.to_vec(),
+            |s| s.split(',').map(|x| x.parse().unwrap()).collect(),
+        )
+    };
     let t0 = Instant::now();
     let mut stats = None;
-    for _ in 0..reps {
-        let (_, s) = simulate_with_stats(&model, &chi, &Controller::EMPS, &qr, None, &opts).unwrap();
-        stats = Some(s);
+    if std::env::var("DIDIM_MODEL").as_deref() == Ok("rigid") {
+        let model = rigid(offset, eps).unwrap();
+        let chi = chi(&[95.0, 200.0, 20.0, 0.0][..3 + offset as usize]);
+        for _ in 0..reps {
+            let (o, s) = simulate_with_stats(&model, &chi, &Controller::EMPS, &qr, None, &opts).unwrap();
+            stats = Some(s);
+            dump(&o.force);
+        }
+    } else {
+        let model = flexible_with(offset, eps).unwrap();
+        let chi = chi(&[68.0, 104.0, 10.0, 38.0, 96.5, 9.5, 8.8e5, 0.0][..7 + offset as usize]);
+        for _ in 0..reps {
+            let (o, s) = simulate_with_stats(&model, &chi, &Controller::EMPS, &qr, None, &opts).unwrap();
+            stats = Some(s);
+            dump(&o.force);
+        }
     }
     let per = t0.elapsed().as_secs_f64() / reps as f64;
     println!(

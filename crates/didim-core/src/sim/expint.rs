@@ -552,7 +552,15 @@ impl<const N: usize, L: Law> Plant<N, L> {
 
     /// Advances `(q, v, g)` over one step of level `l`, halving it while the error is too
     /// large; `hook` sees every accepted step.
+    ///
+    /// `target`: the level a Coulomb sign reversing ahead needs (see [`Plant::kink_level`]),
+    /// 0 for none. A step of a coarser level that the reversal falls inside is halved at
+    /// once, without the attempt the step control would reject: the sign jumps by `2 Fc/M`
+    /// within a few microseconds, which a step's linear interpolation of `g` misses by half
+    /// the jump whatever its length, so the rejected step's error ratio says how many
+    /// halvings the step around the reversal takes.
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     pub fn advance<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
         &mut self,
         l: usize,
@@ -560,8 +568,12 @@ impl<const N: usize, L: Law> Plant<N, L> {
         v: &mut V<N>,
         g: &mut V<N>,
         b: &V<N>,
+        target: usize,
         hook: &mut H,
     ) -> Result<()> {
+        if target > l && self.reversal_ahead(l, q, v, g, b) {
+            return self.subdivide(l, q, v, g, b, target, hook);
+        }
         let step = self.try_step(l, q, v, g, b);
         if step.err <= 1.0 || l == MAX_LEVEL {
             let accepted = Accepted {
@@ -579,11 +591,47 @@ impl<const N: usize, L: Law> Plant<N, L> {
             self.steps += 1;
             return Ok(());
         }
-        self.subdivide(l, q, v, g, b, hook)
+        let target = self.kink_level(l, q, v, g, b, &step);
+        self.subdivide(l, q, v, g, b, target, hook)
+    }
+
+    /// Whether the velocity of a dof with Coulomb friction, moving (beyond 2 ε) and
+    /// slowing down, reaches zero within the first nine tenths of a step of level `l` from
+    /// `(q, v)` at its present acceleration: a reversal of the sign inside the step.
+    #[inline(always)]
+    fn reversal_ahead(&self, l: usize, q: &V<N>, v: &V<N>, g: &V<N>, b: &V<N>) -> bool {
+        let reach = 0.9 * self.level(l).h;
+        let moving = 2.0 * self.law.law().eps;
+        let a = self.accel(q, v, b, g);
+        (0..N).any(|d| {
+            let friction = self.coulomb.as_ref().is_none_or(|c| c[d] != 0.0);
+            friction && v[d] * a[d] < 0.0 && v[d].abs() > moving && v[d].abs() < reach * a[d].abs()
+        })
+    }
+
+    /// The level the rejected `step` of level `l` from `(q, v)` asks for when a Coulomb sign
+    /// reverses inside it ([`Plant::reversal_ahead`]), else 0. There the defect of `g`'s
+    /// linear interpolation is half the sign's jump at any step length, so the error ratio
+    /// falls as `h`: `l + ⌈log2 err⌉` is the level of the step that passes. A step halved
+    /// early ([`EARLY_HALVING`]) has no error ratio: the midpoint defect is then about half
+    /// the missed prediction, `err ≈ missed / (3 g_scale)`, and one level less is asked.
+    #[inline(always)]
+    fn kink_level(&self, l: usize, q: &V<N>, v: &V<N>, g: &V<N>, b: &V<N>, step: &Step<N>) -> usize {
+        let (err, short) = if step.err.is_finite() {
+            (step.err, 0)
+        } else {
+            let missed = amax((step.g1 - g - step.dw).as_slice());
+            (missed / (3.0 * self.level(l).g_scale), 1)
+        };
+        if err.is_nan() || err < 4.0 || !self.reversal_ahead(l, q, v, g, b) {
+            return 0;
+        }
+        (l + err.log2().ceil().min(MAX_LEVEL as f64) as usize - short).min(MAX_LEVEL)
     }
 
     /// A rejected step's two halves: out of line, in the build the closed loop runs in.
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn subdivide<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
         &mut self,
         l: usize,
@@ -591,17 +639,19 @@ impl<const N: usize, L: Law> Plant<N, L> {
         v: &mut V<N>,
         g: &mut V<N>,
         b: &V<N>,
+        target: usize,
         hook: &mut H,
     ) -> Result<()> {
         #[cfg(target_arch = "x86_64")]
         if super::driver::wide_simd() {
             // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
-            return unsafe { self.subdivide_avx2(l, q, v, g, b, hook) };
+            return unsafe { self.subdivide_avx2(l, q, v, g, b, target, hook) };
         }
-        self.subdivide_base(l, q, v, g, b, hook)
+        self.subdivide_base(l, q, v, g, b, target, hook)
     }
 
     #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
     fn subdivide_base<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
         &mut self,
         l: usize,
@@ -609,15 +659,17 @@ impl<const N: usize, L: Law> Plant<N, L> {
         v: &mut V<N>,
         g: &mut V<N>,
         b: &V<N>,
+        target: usize,
         hook: &mut H,
     ) -> Result<()> {
-        self.subdivide_body(l, q, v, g, b, hook)
+        self.subdivide_body(l, q, v, g, b, target, hook)
     }
 
     /// # Safety
     /// The processor must support AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
     unsafe fn subdivide_avx2<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
         &mut self,
         l: usize,
@@ -625,12 +677,14 @@ impl<const N: usize, L: Law> Plant<N, L> {
         v: &mut V<N>,
         g: &mut V<N>,
         b: &V<N>,
+        target: usize,
         hook: &mut H,
     ) -> Result<()> {
-        self.subdivide_body(l, q, v, g, b, hook)
+        self.subdivide_body(l, q, v, g, b, target, hook)
     }
 
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn subdivide_body<H: FnMut(&Self, &Accepted<N>) -> Result<()>>(
         &mut self,
         l: usize,
@@ -638,12 +692,13 @@ impl<const N: usize, L: Law> Plant<N, L> {
         v: &mut V<N>,
         g: &mut V<N>,
         b: &V<N>,
+        target: usize,
         hook: &mut H,
     ) -> Result<()> {
         self.rejected += 1;
         self.ensure(l + 2)?;
-        self.advance(l + 1, q, v, g, b, hook)?;
-        self.advance(l + 1, q, v, g, b, hook)
+        self.advance(l + 1, q, v, g, b, target, hook)?;
+        self.advance(l + 1, q, v, g, b, target, hook)
     }
 }
 
@@ -735,9 +790,10 @@ impl<const N: usize, L: Law> Stepper<N> for Exponential<N, L> {
         tangent: &mut T,
     ) -> Result<()> {
         let b = self.plant.input(tau);
-        self.plant.advance(0, q, v, &mut self.g, &b, &mut |plant, step| {
-            tangent.step(plant, step)
-        })
+        self.plant
+            .advance(0, q, v, &mut self.g, &b, 0, &mut |plant, step| {
+                tangent.step(plant, step)
+            })
     }
 }
 
