@@ -104,6 +104,17 @@ def resolved(model, rec, coulomb_eps=None):
 #: Robot records with known truth from a simulator built on Pinocchio (../shared/data/robots, see its README).
 ROBOTS_DIR = pathlib.Path(
     os.environ.get("DIDIM_ROBOTS_DIR", pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "robots"))
+#: Flexible-joint robot records with known truth from another simulator (../shared/data/flexrobots, see its README).
+FLEXROBOTS_DIR = pathlib.Path(
+    os.environ.get("DIDIM_FLEXROBOTS_DIR",
+                   pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "flexrobots"))
+
+
+@pytest.fixture(scope="session")
+def flexrobots_dir():
+    if not (FLEXROBOTS_DIR / "truth.json").exists():
+        pytest.skip(f"flexible-joint robot records {FLEXROBOTS_DIR} not available (set DIDIM_FLEXROBOTS_DIR)")
+    return FLEXROBOTS_DIR
 
 
 @pytest.fixture(scope="session")

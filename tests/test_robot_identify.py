@@ -233,8 +233,10 @@ def test_the_robots_model_travels_whole_into_the_result_and_back(data, tmp_path)
     assert back.robot.joint_names == robot.joint_names
     np.testing.assert_allclose(list(back.params.values()), list(res.params.values()), rtol=1e-15)
     # what a robot's model cannot hold is refused by name
-    with pytest.raises(didim.DataError, match="rigid"):
+    with pytest.raises(didim.DataError, match="names its elastic joints"):
         didim.Model("flexible", robot=robot)
+    with pytest.raises(didim.DataError, match="is not a joint of the robot"):
+        didim.Model(robot=robot, elastic=["elbow_joint"])
     with pytest.raises(didim.DataError, match="takes no terms"):
         didim.Model(robot=robot, terms=[didim.Term("Fs", "stribeck", vs=0.01)])
     with pytest.raises(didim.DataError, match="one smoothing speed per joint"):

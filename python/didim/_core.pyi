@@ -125,6 +125,8 @@ def simulate_robot(
     u_ext: Optional[_F64] = None,
     delay: Optional[Sequence[int]] = None,
     force_lag: Optional[Sequence[float]] = None,
+    stiffness: Optional[Sequence[float]] = None,
+    damping: Optional[Sequence[float]] = None,
 ) -> Dict[str, _F64]: ...
 
 def coulomb_sign(v: _F64, eps: float = ..., law: str = "algebraic") -> _F64: ...

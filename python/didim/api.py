@@ -305,7 +305,8 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
                              "URDF's values"), ("criterion", None if criterion == "force" else criterion, "fits the force")):
         if value is not None:
             raise DataError(f"{name} does not apply to a robot: DIDIM on a robot {why}")
-    model = as_model(robot, offset=None if offset is None else _checks.flag("offset", offset))
+    model = as_model(robot, offset=None if offset is None else _checks.flag("offset", offset),
+                     elastic=options.pop("elastic", None))
     if model.law is not None:
         raise DataError("a robot's friction law through zero speed is fitted from the record: give its model without "
                         "coulomb_eps")

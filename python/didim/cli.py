@@ -106,7 +106,10 @@ def cmd_identify_robot(args) -> int:
         raise DataError("--max-iter and --tol apply to DIDIM")
     from .model import as_model
 
-    model = as_model(robot, offset=args.offset)  # the robot's model, carried whole to the fit
+    elastic = [x.strip() for x in args.elastic.split(",")] if args.elastic else None
+    if elastic == ["all"]:
+        elastic = list(robot.joint_names)
+    model = as_model(robot, offset=args.offset, elastic=elastic)  # the robot's model, carried whole to the fit
     res = identify(rec, model, args.method, progress=_progress(args.quiet), controller_check=args.controller_check,
                    **opts)
     print(res.summary())
@@ -135,10 +138,11 @@ def cmd_identify(args) -> int:
 
     if args.urdf:
         return cmd_identify_robot(args)
-    if args.joints:
+    if args.joints or args.elastic:
         from ._errors import DataError
 
-        raise DataError("--joints picks a robot's actuated joints: give the robot with --urdf")
+        raise DataError(f"{'--joints' if args.joints else '--elastic'} names a robot's joints: give the robot with "
+                        "--urdf (one axis's two masses are --model flexible)")
     _check_outputs([args.file, args.controller], [args.json, args.plot])
     if args.plot:
         _check_figure_format(args.plot)
@@ -239,23 +243,26 @@ def _simulate_robot(args, result) -> int:
 
     from .formats._io import save_figure, write_text
     from .check import enforce
-    from .methods.robot import force_errors, simulate_robot
+    from .methods.robot import deflection_errors, force_errors, simulate_robot
 
     rec = _robot_record(args, args.file, result.robot)
     chk = enforce(rec, args.controller_check)
     sim = simulate_robot(rec, result)
     err, per = force_errors(rec, sim["force"])
+    deflection = deflection_errors(rec, sim, result.structure)
     print(f"{args.file}: closed-loop force error of {args.result} ({result.method}, {rec.ndof}-joint robot "
           f"{result.robot.name}): {100 * err:.2f} %")
     for j, e in per.items():
-        print(f"  {j}: {100 * e:.2f} %")
+        print(f"  {j}: {100 * e:.2f} %" + (f"; link-minus-motor deflection error {100 * deflection[j]:.1f} % RMS "
+                                          "(against ql − qm)" if j in deflection else ""))
     if chk is not None:
         print(f"  ({chk.summary()})")
     for o in rec.controller_origin:
         print(f"  (no controller was described: {o})")
     if args.json:
         write_text(args.json, json.dumps({"record": args.file, "result": args.result, "force_error": err,
-                                          "force_error_per_joint": per, "params": result.params,
+                                          "force_error_per_joint": per, "deflection_error_per_joint": deflection,
+                                          "params": result.params,
                                           "controller_origin": list(rec.controller_origin),
                                           "controller_check": None if chk is None else chk.to_dict()},
                                          indent=2) + "\n")
@@ -626,6 +633,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "file); --method didim or idim-ls")
     i.add_argument("--joints", metavar="NAMES", help="with --urdf: the actuated joints, comma-separated (default: all "
                    "revolute and prismatic joints of the chain)")
+    i.add_argument("--elastic", metavar="J1,J2|all", help="with --urdf: the joints whose transmission is elastic (a "
+                   "spring K and damping D between rotor and link), by name or number, or all; --method didim runs "
+                   "the three-step DIDIM")
     i.add_argument("--json", metavar="OUT", help="write the result as JSON")
     i.add_argument("--plot", metavar="PNG", help="write measured vs simulated force and the iterations")
     i.add_argument("--quiet", action="store_true", help="no progress messages")

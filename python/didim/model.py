@@ -164,9 +164,12 @@ class Model:
     (:func:`didim.simulation.default_coulomb_eps`; an identified model carries the number it was fitted with).
 
     ``robot``: the link side of a robot (:class:`didim.Robot`, a URDF's rigid-body chain), None for one axis's lumped
-    mass. A robot's model is rigid, each joint with its drive (rotor inertia ``Ia``, ``Fv``, ``Fc`` and, with
-    ``offset``, ``OF``); its ``coulomb_eps`` is one smoothing speed per joint (rad/s or m/s), None to fit the law
-    from the record; its drives' delay and force lag are each joint's, in the controller file (the record's)."""
+    mass. A robot's model gives each joint its drive (rotor inertia ``Ia``, ``Fv``, ``Fc`` and, with ``offset``,
+    ``OF``); ``elastic`` names the joints whose transmission is a spring ``K`` with damping ``D`` between the rotor
+    (``Ia``, the friction and the drive's force, on the motor side the encoder reads) and the link (its kind is then
+    "flexible"; a rigid joint's rotor moves with its link); its ``coulomb_eps`` is one smoothing speed per joint
+    (rad/s or m/s), None to fit the law from the record; its drives' delay and force lag are each joint's, in the
+    controller file (the record's)."""
 
     kind: str = "rigid"
     offset: bool = False
@@ -177,6 +180,7 @@ class Model:
     coulomb_eps: Union[None, float, Tuple[float, ...]] = None
     coulomb_law: str = "algebraic"
     robot: Optional[Any] = None
+    elastic: Tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.kind not in MODELS:
@@ -192,6 +196,9 @@ class Model:
         _checks.one_of("coulomb_law", self.coulomb_law, COULOMB_LAWS)
         if self.robot is not None:
             self._check_robot()
+        elif self.elastic:
+            raise DataError("elastic names a robot's elastic joints; one axis's two masses are the 'flexible' kind "
+                            "(didim.Model('flexible'))")
         elif self.coulomb_eps is not None:
             object.__setattr__(self, "coulomb_eps", _checks.real("coulomb_eps", self.coulomb_eps, "m/s", lo=0.0,
                                                                  lo_open=False))
@@ -205,8 +212,13 @@ class Model:
         if not isinstance(robot, Robot):
             raise DataError(f"a model's robot is a didim.Robot (didim.Robot.from_urdf(path)), got "
                             f"{type(robot).__name__}")
-        if self.kind != "rigid":
-            raise DataError(f"a robot's model is rigid (elastic joints are not available yet), got {self.kind!r}")
+        object.__setattr__(self, "elastic", self._elastic_joints(robot))
+        if self.kind == "flexible" and not self.elastic:
+            raise DataError("a robot's flexible model names its elastic joints: elastic=['joint', ...] (CLI: "
+                            "--elastic J1,J2 or --elastic all)")
+        if self.kind not in ("rigid", "flexible"):
+            raise DataError(f"a robot's model is rigid, or flexible with elastic joints, got {self.kind!r}")
+        object.__setattr__(self, "kind", "flexible" if self.elastic else "rigid")
         given = [name for name, v in (("terms", self.terms), ("delay", self.delay), ("force_lag", self.force_lag),
                                       ("backlash_gap", self.backlash_gap)) if v]
         if given:
@@ -220,6 +232,25 @@ class Model:
             object.__setattr__(self, "coulomb_eps", tuple(
                 _checks.real(f"joint {j}'s coulomb_eps", e, "rad/s or m/s", lo=0.0, lo_open=False)
                 for j, e in zip(robot.joint_names, eps)))
+
+    def _elastic_joints(self, robot) -> Tuple[str, ...]:
+        """``elastic`` as the robot's joint names in its order: names, 1-based numbers, or ``"all"``."""
+        given = self.elastic
+        if isinstance(given, str):
+            given = robot.joint_names if given.strip() == "all" else [x.strip() for x in given.split(",") if x.strip()]
+        if not isinstance(given, (tuple, list)):
+            raise DataError(f"elastic is a list of the robot's joint names (or 'all'), got {type(given).__name__}")
+        names = list(robot.joint_names)
+        out = set()
+        for g in given:
+            if isinstance(g, str) and g in names:
+                out.add(g)
+            elif isinstance(g, (int, str)) and str(g).isdigit() and 1 <= int(g) <= len(names):
+                out.add(names[int(g) - 1])
+            else:
+                raise DataError(f"elastic: {g!r} is not a joint of the robot {robot.name} ({', '.join(names)}; or "
+                                f"their numbers 1..{len(names)}, or 'all')")
+        return tuple(j for j in names if j in out)
 
     @property
     def law(self) -> Optional[Tuple[str, Tuple[float, ...]]]:
@@ -236,6 +267,7 @@ class Model:
         """In words: the kind and every structure field that is not the default."""
         if self.robot is not None:
             return (f"{self.kind} model of the {self.robot.ndof}-joint robot {self.robot.name}"
+                    + (f" with elastic joints {', '.join(self.elastic)}" if self.elastic else "")
                     + (" with an offset per joint" if self.offset else "")
                     + (f", {self.coulomb_law} friction law" if self.law is not None else ""))
         parts = [f"{self.kind} model"]
@@ -288,6 +320,8 @@ class Model:
                "coulomb_law": self.coulomb_law}
         if self.robot is not None:
             out["robot"] = {"name": self.robot.name, "joints": self.robot.joint_names, "urdf": self.robot.urdf}
+            if self.elastic:
+                out["elastic"] = list(self.elastic)
         return out
 
     @classmethod
@@ -295,7 +329,7 @@ class Model:
         if not isinstance(d, dict):
             raise DataError(f"a model structure must be a JSON object, got {type(d).__name__}")
         unknown = set(d) - {"kind", "offset", "terms", "delay", "force_lag", "backlash_gap", "coulomb_eps",
-                             "coulomb_law", "robot"}
+                             "coulomb_law", "robot", "elastic"}
         if unknown:
             raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
         raw = d.get("terms") or []
@@ -317,7 +351,8 @@ class Model:
         return cls(kind=d.get("kind", "rigid"), offset=offset, terms=terms, delay=d.get("delay", 0),
                    force_lag=d.get("force_lag", 0.0),
                    backlash_gap=d.get("backlash_gap"), coulomb_eps=eps,
-                   coulomb_law=d.get("coulomb_law", "algebraic"), robot=robot)
+                   coulomb_law=d.get("coulomb_law", "algebraic"), robot=robot,
+                   elastic=tuple(d.get("elastic") or ()))
 
     @classmethod
     def of_result(cls, kind: str, params: Dict[str, float], options: Dict[str, Any]) -> Optional["Model"]:

@@ -59,8 +59,11 @@ def _signal(name: str, x, n: Optional[int] = None) -> np.ndarray:
     return a
 
 
-def _joint_signals(name: str, x, joints: Tuple[str, ...], n: Optional[int] = None) -> np.ndarray:
-    """A robot's signal: (samples, joints) real numbers, finite, or a DataError naming the joint and the sample."""
+def _joint_signals(name: str, x, joints: Tuple[str, ...], n: Optional[int] = None,
+                   absent: bool = False) -> np.ndarray:
+    """A robot's signal: (samples, joints) real numbers, finite, or a DataError naming the joint and the sample.
+    ``absent``: a joint's column may be all NaN (a signal some joints do not have: link-side encoders on the first
+    axes only)."""
     ndof = len(joints)
     if isinstance(x, np.ndarray) and x.dtype.kind not in "biufc":
         raise DataError(f"{name} must be an array of real numbers, got an array of {x.dtype} (text or objects)")
@@ -69,7 +72,7 @@ def _joint_signals(name: str, x, joints: Tuple[str, ...], n: Optional[int] = Non
         raise DataError(f"{name} must be (samples, {ndof}) for joints {', '.join(joints)}, got shape {a.shape}")
     if n is not None and a.shape[0] != n:
         raise DataError(f"{name} has {a.shape[0]} samples but the reference has {n}: all signals must have the same length")
-    bad = np.argwhere(~np.isfinite(a))
+    bad = np.argwhere(~np.isfinite(a) & ~(absent & np.all(np.isnan(a), axis=0)))
     if len(bad):
         k, j = bad[0]
         raise DataError(f"{name} of joint {joints[j]} is not finite at sample {k}: clean or cut the record")
@@ -211,7 +214,9 @@ class Recording:
         controller: the controller that ran the axis (:class:`TransferFunction`, :class:`EmpsCascade` or :class:`PD`;
             :func:`didim.load_controller` reads one from a file), or a robot's, one per joint
             (:func:`didim.load_joint_controllers`). Required.
-        ql: measured load position (m or rad) when the plant has a second encoder, else None.
+        ql: measured load position (m or rad) when the plant has a second encoder, else None; a robot's link-side
+            positions (samples, joints), all NaN in the columns of joints without a link-side encoder. They check a
+            model's deflection (:func:`didim.simulate`'s ``deflection_error_per_joint``); no method fits on them.
         u_ext: known external force added to the command (N or N·m), e.g. the EMPS pulses or a robot's feedforward,
             else None.
         position_resolution: resolution of the motor encoder (m or rad), used to quantize the simulated measurement,
@@ -276,8 +281,8 @@ class Recording:
                 raise DataError(f"joint_names has {len(names)} names for a record of one axis (1-D signals)")
         object.__setattr__(self, "joint_names", names)
 
-        def sig(label: str, x, n: Optional[int] = None) -> np.ndarray:
-            return _joint_signals(label, x, names, n) if columns else _signal(label, x, n)
+        def sig(label: str, x, n: Optional[int] = None, absent: bool = False) -> np.ndarray:
+            return _joint_signals(label, x, names, n, absent) if columns else _signal(label, x, n)
 
         qr = sig("qr (position reference)", raw)
         n = qr.shape[0]
@@ -292,7 +297,7 @@ class Recording:
         object.__setattr__(self, "force", sig("force", self.force, n))
         object.__setattr__(self, "qm", sig("qm (motor position)", self.qm, n))
         if self.ql is not None:
-            object.__setattr__(self, "ql", sig("ql (load position)", self.ql, n))
+            object.__setattr__(self, "ql", sig("ql (load position)", self.ql, n, absent=True))
         if self.u_ext is not None:
             object.__setattr__(self, "u_ext", sig("u_ext (external force)", self.u_ext, n))
 

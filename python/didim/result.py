@@ -373,6 +373,7 @@ def _robot_dict(res: IdentificationResult) -> Dict[str, Any]:
                      "controller_check": res.options.get("controller_check"),
                      "friction_law": None if res.law is None else {"shape": res.law[0], "eps": list(res.law[1])},
                      "robot": {"name": res.robot.name, "joints": res.robot.joint_names, "urdf": res.robot.urdf},
+                     "elastic": list(res.structure.elastic),
                      "base": {"names": list(res.base.names), "standard_names": list(res.base.standard_names),
                               "K": res.base.K.tolist(), "independent": list(res.base.independent)}})
 
@@ -418,7 +419,7 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
     _check_robot_parts(d, robot, base)
     law = None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof)
     model = Model("rigid", robot=robot, offset=bool(d["offset"]), coulomb_law=law[0] if law else "algebraic",
-                  coulomb_eps=law[1] if law else None)
+                  coulomb_eps=law[1] if law else None, elastic=tuple(d.get("elastic") or ()))
     return robot_result(d["method"], dict(d["params"]), dict(d["std"]), model, base,
                          force_error=d.get("force_error", math.nan),
                          force_error_per_joint=dict(d.get("force_error_per_joint", {})),
@@ -443,8 +444,9 @@ def _check_robot_parts(d: Dict[str, Any], robot, base) -> None:
     params = d.get("params")
     if not isinstance(params, dict):
         raise DataError("its params are not an object of name: value")
+    elastic = [j for j in robot.joint_names if j in (d.get("elastic") or ())]
     names = list(base.names) + [f"{p}_{j}" for p in ("Ia", "Fv", "Fc") + (("OF",) if d.get("offset") else ())
-                                for j in robot.joint_names]
+                                for j in robot.joint_names] + [f"{p}_{j}" for p in ("K", "D") for j in elastic]
     missing = [k for k in names if k not in params]
     if missing:
         raise DataError(f"its params lack {', '.join(missing[:4])}{' …' if len(missing) > 4 else ''} (a parameter "

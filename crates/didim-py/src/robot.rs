@@ -214,9 +214,12 @@ impl PyRobot {
 /// (`(kind, gains)` as `Problem` takes them), following `qr` (N, n) from rest at `qr[0]`, the
 /// controllers' output starting at `force0`; `u_ext` (N, n) a known force added to each
 /// command, `delay` each joint's actuation delay (samples), `force_lag` each joint's lag from
-/// command to force (s): a dict of q, qd, qdd, force (N, n; the force is the commands).
+/// command to force (s); `stiffness` each joint's spring from rotor to link (N·m/rad or N/m,
+/// `inf` on a rigid joint; None: all rigid) and `damping` the springs' (N·m·s/rad): a dict of
+/// q, qd, qdd (the link side), force (N, n; the force is the commands) and, with an elastic
+/// joint, theta, thetad, thetadd (the motor side; the link side's on rigid joints).
 #[pyfunction]
-#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law, u_ext=None, delay=None, force_lag=None))]
+#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law, u_ext=None, delay=None, force_lag=None, stiffness=None, damping=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate_robot<'py>(
     py: Python<'py>,
@@ -236,6 +239,8 @@ pub fn simulate_robot<'py>(
     u_ext: Option<PyReadonlyArray2<'py, f64>>,
     delay: Option<Vec<usize>>,
     force_lag: Option<Vec<f64>>,
+    stiffness: Option<Vec<f64>>,
+    damping: Option<Vec<f64>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let (rows, n) = (qr.as_array().nrows(), robot.inner.ndof());
     let qr = flat(&qr);
@@ -272,6 +277,8 @@ pub fn simulate_robot<'py>(
             coulomb,
             offset,
             laws,
+            stiffness: stiffness.unwrap_or_default(),
+            damping: damping.unwrap_or_default(),
         };
         let control = controllers
             .iter()
@@ -289,8 +296,13 @@ pub fn simulate_robot<'py>(
         ("qd", out.qd),
         ("qdd", out.qdd),
         ("force", out.force),
+        ("theta", out.theta),
+        ("thetad", out.thetad),
+        ("thetadd", out.thetadd),
     ] {
-        d.set_item(name, PyArray1::from_vec(py, x).reshape([rows, n])?)?;
+        if !x.is_empty() {
+            d.set_item(name, PyArray1::from_vec(py, x).reshape([rows, n])?)?;
+        }
     }
     Ok(d)
 }

@@ -349,6 +349,24 @@ def _encoder_step(qm: np.ndarray) -> float:
     return float(step) if step else 0.0
 
 
+def _link_columns(available: Sequence[str], names: Sequence[str], where: str) -> Dict[int, str]:
+    """The file's link-side position columns, ``ql_<i>`` or ``ql_<joint name>``, of the joints that have one (a
+    robot with link-side encoders on its first axes only): joint index to column."""
+    found: Dict[int, str] = {}
+    for j, name in enumerate(names):
+        got = [c for c in (f"ql_{j + 1}", f"ql_{name}") if c in available]
+        if len(set(got)) > 1:
+            raise DataError(f"{where}: both ql_{j + 1} and ql_{name} are in the file: keep one (which one holds joint "
+                            f"{name}'s link-side position would be a guess)")
+        if got:
+            found[j] = got[0]
+    stray = [c for c in available if c.startswith("ql_") and c not in found.values()]
+    if stray:
+        raise DataError(f"{where}: column {stray[0]} names no joint of the robot ({', '.join(names)}): link-side "
+                        f"positions are ql_1..ql_{len(names)} or ql_<joint name>")
+    return found
+
+
 def _columns(available: Sequence[str], names: Sequence[str], key: str, where: str) -> List[str]:
     """The file's columns of signal ``key`` for each joint: ``key_1 … key_n`` or ``key_<joint name>``."""
     forms = ([f"{key}_{i + 1}" for i in range(len(names))], [f"{key}_{j}" for j in names])
@@ -640,10 +658,18 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     if any(c.startswith("u_ext_") for c in available):
         cols["u_ext"] = _columns(available, names, "u_ext", p)
     signals = {key: np.column_stack([np.asarray(get(c), dtype=float).ravel() for c in cols[key]]) for key in cols}
+    # link-side encoders (ql_1..ql_n or ql_<joint name>) on some joints or all: a joint without one reads NaN
+    ql = _link_columns(available, names, p)
+    if ql:
+        signals["ql"] = np.column_stack([np.asarray(get(ql[j]), dtype=float).ravel() if j in ql
+                                         else np.full(len(signals["qr"]), np.nan) for j in range(len(names))])
+        for j, c in ql.items():
+            cols.setdefault("ql", [None] * len(names))[j] = c
     if any(c in suffix for key in cols for c in cols[key]):
         head = []
         for j in range(len(names)):
-            pos = {suffix[c] for c in (cols["qr"][j], cols["qm"][j]) if c in suffix}
+            pos = {suffix[c] for c in (cols["qr"][j], cols["qm"][j], *cols.get("ql", [None] * len(names))[j:j + 1])
+                   if c in suffix}
             if len(pos) > 1:
                 raise DataError(f"{p}: joint {names[j]}'s positions are in several units ({', '.join(sorted(pos))})")
             forces = {suffix[cols[key][j]] for key in ("force", "u_ext") if key in cols and cols[key][j] in suffix}
@@ -690,7 +716,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     if u is not None:
         for j in range(len(names)):
             k, ff = u[j].position_factor, u[j].force_factor
-            for key, factor in (("qr", k), ("qm", k), ("force", ff), ("u_ext", ff)):
+            for key, factor in (("qr", k), ("qm", k), ("ql", k), ("force", ff), ("u_ext", ff)):
                 if key in signals:
                     signals[key][:, j] *= factor
             if converted:

@@ -77,12 +77,15 @@ def random_states(robot: Robot, samples: int, seed: int) -> Tuple[np.ndarray, np
     return q, rng.normal(size=(samples, n)), rng.normal(size=(samples, n))
 
 
-def base_parameters(robot: Robot, samples: int = 400, seed: int = 0) -> BaseParameters:
+def base_parameters(robot: Robot, samples: int = 400, seed: int = 0, elastic: Tuple[int, ...] = ()) -> BaseParameters:
     """The base parameters of ``robot`` from its regressor at ``samples`` random states (positions within the joint
-    limits, or a turn for unlimited joints; speeds and accelerations of unit spread)."""
+    limits, or a turn for unlimited joints; speeds and accelerations of unit spread). ``elastic``: the joints whose
+    rotor is a body of its own (its inertia acts on its motor side's rows, a parameter of its own, not the chain's)."""
     q, v, a = random_states(robot, samples, seed)
     with np.errstate(all="ignore"):
         w = _full_regressor(robot, q, v, a)
+        if elastic:
+            w.reshape(samples, robot.ndof, -1)[:, :, list(elastic)] = 0.0
         norms = np.linalg.norm(w, axis=0)
     if not (np.all(np.isfinite(w)) and np.all(np.isfinite(norms)) and norms.max() > 0):
         raise DataError(f"robot {robot.name}: its regressor overflows or vanishes at ordinary speeds: a length, mass or "
@@ -113,18 +116,21 @@ def base_parameters(robot: Robot, samples: int = 400, seed: int = 0) -> BasePara
     return BaseParameters(tuple(names), tuple(base_names), k, tuple(int(x) for x in ind))
 
 
+def elastic_of(model: Model) -> Tuple[int, ...]:
+    """The indices of a robot model's elastic joints, in the robot's order."""
+    return tuple(model.robot.joint_names.index(j) for j in model.elastic)
+
+
 def theta_of(res: IdentificationResult) -> np.ndarray:
-    """A robot result's parameter vector θ: the base parameters, each joint's viscous and Coulomb friction (and
-    offset)."""
-    return np.array([res.params[k] for k in _theta_names(res.robot, res.base, res.offset)])
+    """A robot result's parameter vector θ (:class:`_Layout`): the base parameters, the elastic joints' rotor
+    inertias, each joint's viscous and Coulomb friction (and offset), the elastic joints' stiffness and damping."""
+    return np.array([res.params[k] for k in _theta_names(res.robot, res.base, res.offset, elastic_of(res.structure))])
 
 
 def drives_of(res: IdentificationResult) -> Dict[str, List[float]]:
-    """A robot result's drives: each joint's rotor inertia, viscous and Coulomb friction and offset."""
-    names = res.robot.joint_names
-    return {"armature": [res.params[f"Ia_{j}"] for j in names], "viscous": [res.params[f"Fv_{j}"] for j in names],
-            "coulomb": [res.params[f"Fc_{j}"] for j in names],
-            "offset": [res.params.get(f"OF_{j}", 0.0) for j in names]}
+    """A robot result's drives: each joint's rotor inertia, viscous and Coulomb friction and offset (and, with an
+    elastic joint, each joint's stiffness, infinite on rigid joints, and damping)."""
+    return _model_of(res.robot, res.base, res.offset, theta_of(res), elastic_of(res.structure))[1]
 
 
 def standard_of(res: IdentificationResult) -> np.ndarray:
@@ -134,12 +140,51 @@ def standard_of(res: IdentificationResult) -> np.ndarray:
     return res.base.standard_from(beta, anchor)
 
 
-def _theta_names(robot: Robot, base: BaseParameters, offset: bool) -> List[str]:
-    names = list(base.names)
-    names += [f"Fv_{j}" for j in robot.joint_names] + [f"Fc_{j}" for j in robot.joint_names]
+@dataclass(frozen=True)
+class _Layout:
+    """Where each parameter sits in a robot's θ: the ``nb`` base parameters of the chain (with the rigid joints'
+    rotor inertias), the elastic joints' rotor inertias, each of the ``n`` joints' Fv, Fc (and OF), the elastic
+    joints' stiffness K and damping D. Without elastic joints: the base parameters, Fv, Fc (and OF)."""
+
+    nb: int
+    n: int
+    elastic: Tuple[int, ...]
+    offset: bool
+
+    @property
+    def ne(self) -> int:
+        return len(self.elastic)
+
+    def ia(self, e: int) -> int:
+        return self.nb + e
+
+    def fv(self, j: int) -> int:
+        return self.nb + self.ne + j
+
+    def fc(self, j: int) -> int:
+        return self.nb + self.ne + self.n + j
+
+    def of(self, j: int) -> int:
+        return self.nb + self.ne + 2 * self.n + j
+
+    def k(self, e: int) -> int:
+        return self.nb + self.ne + (3 if self.offset else 2) * self.n + e
+
+    def d(self, e: int) -> int:
+        return self.k(e) + self.ne
+
+    @property
+    def size(self) -> int:
+        return self.d(0) + self.ne if self.ne else self.k(0)
+
+
+def _theta_names(robot: Robot, base: BaseParameters, offset: bool, elastic: Tuple[int, ...] = ()) -> List[str]:
+    joints = robot.joint_names
+    names = list(base.names) + [f"Ia_{joints[j]}" for j in elastic]
+    names += [f"Fv_{j}" for j in joints] + [f"Fc_{j}" for j in joints]
     if offset:
-        names += [f"OF_{j}" for j in robot.joint_names]
-    return names
+        names += [f"OF_{j}" for j in joints]
+    return names + [f"{p}_{joints[j]}" for p in ("K", "D") for j in elastic]
 
 
 #: A friction law through zero speed (:data:`didim.methods.friction_law.Law`): its shape, shared by the joints, and each
@@ -257,27 +302,66 @@ def _joint_columns(w: np.ndarray) -> List[Tuple[np.ndarray, np.ndarray]]:
     return [(act, w[:, j, act]) for j, act in enumerate(map(np.flatnonzero, acting))]
 
 
-def _model_columns(robot: Robot, base: BaseParameters, q, v, a, offset: bool) -> List[Tuple[np.ndarray, np.ndarray]]:
+@dataclass
+class _Motor:
+    """The motor sides of a robot's elastic joints (their indices ``elastic``), as simulated: each joint's rotor
+    position, speed and acceleration (samples × joints; the link side's on rigid joints)."""
+
+    elastic: Tuple[int, ...]
+    theta: np.ndarray
+    thetad: np.ndarray
+    thetadd: np.ndarray
+
+    @classmethod
+    def of(cls, sim: Dict[str, np.ndarray], elastic: Tuple[int, ...]) -> Optional["_Motor"]:
+        return cls(elastic, sim["theta"], sim["thetad"], sim["thetadd"]) if elastic else None
+
+    def friction_speeds(self, v: np.ndarray) -> np.ndarray:
+        """Each joint's speed under its friction: the rotor's on an elastic joint, the link's on a rigid one."""
+        out = v.copy()
+        out[:, list(self.elastic)] = self.thetad[:, list(self.elastic)]
+        return out
+
+
+def _model_columns(robot: Robot, base: BaseParameters, q, v, a, offset: bool, motor: Optional[_Motor] = None
+                   ) -> Tuple[List[Tuple[np.ndarray, np.ndarray]], List[Tuple[np.ndarray, np.ndarray]]]:
     """:func:`_model_regressor` with a zero Coulomb column (a law's is put in later), as each joint's acting columns
     (:func:`_joint_columns`) built one joint at a time: no (N, n, p) array of mostly zeros (on a 4 kHz UR10 record,
-    111 MB written, then read again to find the columns that act)."""
+    111 MB written, then read again to find the columns that act).
+
+    With elastic joints (``motor``, their simulated motor sides; θ as :class:`_Layout`), an elastic joint's rows are
+    its motor side's, ``u = Ia θ̈ + Fv θ̇ + Fc s(θ̇) + OF + K (θ − q) + D (θ̇ − q̇)``, and the link rows of the elastic
+    joints come second: ``0 = [Y(q, q̇, q̈) β]_j − K (θ − q) − D (θ̇ − q̇)``, the chain's torque on the joint against
+    the spring's (one axis's load row, eq. (2), on a chain)."""
     n, nb = robot.ndof, len(base.independent)
+    lay = _Layout(nb, n, motor.elastic if motor is not None else (), offset)
     ind = np.asarray(base.independent)
     arm, body = ind[ind < n], ind[ind >= n]  # rotor inertias' columns, then the bodies'
     yb = robot.regressor(q, v, a, columns=body - n)  # (N, n, len(body))
-    out = []
+    out, links = [], []
     for j in range(n):
         bodies = np.flatnonzero(np.any(yb[:, j, :] != 0, axis=0))
         rotor = np.flatnonzero(arm == j)
-        act = np.concatenate([rotor, len(arm) + bodies, [nb + j], [nb + 2 * n + j] if offset else []]).astype(int)
-        m = np.empty((len(q), len(act)), order="F")
-        m[:, :len(rotor)] = a[:, [j] * len(rotor)]  # a rotor inertia acts on its own joint's row, times its acceleration
-        m[:, len(rotor):len(rotor) + len(bodies)] = yb[:, j, bodies]
-        m[:, len(rotor) + len(bodies)] = v[:, j]
-        if offset:
-            m[:, -1] = 1.0
-        out.append((act, m))
-    return out
+        e = lay.elastic.index(j) if j in lay.elastic else None
+        if e is None:
+            act = np.concatenate([rotor, len(arm) + bodies, [lay.fv(j)], [lay.of(j)] if offset else []]).astype(int)
+            m = np.empty((len(q), len(act)), order="F")
+            m[:, :len(rotor)] = a[:, [j] * len(rotor)]  # a rotor inertia acts on its own joint's row, times its acceleration
+            m[:, len(rotor):len(rotor) + len(bodies)] = yb[:, j, bodies]
+            m[:, len(rotor) + len(bodies)] = v[:, j]
+            if offset:
+                m[:, -1] = 1.0
+            out.append((act, m))
+            continue
+        assert motor is not None
+        stretch, rate = motor.theta[:, j] - q[:, j], motor.thetad[:, j] - v[:, j]
+        act = np.array([lay.ia(e), lay.fv(j)] + ([lay.of(j)] if offset else []) + [lay.k(e), lay.d(e)])
+        cols = [motor.thetadd[:, j], motor.thetad[:, j]] + ([np.ones(len(q))] if offset else []) + [stretch, rate]
+        out.append((act, np.asfortranarray(np.column_stack(cols))))
+        act = np.concatenate([rotor, len(arm) + bodies, [lay.k(e), lay.d(e)]]).astype(int)
+        cols = [a[:, [j] * len(rotor)], yb[:, j, bodies], -stretch[:, None], -rate[:, None]]
+        links.append((act, np.asfortranarray(np.concatenate(cols, axis=1))))
+    return out, links
 
 
 def _rows(dec, y: np.ndarray, columns: List[Tuple[np.ndarray, np.ndarray]], p: int, v: np.ndarray,
@@ -312,30 +396,46 @@ class _InverseModel:
     that the laws a search compares, and DIDIM's step of ε, cost a fraction of a fit each."""
 
     def __init__(self, rec: Recording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, dec,
-                 y: Optional[np.ndarray] = None, start_row: int = 0):
-        self.robot, self.base, self.offset, self.dec, self.v = robot, base, offset, dec, v
+                 y: Optional[np.ndarray] = None, start_row: int = 0, motor: Optional[_Motor] = None):
         n, nb = robot.ndof, len(base.names)
+        self.lay = _Layout(nb, n, motor.elastic if motor is not None else (), offset)
+        # each joint's friction acts at its rotor's speed (the link's on a rigid joint)
+        self.robot, self.base, self.offset, self.dec = robot, base, offset, dec
+        self.v = v if motor is None else motor.friction_speeds(v)
         self.n, self.nb = n, nb
         # each joint's Coulomb column is left out here: it is the law's (see rows)
-        got = _rows(dec, rec.applied_force() if y is None else y, _model_columns(robot, base, q, v, a, offset),
-                    nb + (3 if offset else 2) * n, v, top_speeds(rec), start_row)
+        columns, links = _model_columns(robot, base, q, v, a, offset, motor)
+        got = _rows(dec, rec.applied_force() if y is None else y, columns, self.lay.size, self.v, top_speeds(rec),
+                    start_row)
         self.parts = [(yd, wd) for yd, wd, _ in got]
         self.keep = [keep for _, _, keep in got]
+        # an elastic joint's link rows (against zero) follow its motor rows: every row, at any speed (no friction
+        # acts there)
+        self.link_rows = [0] * n
+        if links:
+            ends = list(self.lay.elastic)
+            lk = _rows(dec, np.zeros((len(q), len(ends))), links, self.lay.size, v[:, ends], np.zeros(len(ends)),
+                       start_row)
+            for j, (yd, wd, _) in zip(ends, lk):
+                self.parts[j] = (np.concatenate([self.parts[j][0], yd]), np.concatenate([self.parts[j][1], wd]))
+                self.link_rows[j] = len(yd)
 
     def column(self, j: int, values: np.ndarray) -> np.ndarray:
-        """A full-rate column on joint ``j``'s rows, decimated, on its kept rows."""
-        return self.dec(np.ascontiguousarray(values))[self.keep[j]]
+        """A full-rate column on joint ``j``'s rows, decimated, on its kept rows (zero on an elastic joint's link
+        rows)."""
+        c = self.dec(np.ascontiguousarray(values))[self.keep[j]]
+        return np.concatenate([c, np.zeros(self.link_rows[j])]) if self.link_rows[j] else c
 
     def rows(self, law: Law, coulomb: Optional[np.ndarray] = None) -> List[Tuple[np.ndarray, np.ndarray]]:
         """Each joint's kept rows with its Coulomb column under ``law``. With ``coulomb`` (each joint's Coulomb
         friction), one more column per joint: the law's derivative in its smoothing speed ε times it, whose
         coefficient is the step of ε that the force asks for (a Gauss–Newton step: ε trades with Fv where the law's
         tail is long, and is estimated with it)."""
-        n, nb, v = self.n, self.nb, self.v
+        n, v = self.n, self.v
         out = []
         for j, (yd, wd) in enumerate(self.parts):
             wl = wd.copy()
-            wl[:, nb + n + j] = self.column(j, _sign(v[:, j], law[0], law[1][j]))
+            wl[:, self.lay.fc(j)] = self.column(j, _sign(v[:, j], law[0], law[1][j]))
             if coulomb is not None:
                 e = max(float(law[1][j]), 1e-300)
                 ds = (_sign(v[:, j], law[0], e * (1 + EPS_STEP)) - _sign(v[:, j], law[0], e * (1 - EPS_STEP)))
@@ -435,7 +535,7 @@ def fit_law(rec: Recording, inverse: "_InverseModel",
     common scale). ``per_shape`` receives each shape's best ε per joint on the grid."""
     n, nb, v = inverse.n, inverse.nb, inverse.v
     scale = _speed_scales(rec)
-    fc_cols = [nb + n + j for j in range(n)]
+    fc_cols = [inverse.lay.fc(j) for j in range(n)]
     parts = inverse.rows(("algebraic", (0.0,) * n))  # the hard sign
     # per-joint weights from the hard sign's fit
     y0 = np.concatenate([p[0] for p in parts])
@@ -519,6 +619,7 @@ def _first_half(rec: Recording) -> Recording:
 
     m = max(rec.n // 2, 2)
     return dataclasses.replace(rec, qr=rec.qr[:m], force=rec.force[:m], qm=rec.qm[:m],
+                               ql=None if rec.ql is None else rec.ql[:m],
                                u_ext=None if rec.u_ext is None else rec.u_ext[:m],
                                lead_in=rec.qr_lead if len(rec.qr_lead) else None)
 
@@ -584,14 +685,29 @@ def closed_loop_law(rec: Recording, refit: Callable[[Law], Tuple[Robot, Dict[str
 
 def simulate_robot(rec: Recording, result: IdentificationResult, substeps: int = 0) -> Dict[str, np.ndarray]:
     """The closed loop of ``rec`` (its references, controllers, encoders, first force) with the model of ``result``
-    (its friction law)."""
+    (its friction law): q, qd, qdd the link side's, force the commands, and with elastic joints theta, thetad, thetadd
+    the motor side's."""
     _robot_result(result)
     _check(rec, result.structure)
     substeps = _checks.whole("substeps", substeps, lo=0, hi=1024, hint=" (RK4 steps per sample; 0 chooses)")
-    robot = result.robot.with_inertial_params(standard_of(result)[result.robot.ndof:])
-    d = drives_of(result)
-    d["armature"] = list(standard_of(result)[:result.robot.ndof])
+    robot, d = _model_of(result.robot, result.base, result.offset, theta_of(result), elastic_of(result.structure))
     return _simulate(rec, robot, d, result.law if result.law is not None else _default_law(rec), substeps)
+
+
+def deflection_errors(rec: Recording, sim: Dict[str, np.ndarray], model: Model) -> Dict[str, float]:
+    """Each elastic joint's relative RMS error of the simulated link-minus-motor deflection ``q − θ`` against the
+    logged one ``ql − qm``, where the record has the joint's link-side position (``ql_<joint>``)."""
+    if rec.ql is None or not model.elastic or "theta" not in sim:
+        return {}
+    out = {}
+    for j in elastic_of(model):
+        if np.all(np.isnan(rec.ql[:, j])):
+            continue
+        logged = rec.ql[:, j] - rec.qm[:, j]
+        norm = float(np.linalg.norm(logged))
+        out[rec.joint_names[j]] = (float(np.linalg.norm(sim["q"][:, j] - sim["theta"][:, j] - logged)) / norm
+                                   if norm > 0 else math.nan)
+    return out
 
 
 #: How many closed loops this thread has simulated (a method's result reports the difference over its run).
@@ -602,12 +718,16 @@ def _simulations() -> int:
     return getattr(_count, "n", 0)
 
 
-def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law, substeps: int = 0):
+def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law, substeps: int = 0,
+              quantize: bool = True):
     """The closed loop of ``rec`` with the robot ``robot`` and drives ``d`` under ``law``: from rest at the first
     reference, each controller's integrator holding the logged first force; through the record's lead-in
     (:attr:`Recording.qr_lead`) when it begins in motion, from rest at the lead-in's start, each integrator then
     holding the model's static torque there (gravity and offset, less the feedforward), the lead-in's samples dropped
-    from the outputs."""
+    from the outputs. ``quantize=False``: the encoders read the exact positions (a simulation smooth in the
+    parameters, for a search that differentiates it: a parameter's change flips encoder counts, and the closed loop
+    turns each flip into a step of force, so that the force error of the quantized loop jumps by about its noise at
+    any step of a parameter, 0.7 % of the force on the flexrobots' arm at steps from 1e-4 to 1e-2)."""
     _count.n = _simulations() + 1
     qr, u_ext = rec.lead_in_signals()
     lead = len(qr) - rec.n
@@ -617,10 +737,12 @@ def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law,
         force0 = robot.rnea(qr[0], rest, rest) + np.asarray(d["offset"]) - (0.0 if u_ext is None else u_ext[0])
     try:
         sim = _core.simulate_robot(robot._core, d["armature"], d["viscous"], d["coulomb"], d["offset"],
-                                   rec.core_controllers(), qr, rec.dt, quantization=list(rec.encoder_step),
+                                   rec.core_controllers(), qr, rec.dt,
+                                   quantization=list(rec.encoder_step) if quantize else [0.0] * rec.ndof,
                                    force0=list(map(float, force0)), substeps=substeps, coulomb_eps=list(law[1]),
                                    coulomb_law=[law[0]] * len(law[1]), u_ext=u_ext,
-                                   delay=list(rec.delay) or None, force_lag=list(rec.force_lag) or None)
+                                   delay=list(rec.delay) or None, force_lag=list(rec.force_lag) or None,
+                                   stiffness=d.get("stiffness"), damping=d.get("damping"))
     except DataError as e:
         raise SimulationError(f"the robot's closed loop cannot be simulated with these parameters: {e}") from None
     return {k: v[lead:] for k, v in sim.items()} if lead else sim
@@ -637,7 +759,8 @@ def force_errors(rec: Recording, force_sim: np.ndarray) -> Tuple[float, Dict[str
 def _result(method: str, rec: Recording, model: Model, base: BaseParameters, theta, cov,
             **kw) -> IdentificationResult:
     robot, offset = model.robot, model.offset
-    names = _theta_names(robot, base, offset)
+    elastic = elastic_of(model)
+    names = _theta_names(robot, base, offset, elastic)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     params = dict(zip(names, map(float, theta)))
     stds = dict(zip(names, map(float, std)))
@@ -646,6 +769,8 @@ def _result(method: str, rec: Recording, model: Model, base: BaseParameters, the
     notes = list(kw.pop("notes", []))
     pi0 = np.concatenate([np.zeros(robot.ndof), robot.inertial_params])
     for j, jn in enumerate(robot.joint_names):
+        if j in elastic:
+            continue  # an elastic joint's rotor inertia is a parameter of its own
         i = base.independent.index(j) if j in base.independent else None
         if i is None:
             notes.append(f"Ia_{jn} is not identifiable on its own (no base parameter holds it)")
@@ -707,11 +832,12 @@ def plausibility(res: IdentificationResult) -> List[str]:
         out.append("the standard parameters closest to the URDF's with these base parameters are not those of "
                    f"physical bodies for {', '.join(bad)} (mass or pseudo-inertia not positive): the base parameters "
                    "may still be right (they are what the torques fix), the URDF's split of them is not")
-    for kind in ("Ia", "Fv", "Fc"):
+    for kind in ("Ia", "Fv", "Fc", "K", "D"):
         neg = [f"{kind}_{j} = {res.params[f'{kind}_{j}']:.4g}" for j in res.robot.joint_names
                if res.params.get(f"{kind}_{j}", 0.0) < 0]
         if neg:
-            what = {"Ia": "rotor inertia", "Fv": "viscous friction", "Fc": "Coulomb friction"}[kind]
+            what = {"Ia": "rotor inertia", "Fv": "viscous friction", "Fc": "Coulomb friction", "K": "stiffness",
+                    "D": "spring damping"}[kind]
             more = (" (a regrouped rotor inertia takes the URDF's values of the body parameters it is regrouped with: "
                     "those are off by at least this much)") if kind == "Ia" else ""
             out.append(f"negative {what}: {', '.join(neg)}{more}")
@@ -725,6 +851,10 @@ def idim_ls(rec: Recording, model: Model) -> IdentificationResult:
     simulations of the result."""
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
+    if model.elastic:
+        raise DataError(f"idim-ls regresses the measured positions, and the link side of elastic joints "
+                        f"({', '.join(model.elastic)}) is not what the encoders measure: use method 'didim' (the "
+                        "three-step DIDIM simulates it)")
     base = base_parameters(robot)
     dec = _decimation(rec)
     q, v, a = _measured_states(rec, dec)
@@ -761,13 +891,24 @@ def idim_ls(rec: Recording, model: Model) -> IdentificationResult:
 ABSURD_ERROR = 1.0
 
 
-def _model_of(robot: Robot, base: BaseParameters, offset: bool, theta: np.ndarray):
+def _model_of(robot: Robot, base: BaseParameters, offset: bool, theta: np.ndarray, elastic: Tuple[int, ...] = ()):
     """The robot with the standard parameters closest to the URDF's that give θ's base parameters, and its drives
-    (rotor inertias, each joint's viscous and Coulomb friction and offset)."""
+    (rotor inertias, each joint's viscous and Coulomb friction and offset; with ``elastic`` joints, each joint's
+    stiffness, infinite on rigid ones, and damping)."""
     n, nb = robot.ndof, len(base.names)
+    lay = _Layout(nb, n, elastic, offset)
     pi = base.standard_from(theta[:nb], np.concatenate([np.zeros(n), robot.inertial_params]))
-    d = {"armature": list(pi[:n]), "viscous": list(theta[nb:nb + n]), "coulomb": list(theta[nb + n:nb + 2 * n]),
-         "offset": list(theta[nb + 2 * n:]) if offset else [0.0] * n}
+    arm = pi[:n].copy()
+    for e, j in enumerate(elastic):
+        arm[j] = theta[lay.ia(e)]
+    d: Dict[str, List[float]] = {
+        "armature": list(arm), "viscous": list(theta[lay.fv(0):lay.fv(0) + n]),
+        "coulomb": list(theta[lay.fc(0):lay.fc(0) + n]),
+        "offset": list(theta[lay.of(0):lay.of(0) + n]) if offset else [0.0] * n}
+    if elastic:
+        d["stiffness"], d["damping"] = [math.inf] * n, [0.0] * n
+        for e, j in enumerate(elastic):
+            d["stiffness"][j], d["damping"][j] = float(theta[lay.k(e)]), float(theta[lay.d(e)])
     return robot.with_inertial_params(pi[n:]), d
 
 
@@ -780,15 +921,17 @@ class _RobotPlant:
     (:func:`closed_loop_law`) and the iterations go on until they settle again, each joint's ε estimated with the
     parameters where the closed loop kept the shape the tail chose (:func:`_fit`)."""
 
-    def __init__(self, rec, robot, base, dec, offset, law, per_shape, tol, say):
+    def __init__(self, rec, robot, base, dec, offset, law, per_shape, tol, say, elastic: Tuple[int, ...] = ()):
         self.rec, self.robot, self.base, self.dec, self.offset = rec, robot, base, dec, offset
         self.law, self.per_shape, self.tol, self.say = law, per_shape, tol, say
         self.n, self.nb = robot.ndof, len(base.names)
+        self.elastic = elastic
+        self.lay = _Layout(self.nb, self.n, elastic, offset)
         self.tail_shape = law[0]  # the shape the inverse model chose on the rows the fits keep (the law's tail)
         self.law_chosen = False
         self.inverses: List[Tuple[np.ndarray, _InverseModel]] = []
         self.last: Optional[Tuple[np.ndarray, Law, Any]] = None  # the last simulation (θ, law, its outputs)
-        self.free = list(range(len(base.names) + (3 if offset else 2) * self.n))
+        self.free = list(range(self.lay.size))
         self.start_row = 0  # the decimated rows before the simulation joins the record, left out (set_start)
         self.skip = 0  # the same, in samples, left out of the output error
         self.norm = float(np.linalg.norm(rec.force))
@@ -810,7 +953,7 @@ class _RobotPlant:
 
     def model(self, theta: np.ndarray):
         """The robot with θ's standard parameters and its drives."""
-        return _model_of(self.robot, self.base, self.offset, theta)
+        return _model_of(self.robot, self.base, self.offset, theta, self.elastic)
 
     def simulate(self, theta: np.ndarray):
         if self.last is not None and self.last[1] == self.law and np.array_equal(self.last[0], theta):
@@ -831,14 +974,14 @@ class _RobotPlant:
             if np.array_equal(th, theta):
                 return im
         im = _InverseModel(self.rec, self.robot, self.base, sim["q"], sim["qd"], sim["qdd"], self.offset, self.dec,
-                           start_row=self.start_row)
+                           start_row=self.start_row, motor=_Motor.of(sim, self.elastic))
         self.inverses = [(theta.copy(), im)] + self.inverses[:3]
         return im
 
     def solve(self, theta: np.ndarray, sim) -> Dict[str, Any]:
         n, nb, rec = self.n, self.nb, self.rec
         inverse = self.inverse(theta, sim)
-        if self.law_chosen and min(self.law[1]) > 0 and self.law[0] == self.tail_shape:
+        if self.law_chosen and min(self.law[1]) > 0 and self.law[0] == self.tail_shape and not self.elastic:
             # each joint's ε with the parameters, once the closed loop has confirmed the shape that the tail chose:
             # the fits keep the tail's rows, and a shape the closed loop chose against it has its ε set near zero speed
             theta_e, cov_e, _ = inverse.fit(self.law, coulomb=theta[nb + n:nb + 2 * n])
@@ -881,6 +1024,10 @@ class _RobotPlant:
         def refit(lw: Law):
             return self.model(inverse.fit(lw)[0])
 
+        if self.elastic and not self.per_shape:
+            # an elastic model starts from its rigid step's law: each shape's smoothing speeds from the tail of the
+            # elastic model's rows, for the closed loop to choose among
+            fit_law(self.rec, inverse, self.per_shape)
         new_law = closed_loop_law(self.rec, refit, self.law, self.per_shape, self.say)
         if new_law != self.law or self.start_row != start:
             self.law = new_law
@@ -924,6 +1071,8 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     _checks.options(max_iter=max_iter, tol=tol)
+    if model.elastic:
+        return didim_elastic(rec, model, max_iter=max_iter, tol=tol, progress=progress)
     say = progress or (lambda s: None)
     base = base_parameters(robot)
     dec = _decimation(rec)
@@ -968,6 +1117,322 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     res.force_error, res.force_error_per_joint = sol["force_errors"]
     if plant.skip:
         res.start_s, res.force_error_after_start = plant.skip * rec.dt, err
+    res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
+    return res
+
+
+# ------------------------------------------------------------------------------------------------ elastic joints
+
+#: Step 2's grid, eq. (28) for every elastic joint at once: the share λ of the joint's inertia at mid-stroke on its
+#: motor side, and its locked-rotor mode from fs/100 to fs/12.5, geometric (the paper's [0.1, 0.9] and [10, 80] Hz at
+#: the EMPS's 1 kHz). Each joint takes the grid point where its own force error is least.
+ELASTIC_GRID_LAMBDA = (0.1, 0.3, 0.5, 0.7, 0.9)
+ELASTIC_GRID_F_SHARE = tuple(float(x) for x in np.geomspace(1 / 100, 1 / 12.5, 8))
+#: The springs' damping ratio where step 2 starts (a transmission's is 1-5 %).
+ELASTIC_ZETA0 = 0.03
+#: Step 2's Nelder-Mead on one joint's (λ, ln f, ζ), scaled by ELASTIC_SIMPLEX (half the grid's steps in λ and f),
+#: stops when its simplex spans less than ELASTIC_XTOL of those steps (2e-4 in λ, 3e-4 in f, 4e-5 in ζ) and its values
+#: vary by less than ELASTIC_FTOL of the criterion.
+ELASTIC_SIMPLEX = (0.1, 0.15, 0.02)
+ELASTIC_XTOL = 2e-3
+ELASTIC_FTOL = 1e-4
+#: Step 2's sweeps over the elastic joints (each joint's search with the others' at their last values: the modes of
+#: a chain couple).
+ELASTIC_SWEEPS = 2
+
+
+def _regroup_partner(base: BaseParameters, robot: Robot, j: int) -> Optional[Tuple[int, float]]:
+    """The standard parameter that joint ``j``'s rotor inertia shares its base parameter with, and its coefficient
+    there (preferring one of the joint's own body's inertias): moving the rotor inertia into it keeps the rigid
+    dynamics. None where the rotor inertia is a base parameter of its own (or none)."""
+    if j not in base.independent:
+        return None
+    row = base.K[base.independent.index(j)]
+    deps = [c for c in np.flatnonzero(row) if c != j]
+    if not deps:
+        return None
+    own = [c for c in deps if base.standard_names[c].startswith("I") and base.standard_names[c].endswith(
+        "_" + robot.joint_names[j])]
+    c = (own or deps)[0]
+    return int(c), float(row[c])
+
+
+class _ElasticSplit:
+    """Step 2's model, the paper's eqs. (23)-(27) for each elastic joint j: step 1's rigid estimate with the joint
+    split at (λ_j, f_j, ζ_j): its rotor inertia Ia_j = λ_j T_j, T_j its total inertia at mid-stroke in step 1's model
+    (its rotor's and its chain's, M_jj(q_mid)); where step 1's rotor inertia was regrouped with a body parameter, that
+    parameter takes the rest (the rigid dynamics unchanged); K_j = M_jj(q_mid) (2π f_j)² and D_j = 2 ζ_j √(K_j M_jj)
+    with the split chain's M_jj (f_j is the joint's locked-rotor mode there, ζ_j its damping ratio); the friction and
+    offsets stay step 1's, on the motor side (eq. (27): all friction on the motor)."""
+
+    def __init__(self, rec: Recording, rigid: IdentificationResult, elastic: Tuple[int, ...]):
+        robot = rigid.robot
+        self.rec, self.robot, self.elastic, self.offset = rec, robot, elastic, rigid.offset
+        n = robot.ndof
+        chain, self.d1 = _model_of(robot, rigid.base, rigid.offset, theta_of(rigid))
+        self.pi1 = np.concatenate([self.d1["armature"], chain.inertial_params])
+        self.qmid = 0.5 * (rec.qm.min(axis=0) + rec.qm.max(axis=0))
+        m = chain.mass_matrix(self.qmid)
+        self.total = np.array([self.d1["armature"][j] + m[j, j] for j in elastic])
+        self.partner = [_regroup_partner(rigid.base, robot, j) for j in elastic]
+        self.base = base_parameters(robot, elastic=elastic)
+        self.lay = _Layout(len(self.base.names), n, elastic, rigid.offset)
+
+    def theta(self, x: np.ndarray) -> np.ndarray:
+        """θ of the elastic model (:class:`_Layout`) at ``x`` (one row (λ, f in Hz, ζ) per elastic joint)."""
+        n, lay = self.robot.ndof, self.lay
+        pi = self.pi1.copy()
+        for e, j in enumerate(self.elastic):
+            ia = x[e, 0] * self.total[e]
+            if self.partner[e] is not None:
+                c, coef = self.partner[e]
+                pi[c] += (pi[j] - ia) / coef
+            pi[j] = ia
+        m = self.robot.with_inertial_params(pi[n:]).mass_matrix(self.qmid)
+        th = np.zeros(lay.size)
+        th[:lay.nb] = self.base.of(pi)
+        for j in range(n):
+            th[lay.fv(j)], th[lay.fc(j)] = self.d1["viscous"][j], self.d1["coulomb"][j]
+            if self.offset:
+                th[lay.of(j)] = self.d1["offset"][j]
+        for e, j in enumerate(self.elastic):
+            th[lay.ia(e)] = pi[j]
+            k = m[j, j] * (2 * math.pi * x[e, 1]) ** 2
+            th[lay.k(e)], th[lay.d(e)] = k, 2 * x[e, 2] * math.sqrt(max(k * m[j, j], 0.0))
+        return th
+
+    def errors(self, x: np.ndarray, law: Law) -> Optional[np.ndarray]:
+        """Each joint's relative force error in closed loop at ``x``; None where the loop cannot be simulated."""
+        if not (np.all(x[:, 0] > 0) and np.all(x[:, 0] < 1) and np.all(x[:, 1] > 0) and np.all(x[:, 2] >= 0)):
+            return None
+        try:
+            robot, d = _model_of(self.robot, self.base, self.offset, self.theta(x), self.elastic)
+            sim = _simulate(self.rec, robot, d, law)
+        except (SimulationError, DataError):
+            return None
+        r = np.linalg.norm(self.rec.force - sim["force"], axis=0) / np.maximum(np.linalg.norm(self.rec.force, axis=0),
+                                                                                1e-300)
+        return r if np.all(np.isfinite(r)) else None
+
+
+def _joints_error(per: Optional[np.ndarray]) -> float:
+    """Step 2's criterion: the RMS of the joints' relative force errors (each joint counts alike, whatever its
+    torque); infinite where the loop cannot be simulated."""
+    return math.inf if per is None else float(np.sqrt(np.mean(per ** 2)))
+
+
+def _residuals(rec: Recording, sim: Dict[str, np.ndarray]) -> np.ndarray:
+    """Each joint's force residual over its norm, over √n: the vector whose norm is the RMS of the joints' relative
+    force errors (step 2's criterion)."""
+    norms = np.maximum(np.linalg.norm(rec.force, axis=0), 1e-300)
+    return ((rec.force - sim["force"]) / norms / math.sqrt(rec.ndof)).ravel(order="F")
+
+
+#: Step 2's Levenberg-Marquardt (scipy's trust-region reflective) on the elastic joints' (λ, ln f, ζ): the relative
+#: step of its finite differences, and its stopping tolerance on the criterion and on the step (relative).
+SPRING_FD_STEP = 1e-3
+SPRING_TOL = 1e-4
+SPRING_MAX_ITER = 25
+
+
+def _spring_search(rec: Recording, theta_of_u: Callable[[np.ndarray], np.ndarray], model_of, u0: np.ndarray,
+                   lower: np.ndarray, upper: np.ndarray, law: Law, sims: List[int]) -> Tuple[np.ndarray, float]:
+    """Least squares of the joints' relative force residuals in closed loop (:func:`_residuals`) over ``u``, the model
+    ``model_of(theta_of_u(u))``: scipy's trust-region reflective Levenberg-Marquardt within the bounds, its Jacobian by
+    forward differences simulated in parallel. Returns the best ``u`` and its criterion."""
+    from concurrent.futures import ThreadPoolExecutor
+    from scipy.optimize import least_squares
+
+    cache: Dict[bytes, np.ndarray] = {}
+    bad = np.full(rec.n * rec.ndof, 1.0 / math.sqrt(rec.ndof))  # a loop that cannot be simulated: 100 % per joint
+
+    def res(u: np.ndarray) -> np.ndarray:
+        key = np.asarray(u, dtype=float).tobytes()
+        if key not in cache:
+            sims[0] += 1
+            try:
+                robot, d = model_of(theta_of_u(np.asarray(u, dtype=float)))
+                cache[key] = _residuals(rec, _simulate(rec, robot, d, law, quantize=False))
+            except (SimulationError, DataError):
+                cache[key] = bad
+            if len(cache) > 64:
+                cache.pop(next(iter(cache)))
+        return cache[key]
+
+    def jac(u: np.ndarray) -> np.ndarray:
+        r0 = res(u)
+        steps = SPRING_FD_STEP * np.maximum(np.abs(u), 1.0)
+        steps = np.where(u + steps > upper, -steps, steps)
+        with ThreadPoolExecutor(max_workers=max(1, _core_count())) as pool:
+            cols = list(pool.map(lambda k: (res(u + steps[k] * np.eye(len(u))[k]) - r0) / steps[k], range(len(u))))
+        return np.column_stack(cols)
+
+    out = least_squares(res, u0, jac=jac, bounds=(lower, upper), method="trf", x_scale="jac", ftol=SPRING_TOL,
+                        xtol=SPRING_TOL, gtol=None, max_nfev=SPRING_MAX_ITER)
+    return out.x, float(np.linalg.norm(res(out.x)))
+
+
+def elastic_modes(rec: Recording, rigid: IdentificationResult, elastic: Tuple[int, ...], say=None
+                  ) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
+    """Step 2 for a robot's elastic joints: from eq. (28)'s grid (every joint at once, each taking the point where its
+    own force error is least), the least squares of the joints' relative closed-loop force residuals over every
+    elastic joint's (λ, ln f, ζ) at once (:func:`_spring_search`: Levenberg-Marquardt, where the paper's Nelder-Mead
+    searched one joint's two; the criterion is the paper's (25), the RMS of the joints' relative force errors).
+    Returns each joint's (λ, f in Hz, ζ), the split model, and the search's record (criterion, simulations)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    say = say or (lambda s: None)
+    split = _ElasticSplit(rec, rigid, elastic)
+    law = rigid.law if rigid.law is not None else _default_law(rec)
+    ne, fs = len(elastic), 1 / rec.dt
+    names = [rigid.robot.joint_names[j] for j in elastic]
+    sims = [0]
+
+    def errors(x):
+        sims[0] += 1
+        return split.errors(x, law)
+
+    grid = [(lam, share * fs) for lam in ELASTIC_GRID_LAMBDA for share in ELASTIC_GRID_F_SHARE]
+    points = [np.array([[lam, f, ELASTIC_ZETA0]] * ne) for lam, f in grid]
+    with ThreadPoolExecutor(max_workers=max(1, min(len(points), _core_count()))) as pool:
+        got = list(pool.map(errors, points))
+    x = np.zeros((ne, 3))
+    for e, j in enumerate(elastic):
+        vals = [g[j] if g is not None else math.inf for g in got]
+        i = int(np.argmin(vals))
+        x[e] = (grid[i][0], grid[i][1], ELASTIC_ZETA0)
+    if ne > 1:
+        # each joint's grid again with the others at their best points: the modes of a chain couple
+        for e, j in enumerate(elastic):
+            pts = []
+            for lam, f in grid:
+                xx = x.copy()
+                xx[e] = (lam, f, ELASTIC_ZETA0)
+                pts.append(xx)
+            with ThreadPoolExecutor(max_workers=max(1, min(len(pts), _core_count()))) as pool:
+                got = list(pool.map(errors, pts))
+            i = int(np.argmin([_joints_error(g) for g in got]))
+            x[e] = (grid[i][0], grid[i][1], ELASTIC_ZETA0)
+    say("step 2 start (eq. (28)'s grid, each elastic joint at its best point): " + "; ".join(
+        f"{nm} λ = {x[e, 0]:.2f}, f = {x[e, 1]:.1f} Hz" for e, nm in enumerate(names)))
+
+    def unpack(u: np.ndarray) -> np.ndarray:
+        return np.column_stack([u[0::3], np.exp(u[1::3]), u[2::3]])
+
+    u0 = np.column_stack([x[:, 0], np.log(x[:, 1]), x[:, 2]]).ravel()
+    lower = np.tile([1e-3, -np.inf, 0.0], ne)
+    upper = np.tile([1 - 1e-3, math.log(0.5 * fs), np.inf], ne)
+    u, best = _spring_search(rec, lambda u: split.theta(unpack(u)),
+                             lambda th: _model_of(split.robot, split.base, split.offset, th, elastic), u0, lower, upper,
+                             law, sims)
+    x = unpack(u)
+    say("step 2: " + "; ".join(f"{nm} λ = {x[e, 0]:.3f}, f = {x[e, 1]:.2f} Hz, ζ = {x[e, 2]:.3f}"
+                               for e, nm in enumerate(names)) + f"; joints' force errors RMS {100 * best:.3f} %")
+    return x, split, {"criterion": best, "simulations": sims[0]}
+
+
+#: Rounds of step 2 and 3 again after the first (:func:`didim_elastic`), while each lowers the closed-loop force error
+#: by this share at least.
+ELASTIC_ROUNDS = 3
+ELASTIC_ROUND_GAIN = 0.01
+
+
+def _refine_springs(rec: Recording, plant: "_RobotPlant", theta: np.ndarray, law: Law, search: Dict[str, Any]
+                    ) -> np.ndarray:
+    """Step 2's search (:func:`_spring_search`) from step 3's estimate ``theta``: each elastic joint's rotor inertia
+    (its logarithm), its locked-rotor mode at mid-stroke with the estimate's chain and its damping ratio, the chain
+    and the friction held."""
+    lay, elastic = plant.lay, plant.elastic
+    robot, _ = plant.model(theta)
+    qmid = 0.5 * (rec.qm.min(axis=0) + rec.qm.max(axis=0))
+    m = np.diag(robot.mass_matrix(qmid))[list(elastic)]
+
+    def theta_of_u(u: np.ndarray) -> np.ndarray:
+        th = theta.copy()
+        for e in range(len(elastic)):
+            k = m[e] * (2 * math.pi * math.exp(u[3 * e + 1])) ** 2
+            th[lay.ia(e)], th[lay.k(e)] = math.exp(u[3 * e]), k
+            th[lay.d(e)] = 2 * u[3 * e + 2] * math.sqrt(k * m[e])
+        return th
+
+    u0 = []
+    for e in range(len(elastic)):
+        k, d = theta[lay.k(e)], theta[lay.d(e)]
+        u0 += [math.log(theta[lay.ia(e)]), math.log(math.sqrt(k / m[e]) / (2 * math.pi)),
+               d / (2 * math.sqrt(k * m[e]))]
+    fs = 1 / rec.dt
+    lower = np.tile([-np.inf, -np.inf, 0.0], len(elastic))
+    upper = np.tile([np.inf, math.log(0.5 * fs), np.inf], len(elastic))
+    sims = [0]
+    u, _ = _spring_search(rec, theta_of_u, plant.model, np.array(u0), lower, upper, law, sims)
+    search["simulations"] += sims[0]
+    return theta_of_u(u)
+
+
+def _core_count() -> int:
+    import os
+
+    return int(os.environ.get("RAYON_NUM_THREADS") or os.cpu_count() or 1)
+
+
+def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
+                  progress: Optional[Callable[[str], None]] = None) -> IdentificationResult:
+    """The three-step DIDIM of the paper's section V for a robot with elastic joints (``model.elastic``): step 1,
+    DIDIM on the rigid model (:func:`didim`); step 2, each elastic joint's mass ratio, mode and damping by
+    Nelder-Mead on the closed-loop force error (:func:`elastic_modes`); step 3, DIDIM on the whole model from there:
+    each elastic joint's rows are its motor side's and its link side's (:func:`_model_columns`), whose simulated
+    states the link rows fit exactly, so the regression moves each spring with the chain's inertia it carries and
+    keeps its mode (one axis's M2 and K12, eq. (2)): the modes and damping ratios are step 2's."""
+    from dataclasses import replace
+
+    t0, sims0 = time.perf_counter(), _simulations()
+    robot, offset = _check(rec, model)
+    say = progress or (lambda s: None)
+    elastic = elastic_of(model)
+    say("step 1: DIDIM on the rigid model")
+    rigid = didim(rec, replace(model, elastic=(), kind="rigid"), max_iter=max_iter, tol=tol, progress=progress)
+    say(f"step 1: closed-loop force error {100 * rigid.force_error:.3f} %")
+    x, split, search = elastic_modes(rec, rigid, elastic, say)
+    theta0 = split.theta(x)
+    law = rigid.law if rigid.law is not None else _default_law(rec)
+    dec = _decimation(rec)
+    plant = _RobotPlant(rec, robot, split.base, dec, offset, law, {}, tol, say, elastic=elastic)
+    say("step 3: DIDIM on the elastic model")
+    run = didim_loop(plant, theta0, max_iter=max_iter, progress=say)
+    if run.best[2] is None:
+        raise SimulationError(f"step 3 (DIDIM on the elastic model) could not simulate the robot's closed loop: "
+                              f"{run.message}")
+    # DIDIM keeps the modes (each link row fits the simulated spring exactly): with step 3's friction and chain,
+    # step 2's search again on each elastic joint's rotor inertia, mode and damping, then step 3 again, while the
+    # closed-loop force error falls
+    for rnd in range(ELASTIC_ROUNDS):
+        theta_r = _refine_springs(rec, plant, run.best[1], law, search)
+        say(f"step 2 again (round {rnd + 2}): " + ", ".join(
+            f"{robot.joint_names[j]} Ia = {theta_r[plant.lay.ia(e)]:.4g}, K = {theta_r[plant.lay.k(e)]:.4g}, "
+            f"D = {theta_r[plant.lay.d(e)]:.4g}" for e, j in enumerate(elastic)))
+        again = didim_loop(plant, theta_r, max_iter=max_iter, progress=say)
+        if again.best[2] is None or again.best[0] >= (1 - ELASTIC_ROUND_GAIN) * run.best[0]:
+            if again.best[2] is not None and again.best[0] < run.best[0]:
+                run = again
+            break
+        run = again
+    err, theta, sol, _ = run.best
+    names = [robot.joint_names[j] for j in elastic]
+    modes = {nm: {"lambda": float(x[e, 0]), "f_n_flex": float(x[e, 1]), "zeta": float(x[e, 2]),
+                  "q_mid": float(split.qmid[j])} for e, (nm, j) in enumerate(zip(names, elastic))}
+    notes = [f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid.force_error:.2f} %"
+             + "".join(f"; {j} {100 * v:.2f} %" for j, v in rigid.force_error_per_joint.items()),
+             "step 2 (Nelder-Mead on each elastic joint's mass ratio λ, locked-rotor mode f_n_flex at mid-stroke and "
+             f"damping ratio ζ, {search['simulations']} simulations): " + "; ".join(
+                 f"{nm} λ = {m['lambda']:.3f}, f_n_flex = {m['f_n_flex']:.2f} Hz, ζ = {m['zeta']:.3f}"
+                 for nm, m in modes.items())]
+    res = _result("didim", rec, model.with_law(sol["law"]), split.base, theta, sol["covariance"],
+                  converged=run.converged,
+                  iterations=len(run.history), message="" if run.converged else run.message,
+                  history=iterations_of(run.errors), notes=notes + run.notes)
+    res.options["modes"] = modes
+    res.options["rigid_force_error"] = rigid.force_error
+    res.force_error, res.force_error_per_joint = sol["force_errors"]
     res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
     return res
 
@@ -1138,5 +1603,6 @@ def _check(rec: Recording, model: Model) -> Tuple[Robot, bool]:
     return robot, model.offset
 
 
-__all__ = ["BaseParameters", "PayloadResult", "payload", "base_parameters", "idim_ls", "didim", "simulate_robot", "force_errors",
+__all__ = ["BaseParameters", "PayloadResult", "payload", "base_parameters", "idim_ls", "didim", "didim_elastic",
+           "elastic_modes", "deflection_errors", "simulate_robot", "force_errors",
            "theta_of", "drives_of", "standard_of"]

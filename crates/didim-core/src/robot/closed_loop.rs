@@ -3,6 +3,20 @@
 //! held over the sample while the rigid-body dynamics, the rotor inertias and the joint friction
 //! move the arm (RK4 on fixed substeps). The arm is a `sim::closed_loop::Plant` under the same
 //! loop as one axis's; only the dynamics and their integration are its own.
+//!
+//! A joint is rigid or elastic. An elastic joint's rotor is a body of its own (Spong's model): the
+//! drive's force, the rotor inertia and the friction act on the motor side, whose position the
+//! encoder reads, and a spring K with damping D carries the torque to the link side, which moves
+//! in the rigid-body chain:
+//!
+//! ```text
+//!   Ia θ̈ = u − Fv θ̇ − Fc s(θ̇) − OF − K (θ − q) − D (θ̇ − q̇)       (motor side)
+//!   M(q) q̈ + c(q, q̇) + g(q) = τ,  τ_j = K (θ − q) + D (θ̇ − q̇)      (link side)
+//! ```
+//!
+//! A rigid joint has θ = q, its rotor inertia added to the chain's (armature) and its friction
+//! at the link speed, as the one-axis rigid model. The one-axis two-mass model (eqs. (1)–(3)) is
+//! this plant's elastic joint on a chain of one body.
 
 use crate::controller::TransferFunction;
 use crate::error::{invalid, Error, Result};
@@ -23,6 +37,11 @@ pub struct Drives {
     pub coulomb: Vec<f64>,
     pub offset: Vec<f64>,
     pub laws: Vec<FrictionLaw>,
+    /// Each joint's spring from its rotor to its link (N·m/rad or N/m): `f64::INFINITY` for a
+    /// rigid joint; empty: every joint rigid.
+    pub stiffness: Vec<f64>,
+    /// The springs' damping (N·m·s/rad or N·s/m; ignored on rigid joints); empty: none.
+    pub damping: Vec<f64>,
 }
 
 impl Drives {
@@ -61,9 +80,57 @@ impl Drives {
                 self.laws[j].eps
             ));
         }
+        for (name, x) in [("stiffness", &self.stiffness), ("damping", &self.damping)] {
+            if !x.is_empty() && x.len() != n {
+                return Err(invalid!(
+                    "{name} has {} values; the robot has {n} joints (give none for a rigid robot)",
+                    x.len()
+                ));
+            }
+        }
+        for j in self.elastic() {
+            let (k, d) = (self.stiffness[j], self.damping.get(j).copied().unwrap_or(0.0));
+            if !(k > 0.0 && k.is_finite()) {
+                return Err(invalid!(
+                    "joint {}'s stiffness must be > 0 and finite (INFINITY for a rigid joint), got {k}",
+                    j + 1
+                ));
+            }
+            if !(d >= 0.0 && d.is_finite()) {
+                return Err(invalid!(
+                    "joint {}'s spring damping must be finite and >= 0, got {d}",
+                    j + 1
+                ));
+            }
+            // the rotor is a body of its own: without inertia its acceleration has no equation
+            if !(self.armature[j] > 0.0) {
+                return Err(invalid!(
+                    "joint {} is elastic: its rotor inertia must be > 0, got {}",
+                    j + 1,
+                    self.armature[j]
+                ));
+            }
+        }
         // a negative rotor inertia is refused by the dynamics only where the arm's inertia does not make up for it
         // (a base parameter that regroups it with link inertias fixes only their sum)
         Ok(())
+    }
+
+    /// The elastic joints' indices, in order.
+    pub fn elastic(&self) -> Vec<usize> {
+        (0..self.stiffness.len())
+            .filter(|&j| self.stiffness[j] != f64::INFINITY)
+            .collect()
+    }
+
+    /// The rotor inertia each joint adds to the chain: its own on a rigid joint, none on an
+    /// elastic one (its rotor moves on its own).
+    fn link_armature(&self) -> Vec<f64> {
+        let mut out = self.armature.clone();
+        for j in self.elastic() {
+            out[j] = 0.0;
+        }
+        out
     }
 
     /// The friction and offset torque of each joint at speeds `v`.
@@ -115,142 +182,165 @@ impl RobotLoopOptions {
 }
 
 /// The simulated record: positions, speeds, accelerations and the controllers' forces, each
-/// `samples × n` row-major, at the sample instants.
+/// `samples × n` row-major, at the sample instants. `q`, `qd`, `qdd` are the link side's; on a
+/// robot with an elastic joint, `theta`, `thetad`, `thetadd` are the motor side's (equal to the
+/// link side's on rigid joints), empty otherwise.
 #[derive(Clone, Debug, Default)]
 pub struct RobotLoopOutput {
     pub q: Vec<f64>,
     pub qd: Vec<f64>,
     pub qdd: Vec<f64>,
     pub force: Vec<f64>,
+    pub theta: Vec<f64>,
+    pub thetad: Vec<f64>,
+    pub thetadd: Vec<f64>,
 }
 
-/// The arm's dynamics: the chain and its drives' inertia and friction, and their work buffers.
+/// The arm's dynamics: the chain and its drives' inertia, friction and springs, and their work
+/// buffers. The state is `x = [q, q̇, θ, θ̇]`: the link side's `n` positions and speeds, then the
+/// elastic joints' rotors' (in [`Drives::elastic`]'s order).
 struct Dynamics<'a> {
     robot: &'a Robot,
     drives: &'a Drives,
     ws: AbaWork,
     /// The joint torques of the last acceleration.
     tau: Vec<f64>,
+    /// The elastic joints and the inertia each joint adds to the chain.
+    elastic: Vec<usize>,
+    link_armature: Vec<f64>,
 }
 
 impl Dynamics<'_> {
-    /// The accelerations at `(q, v)` under the drives' forces `u`, into `out`.
+    /// The state's derivative `[q̇, q̈, θ̇, θ̈]` at `x` under the drives' forces `u`, into `out`.
     #[inline(always)]
-    fn accel(&mut self, q: &[f64], v: &[f64], u: &[f64], out: &mut [f64]) -> Result<()> {
+    fn deriv(&mut self, x: &[f64], u: &[f64], out: &mut [f64]) -> Result<()> {
+        let n = u.len();
+        let ne = self.elastic.len();
+        let (q, rest) = x.split_at(n);
+        let (v, rest) = rest.split_at(n);
+        let (theta, omega) = rest.split_at(ne);
+        let (dq, rest) = out.split_at_mut(n);
+        let (dv, rest) = rest.split_at_mut(n);
+        let (dtheta, domega) = rest.split_at_mut(ne);
+        dq.copy_from_slice(v);
         self.drives.resist(v, &mut self.tau);
-        for i in 0..u.len() {
+        for i in 0..n {
             self.tau[i] = u[i] - self.tau[i];
         }
+        let d = self.drives;
+        for (e, &j) in self.elastic.iter().enumerate() {
+            // the spring's torque drives the link; the drive's force, less the motor side's friction and
+            // the spring's reaction, the rotor
+            let spring =
+                d.stiffness[j] * (theta[e] - q[j]) + d.damping.get(j).map_or(0.0, |c| c * (omega[e] - v[j]));
+            let w = omega[e];
+            let friction = d.viscous[j] * w + d.coulomb[j] * d.laws[j].sign(w) + d.offset[j];
+            dtheta[e] = w;
+            domega[e] = (u[j] - friction - spring) / d.armature[j];
+            self.tau[j] = spring;
+        }
         self.robot
-            .aba_into(q, v, &self.tau, Some(&self.drives.armature), &mut self.ws, out)
+            .aba_into(q, v, &self.tau, Some(&self.link_armature), &mut self.ws, dv)
     }
 }
 
-/// The arm as the loop's [`Plant`]: its dynamics, the state `(q, v)`, the acceleration at the last
-/// recorded state (the first RK4 stage of the next period), RK4's work buffers and the recorded
-/// positions, speeds and accelerations (`samples × n`, row-major).
+/// The arm as the loop's [`Plant`]: its dynamics, the state `x` ([`Dynamics`]), its derivative
+/// at the last recorded state (the first RK4 stage of the next period), RK4's work buffers and the
+/// recorded link and motor sides (`samples × n`, row-major).
 struct Arm<'a, 'b> {
     /// Borrowed, not held: the dynamics go out of line (ABA), and a pointer into the arm would
     /// keep the state and the stages' buffers out of registers.
     dynamics: &'b mut Dynamics<'a>,
-    q: Vec<f64>,
-    v: Vec<f64>,
-    a: Vec<f64>,
+    n: usize,
+    x: Vec<f64>,
+    dx: Vec<f64>,
     /// RK4's stages and the state at a stage.
-    k1q: Vec<f64>,
-    k1v: Vec<f64>,
-    k2q: Vec<f64>,
-    k2v: Vec<f64>,
-    k3q: Vec<f64>,
-    k3v: Vec<f64>,
-    k4q: Vec<f64>,
-    k4v: Vec<f64>,
-    qs: Vec<f64>,
-    vs: Vec<f64>,
+    k1: Vec<f64>,
+    k2: Vec<f64>,
+    k3: Vec<f64>,
+    k4: Vec<f64>,
+    xs: Vec<f64>,
+    /// Each joint's encoder: its index in `x` (the rotor's position on an elastic joint).
+    encoder: Vec<usize>,
     /// The RK4 step (s) and the steps per sample.
     h: f64,
     substeps: usize,
     dt: f64,
-    out_q: Vec<f64>,
-    out_qd: Vec<f64>,
-    out_qdd: Vec<f64>,
+    out: RobotLoopOutput,
 }
 
 impl Plant for Arm<'_, '_> {
     type Joints = Vec<f64>;
 
     fn joints(&self) -> Vec<f64> {
-        vec![0.0; self.q.len()]
+        vec![0.0; self.n]
     }
 
     #[inline(always)]
     fn position(&self, j: usize) -> f64 {
-        self.q[j]
+        self.x[self.encoder[j]]
     }
 
     #[inline(always)]
     fn record(&mut self, k: usize, applied: &[f64]) -> Result<()> {
-        let n = self.q.len();
-        self.dynamics.accel(&self.q, &self.v, applied, &mut self.a)?;
+        let n = self.n;
+        self.dynamics.deriv(&self.x, applied, &mut self.dx)?;
         let row = k * n;
-        self.out_q[row..row + n].copy_from_slice(&self.q);
-        self.out_qd[row..row + n].copy_from_slice(&self.v);
-        self.out_qdd[row..row + n].copy_from_slice(&self.a);
+        self.out.q[row..row + n].copy_from_slice(&self.x[..n]);
+        self.out.qd[row..row + n].copy_from_slice(&self.x[n..2 * n]);
+        self.out.qdd[row..row + n].copy_from_slice(&self.dx[n..2 * n]);
+        let ne = self.dynamics.elastic.len();
+        if ne > 0 {
+            self.out.theta[row..row + n].copy_from_slice(&self.x[..n]);
+            self.out.thetad[row..row + n].copy_from_slice(&self.x[n..2 * n]);
+            self.out.thetadd[row..row + n].copy_from_slice(&self.dx[n..2 * n]);
+            for (e, &j) in self.dynamics.elastic.iter().enumerate() {
+                self.out.theta[row + j] = self.x[2 * n + e];
+                self.out.thetad[row + j] = self.x[2 * n + ne + e];
+                self.out.thetadd[row + j] = self.dx[2 * n + ne + e];
+            }
+        }
         Ok(())
     }
 
     /// `substeps` RK4 steps with the forces held.
     #[inline(always)]
     fn advance(&mut self, applied: &[f64]) -> Result<()> {
-        let n = self.q.len();
         let h = self.h;
         let Self {
             dynamics,
-            q,
-            v,
-            a,
-            k1q,
-            k1v,
-            k2q,
-            k2v,
-            k3q,
-            k3v,
-            k4q,
-            k4v,
-            qs,
-            vs,
+            x,
+            dx,
+            k1,
+            k2,
+            k3,
+            k4,
+            xs,
             ..
         } = self;
-        let mut accel = |q: &[f64], v: &[f64], out: &mut [f64]| dynamics.accel(q, v, applied, out);
+        let m = x.len();
+        let mut deriv = |x: &[f64], out: &mut [f64]| dynamics.deriv(x, applied, out);
         for s in 0..self.substeps {
-            // the first stage of the first substep is the acceleration just recorded
+            // the first stage of the first substep is the derivative just recorded
             if s == 0 {
-                k1v.copy_from_slice(a);
+                k1.copy_from_slice(dx);
             } else {
-                accel(q, v, k1v)?;
+                deriv(x, k1)?;
             }
-            k1q.copy_from_slice(v);
-            for j in 0..n {
-                qs[j] = q[j] + 0.5 * h * k1q[j];
-                vs[j] = v[j] + 0.5 * h * k1v[j];
+            for i in 0..m {
+                xs[i] = x[i] + 0.5 * h * k1[i];
             }
-            k2q.copy_from_slice(vs);
-            accel(qs, vs, k2v)?;
-            for j in 0..n {
-                qs[j] = q[j] + 0.5 * h * k2q[j];
-                vs[j] = v[j] + 0.5 * h * k2v[j];
+            deriv(xs, k2)?;
+            for i in 0..m {
+                xs[i] = x[i] + 0.5 * h * k2[i];
             }
-            k3q.copy_from_slice(vs);
-            accel(qs, vs, k3v)?;
-            for j in 0..n {
-                qs[j] = q[j] + h * k3q[j];
-                vs[j] = v[j] + h * k3v[j];
+            deriv(xs, k3)?;
+            for i in 0..m {
+                xs[i] = x[i] + h * k3[i];
             }
-            k4q.copy_from_slice(vs);
-            accel(qs, vs, k4v)?;
-            for j in 0..n {
-                q[j] += h / 6.0 * (k1q[j] + 2.0 * k2q[j] + 2.0 * k3q[j] + k4q[j]);
-                v[j] += h / 6.0 * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j]);
+            deriv(xs, k4)?;
+            for i in 0..m {
+                x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
             }
         }
         Ok(())
@@ -258,21 +348,22 @@ impl Plant for Arm<'_, '_> {
 
     #[inline(always)]
     fn finite(&self) -> bool {
-        self.q.iter().chain(&self.v).all(|x| x.is_finite())
+        self.x.iter().all(|x| x.is_finite())
     }
 
     #[cold]
     fn diverged(&self, k: usize, qr: &[f64], bound: &[f64]) -> Error {
         // the first joint off its reference or not finite
-        let j = (0..self.q.len())
-            .find(|&j| !((self.q[j] - qr[j]).abs() <= bound[j] && self.v[j].is_finite()))
+        let n = self.n;
+        let j = (0..n)
+            .find(|&j| !((self.position(j) - qr[j]).abs() <= bound[j] && self.x[n + j].is_finite()))
             .unwrap_or(0);
         Error::Simulation(format!(
             "the robot's closed loop diverged at sample {k} (t = {:.6} s): joint {} ({}) is {:.3e} away from its reference",
             k as f64 * self.dt,
             j + 1,
             self.dynamics.robot.joints[j].name,
-            self.q[j] - qr[j]
+            self.position(j) - qr[j]
         ))
     }
 }
@@ -286,24 +377,50 @@ impl Plant for Arm<'_, '_> {
 /// simulation's time, fall by 40 %.
 pub const STIFF_STEP: f64 = 2.5;
 
+/// The largest ω·h of an elastic joint's oscillation that RK4's substeps keep within: RK4 damps
+/// a mode of ω·h = 0.5 by (ωh)⁶/144 ≈ 1e-4 per step, a damping ratio of 3e-5, far below a
+/// transmission's own (1–5 %), and shifts its frequency by (ωh)⁴/120 ≈ 5e-4.
+pub const SPRING_STEP: f64 = 0.5;
+
 /// RK4's steps per sample for this robot: the fastest decay rate of its joints at `q0`, friction's
-/// slope through zero speed over the joint's inertia, `λ = (Fv + Fc·s'(0)) / (Ia + M_jj)`, times
-/// the step within [`STIFF_STEP`], and at least 2 steps. A sharp friction law (a small smoothing
-/// speed) is stiff: on the UR5 with ε = 0.01 rad/s the wrist's λ is about 4·10³/s.
+/// slope through zero speed over the inertia it moves, `λ = (Fv + Fc·s'(0)) / (Ia + M_jj)` on a
+/// rigid joint and `/ Ia` on an elastic joint's rotor, times the step within [`STIFF_STEP`]; an
+/// elastic joint's free-motor mode `ω² = K (1/Ia + 1/M_jj)` and its damping's rate
+/// `D (1/Ia + 1/M_jj)` within [`SPRING_STEP`] and [`STIFF_STEP`]; and at least 2 steps. A sharp
+/// friction law (a small smoothing speed) is stiff: on the UR5 with ε = 0.01 rad/s the wrist's λ
+/// is about 4·10³/s.
 pub fn auto_substeps(robot: &Robot, drives: &Drives, q0: &[f64], dt: f64) -> Result<usize> {
     let m = robot.mass_matrix(q0)?;
+    let link = drives.link_armature();
     let mut lambda: f64 = 0.0;
+    let mut omega: f64 = 0.0;
+    let elastic = drives.elastic();
     for j in 0..robot.ndof() {
         let (_, slope) = drives.laws[j].sign_and_derivative(0.0);
-        let inertia = drives.armature[j] + m[(j, j)];
-        if inertia > 0.0 {
-            lambda = lambda.max((drives.viscous[j].abs() + drives.coulomb[j].abs() * slope) / inertia);
+        let friction = drives.viscous[j].abs() + drives.coulomb[j].abs() * slope;
+        let link_inertia = link[j] + m[(j, j)];
+        if elastic.contains(&j) {
+            let ia = drives.armature[j];
+            let both = 1.0 / ia
+                + if link_inertia > 0.0 {
+                    1.0 / link_inertia
+                } else {
+                    0.0
+                };
+            lambda = lambda
+                .max(friction / ia)
+                .max(drives.damping.get(j).copied().unwrap_or(0.0) * both);
+            omega = omega.max((drives.stiffness[j] * both).sqrt());
+        } else if link_inertia > 0.0 {
+            lambda = lambda.max(friction / link_inertia);
         }
     }
-    let steps = (lambda * dt / STIFF_STEP).ceil();
+    let steps = (lambda * dt / STIFF_STEP)
+        .ceil()
+        .max((omega * dt / SPRING_STEP).ceil());
     if !steps.is_finite() || steps > 1e4 {
         return Err(invalid!(
-            "the joints' friction is too stiff to integrate ({lambda:.3e}/s at a sample period of {dt} s): a Coulomb smoothing speed this small needs a finer law or the friction parameters are off"
+            "the joints' friction or springs are too stiff to integrate (decay {lambda:.3e}/s, mode {omega:.3e} rad/s at a sample period of {dt} s): a Coulomb smoothing speed this small needs a finer law or the parameters are off"
         ));
     }
     Ok((steps as usize).max(2))
@@ -425,43 +542,84 @@ pub fn simulate_robot(
                 })
                 .collect();
             let zeros = |what| crate::error::filled(samples * n, 0.0, what);
+            let elastic = drives.elastic();
+            let ne = elastic.len();
             let mut dynamics = Dynamics {
                 robot,
                 drives,
                 ws: AbaWork::new(robot),
                 tau: vec![0.0; n],
+                link_armature: drives.link_armature(),
+                elastic,
             };
+            // from rest at the first reference: an elastic joint's rotor there, its link where the spring
+            // holds the link side's static torque (gravity), found by a few fixed-point steps
+            let mut x = vec![0.0; 2 * n + 2 * ne];
+            x[..n].copy_from_slice(&qr[..n]);
+            for (e, &j) in dynamics.elastic.iter().enumerate() {
+                x[2 * n + e] = qr[j];
+            }
+            settle_links(robot, drives, &dynamics.elastic, &mut x)?;
+            let mut encoder: Vec<usize> = (0..n).collect();
+            for (e, &j) in dynamics.elastic.iter().enumerate() {
+                encoder[j] = 2 * n + e;
+            }
+            let m = x.len();
+            let motor = |what| if ne > 0 { zeros(what) } else { Ok(Vec::new()) };
             let mut arm = Arm {
                 dynamics: &mut dynamics,
-                q: qr[..n].to_vec(),
-                v: vec![0.0; n],
-                a: vec![0.0; n],
-                k1q: vec![0.0; n],
-                k1v: vec![0.0; n],
-                k2q: vec![0.0; n],
-                k2v: vec![0.0; n],
-                k3q: vec![0.0; n],
-                k3v: vec![0.0; n],
-                k4q: vec![0.0; n],
-                k4v: vec![0.0; n],
-                qs: vec![0.0; n],
-                vs: vec![0.0; n],
+                n,
+                x,
+                dx: vec![0.0; m],
+                k1: vec![0.0; m],
+                k2: vec![0.0; m],
+                k3: vec![0.0; m],
+                k4: vec![0.0; m],
+                xs: vec![0.0; m],
+                encoder,
                 h: opts.dt / substeps as f64,
                 substeps,
                 dt: opts.dt,
-                out_q: zeros("the simulated positions")?,
-                out_qd: zeros("the simulated speeds")?,
-                out_qdd: zeros("the simulated accelerations")?,
+                out: RobotLoopOutput {
+                    q: zeros("the simulated positions")?,
+                    qd: zeros("the simulated speeds")?,
+                    qdd: zeros("the simulated accelerations")?,
+                    force: Vec::new(),
+                    theta: motor("the simulated motor positions")?,
+                    thetad: motor("the simulated motor speeds")?,
+                    thetadd: motor("the simulated motor accelerations")?,
+                },
             };
             let mut force = zeros("the simulated forces")?;
             let u_ext = (!opts.u_ext.is_empty()).then_some(&opts.u_ext[..]);
             closed_loop::run(&mut arm, &mut joint_drives, qr, u_ext, &span, &mut force)?;
-            Ok(RobotLoopOutput {
-                q: arm.out_q,
-                qd: arm.out_qd,
-                qdd: arm.out_qdd,
-                force,
-            })
+            arm.out.force = force;
+            Ok(arm.out)
         },
     )
+}
+
+/// Each elastic joint's link position at rest with its rotor at `x`'s: where the spring holds the
+/// link side's static torque, `K (θ − q) = g(q)`, by fixed-point steps `q ← θ − g(q)/K` (a
+/// contraction while the springs are stiffer than gravity's slope, as a transmission's are by
+/// orders of magnitude), to rounding.
+fn settle_links(robot: &Robot, drives: &Drives, elastic: &[usize], x: &mut [f64]) -> Result<()> {
+    if elastic.is_empty() {
+        return Ok(());
+    }
+    let n = robot.ndof();
+    let rest = vec![0.0; n];
+    for _ in 0..50 {
+        let g = robot.rnea(&x[..n], &rest, &rest)?;
+        let mut moved: f64 = 0.0;
+        for (e, &j) in elastic.iter().enumerate() {
+            let q = x[2 * n + e] - g[j] / drives.stiffness[j];
+            moved = moved.max((q - x[j]).abs());
+            x[j] = q;
+        }
+        if moved <= 1e-15 * (1.0 + x[..n].iter().fold(0.0f64, |a, b| a.max(b.abs()))) {
+            return Ok(());
+        }
+    }
+    Ok(())
 }

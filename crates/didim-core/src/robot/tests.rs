@@ -337,6 +337,8 @@ fn cart_drives() -> Drives {
         coulomb: vec![AXIS[2]],
         offset: vec![AXIS[3]],
         laws: vec![crate::model::FrictionLaw::algebraic(1e-4)],
+        stiffness: Vec::new(),
+        damping: Vec::new(),
     }
 }
 
@@ -434,5 +436,105 @@ fn a_robot_drive_holds_its_first_command_through_its_delay_and_lag() {
                 want[k]
             );
         }
+    }
+}
+
+#[test]
+fn an_elastic_one_joint_robot_is_the_one_axis_two_mass_model() {
+    use crate::model::flexible;
+    use crate::sim::{simulate, Integrator, SimOptions};
+    use crate::Controller;
+    // the paper's two masses: the motor side (M1, Fv1, Fc1) and the load (M2 on the cart, no
+    // load friction) joined by K12, eqs. (2)-(4), against the cart with an elastic joint
+    let (m1, fv1, fc1, m2, k12) = (30.0, 150.0, 20.0, 65.0, 4.0e5);
+    let (dt, n) = (1e-3, 3000);
+    let qr: Vec<f64> = (0..n)
+        .map(|k| {
+            let t = k as f64 * dt;
+            0.1 * (1.0 - (2.0 * std::f64::consts::PI * t / (n as f64 * dt)).cos())
+        })
+        .collect();
+    let axis_opts = SimOptions {
+        integrator: Integrator::Rk4,
+        substeps: 10,
+        ..SimOptions::new(dt)
+    };
+    let model = flexible(1e-4).unwrap();
+    let axis = simulate(
+        &model,
+        &[m1, fv1, fc1, m2, 0.0, 0.0, k12],
+        &Controller::EMPS,
+        &qr,
+        None,
+        &axis_opts,
+    )
+    .unwrap();
+    let drives = Drives {
+        armature: vec![m1],
+        viscous: vec![fv1],
+        coulomb: vec![fc1],
+        offset: vec![0.0],
+        laws: vec![crate::model::FrictionLaw::algebraic(1e-4)],
+        stiffness: vec![k12],
+        damping: vec![0.0],
+    };
+    let law = Controller::EMPS.law(dt).unwrap();
+    let opts = RobotLoopOptions::new(dt, 10, vec![0.0], vec![0.0]);
+    let arm = simulate_robot(&cart(m2), &drives, &[law], &qr, &opts).unwrap();
+    let scale = axis.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    assert!(scale > 50.0, "the move should need force: {scale}");
+    // the load lags the motor by the spring's stretch: this is an elastic loop
+    let stretch = (0..n).fold(0.0f64, |m, k| m.max((arm.theta[k] - arm.q[k]).abs()));
+    assert!(stretch > 1e-5, "the spring should stretch: {stretch}");
+    for k in 0..n {
+        assert!(
+            (axis.force[k] - arm.force[k]).abs() < 1e-7 * scale,
+            "sample {k}: {} vs {}",
+            axis.force[k],
+            arm.force[k]
+        );
+        assert!((axis.q[0][k] - arm.theta[k]).abs() < 1e-12, "motor, sample {k}");
+        assert!((axis.q[1][k] - arm.q[k]).abs() < 1e-12, "load, sample {k}");
+    }
+}
+
+#[test]
+fn an_elastic_arm_at_rest_stays_at_rest_with_its_springs_holding_gravity() {
+    // a pendulum whose joint is elastic, its controller holding gravity's torque from the start:
+    // the link hangs where the spring holds it, and nothing moves
+    let r = pendulum(2.0, 0.5, 0.01);
+    let (q0, k) = (0.7, 3.0e3);
+    // the link's rest: K (q0 − q) = g(q)
+    let mut q = q0;
+    for _ in 0..100 {
+        q = q0 - r.rnea(&[q], &[0.0], &[0.0]).unwrap()[0] / k;
+    }
+    let g = r.rnea(&[q], &[0.0], &[0.0]).unwrap()[0];
+    assert!(((q0 - q) * k).abs() > 1.0, "gravity should stretch the spring");
+    let drives = Drives {
+        armature: vec![0.05],
+        viscous: vec![0.5],
+        coulomb: vec![0.3],
+        offset: vec![0.0],
+        laws: vec![crate::model::FrictionLaw::algebraic(1e-3)],
+        stiffness: vec![k],
+        damping: vec![0.5],
+    };
+    let law = crate::Controller::EMPS.law(1e-3).unwrap();
+    let qr = vec![q0; 500];
+    let opts = RobotLoopOptions::new(1e-3, 0, vec![0.0], vec![g]);
+    let out = simulate_robot(&r, &drives, &[law], &qr, &opts).unwrap();
+    for i in 0..qr.len() {
+        assert!(
+            (out.theta[i] - q0).abs() < 1e-12,
+            "motor, sample {i}: {}",
+            out.theta[i]
+        );
+        assert!(
+            (out.q[i] - q).abs() < 1e-12,
+            "link, sample {i}: {} vs {q}",
+            out.q[i]
+        );
+        assert!((out.force[i] - g).abs() < 1e-9 * g.abs(), "force, sample {i}");
     }
 }

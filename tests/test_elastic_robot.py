@@ -1,0 +1,131 @@
+"""Elastic joints on robots (issue 39), against the flexible-joint records of an independent simulator
+(../shared/data/flexrobots: Pinocchio's aba in a Python RK4 loop, Spong's model): the closed loop of the truth's
+parameters replays the record to its truth floor and the link side to the link-side file; the link-side positions are
+read from ``ql_`` columns of some joints or all; the three-step DIDIM finds each elastic joint's mode and gives the
+deflection within 15 % RMS; a rigid model is refused by its force error, joint by joint."""
+
+import json
+
+import numpy as np
+import pytest
+
+import didim
+from didim import _core
+from didim.methods.robot import deflection_errors, force_errors, simulate_robot
+
+
+@pytest.fixture(scope="module")
+def flex(flexrobots_dir):
+    return flexrobots_dir, json.loads((flexrobots_dir / "truth.json").read_text())["robots"]
+
+
+def _with_link_columns(d, name, tmp_path, joints=None):
+    """The training record with the link-side file's positions of ``joints`` (default: the elastic ones) as ql_<i>
+    columns."""
+    tr = np.genfromtxt(d / f"{name}_train.csv", delimiter=",", names=True)
+    lk = np.genfromtxt(d / f"{name}_link_train.csv", delimiter=",", names=True)
+    cols = list(tr.dtype.names)
+    n = sum(c.startswith("qr_") for c in cols)
+    truth = json.loads((d / "truth.json").read_text())["robots"][name]
+    joints = [i for i in range(n) if truth["flexible"][i]] if joints is None else joints
+    data = np.column_stack([tr[c] for c in cols] + [lk[f"q_{i + 1}"] for i in joints])
+    out = tmp_path / f"{name}_train.csv"
+    np.savetxt(out, data, delimiter=",", header=",".join(cols + [f"ql_{i + 1}" for i in joints]), comments="",
+               fmt="%.17g")
+    return out
+
+
+def _truth_sim(d, t, name, rec):
+    rob = didim.Robot.from_urdf(d / f"{name}_cad.urdf")
+    pi = np.concatenate([t["links_truth"][j]["dyn10"] for j in t["joint_names"]])
+    n = len(t["joint_names"])
+    return _core.simulate_robot(
+        rob.with_inertial_params(pi)._core, t["Ia"], t["Fv"], t["Fc"], t["offset"], rec.core_controllers(), rec.qr,
+        rec.dt, quantization=list(rec.encoder_step), force0=list(rec.force[0]), coulomb_eps=[t["vs"]] * n,
+        coulomb_law=[t["law"]] * n, stiffness=[k if f else np.inf for k, f in zip(t["K"], t["flexible"])],
+        damping=[c if f else 0.0 for c, f in zip(t["D"], t["flexible"])])
+
+
+@pytest.mark.parametrize("name", ["arm2", "ur5flex"])
+def test_the_truths_elastic_loop_replays_the_independent_simulators_record(flex, name, tmp_path):
+    """The truth's parameters in didim's elastic closed loop give the record's force within its truth floor (the
+    noise the simulator added: 1.23 % on arm2, 1.85 % on the UR5; measured 1.244 % and 1.848 %), and the link side
+    within a few µrad of the link-side file: the deflection θ − q within 1 % RMS of the simulator's (0.1-0.6 %)."""
+    d, truth = flex
+    t = truth[name]
+    rob = didim.Robot.from_urdf(d / f"{name}_cad.urdf")
+    rec = didim.load_record(_with_link_columns(d, name, tmp_path), robot=rob,
+                            controller=d / f"{name}_controller.json")
+    sim = _truth_sim(d, t, name, rec)
+    err, _ = force_errors(rec, sim["force"])
+    floor = t["records"]["train"]["truth_floor_total"]
+    # the noise is the floor; the two simulators' RK4 steps differ (13 and 10 substeps against didim's own), which
+    # the generator's integrator check puts at 0.06 % of the force for a doubled step
+    assert err == pytest.approx(floor, rel=0.02)
+    model = didim.Model(robot=rob, elastic=[j for j, f in zip(t["joint_names"], t["flexible"]) if f])
+    defl = deflection_errors(rec, sim, model)
+    assert set(defl) == set(model.elastic)
+    assert max(defl.values()) < 0.01, defl
+    # rigid joints read their link: θ = q
+    rigid = [i for i, f in enumerate(t["flexible"]) if not f]
+    np.testing.assert_array_equal(sim["theta"][:, rigid], sim["q"][:, rigid])
+
+
+def test_link_side_positions_of_some_joints_are_read_and_others_are_absent(flex, tmp_path):
+    """A record with link-side encoders on its first joints only (as the KR300's axes 1-3): ql of those joints read,
+    the others' NaN; a ql column naming no joint is refused by name."""
+    d, _ = flex
+    rob = didim.Robot.from_urdf(d / "ur5flex_cad.urdf")
+    path = _with_link_columns(d, "ur5flex", tmp_path, joints=[0, 2])
+    rec = didim.load_record(path, robot=rob, controller=d / "ur5flex_controller.json")
+    assert rec.ql.shape == rec.qm.shape
+    assert list(np.all(np.isnan(rec.ql), axis=0)) == [False, True, False, True, True, True]
+    bad = tmp_path / "bad.csv"
+    text = path.read_text().splitlines()
+    bad.write_text("\n".join([text[0].replace("ql_3", "ql_9")] + text[1:]) + "\n")
+    with pytest.raises(didim.DataError, match="ql_9 names no joint"):
+        didim.load_record(bad, robot=rob, controller=d / "ur5flex_controller.json")
+
+
+def test_elastic_joints_are_named_or_refused(flex):
+    d, _ = flex
+    rob = didim.Robot.from_urdf(d / "arm2_cad.urdf")
+    assert didim.Model(robot=rob, elastic="all").elastic == ("shoulder", "elbow")
+    assert didim.Model(robot=rob, elastic=[2]).elastic == ("elbow",)
+    assert didim.Model(robot=rob, elastic=["elbow"]).kind == "flexible"
+    with pytest.raises(didim.DataError, match="wrist"):
+        didim.Model(robot=rob, elastic=["wrist"])
+    with pytest.raises(didim.DataError, match="robot's elastic joints"):
+        didim.Model("rigid", elastic=["elbow"])
+
+
+def test_three_step_didim_finds_the_modes_of_an_elastic_arm(flex, tmp_path):
+    """The three-step DIDIM on the 2-joint vertical arm (both joints elastic) from its motor encoders: each joint's
+    locked-rotor mode at the search's mid-stroke within 3 % of the truth's there (measured 1.6 % and 0.7 %), the
+    training force error 8× below the rigid model's (19.3 % to 1.6 %; floor 1.23 %), the link-side deflection within
+    15 % RMS (measured 6 % and 12 %); the saved result simulates the same. What is not there yet (issue 39): K within
+    5 % (measured +8 % and +15 %: the split of each joint's inertia between rotor and link, λ, is off by 10 % and the
+    spring scales with the link's share) and the validation within 1.2× its floor (measured 1.55×)."""
+    d, truth = flex
+    t = truth["arm2"]
+    rob = didim.Robot.from_urdf(d / "arm2_cad.urdf")
+    rec = didim.load_record(_with_link_columns(d, "arm2", tmp_path), robot=rob, controller=d / "arm2_controller.json")
+    res = didim.identify(rec, rob, "didim", elastic="all")
+    assert res.structure.elastic == ("shoulder", "elbow")
+    assert res.options["rigid_force_error"] > 5 * res.force_error
+    pi = np.concatenate([t["links_truth"][j]["dyn10"] for j in t["joint_names"]])
+    for i, j in enumerate(t["joint_names"]):
+        mode = res.options["modes"][j]
+        q_mid = np.array([res.options["modes"][k]["q_mid"] for k in t["joint_names"]])
+        m_jj = rob.with_inertial_params(pi).mass_matrix(q_mid)[i, i]
+        f_true = np.sqrt(t["K"][i] / m_jj) / (2 * np.pi)
+        assert mode["f_n_flex"] == pytest.approx(f_true, rel=0.03), j
+        assert {f"K_{j}", f"D_{j}", f"Ia_{j}"} <= set(res.params)
+    sim = simulate_robot(rec, res)
+    defl = deflection_errors(rec, sim, res.structure)
+    assert max(defl.values()) < 0.15, defl
+    res.save(tmp_path / "r.json")
+    back = didim.load_result(tmp_path / "r.json")
+    assert back.structure.elastic == res.structure.elastic
+    np.testing.assert_allclose(simulate_robot(rec, back)["force"], sim["force"], rtol=0, atol=1e-9 * np.abs(
+        rec.force).max())
