@@ -103,7 +103,7 @@ impl Drives {
                 ));
             }
             // the rotor is a body of its own: without inertia its acceleration has no equation
-            if !(self.armature[j] > 0.0) {
+            if self.armature[j].is_nan() || self.armature[j] <= 0.0 {
                 return Err(invalid!(
                     "joint {} is elastic: its rotor inertia must be > 0, got {}",
                     j + 1,
