@@ -538,10 +538,10 @@ def _robot_file_units(path, kinds) -> Optional[list]:
     from ..controllers import _spec
     from ..units import for_joints
 
-    _, spec = _spec(path)
+    where, spec = _spec(path)
     if not isinstance(spec, dict):
         return None
-    where = f"{path}"
+    where = f"{where}"
     whole = for_joints(spec.get("units"), kinds, f"{where}: \"units\"")
     entries = spec.get("joints") if isinstance(spec.get("joints"), list) else []
     each = [e.get("units") if isinstance(e, dict) else None for e in entries]
@@ -587,16 +587,21 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     declared = []  # (where, per-joint units)
     delay: Tuple[int, ...] = ()
     force_lag: Tuple[float, ...] = ()
-    controller_file = controller if isinstance(controller, (str, os.PathLike)) else None
-    if isinstance(controller, (str, os.PathLike)):
+    # a joints file, by its path or its content (a mapping {"type": "joints", "joints": [...]})
+    as_file = isinstance(controller, (str, os.PathLike)) or (isinstance(controller, Mapping)
+                                                              and controller.get("type") == "joints")
+    controller_file = (controller if not isinstance(controller, Mapping) else "the controllers' mapping") \
+        if as_file else None
+    if as_file:
         file_units = _robot_file_units(controller, kinds)
         if file_units is not None:
-            declared.append((f"the controller file {controller}", file_units))
+            declared.append((f"the controller file {controller_file}", file_units))
         delay, force_lag = load_joint_drives(controller)
         controller = load_joint_controllers(controller)
     if controller is not None and not isinstance(controller, (list, tuple)):
         raise DataError(f"{p}: a robot's record takes one controller per joint ({len(kinds)}: "
-                        f"{', '.join(robot.joint_names)}): give a joints file or a list of controllers, got one "
+                        f"{', '.join(robot.joint_names)}): give a joints file (its path, or its content as a "
+                        "mapping {\"type\": \"joints\", \"joints\": [...]}) or a list of controllers, got one "
                         f"{type(controller).__name__}")
     controllers = tuple(controller) if controller is not None else None
     arg_units = for_joints(units, kinds, "units")
