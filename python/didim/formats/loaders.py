@@ -189,8 +189,11 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
 def _csv(path: str):
     import csv
 
+    skip = 1  # the header's line, after the comment lines ("# exported by ...") a logger may write above it
     with open(path, newline="", encoding="utf-8-sig") as f:
         head = f.readline()
+        while head.lstrip().startswith("#"):
+            head, skip = f.readline(), skip + 1
     if not head.strip():
         raise DataError(f"{path}: the file is empty or its first line is blank; a CSV record starts with a header "
                         f"line naming its columns ({', '.join(REQUIRED)})")
@@ -201,7 +204,7 @@ def _csv(path: str):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data": said below, as a DataError
-            data = np.loadtxt(path, delimiter=delim, skiprows=1, ndmin=2, encoding="utf-8-sig")
+            data = np.loadtxt(path, delimiter=delim, skiprows=skip, ndmin=2, encoding="utf-8-sig")
     except ValueError as e:
         msg = str(e).rstrip(". ")
         empty = ("an empty field is a missing value: fill it or cut the record (pandas writes NaN as an empty field "
@@ -395,7 +398,7 @@ LIMIT_MARGIN = 0.1
 
 
 #: A jump of a revolute joint's position between two samples within this share of a whole turn (2π, in SI) is an
-#: encoder's wrap, when it also exceeds :data:`WRAP_JUMP_RATIO` times the joint's largest other step.
+#: encoder's wrap, when it also exceeds :data:`WRAP_JUMP_RATIO` times the joint's largest step that is not one.
 WRAP_TURN_RTOL = 0.05
 WRAP_JUMP_RATIO = 20.0
 
@@ -404,9 +407,11 @@ WRAP_JUMP_RATIO = 20.0
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
 
 
-def _check_wraps(p, names, kinds, signals) -> None:
-    """Refuses a revolute joint's position that jumps by a whole turn between two samples (an encoder that wraps at
-    ±π or 0..2π, logged as is): the closed loop would read it as a turn in one sample period."""
+def _check_wraps(p, names, kinds, signals, dt: float) -> None:
+    """Refuses a revolute joint's position that jumps by a whole turn between two samples, once or at every turn (an
+    encoder that wraps at ±π or 0..2π, logged as is): the closed loop would read it as a turn in one sample period,
+    and the dynamics as positions in another unit. Jumps of more than half a turn within :data:`WRAP_TURN_RTOL` of a
+    whole number of turns are wraps when each exceeds :data:`WRAP_JUMP_RATIO` times the joint's largest other step."""
     for key in ("qm", "qr"):
         for j, kind in enumerate(kinds):
             if kind == "prismatic":
@@ -414,14 +419,17 @@ def _check_wraps(p, names, kinds, signals) -> None:
             d = np.diff(signals[key][:, j])
             if d.size < 2 or not np.all(np.isfinite(d)):
                 continue  # a non-finite value is refused by the record's own check, naming its sample
-            k = int(np.argmax(np.abs(d)))
-            jump = float(d[k])
-            rest = float(np.max(np.abs(np.delete(d, k))))
-            if abs(abs(jump) / (2 * math.pi) - round(abs(jump) / (2 * math.pi))) <= WRAP_TURN_RTOL \
-                    and abs(jump) > math.pi and abs(jump) > WRAP_JUMP_RATIO * rest:
-                raise DataError(f"{p}: joint {names[j]}'s {key} jumps by {jump:.4g} rad between samples {k} and "
-                                f"{k + 1}, a whole turn: its encoder wraps; unwrap the positions (numpy.unwrap) "
-                                "before identifying")
+            turns = np.abs(d) / (2 * math.pi)
+            wraps = (np.abs(d) > math.pi) & (np.abs(turns - np.round(turns)) <= WRAP_TURN_RTOL)
+            if not np.any(wraps) or np.all(wraps):
+                continue
+            rest = float(np.max(np.abs(d[~wraps])))
+            if np.all(np.abs(d[wraps]) > WRAP_JUMP_RATIO * rest):
+                k = int(np.flatnonzero(wraps)[0])
+                raise DataError(f"{p}: joint {names[j]}'s {key} jumps by {d[k]:.4g} rad between samples {k} and "
+                                f"{k + 1}, a whole turn: its encoder wraps at one turn (at t = {(k + 1) * dt:.6g} s"
+                                + (f", {int(np.sum(wraps))} times in the record" if np.sum(wraps) > 1 else "")
+                                + "); unwrap the positions (numpy.unwrap) before identifying")
 
 
 def _check_limits(p, robot, qr: np.ndarray, declared: bool) -> None:
@@ -704,7 +712,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
                 controllers = controllers[:j] + (in_units(controllers[j], dt, k, ff),) + controllers[j + 1:]
             except DataError as e:
                 raise DataError(f"{p}: joint {names[j]}: {e}") from None
-    _check_wraps(p, names, kinds, signals)
+    _check_wraps(p, names, kinds, signals, dt)
     _check_limits(p, robot, signals["qr"], u is not None)
     steps = []
     for j in range(len(names)):
