@@ -460,12 +460,21 @@ def _check_limits(p, robot, qr: np.ndarray, declared: bool) -> None:
 #: times that; the held-out arm's quill in mm read as m, 360 % against 4 % (its position hardly enters the others'
 #: torques, so a quill in m declared in mm fits alike, 3.53 % against 3.52 %, and passes).
 UNITS_RATIO = 2.0
+#: The units of position the dynamics can tell apart, an angle in rad, degrees or revolutions, a length in m, mm or
+#: µm (:data:`didim.units.POSITION_UNITS`): a record read in one of them is tried in each other of its kind.
+READINGS = ("rad", "deg", "rev", "m", "mm", "um")
 
 
-#: The other reading of each unit of position the dynamics can tell apart, an angle in rad or degrees, a length in m
-#: or mm, and the factor that takes the positions read in the one to the other (both in SI).
-OTHER_READING = {"rad": ("deg", math.pi / 180), "deg": ("rad", 180 / math.pi),
-                 "m": ("mm", 1e-3), "mm": ("m", 1e3)}
+def _other_readings(read: str) -> List[Tuple[str, float]]:
+    """The other readings of positions read in ``read`` (one of :data:`READINGS`), each with the factor that takes
+    the positions read in ``read`` to them (both in SI): rad for deg is π/180, rev for rad 2π. Empty for a unit
+    without one (counts, whose count per turn only the user knows)."""
+    from ..units import POSITION_UNITS
+
+    if read not in READINGS:
+        return []
+    si, rotary = POSITION_UNITS[read]
+    return [(u, POSITION_UNITS[u][0] / si) for u in READINGS if u != read and POSITION_UNITS[u][1] == rotary]
 
 
 def _check_position_units(p, robot, rec: Recording) -> None:
@@ -474,7 +483,7 @@ def _check_position_units(p, robot, rec: Recording) -> None:
     as a group (a record in rad declared in degrees, in degrees declared in nothing, a quill in m declared in mm):
     :func:`didim.methods.robot.urdf_residual`. The limits catch a reference beyond the URDF's range; this catches
     the rest, in either direction."""
-    from ..methods.robot import urdf_residual
+    from ..methods.robot import FIT_WELL, urdf_mismatch, urdf_residual
 
     if not hasattr(robot, "rnea"):  # joints known by number only (no dynamics)
         return
@@ -484,13 +493,17 @@ def _check_position_units(p, robot, rec: Recording) -> None:
         if len(read_as) > 1:  # joints of one kind declared in several units: each declaration judged on its joint
             _check_joint_units(p, robot, rec, joints)
             continue
-        if len(read_as) != 1 or next(iter(read_as)) not in OTHER_READING:
-            continue  # no joint of the kind; revolutions, counts, µm: no single other reading
+        if len(read_as) != 1 or not _other_readings(next(iter(read_as))):
+            continue  # no joint of the kind; counts: no other reading
         read = next(iter(read_as))
-        other, factor = OTHER_READING[read]
         key = "length_factor" if kind == "prismatic" else "angle_factor"
         here = urdf_residual(rec, robot)
-        there = urdf_residual(rec, robot, **{key: factor})
+        there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in _other_readings(read))
+        if here > UNITS_RATIO * there and there > FIT_WELL:  # no reading fits: the URDF's or the record's fault
+            raise DataError(f"{p}: no unit of position makes the record fit the URDF's dynamics (read in {read} they "
+                            f"leave {100 * here:.0f} % of the force unexplained, in {other} at best "
+                            f"{100 * there:.0f} %; a right URDF leaves under {100 * FIT_WELL:.0f} %): "
+                            + urdf_mismatch(rec, robot))
         if here > UNITS_RATIO * there:
             raise DataError(f"{p}: read in {read}, the {kind} joints' positions leave the URDF's dynamics "
                             f"{100 * here:.0f} % of the force unexplained, read in {other} {100 * there:.0f} %: the "
@@ -498,6 +511,33 @@ def _check_position_units(p, robot, rec: Recording) -> None:
                             f"{other}, a header such as qr_{joints[0] + 1}[{other}], or \"units\" in the controllers' "
                             "file), or "
                             "check that the URDF is this robot's")
+
+
+def _check_time_unit(p, robot, rec: Recording, read: str) -> None:
+    """Refuses a record whose time column fits the URDF's dynamics :data:`UNITS_RATIO` times better in another unit
+    of :data:`TIME_UNITS` than in the one it was read in (a time in ms read as s: a 1 s sample period, the
+    accelerations a millionth of the true ones, every controller fitted from the log and every inertia a million
+    times off): the same test as the positions' (:func:`_check_position_units`), the speeds divided by the factor and
+    the accelerations by its square, and the drives' own inertia left out (it would take up a joint's share of
+    accelerations read a factor off)."""
+    from ..methods.robot import urdf_residual
+    from ..recording import DT_RANGE
+
+    if not hasattr(robot, "rnea"):  # joints known by number only (no dynamics)
+        return
+    tried = [(urdf_residual(rec, robot, time_factor=f / TIME_UNITS[read], drive_inertia=False), unit,
+              rec.dt * f / TIME_UNITS[read])
+             for unit, f in TIME_UNITS.items() if f != TIME_UNITS[read]
+             and DT_RANGE[0] <= rec.dt * f / TIME_UNITS[read] <= DT_RANGE[1]]
+    if not tried:
+        return
+    there, unit, dt = min(tried)
+    here = urdf_residual(rec, robot, drive_inertia=False)
+    if here > UNITS_RATIO * there:
+        raise DataError(f"{p}: read in {read}, the time column t (a sample period of {rec.dt:g} s) leaves the URDF's "
+                        f"dynamics {100 * here:.0f} % of the force unexplained, read in {unit} ({dt:g} s) "
+                        f"{100 * there:.0f} %: its time is probably in {unit}; declare it in the header (t[{unit}]) "
+                        "or convert it to s, or check that the URDF is this robot's")
 
 
 def _check_force_scale(p, robot, rec: Recording) -> None:
@@ -522,17 +562,24 @@ def _check_force_scale(p, robot, rec: Recording) -> None:
 def _check_joint_units(p, robot, rec: Recording, joints: List[int]) -> None:
     """:func:`_check_position_units` for joints of one kind declared in several units: each joint's positions read
     in the other unit alone, the rest as declared (a joints file declaring one joint in degrees on a record in rad)."""
-    from ..methods.robot import urdf_residual
+    from ..methods.robot import FIT_WELL, urdf_mismatch, urdf_residual
 
     here = urdf_residual(rec, robot)
     for j in joints:
-        read = rec.units[j].position
-        if read not in OTHER_READING:
+        tried = []
+        for other, factor in _other_readings(rec.units[j].position):
+            factors = np.ones(rec.ndof)
+            factors[j] = factor
+            tried.append((urdf_residual(rec, robot, factors=factors), other))
+        if not tried:
             continue
-        other, factor = OTHER_READING[read]
-        factors = np.ones(rec.ndof)
-        factors[j] = factor
-        there = urdf_residual(rec, robot, factors=factors)
+        read = rec.units[j].position
+        there, other = min(tried)
+        if here > UNITS_RATIO * there and there > FIT_WELL:  # no reading fits: the URDF's or the record's fault
+            raise DataError(f"{p}: no unit of position makes the record fit the URDF's dynamics (read in {read} they "
+                            f"leave {100 * here:.0f} % of the force unexplained, in {other} at best "
+                            f"{100 * there:.0f} %; a right URDF leaves under {100 * FIT_WELL:.0f} %): "
+                            + urdf_mismatch(rec, robot))
         if here > UNITS_RATIO * there:
             raise DataError(f"{p}: joint {rec.joint_names[j]} is read in {read}, where its positions leave the URDF's "
                             f"dynamics {100 * here:.0f} % of the force unexplained, read in {other} "
@@ -730,6 +777,14 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
                              lead_in=lead_in)
     except DataError as e:
         raise DataError(f"{p}: {e}") from None
+    from ..methods.robot import MIN_SAMPLES, STATE_FILTER_ORDER
+
+    if rec.n < MIN_SAMPLES:
+        raise DataError(f"{p}: the record has {rec.n} samples ({rec.n * dt:.4g} s): a robot's states are filtered "
+                        f"without phase (a {STATE_FILTER_ORDER}th-order low-pass padded with {MIN_SAMPLES - 1} samples "
+                        f"at each end), which needs at least {MIN_SAMPLES} samples, and a fit a motion that excites "
+                        "every joint: log a longer record")
+    _check_time_unit(p, robot, rec, t_unit)
     _check_position_units(p, robot, rec)
     _check_force_scale(p, robot, rec)
     return rec
