@@ -385,3 +385,24 @@ def test_pulses_gain_is_refused_on_a_robot_record(robots_dir):
     out = run("identify", str(robots_dir / "pendulum_train.csv"), "--urdf", str(robots_dir / "pendulum_cad.urdf"),
               "--method", "idim-ls", "--pulses-gain", "2")
     assert out.returncode == 2 and "--pulses-gain does not apply to a robot (--urdf)" in out.stderr, out.stderr
+
+
+def test_a_joint_kind_the_record_does_not_have_and_a_robot_dataframe(pendulum, tmp_path):
+    """A URDF calling the pendulum's second joint prismatic: IDIM-LS printed "closed-loop force error nan %" and
+    nothing else; the summary now says the loop could not be simulated, and the note that the URDF leaves 63 % of the
+    force unexplained, naming joint2. A robot's record as a DataFrame (from_dataframe(df, robot=...)) reads as its
+    CSV does (it was a TypeError)."""
+    robot, ctl, rec, frame = pendulum
+    slid = didim.Robot.from_urdf_string(robot.urdf.replace('name="joint2" type="revolute"',
+                                                           'name="joint2" type="prismatic"'))
+    assert slid.joint_kinds == ["revolute", "prismatic"]
+    got = didim.load_record(robots_record(frame, tmp_path), robot=slid, controller=ctl)
+    res = didim.identify(got, slid, "idim-ls", controller_check="off")
+    assert "its closed loop could not be simulated" in res.summary()
+    assert any("the URDF probably does not describe this record's robot (joint joint2 fits worst" in n
+               for n in res.notes), res.notes
+    got = didim.from_dataframe(frame, robot=robot, controller=ctl)
+    np.testing.assert_array_equal(got.force, rec.force)
+    np.testing.assert_array_equal(got.qm, rec.qm)
+    with pytest.raises(didim.DataError, match="dt applies to one axis's record"):
+        didim.from_dataframe(frame, robot=robot, controller=ctl, dt=0.001)

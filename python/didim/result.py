@@ -382,7 +382,9 @@ def _robot_summary(res: IdentificationResult) -> str:
     with their %σ, the notes."""
     lines = [f"{res.method} on a {res.robot.ndof}-joint robot ({res.robot.name}): "
              + ("converged" if res.converged else "NOT converged") + f" in {res.iterations} iteration(s), "
-             f"{res.elapsed_s:.1f} s; closed-loop force error {100 * res.force_error:.2f} %"
+             f"{res.elapsed_s:.1f} s; "
+             + (f"closed-loop force error {100 * res.force_error:.2f} %" if math.isfinite(res.force_error) else
+                "its closed loop could not be simulated (no closed-loop force error: see the notes)")
              + (f" ({100 * res.force_error_after_start:.2f} % after the first {1e3 * res.start_s:.0f} ms, where the "
                 "simulation joins a record that began in motion)" if res.start_s > 0 else "")]
     lines += [f"  {j}: force error {100 * e:.2f} %" for j, e in res.force_error_per_joint.items()]

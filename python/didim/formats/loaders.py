@@ -617,7 +617,8 @@ def _robot_file_units(path, kinds) -> Optional[list]:
 
 
 def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Optional[str] = None,
-                      units: Any = None, beside_controller: bool = True, lead_in: Any = "auto") -> Recording:
+                      units: Any = None, beside_controller: bool = True, lead_in: Any = "auto",
+                      table: Optional[Tuple[Callable[[str], np.ndarray], List[str]]] = None) -> Recording:
     """A robot record from a CSV, Parquet or HDF5 file with columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``
     in ``robot``'s joint order (or ``qr_<joint name>``…), positions in rad (prismatic joints: m), forces in N·m (N),
     unless the record declares other units: ``units`` (``"deg"``, ``"deg,mm"``, one per joint:
@@ -626,16 +627,20 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     controllers are converted to SI once. ``controller``: the joints' controllers (a sequence, one per joint) or
     the path of their file; by default ``NAME_controller.json`` beside the record (unless ``beside_controller`` is
     False), and without one each joint's linear law is fitted from its log (:func:`didim.fit_controller`;
-    ``Recording.controller_origin`` says so)."""
+    ``Recording.controller_origin`` says so). ``table``: the columns already read (a column getter and the
+    columns' names: :func:`from_dataframe`), ``path`` then only names them."""
     from ..units import for_joints
 
-    p = check_input(path, "robot record")
-    ext = os.path.splitext(p)[1].lower()
-    kind = EXTENSIONS.get(ext)
-    if kind not in ("CSV", "Parquet", "HDF5"):
-        raise DataError(f"{p}: a robot record is a CSV, Parquet or HDF5 file, got {ext or 'no extension'!r}")
-    if os.path.getsize(p) == 0:
-        raise DataError(f"{p}: the file is empty (0 bytes)")
+    if table is None:
+        p = check_input(path, "robot record")
+        ext = os.path.splitext(p)[1].lower()
+        kind = EXTENSIONS.get(ext)
+        if kind not in ("CSV", "Parquet", "HDF5"):
+            raise DataError(f"{p}: a robot record is a CSV, Parquet or HDF5 file, got {ext or 'no extension'!r}")
+        if os.path.getsize(p) == 0:
+            raise DataError(f"{p}: the file is empty (0 bytes)")
+    else:
+        p, beside_controller = str(path), False
     if controller is None and beside_controller:
         controller = beside(p)  # NAME_controller.json beside the record, if there is one
     kinds = list(robot.joint_kinds)
@@ -663,7 +668,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     if arg_units is not None:
         declared.append(("units=" + (units if isinstance(units, str) else "..."), arg_units))
     try:
-        get, available = {"CSV": _csv, "Parquet": _parquet, "HDF5": _hdf5}[kind](p)
+        get, available = table if table is not None else {"CSV": _csv, "Parquet": _parquet, "HDF5": _hdf5}[kind](p)
     except UnicodeDecodeError:
         raise DataError(f"{p}: not a text file: a {kind} record was expected from its extension") from None
     names = robot.joint_names
@@ -790,13 +795,15 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     return rec
 
 
-def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str, str]] = None,
+def from_dataframe(df, *, controller: Any, columns: Optional[Mapping[str, str]] = None,
                    force_scale: float = 1.0, dt: Optional[float] = None,
                    position_resolution: Union[None, float, str] = "auto", name: str = "",
-                   units: Union[None, str, Units] = None) -> Recording:
-    """A record from a pandas DataFrame (or any mapping of column name to array), as :func:`load_record`.
+                   units: Any = None, robot: Optional["Robot"] = None) -> Recording:
+    """A record from a pandas DataFrame (or any mapping of column name to array), as :func:`load_record`: one axis's,
+    or with ``robot`` a robot's (columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``, as
+    :func:`load_robot_record` reads them from a file; ``controller`` one per joint or a joints file).
 
-    A DataFrame whose index is the time may be passed with ``df.reset_index()`` or ``dt=``."""
+    A DataFrame whose index is the time may be passed with ``df.reset_index()`` or ``dt=`` (one axis)."""
     try:
         names = [str(c) for c in df.columns] if hasattr(df, "columns") else [str(c) for c in df.keys()]
     except Exception:
@@ -807,6 +814,15 @@ def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str,
         col = df[c]
         return col.to_numpy() if hasattr(col, "to_numpy") else np.asarray(col)
 
+    if robot is not None:
+        given = [k for k, v in (("columns", columns), ("force_scale", force_scale != 1.0), ("dt", dt),
+                                ("position_resolution", position_resolution != "auto")) if v]
+        if given:
+            raise DataError(f"from_dataframe: {', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to one "
+                            "axis's record; a robot's has a time column t and its joints' columns qr_1.., force_1.., "
+                            "qm_1.. (units: units=...)")
+        return load_robot_record(name or "DataFrame", robot, controller=controller, name=name or None, units=units,
+                                 table=(get, names))
     return _from_columns(get, names, name or "DataFrame", controller=controller, columns=columns,
                          force_scale=force_scale, dt=dt, position_resolution=position_resolution, name=name,
                          units=units)
