@@ -406,3 +406,19 @@ def test_a_joint_kind_the_record_does_not_have_and_a_robot_dataframe(pendulum, t
     np.testing.assert_array_equal(got.qm, rec.qm)
     with pytest.raises(didim.DataError, match="dt applies to one axis's record"):
         didim.from_dataframe(frame, robot=robot, controller=ctl, dt=0.001)
+
+
+def test_a_urdf_whose_dynamics_overflow_on_the_record_is_refused_at_load(pendulum, tmp_path):
+    """A link of 1e300 kg: overflow warnings, then "no joint moves above the slow-speed threshold"; now refused when
+    the record is read, naming the URDF, without a warning."""
+    import warnings
+
+    robot, ctl, rec, frame = pendulum
+    heavy = didim.Robot.from_urdf_string(robot.urdf.replace('<mass value="2.0"/>', '<mass value="1e300"/>'),
+                                         source="heavy.urdf")
+    assert heavy.urdf != robot.urdf
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(didim.DataError, match="the URDF's inverse dynamics are not finite on this record's motion "
+                                                  ".*heavy.urdf is far out of scale"):
+            didim.load_record(robots_record(frame, tmp_path), robot=heavy, controller=ctl)

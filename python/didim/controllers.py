@@ -437,7 +437,8 @@ def _spec(path) -> Any:
     p = check_input(path, "controller file")
     ext = os.path.splitext(str(p))[1].lower()
     try:
-        raw = open(p, "rb").read()
+        with open(p, "rb") as f:
+            raw = f.read()
         if ext == ".toml":
             import tomllib
 

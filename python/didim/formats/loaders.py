@@ -513,6 +513,17 @@ def _check_position_units(p, robot, rec: Recording) -> None:
                             "check that the URDF is this robot's")
 
 
+def _check_urdf_scale(p, robot, rec: Recording) -> None:
+    """Refuses a URDF whose inverse dynamics are not finite on the record's own motion (a mass of 1e300 kg): no fit
+    or check can read them."""
+    from ..methods.robot import urdf_residual
+
+    if hasattr(robot, "rnea") and not math.isfinite(urdf_residual(rec, robot)):
+        raise DataError(f"{p}: the URDF's inverse dynamics are not finite on this record's motion (they overflow): a "
+                        f"mass, length or inertia of {robot.source or 'the URDF'} is far out of scale; check its "
+                        "numbers")
+
+
 def _check_time_unit(p, robot, rec: Recording, read: str) -> None:
     """Refuses a record whose time column fits the URDF's dynamics :data:`UNITS_RATIO` times better in another unit
     of :data:`TIME_UNITS` than in the one it was read in (a time in ms read as s: a 1 s sample period, the
@@ -789,6 +800,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
                         f"without phase (a {STATE_FILTER_ORDER}th-order low-pass padded with {MIN_SAMPLES - 1} samples "
                         f"at each end), which needs at least {MIN_SAMPLES} samples, and a fit a motion that excites "
                         "every joint: log a longer record")
+    _check_urdf_scale(p, robot, rec)
     _check_time_unit(p, robot, rec, t_unit)
     _check_position_units(p, robot, rec)
     _check_force_scale(p, robot, rec)

@@ -384,10 +384,21 @@ def urdf_residual(rec: Recording, robot: Robot, angle_factor: float = 1.0, lengt
     step = max(1, rec.n // 2000)
     q, v, a = (x[::step] * factors / time_factor**i for i, x in enumerate((q, v, a)))
     force = (rec.force if force is None else force)[::step]
-    rest = force - robot.rnea(q, v, a)
+    with np.errstate(over="ignore", invalid="ignore"):  # a URDF far out of scale: not finite, said by the caller
+        return _residual_shares(robot.rnea(q, v, a), force, v, a, drive_inertia, per_joint)
+
+
+def _residual_shares(dyn: np.ndarray, force: np.ndarray, v: np.ndarray, a: np.ndarray, drive_inertia: bool,
+                     per_joint: bool):
+    """:func:`urdf_residual`'s shares from the URDF's torques ``dyn`` on the states, the force and the states' speeds
+    and accelerations (infinite where the torques are not finite)."""
+    rest = force - dyn
+    ndof = force.shape[1]
+    if not np.all(np.isfinite(rest)):
+        return np.full(ndof, math.inf) if per_joint else math.inf
     scale = np.std(force, axis=0)
-    left, total = np.zeros(rec.ndof), np.zeros(rec.ndof)
-    for j in range(rec.ndof):
+    left, total = np.zeros(ndof), np.zeros(ndof)
+    for j in range(ndof):
         if not scale[j] > 0:
             continue  # a force that never changes: nothing for the dynamics to explain (the controller check says so)
         w = np.column_stack(([a[:, j]] if drive_inertia else []) + [v[:, j], np.sign(v[:, j]), np.ones(len(v))])
@@ -396,6 +407,8 @@ def urdf_residual(rec: Recording, robot: Robot, angle_factor: float = 1.0, lengt
         r = y - w @ np.linalg.lstsq(w, y, rcond=None)[0]
         left[j] = float(r @ r)
         total[j] = float(np.sum((force[:, j] / scale[j]) ** 2))
+    if not np.all(np.isfinite(left)):
+        return np.full(ndof, math.inf) if per_joint else math.inf
     if per_joint:
         return np.sqrt(left / np.maximum(total, 1e-300)) * (total > 0)
     return math.sqrt(left.sum() / total.sum()) if total.sum() > 0 else 0.0
