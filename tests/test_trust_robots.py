@@ -422,3 +422,14 @@ def test_a_urdf_whose_dynamics_overflow_on_the_record_is_refused_at_load(pendulu
         with pytest.raises(didim.DataError, match="the URDF's inverse dynamics are not finite on this record's motion "
                                                   ".*heavy.urdf is far out of scale"):
             didim.load_record(robots_record(frame, tmp_path), robot=heavy, controller=ctl)
+
+
+def test_load_record_names_an_option_it_does_not_take(pendulum):
+    """load_record(..., joints=[...]) was Python's TypeError; it now says where joints are picked (the URDF), and a
+    misspelt option is named with its nearest."""
+    robot, ctl, rec, frame = pendulum
+    with pytest.raises(didim.DataError, match=r"load_record takes no joints=: .*didim.Robot.from_urdf\(path, "
+                                              r"joints=\[...\]\)"):
+        didim.load_record(robot.source, robot=robot, controller=ctl, joints=["joint1"])
+    with pytest.raises(didim.DataError, match="'contoller': did you mean 'controller'"):
+        didim.load_record(robot.source, contoller=ctl)

@@ -257,7 +257,7 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
                 position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None,
                 pulses_gain: Union[float, str] = "log", lead_in: Union[str, None, np.ndarray] = "auto",
                 units: Union[None, str, Units] = None, beside_controller: bool = True,
-                robot: Optional["Robot"] = None) -> Recording:
+                robot: Optional["Robot"] = None, **unknown) -> Recording:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
 
     With ``robot`` (a :class:`didim.Robot` or a URDF's path): a robot's record (a :class:`didim.Recording` with joint columns),
@@ -272,6 +272,8 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
 
     ``controller``: the controller that ran the axis, or the path of its file; when None, ``NAME_controller.json`` (or ``.toml``) beside the
     file is read if it exists. ``columns``: map from didim's names (t, qr, force, qm, ql, u_ext) to the file's.
+    An option it does not take is refused by name (``joints``: a robot's are picked with its URDF,
+    ``didim.Robot.from_urdf(path, joints=[...])``).
     ``force_scale``: N per unit of the logged force. ``dt``: the expected period (s), checked against ``t``, or the
     period when the file has no time column. ``position_resolution``: the motor encoder's step (m), ``'auto'`` to
     detect it from ``qm`` (positions on a grid), or None. ``pulses_gain``: MAT files, see :func:`didim.load_mat`.
@@ -284,6 +286,12 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     file beside the record unless ``beside_controller=False``), the controller is fitted from the log
     (:func:`didim.fit_controller`) and ``Recording.controller_origin`` says so.
     """
+    if "joints" in unknown:
+        raise DataError("load_record takes no joints=: a robot's actuated joints are picked when its URDF is read, "
+                        "robot=didim.Robot.from_urdf(path, joints=[...]) (CLI: --joints), and the record's columns "
+                        "follow them")
+    if unknown:
+        _checks.known_options([load_record], unknown, "load_record")
     if robot is not None:
         if isinstance(robot, (str, os.PathLike)):
             robot = Robot.from_urdf(robot)  # the URDF's path
