@@ -486,11 +486,13 @@ def _other_readings(read: str) -> List[Tuple[str, float]]:
 
 
 def _check_position_units(p, robot, rec: Recording) -> None:
-    """Refuses a record whose positions fit the URDF's dynamics :data:`UNITS_RATIO` times better in the other unit
-    than in the one they were read in, for the revolute joints (rad or degrees) and the prismatic ones (m or mm) each
-    as a group (a record in rad declared in degrees, in degrees declared in nothing, a quill in m declared in mm):
-    :func:`didim.methods.robot.urdf_residual`. The limits catch a reference beyond the URDF's range; this catches
-    the rest, in either direction."""
+    """Refuses a record whose positions fit the URDF's dynamics :data:`UNITS_RATIO` times better in another unit
+    (:data:`READINGS`) than in the one they were read in, for the revolute joints (rad, degrees or revolutions) and
+    the prismatic ones (m, mm or µm) each as a group (a record in rad declared in degrees, in degrees or revolutions
+    declared in nothing, a quill in m declared in mm): :func:`didim.methods.robot.urdf_residual`. The unit is named
+    only when it brings the URDF's share under :data:`didim.methods.robot.FIT_WELL`; otherwise no unit fits, and
+    the refusal says why it may be (:func:`didim.methods.robot.urdf_mismatch`). The limits catch a reference beyond
+    the URDF's range; this catches the rest, in either direction."""
     from ..methods.robot import FIT_WELL, urdf_mismatch, urdf_residual
 
     if not hasattr(robot, "rnea"):  # joints known by number only (no dynamics)
