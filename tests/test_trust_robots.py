@@ -433,3 +433,15 @@ def test_load_record_names_an_option_it_does_not_take(pendulum):
         didim.load_record(robot.source, robot=robot, controller=ctl, joints=["joint1"])
     with pytest.raises(didim.DataError, match="'contoller': did you mean 'controller'"):
         didim.load_record(robot.source, contoller=ctl)
+
+
+def test_an_unreadable_urdf_says_where(pendulum):
+    """A URDF cut mid-file ("No elements found") and a mass written "abc" ("custom: invalid float literal", no
+    element named): the XML's line and column, or the link and the attribute."""
+    robot, *_ = pendulum
+    with pytest.raises(didim.DataError, match=r"cut.urdf: not a URDF robot description: its XML is not well formed at "
+                                              r"line \d+, column \d+ .*a file cut short"):
+        didim.Robot.from_urdf_string(robot.urdf[:600], source="cut.urdf")
+    assert '<mass value="2.0"/>' in robot.urdf
+    with pytest.raises(didim.DataError, match='link link2\'s <mass value="abc">: not a number'):
+        didim.Robot.from_urdf_string(robot.urdf.replace('<mass value="2.0"/>', '<mass value="abc"/>'))
