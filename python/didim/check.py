@@ -83,7 +83,9 @@ class ControllerCheck:
         where = ", ".join(f"{100 * v:.0f} % {k}" for k, v in self.where.items() if v >= 0.005)
         out = head.replace("within", "only within") + f"; the mismatch lives {where}"
         if self.likely:
-            out += f"; likely: {self.likely} (corrected, the law gives the log within {100 * self.likely_mismatch:.3g} %)"
+            out += f"; likely: {self.likely}" + (f" (corrected, the law gives the log within "
+                                                 f"{100 * self.likely_mismatch:.3g} %)"
+                                                 if math.isfinite(self.likely_mismatch) else "")
         else:
             out += ("; none of the usual mistakes (feedforward missing or doubled, a time constant or gain in another "
                     "unit, the force gain, the sign, a sample of delay) explains it: check that this is the controller "
@@ -174,6 +176,62 @@ def _variants(tf: TransferFunction) -> List[Tuple[str, TransferFunction]]:
     return [(w, c) for w, c in out if c is not None]
 
 
+#: A pole of the law this much outside the unit circle (in |z|) is unstable, not the rounding of an integrator's.
+UNSTABLE_POLE = 1e-6
+
+
+def _unstable(tf: TransferFunction) -> Optional[str]:
+    """The law's denominator whose pole lies outside the unit circle, in words, or None: its command grows without
+    bound from any input (a sign typed wrong in a_y or a_r)."""
+    for name in ("a_y", "a_r"):
+        den = np.asarray(getattr(tf, name), dtype=float)
+        poles = np.roots(den) if len(den) > 1 else np.array([])
+        if poles.size and float(np.max(np.abs(poles))) > 1 + UNSTABLE_POLE:
+            return (f"the controller's denominator {name} = {list(map(float, den))} has a pole at |z| = "
+                    f"{float(np.max(np.abs(poles))):.4g}, outside the unit circle: its law is unstable; check {name}'s "
+                    "coefficients (in ascending powers of 1/z) and their signs")
+    return None
+
+
+def _position_mistakes(tf: TransferFunction, rec) -> List[Tuple[str, np.ndarray]]:
+    """The law's command under the mistakes that change how the positions enter it, each (what, command): the
+    controller in the other angle unit than the record (degrees and radians mixed) and the reference's sign
+    reversed."""
+    u_ext = rec.u_ext
+    out = []
+    with np.errstate(all="ignore"):
+        for k, what in ((math.pi / 180, "the controller acts on positions in deg while the record's are in rad (or the "
+                                         "controller's coefficients are per rad and the record was declared in deg)"),
+                        (180 / math.pi, "the controller acts on positions in rad while the record's are in deg (or the "
+                                        "controller's coefficients are per deg and the record was declared in rad)")):
+            out.append((what + ": give the controller in the record's units", tf.command(rec.qr * k, rec.qm * k, u_ext)))
+        out.append(("the reference's sign is reversed against the measured position (qr logged with the other sign: "
+                    "negate it)", tf.command(-rec.qr, rec.qm, u_ext)))
+    return out
+
+
+def _saturated_cause(tf: TransferFunction, rec, f: np.ndarray) -> str:
+    """What likely makes the law's command saturate on almost every sample: an unstable denominator, or a mistake of
+    :func:`_position_mistakes` under which the law replays the log (on the samples it then leaves unsaturated);
+    else the saturation and gain to check."""
+    unstable = _unstable(tf)
+    if unstable:
+        return "likely: " + unstable
+    limit = tf.force_limit
+    best = None
+    for what, alt in _position_mistakes(tf, rec):
+        keep = np.isfinite(alt) & (np.abs(alt) < SATURATION_MARGIN * limit if math.isfinite(limit) else True)
+        keep[:2] = False
+        if np.count_nonzero(keep) < 0.5 * rec.n:
+            continue
+        m = mismatch(tf, f, alt, keep)
+        if m <= CHECK_TOLERANCE and (best is None or m < best[1]):
+            best = (what, m)
+    if best is not None:
+        return f"likely: {best[0]} (corrected, the law gives the log within {100 * best[1]:.3g} %)"
+    return "check the saturation and gain"
+
+
 def check_controller(rec) -> ControllerCheck:
     """The recording's controller against its log (see the module's text). Tries the usual mistakes only when the
     description fails: the cascade's settings (feedforward, ti, f_lp, kv, kp in another unit) when the controller was
@@ -181,13 +239,17 @@ def check_controller(rec) -> ControllerCheck:
     least-squares factor), the sign and one or two samples of delay between the command and the log."""
     tf = rec.controller.transfer_function(rec.dt)
     f = np.asarray(rec.force, dtype=float)
+    if not np.any(f) and np.ptp(rec.qr) > 0:  # a loop that moves commands a force: this column holds none
+        raise DataError(f"{rec.name or 'record'}: the logged force is zero on every sample while the reference moves: "
+                        "the force column holds no command (not logged, or another column); check the force column "
+                        "and its scale")
     c = _law(tf, rec)
     limit = tf.force_limit
     keep = np.ones(rec.n, bool) if not math.isfinite(limit) else np.abs(c) < SATURATION_MARGIN * limit
     keep[:2] = False  # the law's first samples take the first position for the earlier ones
     if np.count_nonzero(keep) < max(3, 0.05 * rec.n):
         raise DataError(f"{rec.name or 'record'}: the controller's command is at its saturation on almost every sample: "
-                        "the controller cannot be checked against the log (check the saturation and gain)")
+                        f"the controller cannot be checked against the log; {_saturated_cause(tf, rec, f)}")
     out = ControllerCheck(mismatch(tf, f, c, keep), CHECK_TOLERANCE, int(np.count_nonzero(keep)))
     if out.mismatch > ROUNDING_LEVEL:
         # what noise explains: the best linear law fitted from this log replays it only so well
@@ -239,6 +301,8 @@ def check_controller(rec) -> ControllerCheck:
                      else f"the force gain ({tf.gain:.4g} → {tf.gain * a:.4g})")
             cands.append((f"the command's scale is off by a factor {a:.4g}{f' ({unit})' if unit else ''}: {scale}, or "
                           f"a force logged in other units (force_scale {1 / a:.4g})", a * c))
+    cands += _position_mistakes(tf, rec)
+    unstable = _unstable(tf)
     with np.errstate(all="ignore"):
         cands.append(("the reference and the measured position are swapped (qr read as qm and qm as qr: check the "
                       "columns' names or the mapping)", tf.command(rec.qm, rec.qr, rec.u_ext)))
@@ -252,6 +316,8 @@ def check_controller(rec) -> ControllerCheck:
     best = min(out.tried, key=lambda t: t[1]) if out.tried else None
     if best is not None and best[1] <= tol:
         out.likely, out.likely_mismatch = best
+    elif unstable:
+        out.likely, out.likely_mismatch = unstable, math.nan
     return out
 
 

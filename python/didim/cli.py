@@ -90,9 +90,12 @@ def cmd_identify_robot(args) -> int:
     from .robots import Robot
 
     for flag, value in (("--model", args.model != "rigid"), ("--variant", args.variant), ("--apm", args.apm),
-                        ("--criterion", args.criterion != "force"), ("--set", args.set)):
+                        ("--criterion", args.criterion != "force"), ("--set", args.set),
+                        ("--pulses-gain", getattr(args, "pulses_gain", "log") != "log")):
         if value:
-            raise DataError(f"{flag} does not apply to a robot (--urdf): DIDIM starts from the URDF's values")
+            why = ("it reads the pulses_N of one axis's MAT file; a robot's known feedforward goes in its record's "
+                   "u_ext_1..u_ext_n columns" if flag == "--pulses-gain" else "DIDIM starts from the URDF's values")
+            raise DataError(f"{flag} does not apply to a robot (--urdf): {why}")
     _check_outputs([args.file, args.controller, args.urdf], [args.json, args.plot])
     if args.plot:
         _check_figure_format(args.plot)

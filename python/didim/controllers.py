@@ -15,7 +15,7 @@ import math
 import os
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Dict, Optional, Tuple, Union
+from typing import Any, Dict, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
@@ -408,6 +408,10 @@ def controller_from_dict(spec: Dict[str, Any], where: str = "controller") -> Con
         return TransferFunction.cascade(**args)
     except TypeError as e:
         raise DataError(f"{where}: {e}") from None
+    except DataError as e:  # a field's own check: say which file (and joint) holds it
+        if where == "controller" or str(e).startswith(where):
+            raise
+        raise DataError(f"{where}: {e}") from None
 
 
 def in_units(c: Controller, dt: float, position_factor: float, force_factor: float) -> Controller:
@@ -428,10 +432,13 @@ def in_units(c: Controller, dt: float, position_factor: float, force_factor: flo
 def _spec(path) -> Any:
     from .formats._io import check_input
 
+    if isinstance(path, Mapping):  # a controller file's content, given in Python
+        return "the controllers' mapping", dict(path)
     p = check_input(path, "controller file")
     ext = os.path.splitext(str(p))[1].lower()
     try:
-        raw = open(p, "rb").read()
+        with open(p, "rb") as f:
+            raw = f.read()
         if ext == ".toml":
             import tomllib
 

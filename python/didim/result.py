@@ -383,7 +383,9 @@ def _robot_summary(res: IdentificationResult) -> str:
     with their %σ, the notes."""
     lines = [f"{res.method} on a {res.robot.ndof}-joint robot ({res.robot.name}): "
              + ("converged" if res.converged else "NOT converged") + f" in {res.iterations} iteration(s), "
-             f"{res.elapsed_s:.1f} s; closed-loop force error {100 * res.force_error:.2f} %"
+             f"{res.elapsed_s:.1f} s; "
+             + (f"closed-loop force error {100 * res.force_error:.2f} %" if math.isfinite(res.force_error) else
+                "its closed loop could not be simulated (no closed-loop force error: see the notes)")
              + (f" ({100 * res.force_error_after_start:.2f} % after the first {1e3 * res.start_s:.0f} ms, where the "
                 "simulation joins a record that began in motion)" if res.start_s > 0 else "")]
     lines += [f"  {j}: force error {100 * e:.2f} %" for j, e in res.force_error_per_joint.items()]
@@ -408,19 +410,32 @@ def robot_result(method: str, params: Dict[str, float], std: Dict[str, float], m
                                 structure=model, base=base, **fields)
 
 
+def _field(d: Dict[str, Any], path: str) -> Any:
+    """A saved robot result's field ``path`` ("robot.urdf"), or a DataError naming it when it is missing."""
+    x: Any = d
+    for key in path.split("."):
+        if not isinstance(x, dict) or key not in x:
+            raise DataError(f"its field {path!r} is missing (removed or renamed by hand?): save the result again")
+        x = x[key]
+    return x
+
+
 def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
     from .robots.chain import BaseParameters, Robot
 
-    r = d["robot"]
-    robot = Robot.from_urdf_string(r["urdf"], r["joints"])
-    b = d["base"]
-    base = BaseParameters(tuple(b["standard_names"]), tuple(b["names"]), np.array(b["K"], dtype=float),
-                          tuple(b["independent"]))
+    robot = Robot.from_urdf_string(_field(d, "robot.urdf"), _field(d, "robot.joints"))
+    try:
+        k = np.array(_field(d, "base.K"), dtype=float)
+    except (TypeError, ValueError):
+        raise DataError("its field 'base.K' is not a table of numbers (one row of equal length per base parameter): "
+                        "save the result again") from None
+    base = BaseParameters(tuple(_field(d, "base.standard_names")), tuple(_field(d, "base.names")), k,
+                          tuple(_field(d, "base.independent")))
     _check_robot_parts(d, robot, base)
     law = None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof)
-    model = Model("rigid", robot=robot, offset=bool(d["offset"]), coulomb_law=law[0] if law else "algebraic",
+    model = Model("rigid", robot=robot, offset=bool(_field(d, "offset")), coulomb_law=law[0] if law else "algebraic",
                   coulomb_eps=law[1] if law else None, elastic=tuple(d.get("elastic") or ()))
-    return robot_result(d["method"], dict(d["params"]), dict(d["std"]), model, base,
+    return robot_result(_field(d, "method"), dict(_field(d, "params")), dict(_field(d, "std")), model, base,
                          force_error=d.get("force_error", math.nan),
                          force_error_per_joint=dict(d.get("force_error_per_joint", {})),
                          start_s=float(d.get("start_s") or 0.0),
@@ -575,6 +590,9 @@ def load_result(path) -> "IdentificationResult":  # noqa: F821
         raise DataError(f"{os.fspath(path)}: not a JSON result ({e})") from None
     except RecursionError:
         raise DataError(f"{os.fspath(path)}: not a didim result (its JSON is nested too deeply)") from None
+    if isinstance(d, dict) and d.get("kind") != "robot" and "robot" in d and "base" in d:
+        raise DataError(f"{os.fspath(path)}: its field 'kind' is {d.get('kind')!r} but it holds a robot's result "
+                        "(fields 'robot' and 'base'): a robot's result has kind 'robot'; save the result again")
     if not isinstance(d, dict) or ("params" not in d or "model" not in d) and d.get("kind") != "robot":
         raise DataError(f"{os.fspath(path)}: not a didim result (needs 'model' and 'params'; save one with "
                         "result.save('r.json') or didim identify --json)")

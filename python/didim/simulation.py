@@ -302,6 +302,10 @@ def simulate(
         _checks.known_options([simulate], unknown, "simulate")
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
+    if recording.has_joint_columns:
+        raise DataError(f"{recording.name or 'the record'} is a robot's ({len(recording.joint_names)} joints: "
+                        f"{', '.join(recording.joint_names)}); didim.simulate simulates one axis: simulate a robot's "
+                        "identification result on it with didim.robots.simulate_robot(rec, result)")
     structure = dict(offset=offset, terms=tuple(terms), delay=delay, force_lag=force_lag, backlash_gap=backlash_gap,
                      coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
     if _is_result(params):  # a result carries its model structure and its simulator's numerics

@@ -299,8 +299,10 @@ def for_joints(spec, kinds, where: str = "units") -> Optional[list]:
     drive = [p[1] for p in parts if isinstance(p, tuple)]
     for kind, found in (("angle", rot), ("length", lin)):
         if len({(u.position, u.counts_per) for u in found}) > 1:
-            raise DataError(f"{where}: several {kind} units ({', '.join(u.position for u in found)}): a robot's "
-                            f"joints of one kind share one; declare them per joint where they differ")
+            raise DataError(f"{where}: several {kind} units ({', '.join(u.position for u in found)}): one declaration "
+                            f"gives one {kind} unit to every joint of its kind; where the joints differ, declare them "
+                            "per joint: \"units\" in each joint's entry of the controllers' file, a header such as "
+                            "qr_1[deg], or in Python units=[...] with one per joint")
     if len(drive) > 1:
         raise DataError(f"{where}: several force units; give one drive unit with its scale")
     for kind, found, word in (("revolute", rot, "angle"), ("prismatic", lin, "length")):

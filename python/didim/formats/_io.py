@@ -158,8 +158,11 @@ def atomic_path(path) -> Iterator[str]:
         os.close(fd)
         try:
             yield tmp
-            with open(tmp, "rb") as src, open(target, "wb") as dst:
-                shutil.copyfileobj(src, dst)
+            try:
+                with open(tmp, "rb") as src, open(target, "wb") as dst:
+                    shutil.copyfileobj(src, dst)
+            except OSError as e:  # a full device (/dev/full), one that refuses writes: say which
+                raise OSError(e.errno, f"cannot write {shown}: {e.strerror or e}") from None
         finally:
             try:
                 os.unlink(tmp)

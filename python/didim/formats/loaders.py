@@ -189,8 +189,11 @@ def _from_columns(get: Callable[[str], Optional[np.ndarray]], available: List[st
 def _csv(path: str):
     import csv
 
+    skip = 1  # the header's line, after the comment lines ("# exported by ...") a logger may write above it
     with open(path, newline="", encoding="utf-8-sig") as f:
         head = f.readline()
+        while head.lstrip().startswith("#"):
+            head, skip = f.readline(), skip + 1
     if not head.strip():
         raise DataError(f"{path}: the file is empty or its first line is blank; a CSV record starts with a header "
                         f"line naming its columns ({', '.join(REQUIRED)})")
@@ -201,7 +204,7 @@ def _csv(path: str):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data": said below, as a DataError
-            data = np.loadtxt(path, delimiter=delim, skiprows=1, ndmin=2, encoding="utf-8-sig")
+            data = np.loadtxt(path, delimiter=delim, skiprows=skip, ndmin=2, encoding="utf-8-sig")
     except ValueError as e:
         msg = str(e).rstrip(". ")
         empty = ("an empty field is a missing value: fill it or cut the record (pandas writes NaN as an empty field "
@@ -254,7 +257,7 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
                 position_resolution: Union[None, float, str] = "auto", name: Optional[str] = None,
                 pulses_gain: Union[float, str] = "log", lead_in: Union[str, None, np.ndarray] = "auto",
                 units: Union[None, str, Units] = None, beside_controller: bool = True,
-                robot: Optional["Robot"] = None) -> Recording:
+                robot: Optional["Robot"] = None, **unknown) -> Recording:
     """A record from a CSV, Parquet, HDF5 or MAT file, the format chosen by the extension.
 
     With ``robot`` (a :class:`didim.Robot` or a URDF's path): a robot's record (a :class:`didim.Recording` with joint columns),
@@ -269,6 +272,8 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
 
     ``controller``: the controller that ran the axis, or the path of its file; when None, ``NAME_controller.json`` (or ``.toml``) beside the
     file is read if it exists. ``columns``: map from didim's names (t, qr, force, qm, ql, u_ext) to the file's.
+    An option it does not take is refused by name (``joints``: a robot's are picked with its URDF,
+    ``didim.Robot.from_urdf(path, joints=[...])``).
     ``force_scale``: N per unit of the logged force. ``dt``: the expected period (s), checked against ``t``, or the
     period when the file has no time column. ``position_resolution``: the motor encoder's step (m), ``'auto'`` to
     detect it from ``qm`` (positions on a grid), or None. ``pulses_gain``: MAT files, see :func:`didim.load_mat`.
@@ -281,6 +286,12 @@ def load_record(path: PathLike, *, controller: Union[None, Controller, PathLike]
     file beside the record unless ``beside_controller=False``), the controller is fitted from the log
     (:func:`didim.fit_controller`) and ``Recording.controller_origin`` says so.
     """
+    if "joints" in unknown:
+        raise DataError("load_record takes no joints=: a robot's actuated joints are picked when its URDF is read, "
+                        "robot=didim.Robot.from_urdf(path, joints=[...]) (CLI: --joints), and the record's columns "
+                        "follow them")
+    if unknown:
+        _checks.known_options([load_record], unknown, "load_record")
     if robot is not None:
         if isinstance(robot, (str, os.PathLike)):
             robot = Robot.from_urdf(robot)  # the URDF's path
@@ -413,7 +424,7 @@ LIMIT_MARGIN = 0.1
 
 
 #: A jump of a revolute joint's position between two samples within this share of a whole turn (2π, in SI) is an
-#: encoder's wrap, when it also exceeds :data:`WRAP_JUMP_RATIO` times the joint's largest other step.
+#: encoder's wrap, when it also exceeds :data:`WRAP_JUMP_RATIO` times the joint's largest step that is not one.
 WRAP_TURN_RTOL = 0.05
 WRAP_JUMP_RATIO = 20.0
 
@@ -422,9 +433,11 @@ WRAP_JUMP_RATIO = 20.0
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
 
 
-def _check_wraps(p, names, kinds, signals) -> None:
-    """Refuses a revolute joint's position that jumps by a whole turn between two samples (an encoder that wraps at
-    ±π or 0..2π, logged as is): the closed loop would read it as a turn in one sample period."""
+def _check_wraps(p, names, kinds, signals, dt: float) -> None:
+    """Refuses a revolute joint's position that jumps by a whole turn between two samples, once or at every turn (an
+    encoder that wraps at ±π or 0..2π, logged as is): the closed loop would read it as a turn in one sample period,
+    and the dynamics as positions in another unit. Jumps of more than half a turn within :data:`WRAP_TURN_RTOL` of a
+    whole number of turns are wraps when each exceeds :data:`WRAP_JUMP_RATIO` times the joint's largest other step."""
     for key in ("qm", "qr"):
         for j, kind in enumerate(kinds):
             if kind == "prismatic":
@@ -432,14 +445,17 @@ def _check_wraps(p, names, kinds, signals) -> None:
             d = np.diff(signals[key][:, j])
             if d.size < 2 or not np.all(np.isfinite(d)):
                 continue  # a non-finite value is refused by the record's own check, naming its sample
-            k = int(np.argmax(np.abs(d)))
-            jump = float(d[k])
-            rest = float(np.max(np.abs(np.delete(d, k))))
-            if abs(abs(jump) / (2 * math.pi) - round(abs(jump) / (2 * math.pi))) <= WRAP_TURN_RTOL \
-                    and abs(jump) > math.pi and abs(jump) > WRAP_JUMP_RATIO * rest:
-                raise DataError(f"{p}: joint {names[j]}'s {key} jumps by {jump:.4g} rad between samples {k} and "
-                                f"{k + 1}, a whole turn: its encoder wraps; unwrap the positions (numpy.unwrap) "
-                                "before identifying")
+            turns = np.abs(d) / (2 * math.pi)
+            wraps = (np.abs(d) > math.pi) & (np.abs(turns - np.round(turns)) <= WRAP_TURN_RTOL)
+            if not np.any(wraps) or np.all(wraps):
+                continue
+            rest = float(np.max(np.abs(d[~wraps])))
+            if np.all(np.abs(d[wraps]) > WRAP_JUMP_RATIO * rest):
+                k = int(np.flatnonzero(wraps)[0])
+                raise DataError(f"{p}: joint {names[j]}'s {key} jumps by {d[k]:.4g} rad between samples {k} and "
+                                f"{k + 1}, a whole turn: its encoder wraps at one turn (at t = {(k + 1) * dt:.6g} s"
+                                + (f", {int(np.sum(wraps))} times in the record" if np.sum(wraps) > 1 else "")
+                                + "); unwrap the positions (numpy.unwrap) before identifying")
 
 
 def _check_limits(p, robot, qr: np.ndarray, declared: bool) -> None:
@@ -470,21 +486,32 @@ def _check_limits(p, robot, qr: np.ndarray, declared: bool) -> None:
 #: times that; the held-out arm's quill in mm read as m, 360 % against 4 % (its position hardly enters the others'
 #: torques, so a quill in m declared in mm fits alike, 3.53 % against 3.52 %, and passes).
 UNITS_RATIO = 2.0
+#: The units of position the dynamics can tell apart, an angle in rad, degrees or revolutions, a length in m, mm or
+#: µm (:data:`didim.units.POSITION_UNITS`): a record read in one of them is tried in each other of its kind.
+READINGS = ("rad", "deg", "rev", "m", "mm", "um")
 
 
-#: The other reading of each unit of position the dynamics can tell apart, an angle in rad or degrees, a length in m
-#: or mm, and the factor that takes the positions read in the one to the other (both in SI).
-OTHER_READING = {"rad": ("deg", math.pi / 180), "deg": ("rad", 180 / math.pi),
-                 "m": ("mm", 1e-3), "mm": ("m", 1e3)}
+def _other_readings(read: str) -> List[Tuple[str, float]]:
+    """The other readings of positions read in ``read`` (one of :data:`READINGS`), each with the factor that takes
+    the positions read in ``read`` to them (both in SI): rad for deg is π/180, rev for rad 2π. Empty for a unit
+    without one (counts, whose count per turn only the user knows)."""
+    from ..units import POSITION_UNITS
+
+    if read not in READINGS:
+        return []
+    si, rotary = POSITION_UNITS[read]
+    return [(u, POSITION_UNITS[u][0] / si) for u in READINGS if u != read and POSITION_UNITS[u][1] == rotary]
 
 
 def _check_position_units(p, robot, rec: Recording) -> None:
-    """Refuses a record whose positions fit the URDF's dynamics :data:`UNITS_RATIO` times better in the other unit
-    than in the one they were read in, for the revolute joints (rad or degrees) and the prismatic ones (m or mm) each
-    as a group (a record in rad declared in degrees, in degrees declared in nothing, a quill in m declared in mm):
-    :func:`didim.methods.robot.urdf_residual`. The limits catch a reference beyond the URDF's range; this catches
-    the rest, in either direction."""
-    from ..methods.robot import urdf_residual
+    """Refuses a record whose positions fit the URDF's dynamics :data:`UNITS_RATIO` times better in another unit
+    (:data:`READINGS`) than in the one they were read in, for the revolute joints (rad, degrees or revolutions) and
+    the prismatic ones (m, mm or µm) each as a group (a record in rad declared in degrees, in degrees or revolutions
+    declared in nothing, a quill in m declared in mm): :func:`didim.methods.robot.urdf_residual`. The unit is named
+    only when it brings the URDF's share under :data:`didim.methods.robot.FIT_WELL`; otherwise no unit fits, and
+    the refusal says why it may be (:func:`didim.methods.robot.urdf_mismatch`). The limits catch a reference beyond
+    the URDF's range; this catches the rest, in either direction."""
+    from ..methods.robot import FIT_WELL, urdf_mismatch, urdf_residual
 
     if not hasattr(robot, "rnea"):  # joints known by number only (no dynamics)
         return
@@ -494,13 +521,17 @@ def _check_position_units(p, robot, rec: Recording) -> None:
         if len(read_as) > 1:  # joints of one kind declared in several units: each declaration judged on its joint
             _check_joint_units(p, robot, rec, joints)
             continue
-        if len(read_as) != 1 or next(iter(read_as)) not in OTHER_READING:
-            continue  # no joint of the kind; revolutions, counts, µm: no single other reading
+        if len(read_as) != 1 or not _other_readings(next(iter(read_as))):
+            continue  # no joint of the kind; counts: no other reading
         read = next(iter(read_as))
-        other, factor = OTHER_READING[read]
         key = "length_factor" if kind == "prismatic" else "angle_factor"
         here = urdf_residual(rec, robot)
-        there = urdf_residual(rec, robot, **{key: factor})
+        there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in _other_readings(read))
+        if here > UNITS_RATIO * there and there > FIT_WELL:  # no reading fits: the URDF's or the record's fault
+            raise DataError(f"{p}: no unit of position makes the record fit the URDF's dynamics (read in {read} they "
+                            f"leave {100 * here:.0f} % of the force unexplained, in {other} at best "
+                            f"{100 * there:.0f} %; a right URDF leaves under {100 * FIT_WELL:.0f} %): "
+                            + urdf_mismatch(rec, robot))
         if here > UNITS_RATIO * there:
             raise DataError(f"{p}: read in {read}, the {kind} joints' positions leave the URDF's dynamics "
                             f"{100 * here:.0f} % of the force unexplained, read in {other} {100 * there:.0f} %: the "
@@ -508,6 +539,44 @@ def _check_position_units(p, robot, rec: Recording) -> None:
                             f"{other}, a header such as qr_{joints[0] + 1}[{other}], or \"units\" in the controllers' "
                             "file), or "
                             "check that the URDF is this robot's")
+
+
+def _check_urdf_scale(p, robot, rec: Recording) -> None:
+    """Refuses a URDF whose inverse dynamics are not finite on the record's own motion (a mass of 1e300 kg): no fit
+    or check can read them."""
+    from ..methods.robot import urdf_residual
+
+    if hasattr(robot, "rnea") and not math.isfinite(urdf_residual(rec, robot)):
+        raise DataError(f"{p}: the URDF's inverse dynamics are not finite on this record's motion (they overflow): a "
+                        f"mass, length or inertia of {robot.source or 'the URDF'} is far out of scale; check its "
+                        "numbers")
+
+
+def _check_time_unit(p, robot, rec: Recording, read: str) -> None:
+    """Refuses a record whose time column fits the URDF's dynamics :data:`UNITS_RATIO` times better in another unit
+    of :data:`TIME_UNITS` than in the one it was read in (a time in ms read as s: a 1 s sample period, the
+    accelerations a millionth of the true ones, every controller fitted from the log and every inertia a million
+    times off): the same test as the positions' (:func:`_check_position_units`), the speeds divided by the factor and
+    the accelerations by its square, and the drives' own inertia left out (it would take up a joint's share of
+    accelerations read a factor off)."""
+    from ..methods.robot import urdf_residual
+    from ..recording import DT_RANGE
+
+    if not hasattr(robot, "rnea"):  # joints known by number only (no dynamics)
+        return
+    tried = [(urdf_residual(rec, robot, time_factor=f / TIME_UNITS[read], drive_inertia=False), unit,
+              rec.dt * f / TIME_UNITS[read])
+             for unit, f in TIME_UNITS.items() if f != TIME_UNITS[read]
+             and DT_RANGE[0] <= rec.dt * f / TIME_UNITS[read] <= DT_RANGE[1]]
+    if not tried:
+        return
+    there, unit, dt = min(tried)
+    here = urdf_residual(rec, robot, drive_inertia=False)
+    if here > UNITS_RATIO * there:
+        raise DataError(f"{p}: read in {read}, the time column t (a sample period of {rec.dt:g} s) leaves the URDF's "
+                        f"dynamics {100 * here:.0f} % of the force unexplained, read in {unit} ({dt:g} s) "
+                        f"{100 * there:.0f} %: its time is probably in {unit}; declare it in the header (t[{unit}]) "
+                        "or convert it to s, or check that the URDF is this robot's")
 
 
 def _check_force_scale(p, robot, rec: Recording) -> None:
@@ -532,17 +601,24 @@ def _check_force_scale(p, robot, rec: Recording) -> None:
 def _check_joint_units(p, robot, rec: Recording, joints: List[int]) -> None:
     """:func:`_check_position_units` for joints of one kind declared in several units: each joint's positions read
     in the other unit alone, the rest as declared (a joints file declaring one joint in degrees on a record in rad)."""
-    from ..methods.robot import urdf_residual
+    from ..methods.robot import FIT_WELL, urdf_mismatch, urdf_residual
 
     here = urdf_residual(rec, robot)
     for j in joints:
-        read = rec.units[j].position
-        if read not in OTHER_READING:
+        tried = []
+        for other, factor in _other_readings(rec.units[j].position):
+            factors = np.ones(rec.ndof)
+            factors[j] = factor
+            tried.append((urdf_residual(rec, robot, factors=factors), other))
+        if not tried:
             continue
-        other, factor = OTHER_READING[read]
-        factors = np.ones(rec.ndof)
-        factors[j] = factor
-        there = urdf_residual(rec, robot, factors=factors)
+        read = rec.units[j].position
+        there, other = min(tried)
+        if here > UNITS_RATIO * there and there > FIT_WELL:  # no reading fits: the URDF's or the record's fault
+            raise DataError(f"{p}: no unit of position makes the record fit the URDF's dynamics (read in {read} they "
+                            f"leave {100 * here:.0f} % of the force unexplained, in {other} at best "
+                            f"{100 * there:.0f} %; a right URDF leaves under {100 * FIT_WELL:.0f} %): "
+                            + urdf_mismatch(rec, robot))
         if here > UNITS_RATIO * there:
             raise DataError(f"{p}: joint {rec.joint_names[j]} is read in {read}, where its positions leave the URDF's "
                             f"dynamics {100 * here:.0f} % of the force unexplained, read in {other} "
@@ -556,10 +632,10 @@ def _robot_file_units(path, kinds) -> Optional[list]:
     from ..controllers import _spec
     from ..units import for_joints
 
-    _, spec = _spec(path)
+    where, spec = _spec(path)
     if not isinstance(spec, dict):
         return None
-    where = f"{path}"
+    where = f"{where}"
     whole = for_joints(spec.get("units"), kinds, f"{where}: \"units\"")
     entries = spec.get("joints") if isinstance(spec.get("joints"), list) else []
     each = [e.get("units") if isinstance(e, dict) else None for e in entries]
@@ -580,7 +656,8 @@ def _robot_file_units(path, kinds) -> Optional[list]:
 
 
 def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Optional[str] = None,
-                      units: Any = None, beside_controller: bool = True, lead_in: Any = "auto") -> Recording:
+                      units: Any = None, beside_controller: bool = True, lead_in: Any = "auto",
+                      table: Optional[Tuple[Callable[[str], np.ndarray], List[str]]] = None) -> Recording:
     """A robot record from a CSV, Parquet or HDF5 file with columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``
     in ``robot``'s joint order (or ``qr_<joint name>``…), positions in rad (prismatic joints: m), forces in N·m (N),
     unless the record declares other units: ``units`` (``"deg"``, ``"deg,mm"``, one per joint:
@@ -589,39 +666,48 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
     controllers are converted to SI once. ``controller``: the joints' controllers (a sequence, one per joint) or
     the path of their file; by default ``NAME_controller.json`` beside the record (unless ``beside_controller`` is
     False), and without one each joint's linear law is fitted from its log (:func:`didim.fit_controller`;
-    ``Recording.controller_origin`` says so)."""
+    ``Recording.controller_origin`` says so). ``table``: the columns already read (a column getter and the
+    columns' names: :func:`from_dataframe`), ``path`` then only names them."""
     from ..units import for_joints
 
-    p = check_input(path, "robot record")
-    ext = os.path.splitext(p)[1].lower()
-    kind = EXTENSIONS.get(ext)
-    if kind not in ("CSV", "Parquet", "HDF5"):
-        raise DataError(f"{p}: a robot record is a CSV, Parquet or HDF5 file, got {ext or 'no extension'!r}")
-    if os.path.getsize(p) == 0:
-        raise DataError(f"{p}: the file is empty (0 bytes)")
+    if table is None:
+        p = check_input(path, "robot record")
+        ext = os.path.splitext(p)[1].lower()
+        kind = EXTENSIONS.get(ext)
+        if kind not in ("CSV", "Parquet", "HDF5"):
+            raise DataError(f"{p}: a robot record is a CSV, Parquet or HDF5 file, got {ext or 'no extension'!r}")
+        if os.path.getsize(p) == 0:
+            raise DataError(f"{p}: the file is empty (0 bytes)")
+    else:
+        p, beside_controller = str(path), False
     if controller is None and beside_controller:
         controller = beside(p)  # NAME_controller.json beside the record, if there is one
     kinds = list(robot.joint_kinds)
     declared = []  # (where, per-joint units)
     delay: Tuple[int, ...] = ()
     force_lag: Tuple[float, ...] = ()
-    controller_file = controller if isinstance(controller, (str, os.PathLike)) else None
-    if isinstance(controller, (str, os.PathLike)):
+    # a joints file, by its path or its content (a mapping {"type": "joints", "joints": [...]})
+    as_file = isinstance(controller, (str, os.PathLike)) or (isinstance(controller, Mapping)
+                                                              and controller.get("type") == "joints")
+    controller_file = (controller if not isinstance(controller, Mapping) else "the controllers' mapping") \
+        if as_file else None
+    if as_file:
         file_units = _robot_file_units(controller, kinds)
         if file_units is not None:
-            declared.append((f"the controller file {controller}", file_units))
+            declared.append((f"the controller file {controller_file}", file_units))
         delay, force_lag = load_joint_drives(controller)
         controller = load_joint_controllers(controller)
     if controller is not None and not isinstance(controller, (list, tuple)):
         raise DataError(f"{p}: a robot's record takes one controller per joint ({len(kinds)}: "
-                        f"{', '.join(robot.joint_names)}): give a joints file or a list of controllers, got one "
+                        f"{', '.join(robot.joint_names)}): give a joints file (its path, or its content as a "
+                        "mapping {\"type\": \"joints\", \"joints\": [...]}) or a list of controllers, got one "
                         f"{type(controller).__name__}")
     controllers = tuple(controller) if controller is not None else None
     arg_units = for_joints(units, kinds, "units")
     if arg_units is not None:
         declared.append(("units=" + (units if isinstance(units, str) else "..."), arg_units))
     try:
-        get, available = {"CSV": _csv, "Parquet": _parquet, "HDF5": _hdf5}[kind](p)
+        get, available = table if table is not None else {"CSV": _csv, "Parquet": _parquet, "HDF5": _hdf5}[kind](p)
     except UnicodeDecodeError:
         raise DataError(f"{p}: not a text file: a {kind} record was expected from its extension") from None
     names = robot.joint_names
@@ -725,7 +811,7 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
                 controllers = controllers[:j] + (in_units(controllers[j], dt, k, ff),) + controllers[j + 1:]
             except DataError as e:
                 raise DataError(f"{p}: joint {names[j]}: {e}") from None
-    _check_wraps(p, names, kinds, signals)
+    _check_wraps(p, names, kinds, signals, dt)
     _check_limits(p, robot, signals["qr"], u is not None)
     steps = []
     for j in range(len(names)):
@@ -743,18 +829,29 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
                              lead_in=lead_in)
     except DataError as e:
         raise DataError(f"{p}: {e}") from None
+    from ..methods.robot import MIN_SAMPLES, STATE_FILTER_ORDER
+
+    if rec.n < MIN_SAMPLES:
+        raise DataError(f"{p}: the record has {rec.n} samples ({rec.n * dt:.4g} s): a robot's states are filtered "
+                        f"without phase (a {STATE_FILTER_ORDER}th-order low-pass padded with {MIN_SAMPLES - 1} samples "
+                        f"at each end), which needs at least {MIN_SAMPLES} samples, and a fit a motion that excites "
+                        "every joint: log a longer record")
+    _check_urdf_scale(p, robot, rec)
+    _check_time_unit(p, robot, rec, t_unit)
     _check_position_units(p, robot, rec)
     _check_force_scale(p, robot, rec)
     return rec
 
 
-def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str, str]] = None,
+def from_dataframe(df, *, controller: Any, columns: Optional[Mapping[str, str]] = None,
                    force_scale: float = 1.0, dt: Optional[float] = None,
                    position_resolution: Union[None, float, str] = "auto", name: str = "",
-                   units: Union[None, str, Units] = None) -> Recording:
-    """A record from a pandas DataFrame (or any mapping of column name to array), as :func:`load_record`.
+                   units: Any = None, robot: Optional["Robot"] = None) -> Recording:
+    """A record from a pandas DataFrame (or any mapping of column name to array), as :func:`load_record`: one axis's,
+    or with ``robot`` a robot's (columns ``t, qr_1..qr_n, force_1..force_n, qm_1..qm_n``, as
+    :func:`load_robot_record` reads them from a file; ``controller`` one per joint or a joints file).
 
-    A DataFrame whose index is the time may be passed with ``df.reset_index()`` or ``dt=``."""
+    A DataFrame whose index is the time may be passed with ``df.reset_index()`` or ``dt=`` (one axis)."""
     try:
         names = [str(c) for c in df.columns] if hasattr(df, "columns") else [str(c) for c in df.keys()]
     except Exception:
@@ -765,6 +862,15 @@ def from_dataframe(df, *, controller: Controller, columns: Optional[Mapping[str,
         col = df[c]
         return col.to_numpy() if hasattr(col, "to_numpy") else np.asarray(col)
 
+    if robot is not None:
+        given = [k for k, v in (("columns", columns), ("force_scale", force_scale != 1.0), ("dt", dt),
+                                ("position_resolution", position_resolution != "auto")) if v]
+        if given:
+            raise DataError(f"from_dataframe: {', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to one "
+                            "axis's record; a robot's has a time column t and its joints' columns qr_1.., force_1.., "
+                            "qm_1.. (units: units=...)")
+        return load_robot_record(name or "DataFrame", robot, controller=controller, name=name or None, units=units,
+                                 table=(get, names))
     return _from_columns(get, names, name or "DataFrame", controller=controller, columns=columns,
                          force_scale=force_scale, dt=dt, position_resolution=position_resolution, name=name,
                          units=units)

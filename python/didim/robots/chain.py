@@ -14,6 +14,36 @@ from .. import _checks, _core
 from .._errors import DataError
 
 
+#: The numeric attributes of a URDF's elements, by element: each a number, or three (xyz, rpy).
+_NUMBERS = {"mass": ("value",), "inertia": ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), "origin": ("xyz", "rpy"),
+            "axis": ("xyz",), "limit": ("lower", "upper", "effort", "velocity"), "dynamics": ("damping", "friction")}
+
+
+def _unreadable(text: str) -> Optional[str]:
+    """Where a URDF that the parser refuses is unreadable, in words (the XML's line and column where it breaks off
+    or goes wrong, or the first numeric attribute that is not a number, with its link or joint), or None."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as e:
+        line, col = e.position
+        return (f"its XML is not well formed at line {line}, column {col} ({str(e).split(':')[0]}: a file cut short "
+                "or a tag left open?)")
+    for owner in list(root.iter("link")) + list(root.iter("joint")):
+        for el in owner.iter():
+            for key in _NUMBERS.get(el.tag, ()):
+                value = el.get(key)
+                if value is None:
+                    continue
+                try:
+                    [float(x) for x in value.split()]
+                except ValueError:
+                    return (f"{owner.tag} {owner.get('name')}'s <{el.tag} {key}=\"{value}\">: not a number; give "
+                            f"{'three numbers' if key in ('xyz', 'rpy') else 'a number'}")
+    return None
+
+
 class Robot:
     """A serial chain of actuated joints under gravity, (0, 0, −9.81) m/s² in the URDF's world frame.
 
@@ -65,8 +95,10 @@ class Robot:
         try:
             core = _core.Robot.from_urdf(text, joints)
         except DataError as e:
+            where = _unreadable(text) if str(e).startswith("not a URDF robot description:") else None
+            e = DataError(f"not a URDF robot description: {where}") if where else e
             if source is None:
-                raise
+                raise e from None
             raise DataError(f"{source}: {e}") from None
         return cls(core, text, source)
 

@@ -450,6 +450,23 @@ pub fn parse(text: &str, picked: Option<&[String]>) -> Result<Robot> {
             ));
         }
     }
+    // a mimic joint follows another joint's position (one motor driving both): didim's joints are each driven
+    for j in &walk.out {
+        if let Some(m) = doc
+            .joints
+            .iter()
+            .find(|d| d.name == j.name)
+            .and_then(|d| d.mimic.as_ref())
+        {
+            return Err(invalid!(
+                "joint {} mimics joint {} (<mimic>): didim does not support mimic joints (one motor driving two); \
+                 leave it out with joints=[...] (CLI: --joints; it is then locked at zero), or drive it on its own \
+                 (remove its <mimic>)",
+                j.name,
+                m.joint
+            ));
+        }
+    }
     Robot::new(&doc.name, walk.out)
 }
 
