@@ -1075,7 +1075,11 @@ class _RobotPlant:
                 "force_errors": force_errors(rec, sim["force"]), **res}
 
     def physical(self, new: np.ndarray, old) -> bool:
-        return bool(np.all(np.isfinite(new)))
+        """Finite, and each elastic joint's rotor inertia and stiffness positive, its damping not negative (the
+        loop pulls an iterate that is not back toward the best)."""
+        lay = self.lay
+        return bool(np.all(np.isfinite(new))) and all(
+            new[lay.ia(e)] > 0 and new[lay.k(e)] > 0 and new[lay.d(e)] >= 0 for e in range(lay.ne))
 
     def converged(self, loop) -> bool:
         return residual_settled(loop, self.tol)
@@ -1219,42 +1223,63 @@ ELASTIC_FTOL = 1e-4
 ELASTIC_SWEEPS = 2
 
 
-def _regroup_partner(base: BaseParameters, robot: Robot, j: int) -> Optional[Tuple[int, float]]:
-    """The standard parameter that joint ``j``'s rotor inertia shares its base parameter with, and its coefficient
-    there (preferring one of the joint's own body's inertias): moving the rotor inertia into it keeps the rigid
-    dynamics. None where the rotor inertia is a base parameter of its own (or none)."""
-    if j not in base.independent:
-        return None
-    row = base.K[base.independent.index(j)]
-    deps = [c for c in np.flatnonzero(row) if c != j]
-    if not deps:
-        return None
-    own = [c for c in deps if base.standard_names[c].startswith("I") and base.standard_names[c].endswith(
-        "_" + robot.joint_names[j])]
-    c = (own or deps)[0]
-    return int(c), float(row[c])
+def _own_inertia(robot: Robot, j: int, q: np.ndarray) -> Tuple[int, float]:
+    """The standard parameter of joint ``j``'s own body that adds most to its inertia ``M_jj`` at ``q`` (the moment
+    about its axis: Iyy for a y axis; the mass for a prismatic joint), as an index among the standard parameters
+    (rotor inertias first), and its coefficient in ``M_jj``."""
+    n = robot.ndof
+    zero, unit = np.zeros(n), np.eye(n)[j]
+    row = robot.regressor(q[None], zero[None], unit[None])[0, j] - robot.regressor(q[None], zero[None], zero[None])[0, j]
+    body = row[10 * j:10 * j + 10]
+    cand = [0] + list(range(4, 10))  # the mass or an inertia of the body
+    k = max(cand, key=lambda c: abs(body[c]))
+    return n + 10 * j + k, float(body[k])
 
 
 class _ElasticSplit:
-    """Step 2's model, the paper's eqs. (23)-(27) for each elastic joint j: step 1's rigid estimate with the joint
-    split at (λ_j, f_j, ζ_j): its rotor inertia Ia_j = λ_j T_j, T_j its total inertia at mid-stroke in step 1's model
-    (its rotor's and its chain's, M_jj(q_mid)); where step 1's rotor inertia was regrouped with a body parameter, that
-    parameter takes the rest (the rigid dynamics unchanged); K_j = M_jj(q_mid) (2π f_j)² and D_j = 2 ζ_j √(K_j M_jj)
-    with the split chain's M_jj (f_j is the joint's locked-rotor mode there, ζ_j its damping ratio); the friction and
-    offsets stay step 1's, on the motor side (eq. (27): all friction on the motor)."""
+    """Step 2's model, the paper's eqs. (23)-(27) for each elastic joint j: a model's standard parameters (a rigid
+    step's, or an elastic model's) with the joint split at (λ_j, f_j, ζ_j): its total inertia at mid-stroke T_j (its
+    rotor's and its chain's, M_jj(q_mid)) kept, the rotor's share λ_j T_j, the rest its own body's (the moment about its
+    axis, :func:`_own_inertia`: where the rigid step regrouped its rotor inertia with that moment, the rigid dynamics
+    are unchanged); K_j = M_jj(q_mid) (2π f_j)² and D_j = 2 ζ_j √(K_j M_jj) with the split chain's M_jj (f_j is the
+    joint's locked-rotor mode there, ζ_j its damping ratio); the friction and offsets the model's, on the motor side
+    (eq. (27): all friction on the motor)."""
 
-    def __init__(self, rec: Recording, rigid: IdentificationResult, elastic: Tuple[int, ...]):
-        robot = rigid.robot
-        self.rec, self.robot, self.elastic, self.offset = rec, robot, elastic, rigid.offset
+    def __init__(self, rec: Recording, robot: Robot, pi: np.ndarray, drives: Dict[str, List[float]], offset: bool,
+                 elastic: Tuple[int, ...]):
+        self.rec, self.robot, self.elastic, self.offset = rec, robot, elastic, offset
+        self.pi1, self.d1 = np.asarray(pi, dtype=float), drives
         n = robot.ndof
-        chain, self.d1 = _model_of(robot, rigid.base, rigid.offset, theta_of(rigid))
-        self.pi1 = np.concatenate([self.d1["armature"], chain.inertial_params])
         self.qmid = 0.5 * (rec.qm.min(axis=0) + rec.qm.max(axis=0))
+        chain = robot.with_inertial_params(self.pi1[n:])
         m = chain.mass_matrix(self.qmid)
-        self.total = np.array([self.d1["armature"][j] + m[j, j] for j in elastic])
-        self.partner = [_regroup_partner(rigid.base, robot, j) for j in elastic]
+        self.total = np.array([self.pi1[j] + m[j, j] for j in elastic])
+        self.partner = [_own_inertia(chain, j, self.qmid) for j in elastic]
         self.base = base_parameters(robot, elastic=elastic)
-        self.lay = _Layout(len(self.base.names), n, elastic, rigid.offset)
+        self.lay = _Layout(len(self.base.names), n, elastic, offset)
+
+    @classmethod
+    def of_rigid(cls, rec: Recording, rigid: IdentificationResult, elastic: Tuple[int, ...]) -> "_ElasticSplit":
+        chain, d = _model_of(rigid.robot, rigid.base, rigid.offset, theta_of(rigid))
+        return cls(rec, rigid.robot, np.concatenate([d["armature"], chain.inertial_params]), d, rigid.offset, elastic)
+
+    @classmethod
+    def of_elastic(cls, rec: Recording, plant: "_RobotPlant", theta: np.ndarray) -> "_ElasticSplit":
+        chain, d = plant.model(theta)
+        return cls(rec, plant.robot, np.concatenate([d["armature"], chain.inertial_params]), d, plant.offset,
+                   plant.elastic)
+
+    def x_of(self, theta: np.ndarray) -> np.ndarray:
+        """Each elastic joint's (λ, f, ζ) in an elastic model's θ (of this split's layout)."""
+        n, lay = self.robot.ndof, self.lay
+        pi = self.base.standard_from(theta[:lay.nb], np.concatenate([np.zeros(n), self.robot.inertial_params]))
+        m = self.robot.with_inertial_params(pi[n:]).mass_matrix(self.qmid)
+        out = np.zeros((len(self.elastic), 3))
+        for e, j in enumerate(self.elastic):
+            k, ia = theta[lay.k(e)], theta[lay.ia(e)]
+            out[e] = (ia / (ia + m[j, j]), math.sqrt(k / m[j, j]) / (2 * math.pi),
+                      theta[lay.d(e)] / (2 * math.sqrt(k * m[j, j])))
+        return out
 
     def theta(self, x: np.ndarray) -> np.ndarray:
         """θ of the elastic model (:class:`_Layout`) at ``x`` (one row (λ, f in Hz, ζ) per elastic joint)."""
@@ -1262,9 +1287,8 @@ class _ElasticSplit:
         pi = self.pi1.copy()
         for e, j in enumerate(self.elastic):
             ia = x[e, 0] * self.total[e]
-            if self.partner[e] is not None:
-                c, coef = self.partner[e]
-                pi[c] += (pi[j] - ia) / coef
+            c, coef = self.partner[e]
+            pi[c] += (pi[j] - ia) / coef
             pi[j] = ia
         m = self.robot.with_inertial_params(pi[n:]).mass_matrix(self.qmid)
         th = np.zeros(lay.size)
@@ -1291,6 +1315,22 @@ class _ElasticSplit:
         r = np.linalg.norm(self.rec.force - sim["force"], axis=0) / np.maximum(np.linalg.norm(self.rec.force, axis=0),
                                                                                 1e-300)
         return r if np.all(np.isfinite(r)) else None
+
+    def search(self, x0: np.ndarray, law: Law, sims: List[int]) -> Tuple[np.ndarray, float]:
+        """Least squares of the joints' relative force residuals over every elastic joint's (λ, ln f, ζ) from ``x0``
+        (:func:`_spring_search`)."""
+        ne, fs = len(self.elastic), 1 / self.rec.dt
+
+        def unpack(u: np.ndarray) -> np.ndarray:
+            return np.column_stack([u[0::3], np.exp(u[1::3]), u[2::3]])
+
+        u0 = np.column_stack([x0[:, 0], np.log(x0[:, 1]), x0[:, 2]]).ravel()
+        lower = np.tile([1e-3, -np.inf, 0.0], ne)
+        upper = np.tile([1 - 1e-3, math.log(0.5 * fs), np.inf], ne)
+        u, best = _spring_search(self.rec, lambda u: self.theta(unpack(u)),
+                                 lambda th: _model_of(self.robot, self.base, self.offset, th, self.elastic), u0, lower,
+                                 upper, law, sims)
+        return unpack(u), best
 
 
 def _joints_error(per: Optional[np.ndarray]) -> float:
@@ -1360,7 +1400,7 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, elastic: Tuple[in
     from concurrent.futures import ThreadPoolExecutor
 
     say = say or (lambda s: None)
-    split = _ElasticSplit(rec, rigid, elastic)
+    split = _ElasticSplit.of_rigid(rec, rigid, elastic)
     law = rigid.law if rigid.law is not None else _default_law(rec)
     ne, fs = len(elastic), 1 / rec.dt
     names = [rigid.robot.joint_names[j] for j in elastic]
@@ -1394,16 +1434,7 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, elastic: Tuple[in
     say("step 2 start (eq. (28)'s grid, each elastic joint at its best point): " + "; ".join(
         f"{nm} λ = {x[e, 0]:.2f}, f = {x[e, 1]:.1f} Hz" for e, nm in enumerate(names)))
 
-    def unpack(u: np.ndarray) -> np.ndarray:
-        return np.column_stack([u[0::3], np.exp(u[1::3]), u[2::3]])
-
-    u0 = np.column_stack([x[:, 0], np.log(x[:, 1]), x[:, 2]]).ravel()
-    lower = np.tile([1e-3, -np.inf, 0.0], ne)
-    upper = np.tile([1 - 1e-3, math.log(0.5 * fs), np.inf], ne)
-    u, best = _spring_search(rec, lambda u: split.theta(unpack(u)),
-                             lambda th: _model_of(split.robot, split.base, split.offset, th, elastic), u0, lower, upper,
-                             law, sims)
-    x = unpack(u)
+    x, best = split.search(x, law, sims)
     say("step 2: " + "; ".join(f"{nm} λ = {x[e, 0]:.3f}, f = {x[e, 1]:.2f} Hz, ζ = {x[e, 2]:.3f}"
                                for e, nm in enumerate(names)) + f"; joints' force errors RMS {100 * best:.3f} %")
     return x, split, {"criterion": best, "simulations": sims[0]}
@@ -1417,34 +1448,13 @@ ELASTIC_ROUND_GAIN = 0.01
 
 def _refine_springs(rec: Recording, plant: "_RobotPlant", theta: np.ndarray, law: Law, search: Dict[str, Any]
                     ) -> np.ndarray:
-    """Step 2's search (:func:`_spring_search`) from step 3's estimate ``theta``: each elastic joint's rotor inertia
-    (its logarithm), its locked-rotor mode at mid-stroke with the estimate's chain and its damping ratio, the chain
-    and the friction held."""
-    lay, elastic = plant.lay, plant.elastic
-    robot, _ = plant.model(theta)
-    qmid = 0.5 * (rec.qm.min(axis=0) + rec.qm.max(axis=0))
-    m = np.diag(robot.mass_matrix(qmid))[list(elastic)]
-
-    def theta_of_u(u: np.ndarray) -> np.ndarray:
-        th = theta.copy()
-        for e in range(len(elastic)):
-            k = m[e] * (2 * math.pi * math.exp(u[3 * e + 1])) ** 2
-            th[lay.ia(e)], th[lay.k(e)] = math.exp(u[3 * e]), k
-            th[lay.d(e)] = 2 * u[3 * e + 2] * math.sqrt(k * m[e])
-        return th
-
-    u0 = []
-    for e in range(len(elastic)):
-        k, d = theta[lay.k(e)], theta[lay.d(e)]
-        u0 += [math.log(theta[lay.ia(e)]), math.log(math.sqrt(k / m[e]) / (2 * math.pi)),
-               d / (2 * math.sqrt(k * m[e]))]
-    fs = 1 / rec.dt
-    lower = np.tile([-np.inf, -np.inf, 0.0], len(elastic))
-    upper = np.tile([np.inf, math.log(0.5 * fs), np.inf], len(elastic))
+    """Step 2's search again from step 3's estimate ``theta``: each elastic joint's split, mode and damping ratio
+    (:class:`_ElasticSplit` of the elastic model), the rest held."""
+    split = _ElasticSplit.of_elastic(rec, plant, theta)
     sims = [0]
-    u, _ = _spring_search(rec, theta_of_u, plant.model, np.array(u0), lower, upper, law, sims)
+    x, _ = split.search(split.x_of(theta), law, sims)
     search["simulations"] += sims[0]
-    return theta_of_u(u)
+    return split.theta(x)
 
 
 def _core_count() -> int:
@@ -1496,12 +1506,13 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
         run = again
     err, theta, sol, _ = run.best
     names = [robot.joint_names[j] for j in elastic]
+    x = _ElasticSplit.of_elastic(rec, plant, theta).x_of(theta)  # the final model's split, modes and damping
     modes = {nm: {"lambda": float(x[e, 0]), "f_n_flex": float(x[e, 1]), "zeta": float(x[e, 2]),
                   "q_mid": float(split.qmid[j])} for e, (nm, j) in enumerate(zip(names, elastic))}
     notes = [f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid.force_error:.2f} %"
              + "".join(f"; {j} {100 * v:.2f} %" for j, v in rigid.force_error_per_joint.items()),
-             "step 2 (Nelder-Mead on each elastic joint's mass ratio λ, locked-rotor mode f_n_flex at mid-stroke and "
-             f"damping ratio ζ, {search['simulations']} simulations): " + "; ".join(
+             "steps 2 and 3 (each elastic joint's mass ratio λ, locked-rotor mode f_n_flex at mid-stroke and damping "
+             f"ratio ζ by least squares in closed loop, {search['simulations']} simulations): " + "; ".join(
                  f"{nm} λ = {m['lambda']:.3f}, f_n_flex = {m['f_n_flex']:.2f} Hz, ζ = {m['zeta']:.3f}"
                  for nm, m in modes.items())]
     res = _result("didim", rec, model.with_law(sol["law"]), split.base, theta, sol["covariance"],
