@@ -311,9 +311,9 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
         raise DataError("a robot's friction law through zero speed is fitted from the record: give its model without "
                         "coulomb_eps")
     robot = model.robot
-    if method not in ("didim", "idim-ls"):
-        raise DataError(f"method {method!r} is not available for robots: use 'didim' or 'idim-ls'")
-    allowed = {"max_iter", "tol"} if method == "didim" else set()
+    if method not in ("didim", "idim-ls", "oe-lm"):
+        raise DataError(f"method {method!r} is not available for robots: use 'didim', 'oe-lm' or 'idim-ls'")
+    allowed = {"max_iter", "tol"} if method in ("didim", "oe-lm") else set()
     unknown = sorted(set(options) - allowed)
     if unknown:
         raise DataError(f"unknown option(s) {', '.join(unknown)} for a robot's {method}; it takes "
@@ -325,6 +325,10 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
     _warn_findings(recording)
     if method == "didim":
         res = robot_didim(recording, model, progress=progress, **options)
+    elif method == "oe-lm":
+        from .methods.robot import oe_lm as robot_oe_lm
+
+        res = robot_oe_lm(recording, model, progress=progress, **options)
     else:
         res = robot_idim_ls(recording, model)
     if chk is not None:

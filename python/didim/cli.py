@@ -105,8 +105,8 @@ def cmd_identify_robot(args) -> int:
               file=sys.stderr, flush=True)
     rec = _robot_record(args, args.file, robot)
     opts = {k: v for k, v in (("max_iter", args.max_iter), ("tol", args.tol)) if v is not None}
-    if opts and args.method != "didim":
-        raise DataError("--max-iter and --tol apply to DIDIM")
+    if opts and args.method not in ("didim", "oe-lm"):
+        raise DataError("--max-iter and --tol apply to didim and oe-lm")
     from .model import as_model
 
     elastic = [x.strip() for x in args.elastic.split(",")] if args.elastic else None

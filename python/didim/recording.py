@@ -461,7 +461,7 @@ class Recording:
             return self if controller is None else dataclasses.replace(self, controller=controller)
         rotary = self.joint_kinds[j] != "prismatic"
         return Recording(dt=self.dt, qr=self.qr[:, j], force=self.force[:, j], qm=self.qm[:, j],
-                         ql=self.column(self.ql, j), u_ext=self.column(self.u_ext, j),
+                         ql=None if self.ql is None or np.all(np.isnan(self.ql[:, j])) else self.column(self.ql, j), u_ext=self.column(self.u_ext, j),
                          controller=controller if controller is not None else self.controllers[j],
                          position_resolution=self.encoder_step[j] or None,
                          name=f"{self.name or 'record'}, joint {self.joint_names[j]}", lead_in=None,

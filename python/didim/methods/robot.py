@@ -1353,11 +1353,12 @@ SPRING_TOL = 1e-4
 SPRING_MAX_ITER = 25
 
 
-def _spring_search(rec: Recording, theta_of_u: Callable[[np.ndarray], np.ndarray], model_of, u0: np.ndarray,
-                   lower: np.ndarray, upper: np.ndarray, law: Law, sims: List[int]) -> Tuple[np.ndarray, float]:
-    """Least squares of the joints' relative force residuals in closed loop (:func:`_residuals`) over ``u``, the model
-    ``model_of(theta_of_u(u))``: scipy's trust-region reflective Levenberg-Marquardt within the bounds, its Jacobian by
-    forward differences simulated in parallel. Returns the best ``u`` and its criterion."""
+def _output_least_squares(rec: Recording, simulate_u: Callable[[np.ndarray], Dict[str, np.ndarray]], u0: np.ndarray,
+                          lower: np.ndarray, upper: np.ndarray, sims: List[int], max_nfev: int = 0):
+    """Least squares of the joints' relative force residuals in closed loop (:func:`_residuals`) over ``u``, the loop
+    ``simulate_u(u)`` (simulated without encoder quantization: see :func:`_simulate`): scipy's trust-region
+    reflective Levenberg-Marquardt within the bounds, its Jacobian by forward differences of relative step
+    :data:`SPRING_FD_STEP`, simulated in parallel. Returns scipy's result (``x``, ``fun``, ``jac``, ``nfev``)."""
     from concurrent.futures import ThreadPoolExecutor
     from scipy.optimize import least_squares
 
@@ -1369,11 +1370,10 @@ def _spring_search(rec: Recording, theta_of_u: Callable[[np.ndarray], np.ndarray
         if key not in cache:
             sims[0] += 1
             try:
-                robot, d = model_of(theta_of_u(np.asarray(u, dtype=float)))
-                cache[key] = _residuals(rec, _simulate(rec, robot, d, law, quantize=False))
+                cache[key] = _residuals(rec, simulate_u(np.asarray(u, dtype=float)))
             except (SimulationError, DataError):
                 cache[key] = bad
-            if len(cache) > 64:
+            if len(cache) > 8:
                 cache.pop(next(iter(cache)))
         return cache[key]
 
@@ -1381,13 +1381,31 @@ def _spring_search(rec: Recording, theta_of_u: Callable[[np.ndarray], np.ndarray
         r0 = res(u)
         steps = SPRING_FD_STEP * np.maximum(np.abs(u), 1.0)
         steps = np.where(u + steps > upper, -steps, steps)
+
+        def column(k: int) -> np.ndarray:
+            du = np.zeros(len(u))
+            du[k] = steps[k]
+            return (res(u + du) - r0) / steps[k]
+
         with ThreadPoolExecutor(max_workers=max(1, _core_count())) as pool:
-            cols = list(pool.map(lambda k: (res(u + steps[k] * np.eye(len(u))[k]) - r0) / steps[k], range(len(u))))
+            cols = list(pool.map(column, range(len(u))))
         return np.column_stack(cols)
 
-    out = least_squares(res, u0, jac=jac, bounds=(lower, upper), method="trf", x_scale="jac", ftol=SPRING_TOL,
-                        xtol=SPRING_TOL, gtol=None, max_nfev=SPRING_MAX_ITER)
-    return out.x, float(np.linalg.norm(res(out.x)))
+    return least_squares(res, u0, jac=jac, bounds=(lower, upper), method="trf", x_scale="jac", ftol=SPRING_TOL,
+                         xtol=SPRING_TOL, gtol=None, max_nfev=max_nfev or SPRING_MAX_ITER)
+
+
+def _spring_search(rec: Recording, theta_of_u: Callable[[np.ndarray], np.ndarray], model_of, u0: np.ndarray,
+                   lower: np.ndarray, upper: np.ndarray, law: Law, sims: List[int]) -> Tuple[np.ndarray, float]:
+    """:func:`_output_least_squares` over ``u``, the model ``model_of(theta_of_u(u))`` under ``law``: the best ``u``
+    and its criterion."""
+
+    def simulate_u(u: np.ndarray) -> Dict[str, np.ndarray]:
+        robot, d = model_of(theta_of_u(u))
+        return _simulate(rec, robot, d, law, quantize=False)
+
+    out = _output_least_squares(rec, simulate_u, u0, lower, upper, sims)
+    return out.x, float(np.linalg.norm(out.fun))
 
 
 def elastic_modes(rec: Recording, rigid: IdentificationResult, elastic: Tuple[int, ...], say=None
@@ -1523,6 +1541,66 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
     res.options["rigid_force_error"] = rigid.force_error
     res.force_error, res.force_error_per_joint = sol["force_errors"]
     res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
+    return res
+
+
+def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
+          progress: Optional[Callable[[str], None]] = None, start: Optional[IdentificationResult] = None
+          ) -> IdentificationResult:
+    """Output-error Levenberg-Marquardt on a robot (rigid or with elastic joints): the least squares of the joints'
+    relative force residuals in closed loop over every parameter of the model (θ of :class:`_Layout`) and each joint's
+    friction smoothing speed ε, from DIDIM's estimate (``start``, by default :func:`didim`: the three-step DIDIM for
+    elastic joints); at most ``max_iter`` evaluations of the Jacobian. The sensitivities are forward differences of
+    the loop simulated without encoder quantization (:func:`_simulate`; not the exact sensitivity equations), the
+    Jacobian's columns simulated in parallel. The covariance is σ² (JᵀJ)⁻¹ at the solution, σ² from the residual
+    (correlated in time: the standard deviations are optimistic)."""
+    t0, sims0 = time.perf_counter(), _simulations()
+    robot, offset = _check(rec, model)
+    _checks.options(max_iter=max_iter, tol=tol)
+    say = progress or (lambda s: None)
+    if start is None:
+        say("oe-lm: its start, DIDIM")
+        start = didim(rec, model, max_iter=max_iter, tol=tol, progress=progress)
+    elastic = elastic_of(start.structure)
+    theta0 = theta_of(start)
+    law0 = start.law if start.law is not None else _default_law(rec)
+    scale = np.where(np.abs(theta0) > 0, np.abs(theta0), 1.0)
+    p = len(theta0)
+
+    def split(u: np.ndarray) -> Tuple[np.ndarray, Law]:
+        return u[:p] * scale, (law0[0], tuple(float(e) for e in np.exp(u[p:])))
+
+    def simulate_u(u: np.ndarray) -> Dict[str, np.ndarray]:
+        th, lw = split(u)
+        robot_u, d = _model_of(robot, start.base, offset, th, elastic)
+        return _simulate(rec, robot_u, d, lw, quantize=False)
+
+    u0 = np.concatenate([theta0 / scale, np.log(np.maximum(law0[1], 1e-300))])
+    sims = [0]
+    say(f"oe-lm: Levenberg-Marquardt on {p} parameters and {robot.ndof} smoothing speeds")
+    out = _output_least_squares(rec, simulate_u, u0, np.full(len(u0), -np.inf), np.full(len(u0), np.inf), sims,
+                                max_nfev=max_iter)
+    theta, law = split(out.x)
+    r, jac = out.fun, out.jac
+    cov_u = float(r @ r) / max(len(r) - len(u0), 1) * np.linalg.pinv(jac.T @ jac)
+    cov = cov_u[:p, :p] * np.outer(scale, scale)
+    res = _result("oe-lm", rec, model.with_law(law), start.base, theta, cov, converged=bool(out.status > 0),
+                  iterations=int(out.nfev), message="" if out.status > 0 else str(out.message),
+                  notes=[f"started from {start.method}'s estimate (closed-loop force error "
+                         f"{100 * start.force_error:.2f} %)",
+                         "sensitivities by forward differences of the loop without encoder quantization"])
+    if elastic:
+        chain, d = _model_of(robot, start.base, offset, theta, elastic)
+        split_final = _ElasticSplit(rec, robot, np.concatenate([d["armature"], chain.inertial_params]), d, offset,
+                                    elastic)
+        x = split_final.x_of(theta)
+        res.options["modes"] = {robot.joint_names[j]: {"lambda": float(x[e, 0]), "f_n_flex": float(x[e, 1]),
+                                                       "zeta": float(x[e, 2]), "q_mid": float(split_final.qmid[j])}
+                                for e, j in enumerate(elastic)}
+        res.options["rigid_force_error"] = start.options.get("rigid_force_error")
+    res.force_error, res.force_error_per_joint = force_errors(rec, simulate_robot(rec, res)["force"])
+    res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
+    say(f"oe-lm: closed-loop force error {100 * res.force_error:.3f} % ({sims[0]} simulations in its search)")
     return res
 
 
@@ -1693,5 +1771,5 @@ def _check(rec: Recording, model: Model) -> Tuple[Robot, bool]:
 
 
 __all__ = ["BaseParameters", "PayloadResult", "payload", "base_parameters", "idim_ls", "didim", "didim_elastic",
-           "elastic_modes", "deflection_errors", "simulate_robot", "force_errors",
+           "elastic_modes", "deflection_errors", "oe_lm", "simulate_robot", "force_errors",
            "theta_of", "drives_of", "standard_of"]
