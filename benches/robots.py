@@ -176,36 +176,63 @@ def excitation(rng, q0, lo, hi, vmax, f0, seconds, dt, harmonics=5):
     return q
 
 
+class Panda:
+    """The Panda arm (7 joints, fingers locked) of example-robot-data with a drawn truth: the CAD masses x(1 ± 15 %),
+    centres ± 2 cm, inertias about the centre x(1 ± 20 %); rotor inertias, viscous and Coulomb friction and offsets at
+    random; friction through zero speed by the atan law (2/π)·atan(v/0.02) (the slowest law: not tanh, not didim's);
+    an 18-bit encoder at 1 kHz; a start pose inside the limits."""
+
+    def __init__(self, seed: int):
+        import importlib.metadata
+
+        self.path = next(str(f.locate()) for f in importlib.metadata.files("example-robot-data")
+                         if str(f).endswith("/panda.urdf"))
+        self.joints = [f"panda_joint{i}" for i in range(1, 8)]
+        rng = np.random.default_rng(seed)
+        self.full = full = pin.buildModelFromUrdf(self.path)
+        self.model = model = pin.buildReducedModel(full, [full.getJointId(x) for x in full.names[1:]
+                                                          if x not in self.joints], pin.neutral(full))
+        self.cad = didim.Robot.from_urdf(self.path, self.joints)
+        n = self.n = self.cad.ndof
+        for i in range(1, model.njoints):
+            I = model.inertias[i]
+            m = I.mass * (1 + rng.uniform(-0.15, 0.15))
+            c = I.lever + rng.uniform(-0.02, 0.02, 3)
+            ev, evec = np.linalg.eigh(I.inertia)
+            Ic = evec @ np.diag(ev * (1 + rng.uniform(-0.2, 0.2, 3))) @ evec.T
+            model.inertias[i] = pin.Inertia(m, c, Ic)
+        self.Ia = rng.uniform(0.05, 0.3, n) * np.array([1, 1, 1, 1, 0.3, 0.3, 0.3])
+        self.Fv = rng.uniform(0.5, 3.0, n) * np.array([1, 1, 1, 1, 0.4, 0.4, 0.4])
+        self.Fc = rng.uniform(1.0, 5.0, n) * np.array([1, 1, 1, 1, 0.4, 0.4, 0.4])
+        self.offset = np.where(rng.uniform(size=n) < 0.3, rng.uniform(-0.3, 0.3, n), 0.0)
+        self.friction = lambda v: (2 / math.pi) * np.arctan(v / 0.02)  # noqa: E731
+        self.dt, self.step = 1e-3, 2 * math.pi / 2**18
+        lim = self.lim = np.array([lt[:2] for lt in self.cad.limits])
+        self.q0 = np.clip(np.array([0.0, -0.3, 0.0, -2.0, 0.0, 1.8, 0.8]), lim[:, 0] + 0.3, lim[:, 1] - 0.3)
+
+
+def write_controllers(path, ctl, dt) -> None:
+    """A joints file of didim's transfer functions."""
+    pathlib.Path(path).write_text(json.dumps({"type": "joints", "joints": [
+        {"type": "transfer_function", "dt": dt, "b_r": list(c.b_r), "a_r": list(c.a_r), "b_y": list(c.b_y),
+         "a_y": list(c.a_y), "saturation": c.saturation, "gain": c.gain} for c in ctl]}))
+
+
+def write_record(path, qr, force, qm, dt) -> None:
+    """A robot record in didim's CSV layout."""
+    n = qr.shape[1]
+    cols = ["t"] + [f"qr_{j + 1}" for j in range(n)] + [f"force_{j + 1}" for j in range(n)] + \
+           [f"qm_{j + 1}" for j in range(n)]
+    np.savetxt(path, np.column_stack([np.arange(len(qr)) * dt, qr, force, qm]), delimiter=",",
+               header=",".join(cols), comments="", fmt="%.17g")
+
+
 def own_robot(lines, seed=11):
     """The Panda arm (7 joints) of example-robot-data, its truth the CAD values perturbed, on an independent plant;
     identified by didim from CSV files."""
-    import importlib.metadata
-
-    path = next(str(f.locate()) for f in importlib.metadata.files("example-robot-data") if str(f).endswith("/panda.urdf"))
-    joints = [f"panda_joint{i}" for i in range(1, 8)]
-    rng = np.random.default_rng(seed)
-    full = pin.buildModelFromUrdf(path)
-    model = pin.buildReducedModel(full, [full.getJointId(n) for n in full.names[1:] if n not in joints],
-                                  pin.neutral(full))
-    cad = didim.Robot.from_urdf(path, joints)
-    n = cad.ndof
-    # the truth: CAD masses x(1 ± 15 %), centres ± 2 cm, inertias about the centre x(1 ± 20 %)
-    for i in range(1, model.njoints):
-        I = model.inertias[i]
-        m = I.mass * (1 + rng.uniform(-0.15, 0.15))
-        c = I.lever + rng.uniform(-0.02, 0.02, 3)
-        ev, evec = np.linalg.eigh(I.inertia)
-        Ic = evec @ np.diag(ev * (1 + rng.uniform(-0.2, 0.2, 3))) @ evec.T
-        model.inertias[i] = pin.Inertia(m, c, Ic)
-    Ia = rng.uniform(0.05, 0.3, n) * np.array([1, 1, 1, 1, 0.3, 0.3, 0.3])
-    Fv = rng.uniform(0.5, 3.0, n) * np.array([1, 1, 1, 1, 0.4, 0.4, 0.4])
-    Fc = rng.uniform(1.0, 5.0, n) * np.array([1, 1, 1, 1, 0.4, 0.4, 0.4])
-    offset = np.where(rng.uniform(size=n) < 0.3, rng.uniform(-0.3, 0.3, n), 0.0)
-    vs = 0.02
-    friction = lambda v: (2 / math.pi) * np.arctan(v / vs)  # noqa: E731  atan: the slowest law (not tanh, not didim's)
-    dt, step = 1e-3, 2 * math.pi / 2**18
-    lim = np.array([lt[:2] for lt in cad.limits])
-    q0 = np.clip(np.array([0.0, -0.3, 0.0, -2.0, 0.0, 1.8, 0.8]), lim[:, 0] + 0.3, lim[:, 1] - 0.3)
+    p = Panda(seed)
+    joints, full, model, cad, n = p.joints, p.full, p.model, p.cad, p.n
+    Ia, Fv, Fc, offset, friction, dt, step, lim, q0 = p.Ia, p.Fv, p.Fc, p.offset, p.friction, p.dt, p.step, p.lim, p.q0
     # one P + PI cascade per joint from the CAD inertia at q0: 20 Hz velocity loop, 4 Hz position loop
     mjj = np.diag(pin.crba(pin.buildReducedModel(full, [full.getJointId(x) for x in full.names[1:] if x not in joints],
                                                  pin.neutral(full)), pin.Data(model), q0))
@@ -215,9 +242,7 @@ def own_robot(lines, seed=11):
     records = {}
     with tempfile.TemporaryDirectory() as tmp:
         ctl_path = pathlib.Path(tmp) / "panda_controller.json"
-        ctl_path.write_text(json.dumps({"type": "joints", "joints": [
-            {"type": "transfer_function", "dt": dt, "b_r": list(c.b_r), "a_r": list(c.a_r), "b_y": list(c.b_y),
-             "a_y": list(c.a_y), "saturation": c.saturation, "gain": c.gain} for c in ctl]}))
+        write_controllers(ctl_path, ctl, dt)
         for name, seconds, draw in (("train", 20.0, 1), ("valid", 10.0, 2)):
             qr = excitation(np.random.default_rng(seed + draw), q0, lim[:, 0], lim[:, 1], 1.0, 0.1, seconds, dt)
             data = model.createData()
@@ -232,10 +257,7 @@ def own_robot(lines, seed=11):
             gen = time.perf_counter() - t0
             floor = float(np.linalg.norm(force - floor_force) / np.linalg.norm(force))
             csv = pathlib.Path(tmp) / f"panda_{name}.csv"
-            cols = ["t"] + [f"qr_{j + 1}" for j in range(n)] + [f"force_{j + 1}" for j in range(n)] + \
-                   [f"qm_{j + 1}" for j in range(n)]
-            np.savetxt(csv, np.column_stack([np.arange(len(qr)) * dt, qr, force, qm]), delimiter=",",
-                       header=",".join(cols), comments="", fmt="%.17g")
+            write_record(csv, qr, force, qm, dt)
             records[name] = (didim.load_record(csv, robot=cad, controller=ctl_path), floor, gen)
     lines += ["## A robot of this script's own making: the Panda arm on an independent plant", "",
               "The 7 arm joints of example-robot-data's Panda (fingers locked); the truth is the CAD values perturbed "

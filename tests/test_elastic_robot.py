@@ -99,19 +99,26 @@ def test_elastic_joints_are_named_or_refused(flex):
         didim.Model("rigid", elastic=["elbow"])
 
 
-def test_three_step_didim_identifies_an_elastic_arm_from_its_motor_encoders(flex, tmp_path):
+@pytest.fixture(scope="module")
+def arm2(flex, tmp_path_factory):
+    """The 2-joint arm's truth, robot, controllers, training record (with its link side) and validation record, and
+    the three-step DIDIM's result on it."""
+    d, truth = flex
+    rob = didim.Robot.from_urdf(d / "arm2_cad.urdf")
+    ctl = d / "arm2_controller.json"
+    rec = didim.load_record(_with_link_columns(d, "arm2", tmp_path_factory.mktemp("arm2")), robot=rob, controller=ctl)
+    val = didim.load_record(d / "arm2_valid.csv", robot=rob, controller=ctl)
+    return truth["arm2"], rob, rec, val, didim.identify(rec, rob, "didim", elastic="all")
+
+
+def test_three_step_didim_identifies_an_elastic_arm_from_its_motor_encoders(arm2, tmp_path):
     """The three-step DIDIM on the 2-joint vertical arm (both joints elastic) from its motor encoders alone: each
     spring's K within 5 % of the truth (measured +1.6 % and -3.5 %), each joint's locked-rotor mode at the search's
     mid-stroke within 3 % of the truth's there, the friction within 5 % (worst Fv -3.9 %), the validation record
     simulated within 1.2 times its truth floor (measured 1.14), the training force error 10x below the rigid model's
     (19.3 % to 1.6 %), the link-side deflection within 15 % RMS of the link-side file's; the saved result simulates
     the same. The rotor inertias are not all within 5 % yet (elbow +18 %)."""
-    d, truth = flex
-    t = truth["arm2"]
-    rob = didim.Robot.from_urdf(d / "arm2_cad.urdf")
-    ctl = d / "arm2_controller.json"
-    rec = didim.load_record(_with_link_columns(d, "arm2", tmp_path), robot=rob, controller=ctl)
-    res = didim.identify(rec, rob, "didim", elastic="all")
+    t, rob, rec, val, res = arm2
     assert res.structure.elastic == ("shoulder", "elbow")
     assert res.options["rigid_force_error"] > 5 * res.force_error
     pi = np.concatenate([t["links_truth"][j]["dyn10"] for j in t["joint_names"]])
@@ -126,7 +133,6 @@ def test_three_step_didim_identifies_an_elastic_arm_from_its_motor_encoders(flex
     sim = simulate_robot(rec, res)
     defl = deflection_errors(rec, sim, res.structure)
     assert max(defl.values()) < 0.15, defl
-    val = didim.load_record(d / "arm2_valid.csv", robot=rob, controller=ctl)
     err, _ = force_errors(val, simulate_robot(val, res)["force"])
     assert err < 1.2 * t["records"]["valid"]["truth_floor_total"]
     res.save(tmp_path / "r.json")
@@ -136,23 +142,22 @@ def test_three_step_didim_identifies_an_elastic_arm_from_its_motor_encoders(flex
         rec.force).max())
 
 
-def test_output_error_lm_from_three_step_didim_reaches_the_truth_floor(flex, tmp_path):
+def test_output_error_lm_from_three_step_didim_reaches_the_truth_floor(arm2):
     """OE-LM on the elastic arm (from the three-step DIDIM; forward-difference sensitivities of the loop without
     encoder quantization): every parameter within 1 % of the truth (measured 0.35 % at worst, the damping D within
     0.24 %), the validation record at its truth floor (1.005x; 1.03 allowed), the deflection within 1 % RMS of the
     link-side file (0.15 % and 0.29 %)."""
-    d, truth = flex
-    t = truth["arm2"]
-    rob = didim.Robot.from_urdf(d / "arm2_cad.urdf")
-    ctl = d / "arm2_controller.json"
-    rec = didim.load_record(_with_link_columns(d, "arm2", tmp_path), robot=rob, controller=ctl)
-    res = didim.identify(rec, rob, "oe-lm", elastic="all")
+    from didim.methods.robot import oe_lm
+
+    t, rob, rec, val, start = arm2
+    with pytest.raises(didim.DataError, match="another model"):
+        oe_lm(rec, didim.Model(robot=rob, elastic="all", offset=False), start=start)
+    res = oe_lm(rec, start.structure, start=start)
     assert res.method == "oe-lm" and res.converged
     for i, j in enumerate(t["joint_names"]):
         for p in ("Ia", "Fv", "Fc", "K", "D"):
             assert res.params[f"{p}_{j}"] == pytest.approx(t[p][i], rel=0.01), (p, j)
     defl = deflection_errors(rec, simulate_robot(rec, res), res.structure)
     assert max(defl.values()) < 0.01, defl
-    val = didim.load_record(d / "arm2_valid.csv", robot=rob, controller=ctl)
     err, _ = force_errors(val, simulate_robot(val, res)["force"])
     assert err < 1.03 * t["records"]["valid"]["truth_floor_total"]

@@ -1561,6 +1561,9 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     if start is None:
         say("oe-lm: its start, DIDIM")
         start = didim(rec, model, max_iter=max_iter, tol=tol, progress=progress)
+    if start.structure.robot is not robot or start.offset != offset or start.structure.elastic != model.elastic:
+        raise DataError(f"oe-lm's start is a result of another model ({start.structure.describe()}) than the one to "
+                        f"fit ({model.describe()}): give a start of the same robot, offset and elastic joints")
     elastic = elastic_of(start.structure)
     theta0 = theta_of(start)
     law0 = start.law if start.law is not None else _default_law(rec)
