@@ -161,6 +161,7 @@ def test_didim_recovers_the_truth_through_a_declared_delay_and_lag(pendulum, tmp
         assert r.params[f"Fc_{j}"] == pytest.approx(t["Fc"][i], rel=0.01)
     assert r.params["Ia_joint2"] == pytest.approx(t["Ia"][1], rel=0.02)
     assert r.force_error < t["records"]["train"]["truth_floor_total"]
+    assert not [n for n in r.notes if "declares" in n], r.notes  # the right declaration is not questioned
     _record_with_drive(tmp_path, t, robot, rec, (1, 1), (1e-3, 1e-3), declare=False)
     plain = didim.load_record(path, robot=robot, controller=tmp_path / "drive_controller.json")
     assert plain.delay == (0, 0)

@@ -334,6 +334,9 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
     if chk is not None:
         res.options["controller_check"] = chk.to_dict()
         res.notes.insert(0, chk.summary())
+    from .methods.robot import actuation_notes
+
+    res.notes += actuation_notes(recording, res)
     res.notes[:0] = [f"no controller was described: {o}" for o in recording.controller_origin]
     if recording.lead_in_note():
         res.notes.insert(0, recording.lead_in_note())
