@@ -161,3 +161,15 @@ def test_output_error_lm_from_three_step_didim_reaches_the_truth_floor(arm2):
     assert max(defl.values()) < 0.01, defl
     err, _ = force_errors(val, simulate_robot(val, res)["force"])
     assert err < 1.03 * t["records"]["valid"]["truth_floor_total"]
+
+
+def test_an_elastic_model_on_a_rigid_robot_s_record_says_it_sees_no_mode(robots_dir):
+    """Elastic joints named on a record of a rigid robot (the data folder's double pendulum): the elastic model
+    explains their force no better than the rigid one, and the result says so, not converged, naming the joints (a new
+    user's walk through the README got K = 6e5 N·m/rad and 90 Hz modes reported as converged on the rigid UR5)."""
+    robot = didim.Robot.from_urdf(robots_dir / "pendulum_cad.urdf")
+    rec = didim.load_record(robots_dir / "pendulum_train.csv", robot=robot,
+                            controller=robots_dir / "pendulum_controller.json")
+    res = didim.identify(rec, robot, "didim", elastic="all")
+    assert not res.converged
+    assert "no elastic mode" in res.message and all(j in res.message for j in robot.joint_names), res.message

@@ -32,6 +32,11 @@ def test_readme_python_blocks_run_as_written(tmp_path, monkeypatch, emps_path):
     if not (ROBOTS_DIR / "truth.json").exists():
         pytest.skip(f"the README's robot example reads {ROBOTS_DIR}, not available")
     os.symlink(ROBOTS_DIR, tmp_path / "shared" / "data" / "robots")
+    from conftest import FLEXROBOTS_DIR
+
+    if not (FLEXROBOTS_DIR / "truth.json").exists():
+        pytest.skip(f"the README's elastic-joint example reads {FLEXROBOTS_DIR}, not available")
+    os.symlink(FLEXROBOTS_DIR, tmp_path / "shared" / "data" / "flexrobots")
     monkeypatch.chdir(work)
     namespace = {}
     with warnings.catch_warnings():

@@ -95,6 +95,8 @@ def cmd_identify_robot(args) -> int:
         if value:
             why = ("it reads the pulses_N of one axis's MAT file; a robot's known feedforward goes in its record's "
                    "u_ext_1..u_ext_n columns" if flag == "--pulses-gain" else "DIDIM starts from the URDF's values")
+            if flag == "--model":
+                why += "; a robot's elastic joints are named with --elastic J1,J2 or --elastic all"
             raise DataError(f"{flag} does not apply to a robot (--urdf): {why}")
     _check_outputs([args.file, args.controller, args.urdf], [args.json, args.plot])
     if args.plot:
@@ -633,12 +635,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="another option of the method, e.g. cutoff_hz=2 or substeps=20 (the Python function's keywords)")
     i.add_argument("--urdf", metavar="URDF", help="a robot: its URDF (the record then has columns t, qr_1..qr_n, "
                    "force_1..force_n, qm_1..qm_n in the URDF's joint order, and --controller a {\"type\": \"joints\"} "
-                   "file); --method didim or idim-ls")
+                   "file); --method didim, oe-lm or idim-ls")
     i.add_argument("--joints", metavar="NAMES", help="with --urdf: the actuated joints, comma-separated (default: all "
                    "revolute and prismatic joints of the chain)")
     i.add_argument("--elastic", metavar="J1,J2|all", help="with --urdf: the joints whose transmission is elastic (a "
                    "spring K and damping D between rotor and link), by name or number, or all; --method didim runs "
-                   "the three-step DIDIM")
+                   "the three-step DIDIM, --method oe-lm output error from there")
     i.add_argument("--json", metavar="OUT", help="write the result as JSON")
     i.add_argument("--plot", metavar="PNG", help="write measured vs simulated force and the iterations")
     i.add_argument("--quiet", action="store_true", help="no progress messages")

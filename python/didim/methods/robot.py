@@ -21,7 +21,7 @@ import numpy as np
 from .. import _checks, _core
 from . import friction_law
 from .didim_loop import didim_loop, residual_settled
-from .identification import start_notes
+from .identification import RIGID_LIMIT_MARGIN, start_notes
 from ..stats import diebold_mariano
 from .._errors import DataError, IdentifiabilityError, SimulationError
 from ..result import IdentificationResult, iterations_of, robot_result
@@ -1573,9 +1573,20 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
              f"ratio ζ by least squares in closed loop, {search['simulations']} simulations): " + "; ".join(
                  f"{nm} λ = {m['lambda']:.3f}, f_n_flex = {m['f_n_flex']:.2f} Hz, ζ = {m['zeta']:.3f}"
                  for nm, m in modes.items())]
+    # an elastic joint whose force the elastic model explains no better than the rigid one: the record shows no mode
+    # of it (one axis's step 2 says the same, RIGID_LIMIT_MARGIN); its K and D mean nothing
+    per = sol["force_errors"][1]
+    flat = [robot.joint_names[j] for j in elastic
+            if per[robot.joint_names[j]] >= RIGID_LIMIT_MARGIN * rigid.force_error_per_joint[robot.joint_names[j]]]
+    message = "" if run.converged else run.message
+    if flat:
+        message = (f"the record shows no elastic mode of {', '.join(flat)}: the elastic model explains their force no "
+                   "better than the rigid one (" + "; ".join(
+                       f"{j} {100 * per[j]:.2f} % against {100 * rigid.force_error_per_joint[j]:.2f} %" for j in flat)
+                   + "); their K and D mean nothing: model them rigid")
     res = _result("didim", rec, model.with_law(sol["law"]), split.base, theta, sol["covariance"],
-                  converged=run.converged,
-                  iterations=len(run.history), message="" if run.converged else run.message,
+                  converged=run.converged and not flat,
+                  iterations=len(run.history), message=message,
                   history=iterations_of(run.errors), notes=notes + run.notes)
     res.options["modes"] = modes
     res.options["rigid_force_error"] = rigid.force_error
@@ -1627,8 +1638,10 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     r, jac = out.fun, out.jac
     cov_u = float(r @ r) / max(len(r) - len(u0), 1) * np.linalg.pinv(jac.T @ jac)
     cov = cov_u[:p, :p] * np.outer(scale, scale)
-    res = _result("oe-lm", rec, model.with_law(law), start.base, theta, cov, converged=bool(out.status > 0),
-                  iterations=int(out.nfev), message="" if out.status > 0 else str(out.message),
+    flat = "no elastic mode" in (start.message or "")
+    res = _result("oe-lm", rec, model.with_law(law), start.base, theta, cov, converged=bool(out.status > 0) and not flat,
+                  iterations=int(out.nfev), message=start.message if flat else
+                  ("" if out.status > 0 else str(out.message)),
                   notes=[f"started from {start.method}'s estimate (closed-loop force error "
                          f"{100 * start.force_error:.2f} %)",
                          "sensitivities by forward differences of the loop without encoder quantization"])
