@@ -18,7 +18,6 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import pathlib  # noqa: E402
-import platform  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -31,7 +30,7 @@ from didim import _core  # noqa: E402
 from didim.methods.robot import deflection_errors, force_errors, simulate_robot  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from robots import Law, Panda, best_of, excitation, write_controllers, write_record  # noqa: E402
+from robots import Law, Panda, best_of, excitation, header, write_controllers, write_record  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 FLEX = pathlib.Path(os.environ.get("DIDIM_FLEXROBOTS_DIR", ROOT.parent / "shared" / "data" / "flexrobots"))
@@ -309,10 +308,8 @@ def main():
     ap.add_argument("--out", default=str(ROOT / "docs" / "elastic_robots.md"))
     ap.add_argument("--quick", action="store_true", help="the speed comparison only")
     args = ap.parse_args()
-    lines = ["# Elastic-joint robots: speed and accuracy", "",
-             f"Measured by `python benches/elastic_robots.py` on {platform.machine()} with {os.cpu_count()} cores "
-             f"(load average {os.getloadavg()[0]:.1f} at the start), one core (RAYON_NUM_THREADS=1), "
-             f"{time.strftime('%Y-%m-%d')}. Worst joint's relative error (%) against the truth.", ""]
+    lines = header("Elastic-joint robots: speed and accuracy", "benches/elastic_robots.py",
+                   "Worst joint's relative error (%) against the truth.")
     t_ours, t_pin, agree = speed(lines)
     print(f"elastic UR5 10 s: didim {1e3 * t_ours:.0f} ms, Pinocchio loop {t_pin:.2f} s ({t_pin / t_ours:.0f}x), "
           f"agree {agree:.1e}", flush=True)

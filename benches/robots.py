@@ -289,15 +289,20 @@ def own_robot(lines, seed=11):
     return out
 
 
+def header(title: str, script: str, more: str = "") -> list:
+    """A benchmark page's title and what it was measured on (machine, load, one core, date)."""
+    return [f"# {title}", "",
+            f"Measured by `python {script}` on {platform.machine()} with {os.cpu_count()} cores (load average "
+            f"{os.getloadavg()[0]:.1f} at the start), one core (RAYON_NUM_THREADS=1), {time.strftime('%Y-%m-%d')}."
+            + (f" {more}" if more else ""), ""]
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default=str(ROOT / "docs" / "robots.md"))
     ap.add_argument("--seeds", default="12,13,14,15,16,17,18", help="other draws of the Panda set-up")
     args = ap.parse_args()
-    lines = ["# Robots: speed and accuracy", "",
-             f"Measured by `python benches/robots.py` on {platform.machine()} with {os.cpu_count()} cores "
-             f"(load average {os.getloadavg()[0]:.1f} at the start), one core (RAYON_NUM_THREADS=1), "
-             f"{time.strftime('%Y-%m-%d')}.", ""]
+    lines = header("Robots: speed and accuracy", "benches/robots.py")
     t_ours, t_pin, t_did = speed(lines)
     print(f"UR5 20 s: didim {1e3 * t_ours:.0f} ms, Pinocchio loop {t_pin:.2f} s ({t_pin / t_ours:.0f}x); DIDIM {t_did:.1f} s")
     own = own_robot(lines)

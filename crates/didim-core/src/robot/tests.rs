@@ -348,6 +348,23 @@ fn cart_idm(out: &RobotLoopOutput, k: usize) -> f64 {
     AXIS[0] * out.qdd[k] + AXIS[1] * out.qd[k] + AXIS[2] * sign + AXIS[3]
 }
 
+/// One axis's loop and a one-joint robot's are the same loop: the same commands (to 1e-7 of the
+/// largest, `scale`) and positions (each pair: one axis's dof, the robot's signal) but for the
+/// rounding of two plants' arithmetic.
+fn assert_same_loop(axis_force: &[f64], arm_force: &[f64], positions: &[(&[f64], &[f64])], scale: f64) {
+    for k in 0..axis_force.len() {
+        assert!(
+            (axis_force[k] - arm_force[k]).abs() < 1e-7 * scale,
+            "sample {k}: {} vs {}",
+            axis_force[k],
+            arm_force[k]
+        );
+        for (i, (a, b)) in positions.iter().enumerate() {
+            assert!((a[k] - b[k]).abs() < 1e-12, "position {i}, sample {k}");
+        }
+    }
+}
+
 #[test]
 fn a_one_joint_robot_is_one_axis_under_the_same_drive_delay_and_force_lag() {
     use crate::model::rigid;
@@ -381,15 +398,7 @@ fn a_one_joint_robot_is_one_axis_under_the_same_drive_delay_and_force_lag() {
     // the same loop: the same commands and states but for the rounding of two plants' arithmetic
     let scale = axis.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
     assert!(scale > 50.0, "the move should need force: {scale}");
-    for k in 0..n {
-        assert!(
-            (axis.force[k] - arm.force[k]).abs() < 1e-7 * scale,
-            "sample {k}: {} vs {}",
-            axis.force[k],
-            arm.force[k]
-        );
-        assert!((axis.q[0][k] - arm.q[k]).abs() < 1e-12, "sample {k}");
-    }
+    assert_same_loop(&axis.force, &arm.force, &[(&axis.q[0], &arm.q)], scale);
     // and both plants receive the logged commands as `applied_force` replays them (the loop
     // from rest held 0 before the record, its first command here)
     assert_eq!(arm.force[0], 0.0);
@@ -486,16 +495,12 @@ fn an_elastic_one_joint_robot_is_the_one_axis_two_mass_model() {
     // the load lags the motor by the spring's stretch: this is an elastic loop
     let stretch = (0..n).fold(0.0f64, |m, k| m.max((arm.theta[k] - arm.q[k]).abs()));
     assert!(stretch > 1e-5, "the spring should stretch: {stretch}");
-    for k in 0..n {
-        assert!(
-            (axis.force[k] - arm.force[k]).abs() < 1e-7 * scale,
-            "sample {k}: {} vs {}",
-            axis.force[k],
-            arm.force[k]
-        );
-        assert!((axis.q[0][k] - arm.theta[k]).abs() < 1e-12, "motor, sample {k}");
-        assert!((axis.q[1][k] - arm.q[k]).abs() < 1e-12, "load, sample {k}");
-    }
+    assert_same_loop(
+        &axis.force,
+        &arm.force,
+        &[(&axis.q[0], &arm.theta), (&axis.q[1], &arm.q)],
+        scale,
+    );
 }
 
 #[test]
