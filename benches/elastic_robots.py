@@ -221,6 +221,22 @@ def flexrobots(lines):
     return summary
 
 
+def with_mode_excitation(qr, elastic, top_hz, dt, rng, amplitude=0.02, count=6):
+    """The reference with small high harmonics on the elastic joints, as the flexrobots generator adds them (six,
+    log-spaced from 2 Hz to 1.4 times the highest mode, velocity amplitude ``amplitude`` rad/s each, random phases),
+    faded in over the first second so that the move still starts at rest: without them a slow Fourier trajectory
+    under a 3 Hz position loop leaves the modes unexcited, and the rigid model fits the record as well as the truth
+    (2.94 % both on this Panda)."""
+    t = np.arange(len(qr)) * dt
+    fade = np.where(t < 1.0, np.sin(0.5 * math.pi * np.minimum(t, 1.0)) ** 2, 1.0)
+    out = qr.copy()
+    for j in np.flatnonzero(elastic):
+        for f in np.geomspace(2.0, 1.4 * top_hz, count):
+            w = 2 * math.pi * f
+            out[:, j] += fade * amplitude / w * np.sin(w * t + rng.uniform(0, 2 * math.pi))
+    return out
+
+
 def own_robot(lines, seed=21, seconds=20.0):
     """An elastic robot of this script's own making: example-robot-data's Panda, 7 joints, joints 2 and 4 elastic, on
     the Python loop over Pinocchio (atan friction, 18-bit encoders, P + PI cascades, noise inside the loop)."""
@@ -247,6 +263,7 @@ def own_robot(lines, seed=21, seconds=20.0):
         write_controllers(ctl_path, ctl, dt)
         for name, secs, draw in (("train", seconds, 1), ("valid", seconds / 2, 2)):
             qr = excitation(np.random.default_rng(seed + draw), q0, lim[:, 0], lim[:, 1], 0.8, 0.1, secs, dt)
+            qr = with_mode_excitation(qr, elastic, max(modes.values()), dt, np.random.default_rng(seed + 5 * draw))
             model.armature = np.where(elastic, 0.0, Ia)
             u0 = pin.computeGeneralizedGravity(model, data, qr[0]) + offset
             rms = np.sqrt(np.mean(np.array([pin.rnea(model, data, qr[k], np.zeros(n), np.zeros(n))
@@ -272,7 +289,9 @@ def own_robot(lines, seed=21, seconds=20.0):
               "ratios 3 % and 2 %); the plant is this script's Python loop over Pinocchio's `aba` (RK4, 4 substeps), "
               "friction through zero speed by the atan law (2/π)·atan(v/0.02) on the motor side, torque noise inside "
               "the loop (0.7 % of each joint's RMS torque), 18-bit motor encoders, one P + PI cascade per joint (3 Hz "
-              f"position, 12 Hz velocity loop). Train {seconds:.0f} s, validation {seconds / 2:.0f} s (another draw); "
+              "position, 12 Hz velocity loop). The reference: Fourier harmonics of 0.1 Hz, and on the elastic joints "
+              "six small ones from 2 Hz to 1.4 times the highest mode (`with_mode_excitation`). "
+              f"Train {seconds:.0f} s, validation {seconds / 2:.0f} s (another draw); "
               f"generating them took {sum(r[2] for r in records.values()):.0f} s.", "",
               "| method | time | Ia | Fv | Fc | K | D | validation / floor |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
     out = {}
@@ -307,15 +326,19 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default=str(ROOT / "docs" / "elastic_robots.md"))
     ap.add_argument("--quick", action="store_true", help="the speed comparison only")
+    ap.add_argument("--own-only", action="store_true", help="the robot of this script's own making only")
     args = ap.parse_args()
     lines = header("Elastic-joint robots: speed and accuracy", "benches/elastic_robots.py",
                    "Worst joint's relative error (%) against the truth.")
-    t_ours, t_pin, agree = speed(lines)
-    print(f"elastic UR5 10 s: didim {1e3 * t_ours:.0f} ms, Pinocchio loop {t_pin:.2f} s ({t_pin / t_ours:.0f}x), "
-          f"agree {agree:.1e}", flush=True)
-    if not args.quick:
-        flexrobots(lines)
+    if args.own_only:
         own_robot(lines)
+    else:
+        t_ours, t_pin, agree = speed(lines)
+        print(f"elastic UR5 10 s: didim {1e3 * t_ours:.0f} ms, Pinocchio loop {t_pin:.2f} s ({t_pin / t_ours:.0f}x), "
+              f"agree {agree:.1e}", flush=True)
+        if not args.quick:
+            flexrobots(lines)
+            own_robot(lines)
     pathlib.Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
 
