@@ -610,7 +610,7 @@ def fit_law(rec: Recording, inverse: "_InverseModel",
     slow law such as the atan one is still several percent below its Coulomb level at ten times ε and would bend the
     viscous friction), then each joint's ε refined on its own (a prismatic quill's m/s and a shoulder's rad/s have no
     common scale). ``per_shape`` receives each shape's best ε per joint on the grid."""
-    n, nb, v = inverse.n, inverse.nb, inverse.v
+    n, v = inverse.n, inverse.v
     scale = _speed_scales(rec)
     fc_cols = [inverse.lay.fc(j) for j in range(n)]
     parts = inverse.rows(("algebraic", (0.0,) * n))  # the hard sign
@@ -1252,15 +1252,6 @@ ELASTIC_GRID_LAMBDA = (0.1, 0.3, 0.5, 0.7, 0.9)
 ELASTIC_GRID_F_SHARE = tuple(float(x) for x in np.geomspace(1 / 100, 1 / 12.5, 8))
 #: The springs' damping ratio where step 2 starts (a transmission's is 1-5 %).
 ELASTIC_ZETA0 = 0.03
-#: Step 2's Nelder-Mead on one joint's (λ, ln f, ζ), scaled by ELASTIC_SIMPLEX (half the grid's steps in λ and f),
-#: stops when its simplex spans less than ELASTIC_XTOL of those steps (2e-4 in λ, 3e-4 in f, 4e-5 in ζ) and its values
-#: vary by less than ELASTIC_FTOL of the criterion.
-ELASTIC_SIMPLEX = (0.1, 0.15, 0.02)
-ELASTIC_XTOL = 2e-3
-ELASTIC_FTOL = 1e-4
-#: Step 2's sweeps over the elastic joints (each joint's search with the others' at their last values: the modes of
-#: a chain couple).
-ELASTIC_SWEEPS = 2
 
 
 def _own_inertia(robot: Robot, j: int, q: np.ndarray) -> Tuple[int, float]:
