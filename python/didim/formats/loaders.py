@@ -503,6 +503,17 @@ def _other_readings(read: str) -> List[Tuple[str, float]]:
     return [(u, POSITION_UNITS[u][0] / si) for u in READINGS if u != read and POSITION_UNITS[u][1] == rotary]
 
 
+def _refuse_if_no_unit_fits(p, rec, robot, read, here: float, there: float, other: str) -> None:
+    """Refuses a record that fits the URDF's dynamics in no unit of position (the better reading ``other`` still leaves
+    more than FIT_WELL unexplained): the URDF's or the record's fault, said by :func:`urdf_mismatch`."""
+    from ..methods.robot import FIT_WELL, urdf_mismatch
+
+    if here > UNITS_RATIO * there and there > FIT_WELL:
+        raise DataError(f"{p}: no unit of position makes the record fit the URDF's dynamics (read in {read} they "
+                        f"leave {100 * here:.0f} % of the force unexplained, in {other} at best {100 * there:.0f} %; "
+                        f"a right URDF leaves under {100 * FIT_WELL:.0f} %): " + urdf_mismatch(rec, robot))
+
+
 def _check_position_units(p, robot, rec: Recording) -> None:
     """Refuses a record whose positions fit the URDF's dynamics :data:`UNITS_RATIO` times better in another unit
     (:data:`READINGS`) than in the one they were read in, for the revolute joints (rad, degrees or revolutions) and
@@ -511,7 +522,7 @@ def _check_position_units(p, robot, rec: Recording) -> None:
     only when it brings the URDF's share under :data:`didim.methods.robot.FIT_WELL`; otherwise no unit fits, and
     the refusal says why it may be (:func:`didim.methods.robot.urdf_mismatch`). The limits catch a reference beyond
     the URDF's range; this catches the rest, in either direction."""
-    from ..methods.robot import FIT_WELL, urdf_mismatch, urdf_residual
+    from ..methods.robot import urdf_residual
 
     if not hasattr(robot, "rnea"):  # joints known by number only (no dynamics)
         return
@@ -527,11 +538,7 @@ def _check_position_units(p, robot, rec: Recording) -> None:
         key = "length_factor" if kind == "prismatic" else "angle_factor"
         here = urdf_residual(rec, robot)
         there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in _other_readings(read))
-        if here > UNITS_RATIO * there and there > FIT_WELL:  # no reading fits: the URDF's or the record's fault
-            raise DataError(f"{p}: no unit of position makes the record fit the URDF's dynamics (read in {read} they "
-                            f"leave {100 * here:.0f} % of the force unexplained, in {other} at best "
-                            f"{100 * there:.0f} %; a right URDF leaves under {100 * FIT_WELL:.0f} %): "
-                            + urdf_mismatch(rec, robot))
+        _refuse_if_no_unit_fits(p, rec, robot, read, here, there, other)
         if here > UNITS_RATIO * there:
             raise DataError(f"{p}: read in {read}, the {kind} joints' positions leave the URDF's dynamics "
                             f"{100 * here:.0f} % of the force unexplained, read in {other} {100 * there:.0f} %: the "
@@ -601,7 +608,7 @@ def _check_force_scale(p, robot, rec: Recording) -> None:
 def _check_joint_units(p, robot, rec: Recording, joints: List[int]) -> None:
     """:func:`_check_position_units` for joints of one kind declared in several units: each joint's positions read
     in the other unit alone, the rest as declared (a joints file declaring one joint in degrees on a record in rad)."""
-    from ..methods.robot import FIT_WELL, urdf_mismatch, urdf_residual
+    from ..methods.robot import urdf_residual
 
     here = urdf_residual(rec, robot)
     for j in joints:
@@ -614,11 +621,7 @@ def _check_joint_units(p, robot, rec: Recording, joints: List[int]) -> None:
             continue
         read = rec.units[j].position
         there, other = min(tried)
-        if here > UNITS_RATIO * there and there > FIT_WELL:  # no reading fits: the URDF's or the record's fault
-            raise DataError(f"{p}: no unit of position makes the record fit the URDF's dynamics (read in {read} they "
-                            f"leave {100 * here:.0f} % of the force unexplained, in {other} at best "
-                            f"{100 * there:.0f} %; a right URDF leaves under {100 * FIT_WELL:.0f} %): "
-                            + urdf_mismatch(rec, robot))
+        _refuse_if_no_unit_fits(p, rec, robot, read, here, there, other)
         if here > UNITS_RATIO * there:
             raise DataError(f"{p}: joint {rec.joint_names[j]} is read in {read}, where its positions leave the URDF's "
                             f"dynamics {100 * here:.0f} % of the force unexplained, read in {other} "
