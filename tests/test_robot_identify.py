@@ -237,8 +237,8 @@ def test_the_robots_model_travels_whole_into_the_result_and_back(data, tmp_path)
         didim.Model("flexible", robot=robot)
     with pytest.raises(didim.DataError, match="is not a joint of the robot"):
         didim.Model(robot=robot, elastic=["elbow_joint"])
-    with pytest.raises(didim.DataError, match="takes no terms"):
-        didim.Model(robot=robot, terms=[didim.Term("Fs", "stribeck", vs=0.01)])
+    with pytest.raises(didim.DataError, match="the joint it acts on"):
+        didim.Model(robot=robot, terms=[didim.Term("Fs", "stribeck", vs=0.01)])  # a term names its joint (dof)
     with pytest.raises(didim.DataError, match="one smoothing speed per joint"):
         didim.Model(robot=robot, coulomb_eps=0.01)
     with pytest.raises(didim.DataError, match="fitted from the record"):

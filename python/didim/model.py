@@ -51,7 +51,10 @@ class Term:
 
     ``Term("Fs", "stribeck", vs=0.017)``; a kind's first hyper-parameter may be given by position
     (``Term("Fs", "stribeck", 0.017)``). ``dof``: "motor" (default) or "load" (flexible model); a damper couples the
-    two. The older names ``ripple_sin``/``ripple_cos``, ``coulomb_ripple_sin``/``_cos`` and
+    two. On a robot, ``dof`` is the joint's name (``Term("Fs_elbow", "stribeck", vs=0.05, dof="elbow_joint")``; its
+    hyper-parameters in the joint's units, rad or m): the term acts on that joint where its friction acts (the rotor
+    of an elastic joint), at its position and speed; ``gravity`` there is a torque along the joint's stroke such as a
+    counterbalance's or a cable's, ``A sin(q + φ)`` as two terms. The older names ``ripple_sin``/``ripple_cos``, ``coulomb_ripple_sin``/``_cos`` and
     ``coulomb_spline_fwd``/``_bwd`` are read as their kind with the phase or side they fixed.
     """
 
@@ -97,7 +100,8 @@ class Term:
                 raise DataError(f"term {name}: a {base} term needs its {h} ({unit}): e.g. didim.Term({name!r}, "
                                 f"{base!r}, {example})")
             values.append((h, _checks.real(f"term {name}'s {h}", v, unit)))
-        _checks.one_of(f"term {name}'s dof", dof, TERM_DOFS)
+        if not isinstance(dof, str) or not dof:
+            raise DataError(f"term {name}'s dof is 'motor' or 'load' on one axis, a joint's name on a robot; got {dof!r}")
         if base == "damper" and dof != "motor":
             raise DataError(f"term {name}: a damper couples the motor and the load; leave its dof out")
         object.__setattr__(self, "name", name)
@@ -105,7 +109,7 @@ class Term:
         object.__setattr__(self, "dof", dof)
         object.__setattr__(self, "hyper_values", tuple(values))
         # the core checks the values (a Stribeck speed > 0, a knot spacing > 0, a side in {-1, 0, 1})
-        _core_model("rigid" if dof == "motor" and base != "damper" else "flexible", False, (_freeze(self.spec()),),
+        _core_model("flexible" if dof == "load" or base == "damper" else "rigid", False, (_freeze(self.axis_spec()),),
                     None, 1.0, "algebraic")
 
     @property
@@ -120,6 +124,11 @@ class Term:
     def spec(self) -> tuple:
         """(name, kind, dof, [(hyper-parameter, value), ...]), as the core takes it."""
         return (self.name, self.kind, self.dof, list(self.hyper_values))
+
+    def axis_spec(self) -> tuple:
+        """:meth:`spec` on one axis's dof: a robot joint's term as the same term on a one-axis model's motor (the
+        core's basis function of the joint's own position and speed)."""
+        return (self.name, self.kind, self.dof if self.dof in TERM_DOFS else "motor", list(self.hyper_values))
 
     def to_dict(self) -> Dict[str, Any]:
         return {"name": self.name, "kind": self.kind, "dof": self.dof, "hypers": dict(self.hyper_values)}
@@ -196,7 +205,12 @@ class Model:
         _checks.one_of("coulomb_law", self.coulomb_law, COULOMB_LAWS)
         if self.robot is not None:
             self._check_robot()
-        elif self.elastic:
+            return
+        bad = [t for t in self.terms if t.dof not in TERM_DOFS]
+        if bad:
+            raise DataError(f"term {bad[0].name}'s dof is {bad[0].dof!r}: one axis's terms act on the 'motor' or the "
+                            "'load' (a joint's name is a robot's: didim.Model(robot=...))")
+        if self.elastic:
             raise DataError("elastic names a robot's elastic joints; one axis's two masses are the 'flexible' kind "
                             "(didim.Model('flexible'))")
         elif self.coulomb_eps is not None:
@@ -219,11 +233,12 @@ class Model:
         if self.kind not in ("rigid", "flexible"):
             raise DataError(f"a robot's model is rigid, or flexible with elastic joints, got {self.kind!r}")
         object.__setattr__(self, "kind", "flexible" if self.elastic else "rigid")
-        given = [name for name, v in (("terms", self.terms), ("delay", self.delay), ("force_lag", self.force_lag),
+        given = [name for name, v in (("delay", self.delay), ("force_lag", self.force_lag),
                                       ("backlash_gap", self.backlash_gap)) if v]
         if given:
             raise DataError(f"a robot's model takes no {', '.join(given)}: each joint's delay and force lag go in its "
                             "entry of the controller file (\"delay\", \"force_lag\")")
+        self._check_joint_terms(robot)
         if self.coulomb_eps is not None:
             eps = self.coulomb_eps
             if not isinstance(eps, (tuple, list)) or len(eps) != robot.ndof:
@@ -232,6 +247,28 @@ class Model:
             object.__setattr__(self, "coulomb_eps", tuple(
                 _checks.real(f"joint {j}'s coulomb_eps", e, "rad/s or m/s", lo=0.0, lo_open=False)
                 for j, e in zip(robot.joint_names, eps)))
+
+    #: The term kinds a robot's joint takes: those of one dof (a spring or damper couples two).
+    JOINT_TERM_KINDS = ("offset", "viscous", "coulomb", "abs_viscous", "abs_coulomb", "stribeck", "ripple",
+                        "coulomb_ripple", "coulomb_spline", "gravity")
+
+    def _check_joint_terms(self, robot) -> None:
+        """Each term of a robot's model names one of its joints (``dof``) and is of a kind one joint takes; the
+        names are unique and none is a drive's own parameter's."""
+        names = list(robot.joint_names)
+        own = {f"{p}_{j}" for p in ("Ia", "Fv", "Fc", "OF", "K", "D") for j in names}
+        seen = set()
+        for t in self.terms:
+            if t.kind not in self.JOINT_TERM_KINDS:
+                raise DataError(f"term {t.name}: a {t.kind} term couples two dofs; a robot joint's terms are of the "
+                                f"kinds {', '.join(self.JOINT_TERM_KINDS)} (an elastic joint: elastic=[...])")
+            if t.dof not in names:
+                raise DataError(f"term {t.name}: on a robot a term's dof is the joint it acts on, one of "
+                                f"{', '.join(names)}; got {t.dof!r}")
+            if t.name in seen or t.name in own:
+                raise DataError(f"term {t.name}: the name is taken (each term's name is its parameter's: unique, "
+                                "and none of the drives' Ia_, Fv_, Fc_, OF_, K_, D_)")
+            seen.add(t.name)
 
     def _elastic_joints(self, robot) -> Tuple[str, ...]:
         """``elastic`` as the robot's joint names in its order: names, 1-based numbers, or ``"all"``."""
@@ -269,6 +306,8 @@ class Model:
             return (f"{self.kind} model of the {self.robot.ndof}-joint robot {self.robot.name}"
                     + (f" with elastic joints {', '.join(self.elastic)}" if self.elastic else "")
                     + (" with an offset per joint" if self.offset else "")
+                    + (f", terms {', '.join(f'{t.name} ({t.kind} on {t.dof})' for t in self.terms)}" if self.terms
+                       else "")
                     + (f", {self.coulomb_law} friction law" if self.law is not None else ""))
         parts = [f"{self.kind} model"]
         if self.offset:
@@ -302,8 +341,28 @@ class Model:
         return list(self.core().names)
 
     def units(self) -> Dict[str, str]:
-        """Unit of each parameter (SI, load side), as the core's basis functions give them."""
+        """Unit of each parameter (SI, load side), as the core's basis functions give them. A robot's: each joint's
+        drive parameters and terms in its own units (N·m·s/rad on a revolute joint, N·s/m on a prismatic one) and the
+        bodies' standard parameters (m kg, mx kg·m, Ixx kg·m²)."""
+        if self.robot is not None:
+            return self._robot_units()
         return dict(zip(self.core().names, self.core().units))
+
+    def _robot_units(self) -> Dict[str, str]:
+        from .units import label
+
+        out: Dict[str, str] = {}
+        axis = {j: "linear" if k == "prismatic" else "rotary" for j, k in zip(self.robot.joint_names,
+                                                                             self.robot.joint_kinds)}
+        for j in self.robot.joint_names:
+            for p, si in (("Ia", "kg"), ("Fv", "N/(m/s)"), ("Fc", "N"), ("OF", "N"), ("K", "N/m"), ("D", "N/(m/s)")):
+                out[f"{p}_{j}"] = label(si, axis[j])
+        for name in self.robot.param_names:
+            out[name] = {"m": "kg", "mx": "kg·m", "my": "kg·m", "mz": "kg·m"}.get(name.split("_")[0], "kg·m²")
+        for t in self.terms:
+            core = _core_model("rigid", False, (_freeze(t.axis_spec()),), None, 1.0, "algebraic")
+            out[t.name] = label(dict(zip(core.names, core.units))[t.name], axis[t.dof])
+        return out
 
     def roles(self) -> Dict[str, str]:
         """What each parameter is ("mass", "friction", "stiffness", "damping", "force"), from the core."""

@@ -120,7 +120,10 @@ class IdentificationResult:
         result's axis (kg·m², N·m·s/rad, N·m on a rotary one)."""
         from .units import label
 
-        known = self.structure.units() if self.structure is not None and self.robot is None else {}
+        if self.robot is not None:  # each joint's own units; a base parameter's its first standard parameter's
+            known = self.structure.units()
+            return {k: known.get(k, known.get(k.split(" ")[0], "")) for k in (*self.params, *self.frozen)}
+        known = self.structure.units() if self.structure is not None else {}
         return {k: label(known.get(k, UNITS.get(k, "")), self.axis) for k in (*self.params, *self.frozen)}
 
     def set_axis(self, axis: str) -> None:
@@ -374,6 +377,7 @@ def _robot_dict(res: IdentificationResult) -> Dict[str, Any]:
                      "friction_law": None if res.law is None else {"shape": res.law[0], "eps": list(res.law[1])},
                      "robot": {"name": res.robot.name, "joints": res.robot.joint_names, "urdf": res.robot.urdf},
                      "elastic": list(res.structure.elastic),
+                     "terms": [t.to_dict() for t in res.structure.terms],
                      "base": {"names": list(res.base.names), "standard_names": list(res.base.standard_names),
                               "K": res.base.K.tolist(), "independent": list(res.base.independent)}})
 
@@ -434,7 +438,7 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
     _check_robot_parts(d, robot, base)
     law = None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof)
     model = Model("rigid", robot=robot, offset=bool(_field(d, "offset")), coulomb_law=law[0] if law else "algebraic",
-                  coulomb_eps=law[1] if law else None, elastic=tuple(d.get("elastic") or ()))
+                  coulomb_eps=law[1] if law else None, elastic=tuple(d.get("elastic") or ()), terms=_terms_from(d))
     return robot_result(_field(d, "method"), dict(_field(d, "params")), dict(_field(d, "std")), model, base,
                          force_error=d.get("force_error", math.nan),
                          force_error_per_joint=dict(d.get("force_error_per_joint", {})),
@@ -444,6 +448,16 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
                          message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
                          notes=list(d.get("notes", [])), history=iterations_of(d.get("history", [])),
                          options={"controller_check": d.get("controller_check")})
+
+
+def _terms_from(d: Dict[str, Any]) -> tuple:
+    """A saved robot result's extra terms (a DataError naming the field where they are not terms)."""
+    from .model import Term
+
+    raw = d.get("terms") or []
+    if not isinstance(raw, list):
+        raise DataError("its field 'terms' is not a list of {name, kind, dof, hypers} objects: save the result again")
+    return tuple(Term.from_saved(t) for t in raw)
 
 
 def _check_robot_parts(d: Dict[str, Any], robot, base) -> None:
@@ -462,6 +476,7 @@ def _check_robot_parts(d: Dict[str, Any], robot, base) -> None:
     elastic = [j for j in robot.joint_names if j in (d.get("elastic") or ())]
     names = list(base.names) + [f"{p}_{j}" for p in ("Ia", "Fv", "Fc") + (("OF",) if d.get("offset") else ())
                                 for j in robot.joint_names] + [f"{p}_{j}" for p in ("K", "D") for j in elastic]
+    names += [t.name for t in _terms_from(d)]
     missing = [k for k in names if k not in params]
     if missing:
         raise DataError(f"its params lack {', '.join(missing[:4])}{' …' if len(missing) > 4 else ''} (a parameter "

@@ -680,8 +680,13 @@ impl Basis {
         )
     }
 
+    /// True for a term between two dofs (a spring, damper or backlash).
+    pub fn couples(&self) -> bool {
+        self.dofs().1.is_some()
+    }
+
     /// The degrees of freedom this basis function touches.
-    fn dofs(&self) -> (usize, Option<usize>) {
+    pub(crate) fn dofs(&self) -> (usize, Option<usize>) {
         match *self {
             Basis::Inertia { dof }
             | Basis::Viscous { dof }

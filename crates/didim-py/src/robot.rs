@@ -2,7 +2,7 @@
 //! one state or many (arrays of shape (N, n)).
 
 use didim_core::error::Error;
-use didim_core::model::{FrictionLaw, LawShape};
+use didim_core::model::{Basis, FrictionLaw, LawShape};
 use didim_core::robot::{
     map_rows_into, regressor_rows, simulate_robot as simulate_robot_core, Drives, JointKind,
     Robot as CoreRobot, RobotLoopOptions, BODY_PARAMS,
@@ -11,6 +11,9 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 
 use crate::run;
+
+/// One extra term of a joint: its kind, hyper-parameters by name and value.
+type JointTerm = (String, Vec<(String, f64)>, f64);
 
 /// One row's outputs, computed, copied into its place.
 fn put(dst: &mut [f64], got: Result<Vec<f64>, Error>) -> Result<(), Error> {
@@ -217,9 +220,11 @@ impl PyRobot {
 /// command to force (s); `stiffness` each joint's spring from rotor to link (N·m/rad or N/m,
 /// `inf` on a rigid joint; None: all rigid) and `damping` the springs' (N·m·s/rad): a dict of
 /// q, qd, qdd (the link side), force (N, n; the force is the commands) and, with an elastic
-/// joint, theta, thetad, thetadd (the motor side; the link side's on rigid joints).
+/// joint, theta, thetad, thetadd (the motor side; the link side's on rigid joints). `terms`: each
+/// joint's extra terms, a list per joint of `(kind, [(hyper-parameter, value), ...], value)` of
+/// the one-axis model's kinds (`TERM_TABLE`), acting where the joint's friction acts.
 #[pyfunction]
-#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law, u_ext=None, delay=None, force_lag=None, stiffness=None, damping=None))]
+#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law, u_ext=None, delay=None, force_lag=None, stiffness=None, damping=None, terms=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate_robot<'py>(
     py: Python<'py>,
@@ -241,6 +246,7 @@ pub fn simulate_robot<'py>(
     force_lag: Option<Vec<f64>>,
     stiffness: Option<Vec<f64>>,
     damping: Option<Vec<f64>>,
+    terms: Option<Vec<Vec<JointTerm>>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let (rows, n) = (qr.as_array().nrows(), robot.inner.ndof());
     let qr = flat(&qr);
@@ -271,6 +277,19 @@ pub fn simulate_robot<'py>(
                 })
             })
             .collect::<Result<Vec<_>, Error>>()?;
+        let terms = terms
+            .unwrap_or_default()
+            .iter()
+            .map(|joint| {
+                joint
+                    .iter()
+                    .map(|(kind, hypers, value)| {
+                        let h: Vec<(&str, f64)> = hypers.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+                        Ok((Basis::from_kind(kind, &h, 0)?, *value))
+                    })
+                    .collect::<Result<Vec<_>, Error>>()
+            })
+            .collect::<Result<Vec<_>, Error>>()?;
         let drives = Drives {
             armature,
             viscous,
@@ -279,6 +298,7 @@ pub fn simulate_robot<'py>(
             laws,
             stiffness: stiffness.unwrap_or_default(),
             damping: damping.unwrap_or_default(),
+            terms,
         };
         let control = controllers
             .iter()

@@ -26,7 +26,7 @@ from ..stats import diebold_mariano
 from .._errors import DataError, IdentifiabilityError, SimulationError
 from ..result import IdentificationResult, iterations_of, robot_result
 from ..robots.chain import BaseParameters, Robot
-from ..model import Model
+from ..model import Model, Term
 from ..recording import Recording
 
 #: A regressor column is independent when its R diagonal, after the columns are scaled to unit norm, is above this
@@ -121,16 +121,50 @@ def elastic_of(model: Model) -> Tuple[int, ...]:
     return tuple(model.robot.joint_names.index(j) for j in model.elastic)
 
 
+def joint_terms(model: Model) -> Tuple[Tuple[int, Term], ...]:
+    """A robot model's extra terms, each with the index of the joint it acts on."""
+    names = model.robot.joint_names
+    return tuple((names.index(t.dof), t) for t in model.terms)
+
+
 def theta_of(res: IdentificationResult) -> np.ndarray:
     """A robot result's parameter vector θ (:class:`_Layout`): the base parameters, the elastic joints' rotor
-    inertias, each joint's viscous and Coulomb friction (and offset), the elastic joints' stiffness and damping."""
-    return np.array([res.params[k] for k in _theta_names(res.robot, res.base, res.offset, elastic_of(res.structure))])
+    inertias, each joint's viscous and Coulomb friction (and offset), the elastic joints' stiffness and damping, the
+    joints' extra terms."""
+    return np.array([res.params[k] for k in _theta_names(res.structure, res.base)])
 
 
 def drives_of(res: IdentificationResult) -> Dict[str, List[float]]:
     """A robot result's drives: each joint's rotor inertia, viscous and Coulomb friction and offset (and, with an
-    elastic joint, each joint's stiffness, infinite on rigid joints, and damping)."""
-    return _model_of(res.robot, res.base, res.offset, theta_of(res), elastic_of(res.structure))[1]
+    elastic joint, each joint's stiffness, infinite on rigid joints, and damping; with extra terms, each joint's)."""
+    return _model_of(res.structure, res.base, theta_of(res))[1]
+
+
+def chain_of(res: IdentificationResult) -> Robot:
+    """The robot with a result's identified bodies (the standard parameters closest to the URDF's that give its base
+    parameters)."""
+    return _model_of(res.structure, res.base, theta_of(res))[0]
+
+
+def joint_regressors(res: IdentificationResult, sim: Dict[str, np.ndarray]) -> List[np.ndarray]:
+    """Each joint's columns of a result's inverse model on the simulated states ``sim``, at the full rate on every
+    sample (N × k per joint: the columns that act on its rows; an elastic joint's motor side's), the Coulomb and extra
+    terms' under the result's law: what the force the model explains is a combination of, joint by joint."""
+    model, base = res.structure, res.base
+    law = res.law if res.law is not None else ("algebraic", (0.0,) * model.robot.ndof)
+    motor = _Motor.of(sim, elastic_of(model))
+    cols, _ = _model_columns(model.robot, base, sim["q"], sim["qd"], sim["qdd"], _Layout.for_model(model, base), motor)
+    v = sim["qd"] if motor is None else motor.friction_speeds(sim["qd"])
+    x = sim["q"] if motor is None else motor.friction_positions(sim["q"])
+    terms = joint_terms(model)
+    out = []
+    for j, (_, m) in enumerate(cols):
+        extra = [m, _sign(v[:, j], law[0], law[1][j])[:, None]]
+        mine = [t for jt, t in terms if jt == j]
+        if mine:
+            extra.append(term_columns(mine, x[:, j], v[:, j], law[0], law[1][j]))
+        out.append(np.column_stack(extra))
+    return out
 
 
 def standard_of(res: IdentificationResult) -> np.ndarray:
@@ -144,12 +178,20 @@ def standard_of(res: IdentificationResult) -> np.ndarray:
 class _Layout:
     """Where each parameter sits in a robot's θ: the ``nb`` base parameters of the chain (with the rigid joints'
     rotor inertias), the elastic joints' rotor inertias, each of the ``n`` joints' Fv, Fc (and OF), the elastic
-    joints' stiffness K and damping D. Without elastic joints: the base parameters, Fv, Fc (and OF)."""
+    joints' stiffness K and damping D, then the joints' extra terms (``terms``: the joint of each). Without elastic
+    joints nor terms: the base parameters, Fv, Fc (and OF)."""
 
     nb: int
     n: int
     elastic: Tuple[int, ...]
     offset: bool
+    terms: Tuple[int, ...] = ()
+
+    @classmethod
+    def for_model(cls, model: Model, base: BaseParameters) -> "_Layout":
+        """The layout of a robot model's θ on the base parameters ``base``."""
+        return cls(len(base.names), model.robot.ndof, elastic_of(model), model.offset,
+                   tuple(j for j, _ in joint_terms(model)))
 
     @property
     def ne(self) -> int:
@@ -173,18 +215,32 @@ class _Layout:
     def d(self, e: int) -> int:
         return self.k(e) + self.ne
 
+    def t(self, i: int) -> int:
+        return (self.d(0) + self.ne if self.ne else self.k(0)) + i
+
     @property
     def size(self) -> int:
-        return self.d(0) + self.ne if self.ne else self.k(0)
+        return self.t(len(self.terms))
 
 
-def _theta_names(robot: Robot, base: BaseParameters, offset: bool, elastic: Tuple[int, ...] = ()) -> List[str]:
-    joints = robot.joint_names
+def _theta_names(model: Model, base: BaseParameters) -> List[str]:
+    joints, elastic = model.robot.joint_names, elastic_of(model)
     names = list(base.names) + [f"Ia_{joints[j]}" for j in elastic]
     names += [f"Fv_{j}" for j in joints] + [f"Fc_{j}" for j in joints]
-    if offset:
+    if model.offset:
         names += [f"OF_{j}" for j in joints]
-    return names + [f"{p}_{joints[j]}" for p in ("K", "D") for j in elastic]
+    return names + [f"{p}_{joints[j]}" for p in ("K", "D") for j in elastic] + [t.name for t in model.terms]
+
+
+def term_columns(terms, x: np.ndarray, xd: np.ndarray, shape: str, eps: float) -> np.ndarray:
+    """The basis functions of one joint's extra terms (:class:`didim.Term`) at its positions ``x`` and speeds ``xd``
+    under its friction law (``shape``, ``eps``): the one-axis model's own (the core's), one column per term."""
+    from ..model import _core_model, _freeze
+
+    core = _core_model("rigid", False, tuple(_freeze(t.axis_spec()) for t in terms), None, float(eps), shape)
+    x = np.ascontiguousarray(x, dtype=float)[None, :]
+    w = core.regressor(x, np.ascontiguousarray(xd, dtype=float)[None, :], np.zeros_like(x))
+    return np.asarray(w[0, :, 3:])
 
 
 #: A friction law through zero speed (:data:`didim.methods.friction_law.Law`): its shape, shared by the joints, and each
@@ -205,11 +261,13 @@ def _coulomb(v: np.ndarray, law: Law) -> np.ndarray:
     return np.column_stack([_sign(v[:, j], law[0], e) for j, e in enumerate(law[1])])
 
 
-def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, law: Law) -> np.ndarray:
-    """(N, n, p): the base parameters' columns, then each joint's friction (and offset) on its own row, written into
-    one array (the dependent columns are combinations of the independent ones: W·π = W[:, independent]·β)."""
+def _model_regressor(model: Model, base: BaseParameters, q, v, a, law: Law) -> np.ndarray:
+    """(N, n, p): the base parameters' columns, then each joint's friction (and offset) and extra terms on its own
+    row, written into one array (the dependent columns are combinations of the independent ones: W·π =
+    W[:, independent]·β); a rigid model's."""
+    robot, offset, lay = model.robot, model.offset, _Layout.for_model(model, base)
     n, nb = robot.ndof, len(base.independent)
-    out = np.zeros((len(q), n, nb + (3 if offset else 2) * n))
+    out = np.zeros((len(q), n, lay.size))
     ind = np.asarray(base.independent)
     arm, body = ind[ind < n], ind[ind >= n]  # rotor inertias' columns, then the bodies'
     pos = np.arange(nb)
@@ -223,6 +281,8 @@ def _model_regressor(robot: Robot, base: BaseParameters, q, v, a, offset: bool, 
     out[:, idx, nb + n + idx] = _coulomb(v, law)
     if offset:
         out[:, idx, nb + 2 * n + idx] = 1.0
+    for i, (j, t) in enumerate(joint_terms(model)):
+        out[:, j, lay.t(i)] = term_columns([t], q[:, j], v[:, j], law[0], law[1][j])[:, 0]
     return out
 
 
@@ -328,8 +388,14 @@ class _Motor:
         out[:, list(self.elastic)] = self.thetad[:, list(self.elastic)]
         return out
 
+    def friction_positions(self, q: np.ndarray) -> np.ndarray:
+        """Each joint's position under its friction and extra terms: the rotor's on an elastic joint."""
+        out = q.copy()
+        out[:, list(self.elastic)] = self.theta[:, list(self.elastic)]
+        return out
 
-def _model_columns(robot: Robot, base: BaseParameters, q, v, a, offset: bool, motor: Optional[_Motor] = None
+
+def _model_columns(robot: Robot, base: BaseParameters, q, v, a, lay: "_Layout", motor: Optional[_Motor] = None
                    ) -> Tuple[List[Tuple[np.ndarray, np.ndarray]], List[Tuple[np.ndarray, np.ndarray]]]:
     """:func:`_model_regressor` with a zero Coulomb column (a law's is put in later), as each joint's acting columns
     (:func:`_joint_columns`) built one joint at a time: no (N, n, p) array of mostly zeros (on a 4 kHz UR10 record,
@@ -339,8 +405,7 @@ def _model_columns(robot: Robot, base: BaseParameters, q, v, a, offset: bool, mo
     its motor side's, ``u = Ia θ̈ + Fv θ̇ + Fc s(θ̇) + OF + K (θ − q) + D (θ̇ − q̇)``, and the link rows of the elastic
     joints come second: ``0 = [Y(q, q̇, q̈) β]_j − K (θ − q) − D (θ̇ − q̇)``, the chain's torque on the joint against
     the spring's (one axis's load row, eq. (2), on a chain)."""
-    n, nb = robot.ndof, len(base.independent)
-    lay = _Layout(nb, n, motor.elastic if motor is not None else (), offset)
+    n, offset = robot.ndof, lay.offset
     ind = np.asarray(base.independent)
     arm, body = ind[ind < n], ind[ind >= n]  # rotor inertias' columns, then the bodies'
     yb = robot.regressor(q, v, a, columns=body - n)  # (N, n, len(body))
@@ -401,16 +466,20 @@ class _InverseModel:
     speed) left out; a friction law only replaces each joint's Coulomb column (one column decimated per joint), so
     that the laws a search compares, and DIDIM's step of ε, cost a fraction of a fit each."""
 
-    def __init__(self, rec: Recording, robot: Robot, base: BaseParameters, q, v, a, offset: bool, dec,
+    def __init__(self, rec: Recording, model: Model, base: BaseParameters, q, v, a, dec,
                  y: Optional[np.ndarray] = None, start_row: int = 0, motor: Optional[_Motor] = None):
+        robot = model.robot
         n, nb = robot.ndof, len(base.names)
-        self.lay = _Layout(nb, n, motor.elastic if motor is not None else (), offset)
-        # each joint's friction acts at its rotor's speed (the link's on a rigid joint)
-        self.robot, self.base, self.offset, self.dec = robot, base, offset, dec
+        self.lay = _Layout.for_model(model, base)
+        assert self.lay.elastic == (motor.elastic if motor is not None else ())
+        self.terms = joint_terms(model)
+        # each joint's friction and extra terms act at its rotor's position and speed (the link's on a rigid joint)
+        self.robot, self.base, self.offset, self.dec = robot, base, model.offset, dec
         self.v = v if motor is None else motor.friction_speeds(v)
+        self.x = q if motor is None else motor.friction_positions(q)
         self.n, self.nb = n, nb
-        # each joint's Coulomb column is left out here: it is the law's (see rows)
-        columns, links = _model_columns(robot, base, q, v, a, offset, motor)
+        # each joint's Coulomb and extra terms' columns are left out here: they are the law's (see rows)
+        columns, links = _model_columns(robot, base, q, v, a, self.lay, motor)
         got = _rows(dec, rec.applied_force() if y is None else y, columns, self.lay.size, self.v, top_speeds(rec),
                     start_row)
         self.parts = [(yd, wd) for yd, wd, _ in got]
@@ -442,6 +511,11 @@ class _InverseModel:
         for j, (yd, wd) in enumerate(self.parts):
             wl = wd.copy()
             wl[:, self.lay.fc(j)] = self.column(j, _sign(v[:, j], law[0], law[1][j]))
+            mine = [i for i, (jt, _) in enumerate(self.terms) if jt == j]
+            if mine:
+                cols = term_columns([self.terms[i][1] for i in mine], self.x[:, j], v[:, j], law[0], law[1][j])
+                for i, c in zip(mine, cols.T):
+                    wl[:, self.lay.t(i)] = self.column(j, c)
             if coulomb is not None:
                 e = max(float(law[1][j]), 1e-300)
                 ds = (_sign(v[:, j], law[0], e * (1 + EPS_STEP)) - _sign(v[:, j], law[0], e * (1 - EPS_STEP)))
@@ -760,15 +834,17 @@ def closed_loop_law(rec: Recording, refit: Callable[[Law], Tuple[Robot, Dict[str
     return found.law
 
 
-def simulate_robot(rec: Recording, result: IdentificationResult, substeps: int = 0) -> Dict[str, np.ndarray]:
+def simulate_robot(rec: Recording, result: IdentificationResult, substeps: int = 0,
+                   quantize: bool = True) -> Dict[str, np.ndarray]:
     """The closed loop of ``rec`` (its references, controllers, encoders, first force) with the model of ``result``
     (its friction law): q, qd, qdd the link side's, force the commands, and with elastic joints theta, thetad, thetadd
-    the motor side's."""
+    the motor side's. ``quantize=False``: the encoders read the exact positions (:func:`_simulate`)."""
     _robot_result(result)
     _check(rec, result.structure)
     substeps = _checks.whole("substeps", substeps, lo=0, hi=1024, hint=" (RK4 steps per sample; 0 chooses)")
-    robot, d = _model_of(result.robot, result.base, result.offset, theta_of(result), elastic_of(result.structure))
-    return _simulate(rec, robot, d, result.law if result.law is not None else _default_law(rec), substeps)
+    robot, d = _model_of(result.structure, result.base, theta_of(result))
+    return _simulate(rec, robot, d, result.law if result.law is not None else _default_law(rec), substeps,
+                     quantize=quantize)
 
 
 def deflection_errors(rec: Recording, sim: Dict[str, np.ndarray], model: Model) -> Dict[str, float]:
@@ -812,6 +888,10 @@ def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law,
     if lead:
         rest = np.zeros(rec.ndof)
         force0 = robot.rnea(qr[0], rest, rest) + np.asarray(d["offset"]) - (0.0 if u_ext is None else u_ext[0])
+        for j, terms in enumerate(d.get("terms") or ()):  # a torque along the stroke holds at rest too
+            for kind, hypers, value in terms:
+                force0[j] += value * term_columns([Term("at_rest", kind, **dict(hypers))], qr[0, j:j + 1], rest[:1],
+                                                  law[0], law[1][j])[0, 0]
     try:
         sim = _core.simulate_robot(robot._core, d["armature"], d["viscous"], d["coulomb"], d["offset"],
                                    rec.core_controllers(), qr, rec.dt,
@@ -819,7 +899,7 @@ def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law,
                                    force0=list(map(float, force0)), substeps=substeps, coulomb_eps=list(law[1]),
                                    coulomb_law=[law[0]] * len(law[1]), u_ext=u_ext,
                                    delay=list(rec.delay) or None, force_lag=list(rec.force_lag) or None,
-                                   stiffness=d.get("stiffness"), damping=d.get("damping"))
+                                   stiffness=d.get("stiffness"), damping=d.get("damping"), terms=d.get("terms"))
     except DataError as e:
         raise SimulationError(f"the robot's closed loop cannot be simulated with these parameters: {e}") from None
     return {k: v[lead:] for k, v in sim.items()} if lead else sim
@@ -877,7 +957,7 @@ def _result(method: str, rec: Recording, model: Model, base: BaseParameters, the
             **kw) -> IdentificationResult:
     robot, offset = model.robot, model.offset
     elastic = elastic_of(model)
-    names = _theta_names(robot, base, offset, elastic)
+    names = _theta_names(model, base)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     params = dict(zip(names, map(float, theta)))
     stds = dict(zip(names, map(float, std)))
@@ -975,14 +1055,14 @@ def idim_ls(rec: Recording, model: Model) -> IdentificationResult:
     base = base_parameters(robot)
     dec = _decimation(rec)
     q, v, a = _measured_states(rec, dec)
-    inverse = _InverseModel(rec, robot, base, q, v, a, offset, dec)
+    inverse = _InverseModel(rec, model, base, q, v, a, dec)
     per_shape: Dict[str, Tuple[float, ...]] = {}
     law = fit_law(rec, inverse, per_shape)
     # the law through zero speed is the closed loop's to choose (the inverse model leaves out where it acts), each
     # shape compared with the parameters the inverse model gives with it
 
     def refit(lw: Law):
-        return _model_of(robot, base, offset, inverse.fit(lw)[0])
+        return _model_of(model, base, inverse.fit(lw)[0])
 
     sim_law = law
     try:
@@ -1008,12 +1088,14 @@ def idim_ls(rec: Recording, model: Model) -> IdentificationResult:
 ABSURD_ERROR = 1.0
 
 
-def _model_of(robot: Robot, base: BaseParameters, offset: bool, theta: np.ndarray, elastic: Tuple[int, ...] = ()):
+def _model_of(model: Model, base: BaseParameters, theta: np.ndarray):
     """The robot with the standard parameters closest to the URDF's that give θ's base parameters, and its drives
-    (rotor inertias, each joint's viscous and Coulomb friction and offset; with ``elastic`` joints, each joint's
-    stiffness, infinite on rigid ones, and damping)."""
+    (rotor inertias, each joint's viscous and Coulomb friction and offset; with elastic joints, each joint's
+    stiffness, infinite on rigid ones, and damping; with extra terms, each joint's list of (kind, hyper-parameters,
+    value) as the core takes them)."""
+    robot, offset, elastic = model.robot, model.offset, elastic_of(model)
     n, nb = robot.ndof, len(base.names)
-    lay = _Layout(nb, n, elastic, offset)
+    lay = _Layout.for_model(model, base)
     pi = base.standard_from(theta[:nb], np.concatenate([np.zeros(n), robot.inertial_params]))
     arm = pi[:n].copy()
     for e, j in enumerate(elastic):
@@ -1026,6 +1108,11 @@ def _model_of(robot: Robot, base: BaseParameters, offset: bool, theta: np.ndarra
         d["stiffness"], d["damping"] = [math.inf] * n, [0.0] * n
         for e, j in enumerate(elastic):
             d["stiffness"][j], d["damping"][j] = float(theta[lay.k(e)]), float(theta[lay.d(e)])
+    if model.terms:
+        d["terms"] = [[] for _ in range(n)]
+        for i, (j, t) in enumerate(joint_terms(model)):
+            d["terms"][j].append((t.kind, list(t.hyper_values), float(theta[lay.t(i)])))
+        d["term_values"] = [float(theta[lay.t(i)]) for i in range(len(lay.terms))]
     return robot.with_inertial_params(pi[n:]), d
 
 
@@ -1038,12 +1125,13 @@ class _RobotPlant:
     (:func:`closed_loop_law`) and the iterations go on until they settle again, each joint's ε estimated with the
     parameters where the closed loop kept the shape the tail chose (:func:`_fit`)."""
 
-    def __init__(self, rec, robot, base, dec, offset, law, per_shape, tol, say, elastic: Tuple[int, ...] = ()):
-        self.rec, self.robot, self.base, self.dec, self.offset = rec, robot, base, dec, offset
+    def __init__(self, rec, model: Model, base, dec, law, per_shape, tol, say):
+        self.rec, self.structure, self.robot, self.base, self.dec = rec, model, model.robot, base, dec
+        self.offset = model.offset
         self.law, self.per_shape, self.tol, self.say = law, per_shape, tol, say
-        self.n, self.nb = robot.ndof, len(base.names)
-        self.elastic = elastic
-        self.lay = _Layout(self.nb, self.n, elastic, offset)
+        self.n, self.nb = self.robot.ndof, len(base.names)
+        self.elastic = elastic_of(model)
+        self.lay = _Layout.for_model(model, base)
         self.tail_shape = law[0]  # the shape the inverse model chose on the rows the fits keep (the law's tail)
         self.law_chosen = False
         self.inverses: List[Tuple[np.ndarray, _InverseModel]] = []
@@ -1070,7 +1158,7 @@ class _RobotPlant:
 
     def model(self, theta: np.ndarray):
         """The robot with θ's standard parameters and its drives."""
-        return _model_of(self.robot, self.base, self.offset, theta, self.elastic)
+        return _model_of(self.structure, self.base, theta)
 
     def simulate(self, theta: np.ndarray):
         if self.last is not None and self.last[1] == self.law and np.array_equal(self.last[0], theta):
@@ -1090,7 +1178,7 @@ class _RobotPlant:
         for th, im in self.inverses:
             if np.array_equal(th, theta):
                 return im
-        im = _InverseModel(self.rec, self.robot, self.base, sim["q"], sim["qd"], sim["qdd"], self.offset, self.dec,
+        im = _InverseModel(self.rec, self.structure, self.base, sim["q"], sim["qd"], sim["qdd"], self.dec,
                            start_row=self.start_row, motor=_Motor.of(sim, self.elastic))
         self.inverses = [(theta.copy(), im)] + self.inverses[:3]
         return im
@@ -1168,10 +1256,10 @@ def _start_error(plant: _RobotPlant, theta: np.ndarray) -> float:
         return math.inf
 
 
-def _didim_run(rec, robot, base, dec, offset, theta, law, per_shape, max_iter, tol, say, plant=None):
+def _didim_run(rec, model, base, dec, theta, law, per_shape, max_iter, tol, say, plant=None):
     """DIDIM's iterations on the robot (:class:`_RobotPlant`) from ``theta``: the loop's outcome and the plant."""
     if plant is None:
-        plant = _RobotPlant(rec, robot, base, dec, offset, law, per_shape, tol, say)
+        plant = _RobotPlant(rec, model, base, dec, law, per_shape, tol, say)
         plant.set_start(theta)
     return didim_loop(plant, theta, max_iter=max_iter, progress=say), plant
 
@@ -1197,17 +1285,17 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     say = progress or (lambda s: None)
     base = base_parameters(robot)
     dec = _decimation(rec)
-    measured = _InverseModel(rec, robot, base, *_measured_states(rec, dec), offset, dec)
+    measured = _InverseModel(rec, model, base, *_measured_states(rec, dec), dec)
     per_shape: Dict[str, Tuple[float, ...]] = {}
     law = fit_law(rec, measured, per_shape)
     say(f"friction law through zero speed, by the inverse model: {law[0]}, ε = " + ", ".join(f"{e:.4g}" for e in law[1]))
     n = robot.ndof
     pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
-    theta0 = np.concatenate([base.of(pi0), np.zeros(2 * n + (n if offset else 0))])
+    theta0 = np.concatenate([base.of(pi0), np.zeros(_Layout.for_model(model, base).size - len(base.names))])
     notes: List[str] = []
     # a start whose closed loop is worse than predicting no force (or cannot be simulated) is no start: DIDIM begins
     # at IDIM-LS's estimate instead, without iterating from it first
-    first = _RobotPlant(rec, robot, base, dec, offset, law, per_shape, tol, say)
+    first = _RobotPlant(rec, model, base, dec, law, per_shape, tol, say)
     first.set_start(theta0)
     e0 = _start_error(first, theta0)
     if e0 > ABSURD_ERROR:
@@ -1215,14 +1303,14 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
                else "their closed loop cannot be simulated")
         say(f"DIDIM starts from IDIM-LS's estimate: not from the URDF's values ({why})")
         notes.append(f"DIDIM started from IDIM-LS's estimate, not from the URDF's values ({why})")
-        run, plant = _didim_run(rec, robot, base, dec, offset, measured.fit(law)[0], law, per_shape, max_iter, tol,
+        run, plant = _didim_run(rec, model, base, dec, measured.fit(law)[0], law, per_shape, max_iter, tol,
                                 say)
     else:
-        run, plant = _didim_run(rec, robot, base, dec, offset, theta0, law, per_shape, max_iter, tol, say, plant=first)
+        run, plant = _didim_run(rec, model, base, dec, theta0, law, per_shape, max_iter, tol, say, plant=first)
         failed = run.best[2] is None or (not run.converged and not run.message.startswith("no convergence"))
         if failed:
             say(f"DIDIM from the URDF's values failed ({run.message}): again from IDIM-LS's estimate")
-            again, plant_again = _didim_run(rec, robot, base, dec, offset, measured.fit(law)[0], law, per_shape,
+            again, plant_again = _didim_run(rec, model, base, dec, measured.fit(law)[0], law, per_shape,
                                             max_iter, tol, say)
             if again.best[2] is not None and (run.best[2] is None or again.best[0] < run.best[0]):
                 notes.append(f"DIDIM from the URDF's values failed ({run.message}); it started from IDIM-LS's "
@@ -1276,9 +1364,9 @@ class _ElasticSplit:
     joint's locked-rotor mode there, ζ_j its damping ratio); the friction and offsets the model's, on the motor side
     (eq. (27): all friction on the motor)."""
 
-    def __init__(self, rec: Recording, robot: Robot, pi: np.ndarray, drives: Dict[str, List[float]], offset: bool,
-                 elastic: Tuple[int, ...]):
-        self.rec, self.robot, self.elastic, self.offset = rec, robot, elastic, offset
+    def __init__(self, rec: Recording, model: Model, pi: np.ndarray, drives: Dict[str, List[float]]):
+        robot, elastic = model.robot, elastic_of(model)
+        self.rec, self.model, self.robot, self.elastic, self.offset = rec, model, robot, elastic, model.offset
         self.pi1, self.d1 = np.asarray(pi, dtype=float), drives
         n = robot.ndof
         self.qmid = 0.5 * (rec.qm.min(axis=0) + rec.qm.max(axis=0))
@@ -1287,18 +1375,18 @@ class _ElasticSplit:
         self.total = np.array([self.pi1[j] + m[j, j] for j in elastic])
         self.partner = [_own_inertia(chain, j, self.qmid) for j in elastic]
         self.base = base_parameters(robot, elastic=elastic)
-        self.lay = _Layout(len(self.base.names), n, elastic, offset)
+        self.lay = _Layout.for_model(model, self.base)
 
     @classmethod
-    def of_rigid(cls, rec: Recording, rigid: IdentificationResult, elastic: Tuple[int, ...]) -> "_ElasticSplit":
-        chain, d = _model_of(rigid.robot, rigid.base, rigid.offset, theta_of(rigid))
-        return cls(rec, rigid.robot, np.concatenate([d["armature"], chain.inertial_params]), d, rigid.offset, elastic)
+    def of_rigid(cls, rec: Recording, rigid: IdentificationResult, model: Model) -> "_ElasticSplit":
+        """The split of the rigid step's result ``rigid`` into the elastic ``model`` (its structure but the springs)."""
+        chain, d = _model_of(rigid.structure, rigid.base, theta_of(rigid))
+        return cls(rec, model, np.concatenate([d["armature"], chain.inertial_params]), d)
 
     @classmethod
     def of_elastic(cls, rec: Recording, plant: "_RobotPlant", theta: np.ndarray) -> "_ElasticSplit":
         chain, d = plant.model(theta)
-        return cls(rec, plant.robot, np.concatenate([d["armature"], chain.inertial_params]), d, plant.offset,
-                   plant.elastic)
+        return cls(rec, plant.structure, np.concatenate([d["armature"], chain.inertial_params]), d)
 
     def x_of(self, theta: np.ndarray) -> np.ndarray:
         """Each elastic joint's (λ, f, ζ) in an elastic model's θ (of this split's layout)."""
@@ -1328,6 +1416,8 @@ class _ElasticSplit:
             th[lay.fv(j)], th[lay.fc(j)] = self.d1["viscous"][j], self.d1["coulomb"][j]
             if self.offset:
                 th[lay.of(j)] = self.d1["offset"][j]
+        for i in range(len(lay.terms)):
+            th[lay.t(i)] = self.d1["term_values"][i]
         for e, j in enumerate(self.elastic):
             th[lay.ia(e)] = pi[j]
             k = m[j, j] * (2 * math.pi * x[e, 1]) ** 2
@@ -1339,7 +1429,7 @@ class _ElasticSplit:
         if not (np.all(x[:, 0] > 0) and np.all(x[:, 0] < 1) and np.all(x[:, 1] > 0) and np.all(x[:, 2] >= 0)):
             return None
         try:
-            robot, d = _model_of(self.robot, self.base, self.offset, self.theta(x), self.elastic)
+            robot, d = _model_of(self.model, self.base, self.theta(x))
             sim = _simulate(self.rec, robot, d, law)
         except (SimulationError, DataError):
             return None
@@ -1359,7 +1449,7 @@ class _ElasticSplit:
         lower = np.tile([1e-3, -np.inf, 0.0], ne)
         upper = np.tile([1 - 1e-3, math.log(0.5 * fs), np.inf], ne)
         u, best = _spring_search(self.rec, lambda u: self.theta(unpack(u)),
-                                 lambda th: _model_of(self.robot, self.base, self.offset, th, self.elastic), u0, lower,
+                                 lambda th: _model_of(self.model, self.base, th), u0, lower,
                                  upper, law, sims)
         return unpack(u), best
 
@@ -1439,7 +1529,7 @@ def _spring_search(rec: Recording, theta_of_u: Callable[[np.ndarray], np.ndarray
     return out.x, float(np.linalg.norm(out.fun))
 
 
-def elastic_modes(rec: Recording, rigid: IdentificationResult, elastic: Tuple[int, ...], say=None
+def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say=None
                   ) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
     """Step 2 for a robot's elastic joints: from eq. (28)'s grid (every joint at once, each taking the point where its
     own force error is least), the least squares of the joints' relative closed-loop force residuals over every
@@ -1449,7 +1539,8 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, elastic: Tuple[in
     from concurrent.futures import ThreadPoolExecutor
 
     say = say or (lambda s: None)
-    split = _ElasticSplit.of_rigid(rec, rigid, elastic)
+    split = _ElasticSplit.of_rigid(rec, rigid, model)
+    elastic = split.elastic
     law = rigid.law if rigid.law is not None else _default_law(rec)
     ne, fs = len(elastic), 1 / rec.dt
     names = [rigid.robot.joint_names[j] for j in elastic]
@@ -1513,27 +1604,34 @@ def _core_count() -> int:
 
 
 def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
-                  progress: Optional[Callable[[str], None]] = None) -> IdentificationResult:
+                  progress: Optional[Callable[[str], None]] = None, rigid: Optional[IdentificationResult] = None,
+                  modes: Optional[Tuple[np.ndarray, "_ElasticSplit", Dict[str, Any]]] = None) -> IdentificationResult:
     """The three-step DIDIM of the paper's section V for a robot with elastic joints (``model.elastic``): step 1,
     DIDIM on the rigid model (:func:`didim`); step 2, each elastic joint's mass ratio, mode and damping by
     Nelder-Mead on the closed-loop force error (:func:`elastic_modes`); step 3, DIDIM on the whole model from there:
     each elastic joint's rows are its motor side's and its link side's (:func:`_model_columns`), whose simulated
     states the link rows fit exactly, so the regression moves each spring with the chain's inertia it carries and
-    keeps its mode (one axis's M2 and K12, eq. (2)): the modes and damping ratios are step 2's."""
+    keeps its mode (one axis's M2 and K12, eq. (2)): the modes and damping ratios are step 2's. ``rigid``: step 1's
+    result when it is at hand (DIDIM on the same model with every joint rigid); ``modes``: step 2's
+    (:func:`elastic_modes` from it)."""
     from dataclasses import replace
 
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     say = progress or (lambda s: None)
     elastic = elastic_of(model)
-    say("step 1: DIDIM on the rigid model")
-    rigid = didim(rec, replace(model, elastic=(), kind="rigid"), max_iter=max_iter, tol=tol, progress=progress)
+    if rigid is None:
+        say("step 1: DIDIM on the rigid model")
+        rigid = didim(rec, replace(model, elastic=(), kind="rigid"), max_iter=max_iter, tol=tol, progress=progress)
+    elif rigid.structure.elastic or rigid.structure.terms != model.terms or rigid.offset != model.offset:
+        raise DataError("step 1's result is the rigid DIDIM of the same model (its terms and offset, no elastic "
+                        f"joint), got {rigid.structure.describe()}")
     say(f"step 1: closed-loop force error {100 * rigid.force_error:.3f} %")
-    x, split, search = elastic_modes(rec, rigid, elastic, say)
+    x, split, search = modes if modes is not None else elastic_modes(rec, rigid, model, say)
     theta0 = split.theta(x)
     law = rigid.law if rigid.law is not None else _default_law(rec)
     dec = _decimation(rec)
-    plant = _RobotPlant(rec, robot, split.base, dec, offset, law, {}, tol, say, elastic=elastic)
+    plant = _RobotPlant(rec, model, split.base, dec, law, {}, tol, say)
     say("step 3: DIDIM on the elastic model")
     run = didim_loop(plant, theta0, max_iter=max_iter, progress=say)
     if run.best[2] is None:
@@ -1603,9 +1701,10 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     if start is None:
         say("oe-lm: its start, DIDIM")
         start = didim(rec, model, max_iter=max_iter, tol=tol, progress=progress)
-    if start.structure.robot is not robot or start.offset != offset or start.structure.elastic != model.elastic:
+    if start.structure.robot is not robot or start.offset != offset or start.structure.elastic != model.elastic \
+            or start.structure.terms != model.terms:
         raise DataError(f"oe-lm's start is a result of another model ({start.structure.describe()}) than the one to "
-                        f"fit ({model.describe()}): give a start of the same robot, offset and elastic joints")
+                        f"fit ({model.describe()}): give a start of the same robot, offset, elastic joints and terms")
     elastic = elastic_of(start.structure)
     theta0 = theta_of(start)
     law0 = start.law if start.law is not None else _default_law(rec)
@@ -1617,7 +1716,7 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
 
     def simulate_u(u: np.ndarray) -> Dict[str, np.ndarray]:
         th, lw = split(u)
-        robot_u, d = _model_of(robot, start.base, offset, th, elastic)
+        robot_u, d = _model_of(start.structure, start.base, th)
         return _simulate(rec, robot_u, d, lw, quantize=False)
 
     u0 = np.concatenate([theta0 / scale, np.log(np.maximum(law0[1], 1e-300))])
@@ -1637,9 +1736,8 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
                          f"{100 * start.force_error:.2f} %)",
                          "sensitivities by forward differences of the loop without encoder quantization"])
     if elastic:
-        chain, d = _model_of(robot, start.base, offset, theta, elastic)
-        split_final = _ElasticSplit(rec, robot, np.concatenate([d["armature"], chain.inertial_params]), d, offset,
-                                    elastic)
+        chain, d = _model_of(start.structure, start.base, theta)
+        split_final = _ElasticSplit(rec, start.structure, np.concatenate([d["armature"], chain.inertial_params]), d)
         x = split_final.x_of(theta)
         res.options["modes"] = {robot.joint_names[j]: {"lambda": float(x[e, 0]), "f_n_flex": float(x[e, 1]),
                                                        "zeta": float(x[e, 2]), "q_mid": float(split_final.qmid[j])}
@@ -1707,7 +1805,7 @@ class _PayloadPlant:
     def solve(self, delta: np.ndarray, sim) -> Dict[str, Any]:
         res, rec = self.result, self.rec
         q, v, a = sim["q"], sim["qd"], sim["qdd"]
-        known = np.einsum("kjp,p->kj", _model_regressor(res.robot, res.base, q, v, a, res.offset, self.law), self.theta)
+        known = np.einsum("kjp,p->kj", _model_regressor(res.structure, res.base, q, v, a, self.law), self.theta)
         w = res.robot.regressor(q, v, a)[:, :, -10:][:, :, self.free]
         rows = _rows(self.dec, rec.applied_force() - known, _joint_columns(w), w.shape[2], v, top_speeds(rec))
         est, cov, fit = _weighted_fit([(yd, wd) for yd, wd, _ in rows])

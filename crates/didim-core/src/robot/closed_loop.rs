@@ -20,7 +20,7 @@
 
 use crate::controller::TransferFunction;
 use crate::error::{invalid, Error, Result};
-use crate::model::FrictionLaw;
+use crate::model::{Basis, FrictionLaw};
 use crate::sim::closed_loop::{self, Plant};
 use crate::sim::drive::{JointDrive, Start};
 
@@ -42,6 +42,12 @@ pub struct Drives {
     pub stiffness: Vec<f64>,
     /// The springs' damping (N·m·s/rad or N·s/m; ignored on rigid joints); empty: none.
     pub damping: Vec<f64>,
+    /// Each joint's extra terms beside its viscous and Coulomb friction and offset: one axis's basis
+    /// functions ([`Basis`], of dof 0: a Stribeck hump, direction-dependent friction, a torque
+    /// along the stroke such as a counterbalance's `A sin(q + φ)`) and their values, acting where
+    /// the joint's friction acts (the rotor of an elastic joint) at its position and speed under
+    /// its friction law; empty: none on any joint.
+    pub terms: Vec<Vec<(Basis, f64)>>,
 }
 
 impl Drives {
@@ -111,6 +117,26 @@ impl Drives {
                 ));
             }
         }
+        if !self.terms.is_empty() && self.terms.len() != n {
+            return Err(invalid!(
+                "terms are given for {} joints; the robot has {n} (give each joint its list, or none at all)",
+                self.terms.len()
+            ));
+        }
+        for (j, terms) in self.terms.iter().enumerate() {
+            for (b, v) in terms {
+                if b.is_inertia() || b.couples() || b.dofs().0 != 0 {
+                    return Err(invalid!(
+                        "joint {}: a {:?} term acts on a joint's own position and speed only if it is no inertia nor coupling",
+                        j + 1,
+                        b
+                    ));
+                }
+                if !v.is_finite() {
+                    return Err(invalid!("joint {}'s term {:?} has the value {v}", j + 1, b));
+                }
+            }
+        }
         // a negative rotor inertia is refused by the dynamics only where the arm's inertia does not make up for it
         // (a base parameter that regroups it with link inertias fixes only their sum)
         Ok(())
@@ -133,12 +159,39 @@ impl Drives {
         out
     }
 
-    /// The friction and offset torque of each joint at speeds `v`.
+    /// The friction, offset and extra terms' torque of joint `j` at position `x` and speed `v`.
     #[inline(always)]
-    fn resist(&self, v: &[f64], out: &mut [f64]) {
-        for i in 0..v.len() {
-            out[i] = self.viscous[i] * v[i] + self.coulomb[i] * self.laws[i].sign(v[i]) + self.offset[i];
+    fn resist_one(&self, j: usize, x: f64, v: f64) -> f64 {
+        let law = self.laws[j];
+        let mut f = self.viscous[j] * v + self.coulomb[j] * law.sign(v) + self.offset[j];
+        if let Some(terms) = self.terms.get(j) {
+            for (b, value) in terms {
+                f += value * b.local(x, v, law).0;
+            }
         }
+        f
+    }
+
+    /// The friction, offset and extra terms' torque of each joint at positions `q`, speeds `v`.
+    #[inline(always)]
+    fn resist(&self, q: &[f64], v: &[f64], out: &mut [f64]) {
+        for i in 0..v.len() {
+            out[i] = self.resist_one(i, q[i], v[i]);
+        }
+    }
+
+    /// The slope through zero speed of joint `j`'s resisting torque at position `x` (its decay
+    /// rate times the inertia it moves).
+    fn slope_at_rest(&self, j: usize, x: f64) -> f64 {
+        let law = self.laws[j];
+        let (_, s) = law.sign_and_derivative(0.0);
+        let mut slope = self.viscous[j].abs() + self.coulomb[j].abs() * s;
+        if let Some(terms) = self.terms.get(j) {
+            for (b, value) in terms {
+                slope += (value * b.local(x, 0.0, law).2).abs();
+            }
+        }
+        slope
     }
 }
 
@@ -223,7 +276,7 @@ impl Dynamics<'_> {
         let (dv, rest) = rest.split_at_mut(n);
         let (dtheta, domega) = rest.split_at_mut(ne);
         dq.copy_from_slice(v);
-        self.drives.resist(v, &mut self.tau);
+        self.drives.resist(q, v, &mut self.tau);
         for i in 0..n {
             self.tau[i] = u[i] - self.tau[i];
         }
@@ -234,7 +287,7 @@ impl Dynamics<'_> {
             let spring =
                 d.stiffness[j] * (theta[e] - q[j]) + d.damping.get(j).map_or(0.0, |c| c * (omega[e] - v[j]));
             let w = omega[e];
-            let friction = d.viscous[j] * w + d.coulomb[j] * d.laws[j].sign(w) + d.offset[j];
+            let friction = d.resist_one(j, theta[e], w);
             dtheta[e] = w;
             domega[e] = (u[j] - friction - spring) / d.armature[j];
             self.tau[j] = spring;
@@ -396,8 +449,7 @@ pub fn auto_substeps(robot: &Robot, drives: &Drives, q0: &[f64], dt: f64) -> Res
     let mut omega: f64 = 0.0;
     let elastic = drives.elastic();
     for j in 0..robot.ndof() {
-        let (_, slope) = drives.laws[j].sign_and_derivative(0.0);
-        let friction = drives.viscous[j].abs() + drives.coulomb[j].abs() * slope;
+        let friction = drives.slope_at_rest(j, q0[j]);
         let link_inertia = link[j] + m[(j, j)];
         if elastic.contains(&j) {
             let ia = drives.armature[j];

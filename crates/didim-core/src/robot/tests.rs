@@ -339,6 +339,7 @@ fn cart_drives() -> Drives {
         laws: vec![crate::model::FrictionLaw::algebraic(1e-4)],
         stiffness: Vec::new(),
         damping: Vec::new(),
+        terms: Vec::new(),
     }
 }
 
@@ -415,6 +416,86 @@ fn a_one_joint_robot_is_one_axis_under_the_same_drive_delay_and_force_lag() {
 }
 
 #[test]
+fn a_joint_term_is_one_axis_term_on_a_one_joint_robot() {
+    // a Stribeck hump, direction-dependent Coulomb friction and a force along the stroke: the
+    // same basis functions on one axis's model and on the cart's joint give the same loop
+    use crate::model::{rigid, Basis};
+    use crate::sim::{simulate, Integrator, SimOptions};
+    use crate::Controller;
+    let (dt, n) = (1e-3, 3000);
+    let qr: Vec<f64> = (0..n)
+        .map(|k| {
+            let t = k as f64 * dt;
+            0.1 + 0.1 * (1.0 - (2.0 * std::f64::consts::PI * t / (n as f64 * dt)).cos())
+        })
+        .collect();
+    let terms = vec![
+        (Basis::Stribeck { dof: 0, vs: 0.02 }, 12.0),
+        (Basis::AbsCoulomb { dof: 0 }, 3.0),
+        (
+            Basis::Ripple {
+                dof: 0,
+                period: 0.05,
+                phase: 0.3,
+            },
+            8.0,
+        ),
+    ];
+    let model = rigid(true, 1e-4)
+        .unwrap()
+        .with_terms(
+            terms
+                .iter()
+                .enumerate()
+                .map(|(i, (b, _))| (format!("T{i}"), *b))
+                .collect(),
+        )
+        .unwrap();
+    let chi: Vec<f64> = AXIS.iter().copied().chain(terms.iter().map(|t| t.1)).collect();
+    let axis_opts = SimOptions {
+        integrator: Integrator::Rk4,
+        substeps: 10,
+        ..SimOptions::new(dt)
+    };
+    let mut drives = cart_drives();
+    drives.terms = vec![terms.clone()];
+    let r = cart(AXIS[0]);
+    let law = Controller::EMPS.law(dt).unwrap();
+    let axis = simulate(&model, &chi, &Controller::EMPS, &qr, None, &axis_opts).unwrap();
+    let arm = simulate_robot(
+        &r,
+        &drives,
+        &[law],
+        &qr,
+        &RobotLoopOptions::new(dt, 10, vec![0.0], vec![0.0]),
+    )
+    .unwrap();
+    let scale = axis.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    assert_same_loop(&axis.force, &arm.force, &[(&axis.q[0], &arm.q)], scale);
+    // the terms act: without them the loop is another
+    let bare = simulate_robot(
+        &r,
+        &cart_drives(),
+        &[law],
+        &qr,
+        &RobotLoopOptions::new(dt, 10, vec![0.0], vec![0.0]),
+    )
+    .unwrap();
+    let moved = (0..n).fold(0.0f64, |m, k| m.max((bare.force[k] - arm.force[k]).abs()));
+    assert!(moved > 1.0, "the terms should change the force: {moved}");
+    // a coupling term has no place on one joint
+    drives.terms = vec![vec![(Basis::Spring { a: 0, b: 1 }, 1.0)]];
+    assert!(simulate_robot(
+        &r,
+        &drives,
+        &[law],
+        &qr,
+        &RobotLoopOptions::new(dt, 10, vec![0.0], vec![0.0])
+    )
+    .is_err());
+}
+
+#[test]
 fn a_robot_drive_holds_its_first_command_through_its_delay_and_lag() {
     // an external force from the first sample makes the first command non-zero: the robot's
     // drive applied it before the record, as `applied_force` with it held replays
@@ -486,6 +567,7 @@ fn an_elastic_one_joint_robot_is_the_one_axis_two_mass_model() {
         laws: vec![crate::model::FrictionLaw::algebraic(1e-4)],
         stiffness: vec![k12],
         damping: vec![0.0],
+        terms: Vec::new(),
     };
     let law = Controller::EMPS.law(dt).unwrap();
     let opts = RobotLoopOptions::new(dt, 10, vec![0.0], vec![0.0]);
@@ -524,6 +606,7 @@ fn an_elastic_arm_at_rest_stays_at_rest_with_its_springs_holding_gravity() {
         laws: vec![crate::model::FrictionLaw::algebraic(1e-3)],
         stiffness: vec![k],
         damping: vec![0.5],
+        terms: Vec::new(),
     };
     let law = crate::Controller::EMPS.law(1e-3).unwrap();
     let qr = vec![q0; 500];
