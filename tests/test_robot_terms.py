@@ -88,3 +88,22 @@ def test_joint_terms_are_checked_where_the_model_is_made(d2):
         didim.Model(robot=robot, terms=[didim.Term(f"Fv_{J2}", "abs_viscous", dof=J2)])
     with pytest.raises(DataError, match="a joint's name is a robot's"):
         didim.Model("rigid", terms=[didim.Term("Fs", "stribeck", vs=0.05, dof=J2)])
+
+
+def test_a_joints_load_dependent_friction_is_fitted_back(d2):
+    """Friction that grows with the torque a joint carries (μ s(v) |τ_L|, τ_L the chain's torque on it), simulated
+    by didim's loop from the identified model with μ = 0.05 on the shoulder, is found again by DIDIM (the regressor's
+    column from the chain of each iterate)."""
+    import dataclasses
+
+    robot, rec, _, _ = d2
+    base = didim.identify(rec, robot, "didim")
+    m = didim.Model(robot=robot, offset=True, load_friction=[J2])
+    made = dataclasses.replace(base, params={**base.params, f"Fl_{J2}": 0.05}, structure=m.with_law(base.law))
+    sim = simulate_robot(rec, made)
+    synthetic = dataclasses.replace(rec, force=sim["force"], qm=np.round(sim["q"] / rec.encoder_step) * rec.encoder_step)
+    r = didim.identify(synthetic, m, "didim")
+    assert r.params[f"Fl_{J2}"] == pytest.approx(0.05, rel=0.05)
+    assert r.units[f"Fl_{J2}"] == "-"
+    with pytest.raises(DataError, match="is not a joint of the robot"):
+        didim.Model(robot=robot, load_friction=["elbow"])

@@ -128,6 +128,7 @@ def simulate_robot(
     stiffness: Optional[Sequence[float]] = None,
     damping: Optional[Sequence[float]] = None,
     terms: Optional[Sequence[Sequence[Tuple[str, Sequence[Tuple[str, float]], float]]]] = None,
+    load_friction: Optional[Sequence[float]] = None,
 ) -> Dict[str, _F64]: ...
 
 def coulomb_sign(v: _F64, eps: float = ..., law: str = "algebraic") -> _F64: ...

@@ -301,10 +301,13 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
     if not isinstance(robot, Robot) and not (isinstance(robot, Model) and robot.robot is not None):
         raise DataError(f"a robot's record is identified with its didim.Robot (didim.Robot.from_urdf(path)) or a "
                         f"didim.Model of it, got {type(robot).__name__}")
-    for name, value, why in (("apM", apM, "starts from the URDF's values"), ("initial", initial, "starts from the "
-                             "URDF's values"), ("criterion", None if criterion == "force" else criterion, "fits the force")):
+    for name, value, why in (("apM", apM, "starts from the URDF's values"),
+                             ("criterion", None if criterion == "force" else criterion, "fits the force")):
         if value is not None:
             raise DataError(f"{name} does not apply to a robot: DIDIM on a robot {why}")
+    if initial is not None and not (isinstance(initial, IdentificationResult) and initial.robot is not None):
+        raise DataError("a robot's DIDIM starts from the URDF's values, or from a result of the same robot: "
+                        f"initial=didim.load_result('r.json') (a robot's result), got {type(initial).__name__}")
     model = as_model(robot, offset=None if offset is None else _checks.flag("offset", offset),
                      elastic=options.pop("elastic", None))
     if model.law is not None:
@@ -323,12 +326,18 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
                         f"({', '.join(robot.joint_names)}), in the same order")
     chk = enforce(recording, controller_check)
     _warn_findings(recording)
+    if initial is not None and (method == "idim-ls" or initial.robot.joint_names != robot.joint_names):
+        raise DataError("initial (a result to start from) is for a robot's didim and oe-lm, with a result of the same "
+                        f"robot's joints ({', '.join(robot.joint_names)})")
+    if initial is not None:
+        # the same chain (a result read from a file has its own copy of the URDF): its parameters by name
+        initial = replace(initial, structure=replace(initial.structure, robot=robot))
     if method == "didim":
-        res = robot_didim(recording, model, progress=progress, **options)
+        res = robot_didim(recording, model, progress=progress, start=initial, **options)
     elif method == "oe-lm":
         from .methods.robot import oe_lm as robot_oe_lm
 
-        res = robot_oe_lm(recording, model, progress=progress, **options)
+        res = robot_oe_lm(recording, model, progress=progress, start=initial, **options)
     else:
         res = robot_idim_ls(recording, model)
     if chk is not None:

@@ -493,7 +493,8 @@ def cmd_doctor(args) -> int:
 
 
 def _robot_diagnosis(args):
-    """``didim doctor REC --urdf U``: the robot's base fit and where each joint's simulation and record differ."""
+    """``didim doctor REC --urdf U``: the robot's base fit, where each joint's simulation and record differ, and the
+    physics each joint misses (:func:`didim.doctor.robot.doctor_robot`)."""
     from ._errors import DataError
     from .doctor import doctor
     from .robots import Robot
@@ -504,7 +505,8 @@ def _robot_diagnosis(args):
     robot = Robot.from_urdf(args.urdf, _joints(args))
     rec = _robot_record(args, args.file, robot)
     val = _robot_record(args, args.validate, robot) if args.validate else None
-    return doctor(rec, robot, val, progress=_progress(args.quiet), controller_check=args.controller_check)
+    return doctor(rec, robot, val, alpha=args.alpha, progress=_progress(args.quiet),
+                  controller_check=args.controller_check)
 
 
 def _joints(args):

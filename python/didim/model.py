@@ -45,6 +45,8 @@ class Term:
     - ``coulomb_spline``: B((q − center)/width)·σ(q̇), ``center`` and ``width`` (m), ``side`` 1 forward, −1 backward,
       0 both (the default): a friction profile along the stroke, B the cubic B-spline (B-splines ``width`` apart sum
       to 1), σ the forward or backward part of sign(q̇), smooth through rest;
+    - ``spline``: B((q − center)/width), ``center`` and ``width`` (m): a force profile along the stroke whatever the
+      motion (a counterbalance's, a cable's), one knot's share;
     - ``gravity``: sin(q + angle_offset + phase) (N·m), q the joint angle (rad); ``A sin(q) + B cos(q)`` is two terms,
       ``phase`` 0 and π/2;
     - ``damper`` (flexible model): coupling damping in parallel with K12 (N/(m/s)).
@@ -190,6 +192,7 @@ class Model:
     coulomb_law: str = "algebraic"
     robot: Optional[Any] = None
     elastic: Tuple[str, ...] = ()
+    load_friction: Tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.kind not in MODELS:
@@ -213,6 +216,9 @@ class Model:
         if self.elastic:
             raise DataError("elastic names a robot's elastic joints; one axis's two masses are the 'flexible' kind "
                             "(didim.Model('flexible'))")
+        elif self.load_friction:
+            raise DataError("load_friction names a robot's joints whose friction grows with their torque; one axis has "
+                            "no chain to carry a load")
         elif self.coulomb_eps is not None:
             object.__setattr__(self, "coulomb_eps", _checks.real("coulomb_eps", self.coulomb_eps, "m/s", lo=0.0,
                                                                  lo_open=False))
@@ -226,7 +232,8 @@ class Model:
         if not isinstance(robot, Robot):
             raise DataError(f"a model's robot is a didim.Robot (didim.Robot.from_urdf(path)), got "
                             f"{type(robot).__name__}")
-        object.__setattr__(self, "elastic", self._elastic_joints(robot))
+        object.__setattr__(self, "elastic", self._joint_names(robot, self.elastic, "elastic"))
+        object.__setattr__(self, "load_friction", self._joint_names(robot, self.load_friction, "load_friction"))
         if self.kind == "flexible" and not self.elastic:
             raise DataError("a robot's flexible model names its elastic joints: elastic=['joint', ...] (CLI: "
                             "--elastic J1,J2 or --elastic all)")
@@ -250,13 +257,13 @@ class Model:
 
     #: The term kinds a robot's joint takes: those of one dof (a spring or damper couples two).
     JOINT_TERM_KINDS = ("offset", "viscous", "coulomb", "abs_viscous", "abs_coulomb", "stribeck", "ripple",
-                        "coulomb_ripple", "coulomb_spline", "gravity")
+                        "coulomb_ripple", "coulomb_spline", "spline", "gravity")
 
     def _check_joint_terms(self, robot) -> None:
         """Each term of a robot's model names one of its joints (``dof``) and is of a kind one joint takes; the
         names are unique and none is a drive's own parameter's."""
         names = list(robot.joint_names)
-        own = {f"{p}_{j}" for p in ("Ia", "Fv", "Fc", "OF", "K", "D") for j in names}
+        own = {f"{p}_{j}" for p in ("Ia", "Fv", "Fc", "OF", "K", "D", "Fl") for j in names}
         seen = set()
         for t in self.terms:
             if t.kind not in self.JOINT_TERM_KINDS:
@@ -267,16 +274,17 @@ class Model:
                                 f"{', '.join(names)}; got {t.dof!r}")
             if t.name in seen or t.name in own:
                 raise DataError(f"term {t.name}: the name is taken (each term's name is its parameter's: unique, "
-                                "and none of the drives' Ia_, Fv_, Fc_, OF_, K_, D_)")
+                                "and none of the drives' Ia_, Fv_, Fc_, OF_, K_, D_, Fl_)")
             seen.add(t.name)
 
-    def _elastic_joints(self, robot) -> Tuple[str, ...]:
-        """``elastic`` as the robot's joint names in its order: names, 1-based numbers, or ``"all"``."""
-        given = self.elastic
+    @staticmethod
+    def _joint_names(robot, given, what: str) -> Tuple[str, ...]:
+        """``elastic`` or ``load_friction`` (``what``) as the robot's joint names in its order: names, 1-based
+        numbers, or ``"all"``."""
         if isinstance(given, str):
             given = robot.joint_names if given.strip() == "all" else [x.strip() for x in given.split(",") if x.strip()]
         if not isinstance(given, (tuple, list)):
-            raise DataError(f"elastic is a list of the robot's joint names (or 'all'), got {type(given).__name__}")
+            raise DataError(f"{what} is a list of the robot's joint names (or 'all'), got {type(given).__name__}")
         names = list(robot.joint_names)
         out = set()
         for g in given:
@@ -285,7 +293,7 @@ class Model:
             elif isinstance(g, (int, str)) and str(g).isdigit() and 1 <= int(g) <= len(names):
                 out.add(names[int(g) - 1])
             else:
-                raise DataError(f"elastic: {g!r} is not a joint of the robot {robot.name} ({', '.join(names)}; or "
+                raise DataError(f"{what}: {g!r} is not a joint of the robot {robot.name} ({', '.join(names)}; or "
                                 f"their numbers 1..{len(names)}, or 'all')")
         return tuple(j for j in names if j in out)
 
@@ -305,6 +313,7 @@ class Model:
         if self.robot is not None:
             return (f"{self.kind} model of the {self.robot.ndof}-joint robot {self.robot.name}"
                     + (f" with elastic joints {', '.join(self.elastic)}" if self.elastic else "")
+                    + (f", load-dependent friction on {', '.join(self.load_friction)}" if self.load_friction else "")
                     + (" with an offset per joint" if self.offset else "")
                     + (f", terms {', '.join(f'{t.name} ({t.kind} on {t.dof})' for t in self.terms)}" if self.terms
                        else "")
@@ -357,6 +366,7 @@ class Model:
         for j in self.robot.joint_names:
             for p, si in (("Ia", "kg"), ("Fv", "N/(m/s)"), ("Fc", "N"), ("OF", "N"), ("K", "N/m"), ("D", "N/(m/s)")):
                 out[f"{p}_{j}"] = label(si, axis[j])
+            out[f"Fl_{j}"] = "-"
         for name in self.robot.param_names:
             out[name] = {"m": "kg", "mx": "kg·m", "my": "kg·m", "mz": "kg·m"}.get(name.split("_")[0], "kg·m²")
         for t in self.terms:
@@ -381,6 +391,8 @@ class Model:
             out["robot"] = {"name": self.robot.name, "joints": self.robot.joint_names, "urdf": self.robot.urdf}
             if self.elastic:
                 out["elastic"] = list(self.elastic)
+            if self.load_friction:
+                out["load_friction"] = list(self.load_friction)
         return out
 
     @classmethod
@@ -388,7 +400,7 @@ class Model:
         if not isinstance(d, dict):
             raise DataError(f"a model structure must be a JSON object, got {type(d).__name__}")
         unknown = set(d) - {"kind", "offset", "terms", "delay", "force_lag", "backlash_gap", "coulomb_eps",
-                             "coulomb_law", "robot", "elastic"}
+                             "coulomb_law", "robot", "elastic", "load_friction"}
         if unknown:
             raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")
         raw = d.get("terms") or []
@@ -411,7 +423,7 @@ class Model:
                    force_lag=d.get("force_lag", 0.0),
                    backlash_gap=d.get("backlash_gap"), coulomb_eps=eps,
                    coulomb_law=d.get("coulomb_law", "algebraic"), robot=robot,
-                   elastic=tuple(d.get("elastic") or ()))
+                   elastic=tuple(d.get("elastic") or ()), load_friction=tuple(d.get("load_friction") or ()))
 
     @classmethod
     def of_result(cls, kind: str, params: Dict[str, float], options: Dict[str, Any]) -> Optional["Model"]:

@@ -378,6 +378,7 @@ def _robot_dict(res: IdentificationResult) -> Dict[str, Any]:
                      "robot": {"name": res.robot.name, "joints": res.robot.joint_names, "urdf": res.robot.urdf},
                      "elastic": list(res.structure.elastic),
                      "terms": [t.to_dict() for t in res.structure.terms],
+                     "load_friction": list(res.structure.load_friction),
                      "base": {"names": list(res.base.names), "standard_names": list(res.base.standard_names),
                               "K": res.base.K.tolist(), "independent": list(res.base.independent)}})
 
@@ -438,7 +439,8 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
     _check_robot_parts(d, robot, base)
     law = None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof)
     model = Model("rigid", robot=robot, offset=bool(_field(d, "offset")), coulomb_law=law[0] if law else "algebraic",
-                  coulomb_eps=law[1] if law else None, elastic=tuple(d.get("elastic") or ()), terms=_terms_from(d))
+                  coulomb_eps=law[1] if law else None, elastic=tuple(d.get("elastic") or ()), terms=_terms_from(d),
+                  load_friction=tuple(d.get("load_friction") or ()))
     return robot_result(_field(d, "method"), dict(_field(d, "params")), dict(_field(d, "std")), model, base,
                          force_error=d.get("force_error", math.nan),
                          force_error_per_joint=dict(d.get("force_error_per_joint", {})),
@@ -476,7 +478,8 @@ def _check_robot_parts(d: Dict[str, Any], robot, base) -> None:
     elastic = [j for j in robot.joint_names if j in (d.get("elastic") or ())]
     names = list(base.names) + [f"{p}_{j}" for p in ("Ia", "Fv", "Fc") + (("OF",) if d.get("offset") else ())
                                 for j in robot.joint_names] + [f"{p}_{j}" for p in ("K", "D") for j in elastic]
-    names += [t.name for t in _terms_from(d)]
+    names += [t.name for t in _terms_from(d)] + [f"Fl_{j}" for j in robot.joint_names
+                                                   if j in (d.get("load_friction") or ())]
     missing = [k for k in names if k not in params]
     if missing:
         raise DataError(f"its params lack {', '.join(missing[:4])}{' …' if len(missing) > 4 else ''} (a parameter "

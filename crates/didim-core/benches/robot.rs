@@ -48,6 +48,7 @@ fn setup() -> (Robot, Drives, Vec<TransferFunction>, Vec<f64>) {
         stiffness: Vec::new(),
         damping: Vec::new(),
         terms: Vec::new(),
+        load_friction: Vec::new(),
     };
     // a PI velocity loop (kv·(1 + T/(ti (1 − z⁻¹)))) on kp·(qr − qm) − D(z) qm, as the data folder's
     let (dt, kp, ti) = (1e-3, 50.0, 0.0265);

@@ -140,6 +140,16 @@ pub const TERM_TABLE: &[TermKind] = &[
         },
     },
     TermKind {
+        name: "spline",
+        hypers: &[hyper("center", "m"), hyper("width", "m")],
+        doc: "a force profile's knot along the stroke: B((q − center)/width) (a counterbalance, a cable, a spring)",
+        build: |dof, h| Basis::Spline {
+            dof,
+            center: h[0],
+            width: h[1],
+        },
+    },
+    TermKind {
         name: "damper",
         hypers: &[],
         doc: "coupling damping in parallel with K12: q̇1 − q̇12 (flexible model)",
@@ -644,6 +654,11 @@ pub enum Basis {
         width: f64,
         side: i8,
     },
+    /// A force that varies along the stroke whatever the motion (N): `φ = B((q − center)/width)`,
+    /// the uniform cubic B-spline of [`Basis::CoulombSpline`]. A set of them `width` apart is a
+    /// smooth profile of force along the stroke, each parameter the force near its knot (a
+    /// counterbalance cylinder's or a cable's torque, a spring's force, an unmodelled weight).
+    Spline { dof: usize, center: f64, width: f64 },
     /// Gravity torque of a rotary joint (N·m, the core's "N" on the load side): `φ =
     /// sin(q + angle_offset + phase)`, q the joint angle (rad); the torque `A sin(q + θ0) + B cos(q + θ0)`
     /// is two terms, phases 0 and π/2, with `angle_offset` θ0 where the joint's zero is.
@@ -698,6 +713,7 @@ impl Basis {
             | Basis::Ripple { dof, .. }
             | Basis::CoulombRipple { dof, .. }
             | Basis::CoulombSpline { dof, .. }
+            | Basis::Spline { dof, .. }
             | Basis::Gravity { dof, .. } => (dof, None),
             Basis::Spring { a, b } | Basis::Damper { a, b } | Basis::Backlash { a, b, .. } => (a, Some(b)),
         }
@@ -716,7 +732,9 @@ impl Basis {
                     "a position ripple needs a finite period > 0 m and a finite phase, got {period} and {phase}"
                 ))
             }
-            Basis::CoulombSpline { center, width, .. } if !(center.is_finite() && width.is_finite() && width > 0.0) => {
+            Basis::CoulombSpline { center, width, .. } | Basis::Spline { center, width, .. }
+                if !(center.is_finite() && width.is_finite() && width > 0.0) =>
+            {
                 Err(invalid!(
                     "a friction spline needs a finite knot position (hyper, m) and a finite knot spacing width > 0 m, \
                      got {center} and {width}"
@@ -765,7 +783,9 @@ impl Basis {
             | Basis::Stribeck { .. }
             | Basis::CoulombRipple { .. }
             | Basis::CoulombSpline { .. } => Role::Friction,
-            Basis::Offset { .. } | Basis::Ripple { .. } | Basis::Gravity { .. } => Role::Force,
+            Basis::Offset { .. } | Basis::Ripple { .. } | Basis::Gravity { .. } | Basis::Spline { .. } => {
+                Role::Force
+            }
         }
     }
 
@@ -779,6 +799,7 @@ impl Basis {
             | Basis::Coulomb { .. }
             | Basis::AbsCoulomb { .. }
             | Basis::Stribeck { .. }
+            | Basis::Spline { .. }
             | Basis::Ripple { .. }
             | Basis::CoulombRipple { .. }
             | Basis::CoulombSpline { .. }
@@ -846,6 +867,10 @@ impl Basis {
             } => {
                 let (sn, cs) = (x + angle_offset + phase).sin_cos();
                 (sn, cs, 0.0)
+            }
+            Basis::Spline { center, width, .. } => {
+                let (b, db) = cubic_bspline((x - center) / width);
+                (b, db / width, 0.0)
             }
             Basis::CoulombSpline {
                 center, width, side, ..

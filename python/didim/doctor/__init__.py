@@ -86,10 +86,12 @@ class Finding:
     accepted: bool = True
     words: str = ""  # the fitted effect in an engineer's words, with units
     note: str = ""  # for a candidate not confirmed: what the held-out residual shows of it
+    joint: Optional[str] = None  # a robot's joint it acts on (None: one axis, or every joint of a robot)
 
     def to_dict(self) -> Dict[str, Any]:
         return _clean({
-            "effect": self.effect, "params": self.params, "std": self.std, "statistic": self.statistic,
+            "effect": self.effect, "joint": self.joint, "params": self.params, "std": self.std,
+            "statistic": self.statistic,
             "evidence": self.evidence, "physics": self.physics, "fit": self.fit, "where": self.where,
             "words": self.words, "note": self.note,
         })
@@ -872,7 +874,7 @@ def doctor(
         from .robot import doctor_robot
 
         return doctor_robot(recording, model, validate, progress=progress,  # type: ignore[return-value]
-                            controller_check=controller_check, offset=offset)
+                            controller_check=controller_check, offset=offset, alpha=alpha, max_findings=max_findings)
     apM, alpha, max_findings = _check_arguments(recording, model, validate, apM, alpha, max_findings, cutoff_hz,
                                                 holdout, progress)
     from ..check import enforce

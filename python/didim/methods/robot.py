@@ -157,9 +157,12 @@ def joint_regressors(res: IdentificationResult, sim: Dict[str, np.ndarray]) -> L
     v = sim["qd"] if motor is None else motor.friction_speeds(sim["qd"])
     x = sim["q"] if motor is None else motor.friction_positions(sim["q"])
     terms = joint_terms(model)
+    load = chain_of(res).rnea(sim["q"], sim["qd"], sim["qdd"]) if model.load_friction else None
     out = []
     for j, (_, m) in enumerate(cols):
         extra = [m, _sign(v[:, j], law[0], law[1][j])[:, None]]
+        if model.robot.joint_names[j] in model.load_friction:
+            extra.append((_sign(v[:, j], law[0], law[1][j]) * np.abs(load[:, j]))[:, None])
         mine = [t for jt, t in terms if jt == j]
         if mine:
             extra.append(term_columns(mine, x[:, j], v[:, j], law[0], law[1][j]))
@@ -178,20 +181,23 @@ def standard_of(res: IdentificationResult) -> np.ndarray:
 class _Layout:
     """Where each parameter sits in a robot's θ: the ``nb`` base parameters of the chain (with the rigid joints'
     rotor inertias), the elastic joints' rotor inertias, each of the ``n`` joints' Fv, Fc (and OF), the elastic
-    joints' stiffness K and damping D, then the joints' extra terms (``terms``: the joint of each). Without elastic
-    joints nor terms: the base parameters, Fv, Fc (and OF)."""
+    joints' stiffness K and damping D, then the joints' extra terms (``terms``: the joint of each), then the
+    load-dependent friction μ of the joints ``load``. Without elastic joints, terms nor load friction: the base
+    parameters, Fv, Fc (and OF)."""
 
     nb: int
     n: int
     elastic: Tuple[int, ...]
     offset: bool
     terms: Tuple[int, ...] = ()
+    load: Tuple[int, ...] = ()
 
     @classmethod
     def for_model(cls, model: Model, base: BaseParameters) -> "_Layout":
         """The layout of a robot model's θ on the base parameters ``base``."""
+        names = model.robot.joint_names
         return cls(len(base.names), model.robot.ndof, elastic_of(model), model.offset,
-                   tuple(j for j, _ in joint_terms(model)))
+                   tuple(j for j, _ in joint_terms(model)), tuple(names.index(j) for j in model.load_friction))
 
     @property
     def ne(self) -> int:
@@ -218,9 +224,12 @@ class _Layout:
     def t(self, i: int) -> int:
         return (self.d(0) + self.ne if self.ne else self.k(0)) + i
 
+    def fl(self, i: int) -> int:
+        return self.t(len(self.terms)) + i
+
     @property
     def size(self) -> int:
-        return self.t(len(self.terms))
+        return self.fl(len(self.load))
 
 
 def _theta_names(model: Model, base: BaseParameters) -> List[str]:
@@ -229,7 +238,8 @@ def _theta_names(model: Model, base: BaseParameters) -> List[str]:
     names += [f"Fv_{j}" for j in joints] + [f"Fc_{j}" for j in joints]
     if model.offset:
         names += [f"OF_{j}" for j in joints]
-    return names + [f"{p}_{joints[j]}" for p in ("K", "D") for j in elastic] + [t.name for t in model.terms]
+    return (names + [f"{p}_{joints[j]}" for p in ("K", "D") for j in elastic] + [t.name for t in model.terms]
+            + [f"Fl_{j}" for j in model.load_friction])
 
 
 def term_columns(terms, x: np.ndarray, xd: np.ndarray, shape: str, eps: float) -> np.ndarray:
@@ -467,7 +477,8 @@ class _InverseModel:
     that the laws a search compares, and DIDIM's step of ε, cost a fraction of a fit each."""
 
     def __init__(self, rec: Recording, model: Model, base: BaseParameters, q, v, a, dec,
-                 y: Optional[np.ndarray] = None, start_row: int = 0, motor: Optional[_Motor] = None):
+                 y: Optional[np.ndarray] = None, start_row: int = 0, motor: Optional[_Motor] = None,
+                 chain: Optional[Robot] = None):
         robot = model.robot
         n, nb = robot.ndof, len(base.names)
         self.lay = _Layout.for_model(model, base)
@@ -478,6 +489,9 @@ class _InverseModel:
         self.v = v if motor is None else motor.friction_speeds(v)
         self.x = q if motor is None else motor.friction_positions(q)
         self.n, self.nb = n, nb
+        # the torque each joint's link asks of it (the chain's, whose parameters ``chain`` holds: the URDF's
+        # by default), which a load-dependent friction grows with
+        self.tau_load = (chain or robot).rnea(q, v, a) if self.lay.load else None
         # each joint's Coulomb and extra terms' columns are left out here: they are the law's (see rows)
         columns, links = _model_columns(robot, base, q, v, a, self.lay, motor)
         got = _rows(dec, rec.applied_force() if y is None else y, columns, self.lay.size, self.v, top_speeds(rec),
@@ -511,6 +525,9 @@ class _InverseModel:
         for j, (yd, wd) in enumerate(self.parts):
             wl = wd.copy()
             wl[:, self.lay.fc(j)] = self.column(j, _sign(v[:, j], law[0], law[1][j]))
+            if j in self.lay.load:
+                wl[:, self.lay.fl(self.lay.load.index(j))] = self.column(
+                    j, _sign(v[:, j], law[0], law[1][j]) * np.abs(self.tau_load[:, j]))
             mine = [i for i, (jt, _) in enumerate(self.terms) if jt == j]
             if mine:
                 cols = term_columns([self.terms[i][1] for i in mine], self.x[:, j], v[:, j], law[0], law[1][j])
@@ -899,7 +916,8 @@ def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law,
                                    force0=list(map(float, force0)), substeps=substeps, coulomb_eps=list(law[1]),
                                    coulomb_law=[law[0]] * len(law[1]), u_ext=u_ext,
                                    delay=list(rec.delay) or None, force_lag=list(rec.force_lag) or None,
-                                   stiffness=d.get("stiffness"), damping=d.get("damping"), terms=d.get("terms"))
+                                   stiffness=d.get("stiffness"), damping=d.get("damping"), terms=d.get("terms"),
+                                   load_friction=d.get("load_friction"))
     except DataError as e:
         raise SimulationError(f"the robot's closed loop cannot be simulated with these parameters: {e}") from None
     return {k: v[lead:] for k, v in sim.items()} if lead else sim
@@ -1113,6 +1131,10 @@ def _model_of(model: Model, base: BaseParameters, theta: np.ndarray):
         for i, (j, t) in enumerate(joint_terms(model)):
             d["terms"][j].append((t.kind, list(t.hyper_values), float(theta[lay.t(i)])))
         d["term_values"] = [float(theta[lay.t(i)]) for i in range(len(lay.terms))]
+    if lay.load:
+        d["load_friction"] = [0.0] * n
+        for i, j in enumerate(lay.load):
+            d["load_friction"][j] = float(theta[lay.fl(i)])
     return robot.with_inertial_params(pi[n:]), d
 
 
@@ -1179,7 +1201,8 @@ class _RobotPlant:
             if np.array_equal(th, theta):
                 return im
         im = _InverseModel(self.rec, self.structure, self.base, sim["q"], sim["qd"], sim["qdd"], self.dec,
-                           start_row=self.start_row, motor=_Motor.of(sim, self.elastic))
+                           start_row=self.start_row, motor=_Motor.of(sim, self.elastic),
+                           chain=self.model(theta)[0] if self.lay.load else None)
         self.inverses = [(theta.copy(), im)] + self.inverses[:3]
         return im
 
@@ -1265,7 +1288,8 @@ def _didim_run(rec, model, base, dec, theta, law, per_shape, max_iter, tol, say,
 
 
 def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
-          progress: Optional[Callable[[str], None]] = None) -> IdentificationResult:
+          progress: Optional[Callable[[str], None]] = None, start: Optional[IdentificationResult] = None
+          ) -> IdentificationResult:
     """DIDIM from the URDF's values (rotor inertias and friction 0): the closed loop simulated with the current
     estimate, weighted least squares of the measured force on the simulated states, until the regression's residual
     changes by less than ``tol`` of itself over a step (the paper's criterion (21), every plant's); the iterations and their safeguards are those of every plant (:func:`didim.methods.didim_loop.didim_loop`): an iterate whose
@@ -1276,12 +1300,16 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     starts from IDIM-LS's estimate; when the run from the URDF's values fails (an iterate that cannot be simulated
     even pulled back, or that is not physical), it runs again from IDIM-LS's estimate and keeps the run that fits the
     training record better. The result says so.
+
+    ``start``: a result of the same robot (the model it grows by a term, as the doctor does): DIDIM starts from its
+    parameters where the model has them (a new term's at 0) instead of the URDF's values; with elastic joints, the
+    three-step DIDIM's step 3 (:func:`didim_elastic`).
     """
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     _checks.options(max_iter=max_iter, tol=tol)
     if model.elastic:
-        return didim_elastic(rec, model, max_iter=max_iter, tol=tol, progress=progress)
+        return didim_elastic(rec, model, max_iter=max_iter, tol=tol, progress=progress, start=start)
     say = progress or (lambda s: None)
     base = base_parameters(robot)
     dec = _decimation(rec)
@@ -1292,6 +1320,10 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     n = robot.ndof
     pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
     theta0 = np.concatenate([base.of(pi0), np.zeros(_Layout.for_model(model, base).size - len(base.names))])
+    if start is not None and start.structure.robot is robot and not start.structure.elastic \
+            and tuple(start.base.names) == tuple(base.names):
+        theta0 = np.array([start.params.get(k, 0.0) for k in _theta_names(model, base)])
+        say("DIDIM starts from the model it grows")
     notes: List[str] = []
     # a start whose closed loop is worse than predicting no force (or cannot be simulated) is no start: DIDIM begins
     # at IDIM-LS's estimate instead, without iterating from it first
@@ -1418,6 +1450,8 @@ class _ElasticSplit:
                 th[lay.of(j)] = self.d1["offset"][j]
         for i in range(len(lay.terms)):
             th[lay.t(i)] = self.d1["term_values"][i]
+        for i, j in enumerate(lay.load):
+            th[lay.fl(i)] = self.d1["load_friction"][j]
         for e, j in enumerate(self.elastic):
             th[lay.ia(e)] = pi[j]
             k = m[j, j] * (2 * math.pi * x[e, 1]) ** 2
@@ -1529,13 +1563,14 @@ def _spring_search(rec: Recording, theta_of_u: Callable[[np.ndarray], np.ndarray
     return out.x, float(np.linalg.norm(out.fun))
 
 
-def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say=None
+def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say=None, search: bool = True
                   ) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
     """Step 2 for a robot's elastic joints: from eq. (28)'s grid (every joint at once, each taking the point where its
     own force error is least), the least squares of the joints' relative closed-loop force residuals over every
     elastic joint's (λ, ln f, ζ) at once (:func:`_spring_search`: Levenberg-Marquardt, where the paper's Nelder-Mead
     searched one joint's two; the criterion is the paper's (25), the RMS of the joints' relative force errors).
-    Returns each joint's (λ, f in Hz, ζ), the split model, and the search's record (criterion, simulations)."""
+    Returns each joint's (λ, f in Hz, ζ), the split model, and the search's record (criterion, simulations).
+    ``search=False``: the grid's best point alone (its criterion; no least squares): a screen for a mode."""
     from concurrent.futures import ThreadPoolExecutor
 
     say = say or (lambda s: None)
@@ -1554,6 +1589,13 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
     points = [np.array([[lam, f, ELASTIC_ZETA0]] * ne) for lam, f in grid]
     with ThreadPoolExecutor(max_workers=max(1, min(len(points), _core_count()))) as pool:
         got = list(pool.map(errors, points))
+    if all(g is None for g in got):
+        raise SimulationError(
+            f"step 2: no point of eq. (28)'s grid (λ {ELASTIC_GRID_LAMBDA[0]}-{ELASTIC_GRID_LAMBDA[-1]}, locked-rotor "
+            f"modes {ELASTIC_GRID_F_SHARE[0] * fs:.3g}-{ELASTIC_GRID_F_SHARE[-1] * fs:.3g} Hz) of "
+            f"{', '.join(names)} gives a closed loop that can be simulated with the rigid step's estimate: the loop is "
+            "unstable with any such spring (check the controller's gains and the rigid step's fit; its force error "
+            f"was {100 * rigid.force_error:.1f} %)")
     x = np.zeros((ne, 3))
     for e, j in enumerate(elastic):
         vals = [g[j] if g is not None else math.inf for g in got]
@@ -1573,6 +1615,8 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
             x[e] = (grid[i][0], grid[i][1], ELASTIC_ZETA0)
     say("step 2 start (eq. (28)'s grid, each elastic joint at its best point): " + "; ".join(
         f"{nm} λ = {x[e, 0]:.2f}, f = {x[e, 1]:.1f} Hz" for e, nm in enumerate(names)))
+    if not search:
+        return x, split, {"criterion": _joints_error(errors(x)), "simulations": sims[0]}
 
     x, best = split.search(x, law, sims)
     say("step 2: " + "; ".join(f"{nm} λ = {x[e, 0]:.3f}, f = {x[e, 1]:.2f} Hz, ζ = {x[e, 2]:.3f}"
@@ -1605,7 +1649,8 @@ def _core_count() -> int:
 
 def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
                   progress: Optional[Callable[[str], None]] = None, rigid: Optional[IdentificationResult] = None,
-                  modes: Optional[Tuple[np.ndarray, "_ElasticSplit", Dict[str, Any]]] = None) -> IdentificationResult:
+                  modes: Optional[Tuple[np.ndarray, "_ElasticSplit", Dict[str, Any]]] = None,
+                  start: Optional[IdentificationResult] = None) -> IdentificationResult:
     """The three-step DIDIM of the paper's section V for a robot with elastic joints (``model.elastic``): step 1,
     DIDIM on the rigid model (:func:`didim`); step 2, each elastic joint's mass ratio, mode and damping by
     Nelder-Mead on the closed-loop force error (:func:`elastic_modes`); step 3, DIDIM on the whole model from there:
@@ -1613,13 +1658,17 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
     states the link rows fit exactly, so the regression moves each spring with the chain's inertia it carries and
     keeps its mode (one axis's M2 and K12, eq. (2)): the modes and damping ratios are step 2's. ``rigid``: step 1's
     result when it is at hand (DIDIM on the same model with every joint rigid); ``modes``: step 2's
-    (:func:`elastic_modes` from it)."""
+    (:func:`elastic_modes` from it). ``start``: an elastic result of the same robot and elastic joints (a model it
+    grows by a term, as the doctor does): steps 1 and 2 are its, step 3 starts from its parameters (a new term's at 0)
+    and law."""
     from dataclasses import replace
 
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     say = progress or (lambda s: None)
-    elastic = elastic_of(model)
+    if start is not None and start.structure.robot is robot and start.structure.elastic == model.elastic \
+            and start.offset == offset and "rigid_force_error_per_joint" in start.options:
+        return _elastic_from(rec, model, start, max_iter, tol, say, t0, sims0)
     if rigid is None:
         say("step 1: DIDIM on the rigid model")
         rigid = didim(rec, replace(model, elastic=(), kind="rigid"), max_iter=max_iter, tol=tol, progress=progress)
@@ -1630,8 +1679,31 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
     x, split, search = modes if modes is not None else elastic_modes(rec, rigid, model, say)
     theta0 = split.theta(x)
     law = rigid.law if rigid.law is not None else _default_law(rec)
-    dec = _decimation(rec)
-    plant = _RobotPlant(rec, model, split.base, dec, law, {}, tol, say)
+    plant = _RobotPlant(rec, model, split.base, _decimation(rec), law, {}, tol, say)
+    return _elastic_steps(rec, model, plant, theta0, split, search, rigid.force_error, rigid.force_error_per_joint,
+                          max_iter, say, t0, sims0)
+
+
+def _elastic_from(rec: Recording, model: Model, start: IdentificationResult, max_iter: int, tol: float, say, t0: float,
+                  sims0: int) -> IdentificationResult:
+    """Step 3 (and its rounds) of :func:`didim_elastic` from an elastic result ``start`` of the same robot and elastic
+    joints: its parameters where the model has them (a new term's at 0), its law, its step 1's errors."""
+    base = base_parameters(model.robot, elastic=elastic_of(model))
+    theta0 = np.array([start.params.get(k, 0.0) for k in _theta_names(model, base)])
+    law = start.law if start.law is not None else _default_law(rec)
+    plant = _RobotPlant(rec, model, base, _decimation(rec), law, {}, tol, say)
+    split = _ElasticSplit.of_elastic(rec, plant, theta0)
+    return _elastic_steps(rec, model, plant, theta0, split, {"criterion": math.nan, "simulations": 0},
+                          start.options["rigid_force_error"], start.options["rigid_force_error_per_joint"], max_iter,
+                          say, t0, sims0)
+
+
+def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: np.ndarray, split: "_ElasticSplit",
+                   search: Dict[str, Any], rigid_error: float, rigid_per: Dict[str, float], max_iter: int, say,
+                   t0: float, sims0: int) -> IdentificationResult:
+    """Step 3 of :func:`didim_elastic` from ``theta0`` and its rounds with step 2 again, and the result (the verdict
+    of a joint whose mode the record does not show from the rigid step's errors ``rigid_error``, ``rigid_per``)."""
+    robot, elastic, law = model.robot, elastic_of(model), plant.law
     say("step 3: DIDIM on the elastic model")
     run = didim_loop(plant, theta0, max_iter=max_iter, progress=say)
     if run.best[2] is None:
@@ -1656,8 +1728,8 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
     x = _ElasticSplit.of_elastic(rec, plant, theta).x_of(theta)  # the final model's split, modes and damping
     modes = {nm: {"lambda": float(x[e, 0]), "f_n_flex": float(x[e, 1]), "zeta": float(x[e, 2]),
                   "q_mid": float(split.qmid[j])} for e, (nm, j) in enumerate(zip(names, elastic))}
-    notes = [f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid.force_error:.2f} %"
-             + "".join(f"; {j} {100 * v:.2f} %" for j, v in rigid.force_error_per_joint.items()),
+    notes = [f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid_error:.2f} %"
+             + "".join(f"; {j} {100 * v:.2f} %" for j, v in rigid_per.items()),
              "steps 2 and 3 (each elastic joint's mass ratio λ, locked-rotor mode f_n_flex at mid-stroke and damping "
              f"ratio ζ by least squares in closed loop, {search['simulations']} simulations): " + "; ".join(
                  f"{nm} λ = {m['lambda']:.3f}, f_n_flex = {m['f_n_flex']:.2f} Hz, ζ = {m['zeta']:.3f}"
@@ -1666,19 +1738,20 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
     # of it (one axis's step 2 says the same, RIGID_LIMIT_MARGIN); its K and D mean nothing
     per = sol["force_errors"][1]
     flat = [robot.joint_names[j] for j in elastic
-            if per[robot.joint_names[j]] >= RIGID_LIMIT_MARGIN * rigid.force_error_per_joint[robot.joint_names[j]]]
+            if per[robot.joint_names[j]] >= RIGID_LIMIT_MARGIN * rigid_per[robot.joint_names[j]]]
     message = "" if run.converged else run.message
     if flat:
         message = (f"the record shows no elastic mode of {', '.join(flat)}: the elastic model explains their force no "
                    "better than the rigid one (" + "; ".join(
-                       f"{j} {100 * per[j]:.2f} % against {100 * rigid.force_error_per_joint[j]:.2f} %" for j in flat)
+                       f"{j} {100 * per[j]:.2f} % against {100 * rigid_per[j]:.2f} %" for j in flat)
                    + "); their K and D mean nothing: model them rigid")
     res = _result("didim", rec, model.with_law(sol["law"]), split.base, theta, sol["covariance"],
                   converged=run.converged and not flat,
                   iterations=len(run.history), message=message,
                   history=iterations_of(run.errors), notes=notes + run.notes)
     res.options["modes"] = modes
-    res.options["rigid_force_error"] = rigid.force_error
+    res.options["rigid_force_error"] = rigid_error
+    res.options["rigid_force_error_per_joint"] = dict(rigid_per)
     res.force_error, res.force_error_per_joint = sol["force_errors"]
     res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
     return res
@@ -1833,6 +1906,9 @@ def payload(rec: Recording, result: IdentificationResult, *, max_iter: int = 30,
     t0 = time.perf_counter()
     _robot_result(result)
     _checks.options(max_iter=max_iter, tol=tol)
+    if result.structure.load_friction or result.structure.elastic:
+        raise DataError("a payload is identified on a rigid robot's result without load-dependent friction (the "
+                        "payload changes the torques such friction grows with); identify the model without them")
     robot, n = result.robot, result.robot.ndof
     _check(rec, result.structure)
     say = progress or (lambda s: None)

@@ -48,6 +48,11 @@ pub struct Drives {
     /// the joint's friction acts (the rotor of an elastic joint) at its position and speed under
     /// its friction law; empty: none on any joint.
     pub terms: Vec<Vec<(Basis, f64)>>,
+    /// Each joint's friction that grows with the torque it carries (dimensionless μ): `μ s(v) |τ_L|`,
+    /// τ_L the torque the chain's bodies ask of the joint (the spring's on an elastic joint), at the
+    /// joint's friction speed under its law (gear-mesh and bearing friction under load); empty:
+    /// none on any joint.
+    pub load_friction: Vec<f64>,
 }
 
 impl Drives {
@@ -117,6 +122,19 @@ impl Drives {
                 ));
             }
         }
+        if !self.load_friction.is_empty() && self.load_friction.len() != n {
+            return Err(invalid!(
+                "load-dependent friction has {} values; the robot has {n} joints (give none for no such friction)",
+                self.load_friction.len()
+            ));
+        }
+        if let Some(j) = self.load_friction.iter().position(|m| !m.is_finite()) {
+            return Err(invalid!(
+                "joint {}'s load-dependent friction is {}: it must be finite",
+                j + 1,
+                self.load_friction[j]
+            ));
+        }
         if !self.terms.is_empty() && self.terms.len() != n {
             return Err(invalid!(
                 "terms are given for {} joints; the robot has {n} (give each joint its list, or none at all)",
@@ -172,11 +190,21 @@ impl Drives {
         f
     }
 
-    /// The friction, offset and extra terms' torque of each joint at positions `q`, speeds `v`.
+    /// The friction, offset and extra terms' torque of each joint at positions `q`, speeds `v`,
+    /// with the load-dependent friction of the link torques `load`.
     #[inline(always)]
-    fn resist(&self, q: &[f64], v: &[f64], out: &mut [f64]) {
+    fn resist(&self, q: &[f64], v: &[f64], load: &[f64], out: &mut [f64]) {
         for i in 0..v.len() {
-            out[i] = self.resist_one(i, q[i], v[i]);
+            out[i] = self.resist_one(i, q[i], v[i]) + self.load_part(i, v[i], load[i]);
+        }
+    }
+
+    /// Joint `j`'s load-dependent friction at speed `v` under the link torque `load`.
+    #[inline(always)]
+    fn load_part(&self, j: usize, v: f64, load: f64) -> f64 {
+        match self.load_friction.get(j) {
+            Some(&mu) if mu != 0.0 => mu * self.laws[j].sign(v) * load.abs(),
+            _ => 0.0,
         }
     }
 
@@ -194,6 +222,10 @@ impl Drives {
         slope
     }
 }
+
+/// The most fixed-point steps between the load-dependent friction and the link torques it grows
+/// with, per derivative (each divides their error by 1/μ, μ of order 0.01–0.1).
+const LOAD_ITERATIONS: usize = 8;
 
 /// How the loop is simulated.
 #[derive(Clone, Debug)]
@@ -261,12 +293,40 @@ struct Dynamics<'a> {
     /// The elastic joints and the inertia each joint adds to the chain.
     elastic: Vec<usize>,
     link_armature: Vec<f64>,
+    /// The torque the chain's bodies asked of each joint at the last derivative (the spring's on an
+    /// elastic joint): what the load-dependent friction of the next one acts with (a stage behind:
+    /// the friction and the accelerations it slows are one algebraic loop of gain μ < 1).
+    load: Vec<f64>,
+    load_before: Vec<f64>,
+    has_load: bool,
 }
 
 impl Dynamics<'_> {
-    /// The state's derivative `[q̇, q̈, θ̇, θ̈]` at `x` under the drives' forces `u`, into `out`.
+    /// The state's derivative `[q̇, q̈, θ̇, θ̈]` at `x` under the drives' forces `u`, into `out`;
+    /// with load-dependent friction, the friction and the link torques it grows with solved
+    /// together by fixed-point steps (a contraction of rate μ < 1), from the last derivative's.
     #[inline(always)]
     fn deriv(&mut self, x: &[f64], u: &[f64], out: &mut [f64]) -> Result<()> {
+        self.deriv_once(x, u, out)?;
+        if self.has_load {
+            let n = u.len();
+            for _ in 0..LOAD_ITERATIONS {
+                self.load_before.copy_from_slice(&self.load);
+                self.deriv_once(x, u, out)?;
+                let before = &self.load_before;
+                let scale = before.iter().fold(1e-300f64, |m, t| m.max(t.abs()));
+                if (0..n).all(|i| (self.load[i] - before[i]).abs() <= 1e-13 * scale) {
+                    break;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// One evaluation of the derivative with the load-dependent friction of the link torques of
+    /// the last one (which it updates).
+    #[inline(always)]
+    fn deriv_once(&mut self, x: &[f64], u: &[f64], out: &mut [f64]) -> Result<()> {
         let n = u.len();
         let ne = self.elastic.len();
         let (q, rest) = x.split_at(n);
@@ -276,7 +336,7 @@ impl Dynamics<'_> {
         let (dv, rest) = rest.split_at_mut(n);
         let (dtheta, domega) = rest.split_at_mut(ne);
         dq.copy_from_slice(v);
-        self.drives.resist(q, v, &mut self.tau);
+        self.drives.resist(q, v, &self.load, &mut self.tau);
         for i in 0..n {
             self.tau[i] = u[i] - self.tau[i];
         }
@@ -287,13 +347,21 @@ impl Dynamics<'_> {
             let spring =
                 d.stiffness[j] * (theta[e] - q[j]) + d.damping.get(j).map_or(0.0, |c| c * (omega[e] - v[j]));
             let w = omega[e];
-            let friction = d.resist_one(j, theta[e], w);
+            let friction = d.resist_one(j, theta[e], w) + d.load_part(j, w, spring);
             dtheta[e] = w;
             domega[e] = (u[j] - friction - spring) / d.armature[j];
             self.tau[j] = spring;
         }
         self.robot
-            .aba_into(q, v, &self.tau, Some(&self.link_armature), &mut self.ws, dv)
+            .aba_into(q, v, &self.tau, Some(&self.link_armature), &mut self.ws, dv)?;
+        if self.has_load {
+            // what the bodies took of each joint's torque: all of it but what moved the rotor (its
+            // spring's on an elastic joint, whose rotor is apart)
+            for i in 0..n {
+                self.load[i] = self.tau[i] - self.link_armature[i] * dv[i];
+            }
+        }
+        Ok(())
     }
 }
 
@@ -603,6 +671,9 @@ pub fn simulate_robot(
                 tau: vec![0.0; n],
                 link_armature: drives.link_armature(),
                 elastic,
+                load: vec![0.0; n],
+                load_before: vec![0.0; n],
+                has_load: drives.load_friction.iter().any(|&m| m != 0.0),
             };
             // from rest at the first reference: an elastic joint's rotor there, its link where the spring
             // holds the link side's static torque (gravity), found by a few fixed-point steps
@@ -612,6 +683,11 @@ pub fn simulate_robot(
                 x[2 * n + e] = qr[j];
             }
             settle_links(robot, drives, &dynamics.elastic, &mut x)?;
+            if dynamics.has_load {
+                // at rest the bodies ask of each joint their weight's torque
+                let rest = vec![0.0; n];
+                dynamics.load = robot.rnea(&x[..n], &rest, &rest)?;
+            }
             let mut encoder: Vec<usize> = (0..n).collect();
             for (e, &j) in dynamics.elastic.iter().enumerate() {
                 encoder[j] = 2 * n + e;

@@ -340,6 +340,7 @@ fn cart_drives() -> Drives {
         stiffness: Vec::new(),
         damping: Vec::new(),
         terms: Vec::new(),
+        load_friction: Vec::new(),
     }
 }
 
@@ -568,6 +569,7 @@ fn an_elastic_one_joint_robot_is_the_one_axis_two_mass_model() {
         stiffness: vec![k12],
         damping: vec![0.0],
         terms: Vec::new(),
+        load_friction: Vec::new(),
     };
     let law = Controller::EMPS.law(dt).unwrap();
     let opts = RobotLoopOptions::new(dt, 10, vec![0.0], vec![0.0]);
@@ -607,6 +609,7 @@ fn an_elastic_arm_at_rest_stays_at_rest_with_its_springs_holding_gravity() {
         stiffness: vec![k],
         damping: vec![0.5],
         terms: Vec::new(),
+        load_friction: Vec::new(),
     };
     let law = crate::Controller::EMPS.law(1e-3).unwrap();
     let qr = vec![q0; 500];
@@ -625,4 +628,51 @@ fn an_elastic_arm_at_rest_stays_at_rest_with_its_springs_holding_gravity() {
         );
         assert!((out.force[i] - g).abs() < 1e-9 * g.abs(), "force, sample {i}");
     }
+}
+
+#[test]
+fn a_joints_load_dependent_friction_grows_with_the_torque_its_link_asks() {
+    // a pendulum swinging under its controller, its friction μ s(v) |τ_L| with τ_L = M q̈ + g(q):
+    // the recorded states answer the implicit inverse model (the friction a stage behind the
+    // accelerations it slows, within RK4's error), and the friction changes the loop
+    let r = pendulum(2.0, 0.5, 0.01);
+    let (dt, n, mu) = (1e-3, 2000, 0.08);
+    let qr: Vec<f64> = (0..n)
+        .map(|k| 0.3 + 0.6 * (2.0 * std::f64::consts::PI * k as f64 * dt / (n as f64 * dt)).sin())
+        .collect();
+    let law = crate::Controller::EMPS.law(dt).unwrap();
+    let mut drives = Drives {
+        armature: vec![0.05],
+        viscous: vec![0.5],
+        coulomb: vec![0.3],
+        offset: vec![0.0],
+        laws: vec![crate::model::FrictionLaw::algebraic(1e-3)],
+        stiffness: Vec::new(),
+        damping: Vec::new(),
+        terms: Vec::new(),
+        load_friction: vec![mu],
+    };
+    let g0 = r.rnea(&[qr[0]], &[0.0], &[0.0]).unwrap()[0];
+    let opts = RobotLoopOptions::new(dt, 20, vec![0.0], vec![g0]);
+    let out = simulate_robot(&r, &drives, &[law], &qr, &opts).unwrap();
+    let applied = crate::sim::applied_force(&out.force, 0, 0.0, dt, out.force[0]);
+    let scale = out.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    for k in 10..n {
+        let (q, v, a) = (out.q[k], out.qd[k], out.qdd[k]);
+        let link = r.rnea(&[q], &[v], &[a]).unwrap()[0];
+        let s = drives.laws[0].sign(v);
+        let idm = 0.05 * a + link + 0.5 * v + 0.3 * s + mu * s * link.abs();
+        assert!(
+            (idm - applied[k]).abs() < 1e-5 * scale,
+            "sample {k}: {idm} vs {}",
+            applied[k]
+        );
+    }
+    drives.load_friction = Vec::new();
+    let bare = simulate_robot(&r, &drives, &[law], &qr, &opts).unwrap();
+    let moved = (0..n).fold(0.0f64, |m, k| m.max((bare.force[k] - out.force[k]).abs()));
+    assert!(
+        moved > 0.05 * scale * mu,
+        "the load friction should change the force: {moved}"
+    );
 }
