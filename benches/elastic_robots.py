@@ -1,9 +1,12 @@
 """Elastic-joint robots, measured in one run (issue 39): didim's elastic closed loop against a Python loop over
 Pinocchio's forward dynamics with the same integrator and plant (Spong's model), the three-step DIDIM and OE-LM on the
 flexrobots records on one core, and the same on an elastic robot of this script's own making (its own plant: the
-Python loop over Pinocchio, another friction law, another encoder and controllers). Writes docs/elastic_robots.md.
+Python loop over Pinocchio, another friction law, another encoder and controllers), and on held-out elastic robots
+of other kinds (``HELD_OUT``: a belt-driven prismatic axis, vertical and horizontal, with a SCARA shoulder; a UR10 under
+PID at 500 Hz), against the truth and with a rigid model beside. Writes docs/elastic_robots.md (``--held-out``: only the
+held-out robots' section, replaced in place).
 
-    python benches/elastic_robots.py [--out docs/elastic_robots.md] [--quick]
+    python benches/elastic_robots.py [--out docs/elastic_robots.md] [--quick] [--own-only] [--held-out [NAME,...]]
 
 Needs pin (Pinocchio) and example-robot-data (pip install -e '.[test]') and ../shared/data/flexrobots.
 """
@@ -21,28 +24,34 @@ import pathlib  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
+import types  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
 
 import didim  # noqa: E402
 from didim import _core  # noqa: E402
-from didim.methods.robot import deflection_errors, force_errors, simulate_robot  # noqa: E402
+from didim.methods.robot import _model_of, deflection_errors, force_errors, simulate_robot, theta_of  # noqa: E402,E501
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from robots import Law, Panda, best_of, excitation, header, write_controllers, write_record  # noqa: E402
+from heldout_robots import (PRIS_STEP, _ur_urdf, box_inertia, cascade_tf, friction_shape,  # noqa: E402
+                            own_urdf, perturb_inertia, pid_tf)
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 FLEX = pathlib.Path(os.environ.get("DIDIM_FLEXROBOTS_DIR", ROOT.parent / "shared" / "data" / "flexrobots"))
 
 
 def pin_elastic_loop(model, Ia, Fv, Fc, offset, friction, K, D, elastic, controllers, qr, dt, substeps, step, force0,
-                     noise=None):
+                     noise=None, link=False):
     """The closed loop in Python over Pinocchio's aba: rigid joints with their rotor as armature and their friction
     at the link's speed; elastic joints (``elastic``, a mask) with their rotor, friction and the drive's torque on the
-    motor side, whose position the encoder reads, and the spring K (θ − q) + D (θ̇ − q̇) on the link. RK4 with
-    ``substeps`` per sample on (q, q̇, θ, θ̇), the torque (plus ``noise``) held over the sample; from rest at the first
-    reference, the links where the springs hold gravity."""
+    motor side, whose position the encoder reads, and the spring K (θ − q) + D (θ̇ − q̇) on the link (N·m/rad, or N/m
+    on a prismatic joint). RK4 with ``substeps`` per sample on (q, q̇, θ, θ̇), the torque (plus ``noise``) held over
+    the sample; from rest at the first reference, the links where the springs hold gravity. ``step``: the encoders'
+    step, one for every joint or one per joint (rad, m; 0: no rounding); ``friction(v)``: the Coulomb law's shape of
+    the joints' speeds (a vector). Returns the force and the motor encoders, and with ``link`` the link positions q
+    too."""
     data = model.createData()
     el = np.asarray(elastic, bool)
     Ia, Fv, Fc, offset, K, D = (np.asarray(x, float) for x in (Ia, Fv, Fc, offset, K, D))
@@ -55,8 +64,10 @@ def pin_elastic_loop(model, Ia, Fv, Fc, offset, friction, K, D, elastic, control
         q = np.where(el, th - pin.computeGeneralizedGravity(model, data, q) / np.where(el, K, 1.0), th)
     v, w = np.zeros(n), np.zeros(n)
     qr0 = qr[0]
-    force, qm_log = np.empty((N, n)), np.empty((N, n))
+    force, qm_log, ql_log = np.empty((N, n)), np.empty((N, n)), np.empty((N, n))
     h = dt / substeps
+    step = np.broadcast_to(np.asarray(step, float), (n,))
+    unit = np.where(step > 0, step, 1.0)
 
     def deriv(q, v, th, w, u):
         spring = K * (th - q) + D * (w - v)
@@ -69,9 +80,9 @@ def pin_elastic_loop(model, Ia, Fv, Fc, offset, friction, K, D, elastic, control
 
     for k in range(N):
         pos = np.where(el, th, q)
-        qm = np.round(pos / step) * step if step else pos
+        qm = np.where(step > 0, np.round(pos / unit) * unit, pos)
         u = np.array([laws[j].step(qr[k, j] - qr0[j], qm[j] - qr0[j], force0[j]) for j in range(n)])
-        force[k], qm_log[k] = u, qm
+        force[k], qm_log[k], ql_log[k] = u, qm, q
         ud = u + (noise[k] if noise is not None else 0.0)
         for _ in range(substeps):
             a1, b1 = deriv(q, v, th, w, ud)
@@ -87,7 +98,7 @@ def pin_elastic_loop(model, Ia, Fv, Fc, offset, friction, K, D, elastic, control
             w = w + h / 6 * (b1 + 2 * b2 + 2 * b3 + b4)
             th = np.where(el, th, q)
             w = np.where(el, w, v)
-    return force, qm_log
+    return (force, qm_log, ql_log) if link else (force, qm_log)
 
 
 def speed(lines, seconds=10.0, substeps=10):
@@ -226,12 +237,14 @@ def with_mode_excitation(qr, elastic, top_hz, dt, rng, amplitude=0.02, count=6):
     log-spaced from 2 Hz to 1.4 times the highest mode, velocity amplitude ``amplitude`` rad/s each, random phases),
     faded in over the first second so that the move still starts at rest: without them a slow Fourier trajectory
     under a 3 Hz position loop leaves the modes unexcited, and the rigid model fits the record as well as the truth
-    (2.94 % both on this Panda)."""
+    (2.94 % both on this Panda). ``top_hz``: the highest mode, or each joint's own (one per joint: each elastic
+    joint's harmonics then end at 1.4 times its own mode)."""
     t = np.arange(len(qr)) * dt
     fade = np.where(t < 1.0, np.sin(0.5 * math.pi * np.minimum(t, 1.0)) ** 2, 1.0)
     out = qr.copy()
+    top = np.broadcast_to(np.asarray(top_hz, float), (qr.shape[1],))
     for j in np.flatnonzero(elastic):
-        for f in np.geomspace(2.0, 1.4 * top_hz, count):
+        for f in np.geomspace(2.0, 1.4 * top[j], count):
             w = 2 * math.pi * f
             out[:, j] += fade * amplitude / w * np.sin(w * t + rng.uniform(0, 2 * math.pi))
     return out
@@ -322,12 +335,322 @@ def own_robot(lines, seed=21, seconds=20.0):
     return out
 
 
+# ------------------------------------------------------------------------------------------ held-out elastic robots
+
+
+def _lift_urdf(axis=(0, 0, 1)):
+    """A lift on a belt (a prismatic axis: vertical, or along ``axis``) carrying a SCARA shoulder (revolute z) and a
+    wrist pitch (revolute y)."""
+    chain = [
+        dict(name="lift", type="prismatic", xyz=[0, 0, 0.5], rpy=[0, 0, 0], axis=list(axis), lower=-0.25, upper=0.25,
+             effort=2000.0, velocity=1.0, link="carriage", mass=9.0, com=[0.05, 0.0, 0.0],
+             inertia=box_inertia(9.0, 0.25, 0.2, 0.15)),
+        dict(name="shoulder", type="revolute", xyz=[0.1, 0, 0.1], rpy=[0, 0, 0], axis=[0, 0, 1], lower=-2.5,
+             upper=2.5, effort=150.0, velocity=3.0, link="arm1", mass=5.0, com=[0.2, 0.0, 0.0],
+             inertia=box_inertia(5.0, 0.45, 0.1, 0.08)),
+        dict(name="wrist", type="revolute", xyz=[0.4, 0, 0], rpy=[0, 0, 0], axis=[0, 1, 0], lower=-2.0, upper=2.0,
+             effort=40.0, velocity=4.0, link="arm2", mass=2.0, com=[0.15, 0.0, 0.0],
+             inertia=box_inertia(2.0, 0.3, 0.06, 0.06)),
+    ]
+    return own_urdf("lift3", f"CAD model written by benches/elastic_robots.py: a lift (prismatic along {axis}, a belt "
+                    "spring), a SCARA shoulder (z) and a wrist pitch (y)", 20.0, chain,
+                    dict(name="tool", xyz=[0.3, 0, 0]))
+
+
+#: The held-out elastic robots (issue 39's "robots of other kinds"): each a CAD URDF, which joints are elastic with
+#: their locked-rotor modes (Hz, at the start pose, the truth's chain) and damping ratios, the drives' ranges (drawn
+#: per seed), the Coulomb law's shape and smoothing speed per joint, the controller, the rate and the encoders.
+HELD_OUT = {
+    "lift": dict(
+        urdf=_lift_urdf, seed=31, dt=1e-3, q0=[0.0, 0.3, -0.4], vmax=[0.15, 1.0, 1.2], seconds=(12.0, 8.0),
+        modes={0: 14.0, 1: 19.0}, zeta={0: 0.04, 1: 0.025}, law="exp", eps=[0.003, 0.03, 0.03],
+        Ia=[(4.0, 6.0), (0.2, 0.3), (0.015, 0.03)], Fv=[(40.0, 80.0), (1.0, 2.0), (0.2, 0.4)],
+        Fc=[(15.0, 30.0), (2.0, 4.0), (0.4, 0.8)], offset=[4.0, 0.0, 0.1], mode_amplitude=[0.01, 0.02, 0.0],
+        ctl=dict(kind="cascade", f_p=3.0, ratio=3.0, fc=80.0, kff=1.0), substeps=4,
+        text="a vertical lift on a belt (prismatic, elastic, K in N/m), a SCARA shoulder (revolute z, elastic) and a "
+             "rigid wrist pitch (revolute y), written as a URDF by this script; 1 kHz; the exponential law "
+             "sign(v)(1 − exp(−|v|/ε)) (ε 3 mm/s on the lift, 0.03 rad/s on the others); one P + PI cascade per "
+             "joint with a 80 Hz low-passed velocity (`heldout_robots.cascade_tf`: 3 Hz position, 9 Hz velocity "
+             "loop); encoders of 1 µm and 2π/2²⁰ rad"),
+    "gantry": None,  # the lift's robot with its belt axis horizontal (below)
+    "ur10": dict(
+        urdf=lambda: _ur_urdf()[0], seed=41, dt=2e-3, q0=[0.0, -1.3, 1.6, -1.9, -1.57, 0.0],
+        vmax=[0.8, 0.8, 1.0, 1.2, 1.2, 1.2], seconds=(16.0, 8.0), modes={1: 7.0, 3: 21.0},
+        zeta={1: 0.03, 3: 0.02}, law="tanh", eps=[0.05] * 6,
+        Ia=[(0.8, 1.6), (1.0, 2.0), (0.4, 0.8), (0.08, 0.16), (0.06, 0.12), (0.05, 0.1)],
+        Fv=[(4.0, 8.0), (5.0, 10.0), (3.0, 6.0), (0.8, 1.6), (0.6, 1.2), (0.6, 1.2)],
+        Fc=[(6.0, 12.0), (8.0, 15.0), (5.0, 9.0), (1.5, 3.0), (1.0, 2.0), (1.0, 2.0)],
+        offset=[0.5, 1.0, 0.5, 0.2, 0.0, 0.1], mode_amplitude=[0.02] * 6,
+        ctl=dict(kind="pid", f_bw=2.5, f_d=40.0), substeps=4,
+        text="example-robot-data's UR10 (6 joints; shoulder lift and wrist 1 elastic), 500 Hz; friction tanh(v/0.05) "
+             "(5 times the flexrobots' smoothing speed); one PID per joint on the motor encoder (`heldout_robots."
+             "pid_tf`: poles at 2.5 Hz, derivative filtered at 40 Hz, velocity feedforward of half the nominal "
+             "viscous friction), not a cascade; encoders of 2π/2²⁰ rad"),
+}
+
+HELD_OUT["gantry"] = dict(
+    HELD_OUT["lift"], urdf=lambda: _lift_urdf(axis=(1, 0, 0)), offset=[1.0, 0.0, 0.1],
+    text="the lift's robot with its belt axis horizontal (x: a gantry's axis, no gravity along it; the same drives, "
+         "modes, law, controllers and encoders)")
+
+HELD_OUT["ur10_shared"] = dict(
+    HELD_OUT["ur10"], own_top=False,
+    text="the same UR10, truth and slow references, but each elastic joint's harmonics up to 1.4 times the highest "
+         "mode (21 Hz), as on the Panda, not its own: the shoulder lift's (7 Hz) reach 4 times its mode")
+
+
+def held_out_robot(name, tmp, seconds=None):
+    """One held-out elastic robot of :data:`HELD_OUT` and its training and validation records (``seconds``: their
+    lengths, by default the robot's), made by :func:`pin_elastic_loop` (with link positions as ``ql_`` columns of the
+    elastic joints): the truth (the CAD inertias perturbed as the Panda's, the drives drawn in their ranges), the
+    records (clean and with torque noise inside the loop, 0.7 % of each joint's RMS force), their truth floors (the
+    force error of the clean record, total and per joint), and the time it took."""
+    c = HELD_OUT[name]
+    c = dict(c, seconds=seconds or c["seconds"])
+    rng = np.random.default_rng(c["seed"])
+    urdf = pathlib.Path(tmp) / f"{name}_cad.urdf"
+    urdf.write_text(c["urdf"]())
+    cad = didim.Robot.from_urdf(urdf)
+    model = pin.buildModelFromUrdf(str(urdf))
+    n = model.nv
+    for i in range(1, model.njoints):
+        model.inertias[i] = perturb_inertia(model.inertias[i], rng)
+    Ia, Fv, Fc = (np.array([rng.uniform(*r) for r in c[k]]) for k in ("Ia", "Fv", "Fc"))
+    offset = np.array([rng.uniform(-o, o) for o in c["offset"]])
+    eps = np.asarray(c["eps"], float)
+    prismatic = np.array([k == "prismatic" for k in cad.joint_kinds])
+    step = np.where(prismatic, PRIS_STEP, 2 * math.pi / 2**20)
+    dt = c["dt"]
+    lim = np.array([lt[:2] for lt in cad.limits])
+    q0 = np.round(np.asarray(c["q0"], float) / step) * step
+    elastic = np.zeros(n, bool)
+    elastic[list(c["modes"])] = True
+    data = model.createData()
+    model.armature = np.zeros(n)
+    mjj = np.diag(pin.crba(model, data, q0))  # the truth's chain: each elastic joint's locked-rotor inertia
+    K, Dm = np.ones(n), np.zeros(n)
+    for j, f in c["modes"].items():
+        K[j] = mjj[j] * (2 * math.pi * f) ** 2
+        Dm[j] = 2 * c["zeta"][j] * math.sqrt(K[j] * mjj[j])
+    # the controllers from the CAD inertia at q0 and the drawn rotor inertia (a designer's nominal values)
+    jd = np.diag(cad.mass_matrix(q0)) + Ia
+    ctl = []
+    for j in range(n):
+        k = c["ctl"]
+        if k["kind"] == "pid":
+            tf, _ = pid_tf(jd[j], dt, k["f_bw"], k["f_d"], 0.5 * np.mean(c["Fv"][j]), 1e6)
+        else:
+            tf, _ = cascade_tf(jd[j], dt, k["f_p"], k["ratio"], k["fc"], k["kff"], 1e6)
+        ctl.append(types.SimpleNamespace(**tf))
+    ctl_path = pathlib.Path(tmp) / f"{name}_controller.json"
+    write_controllers(ctl_path, ctl, dt)
+    truth = {"joint_names": cad.joint_names, "Ia": list(Ia), "Fv": list(Fv), "Fc": list(Fc), "K": list(K),
+             "D": list(Dm), "offset": list(offset), "eps": list(eps), "law": c["law"], "elastic": elastic,
+             "prismatic": prismatic, "model": model,
+             "pi": np.concatenate([model.inertias[i].toDynamicParameters() for i in range(1, model.njoints)])}
+    records, t0 = {}, time.perf_counter()
+    for part, secs, draw in (("train", c["seconds"][0], 1), ("valid", c["seconds"][1], 2)):
+        qr = excitation(np.random.default_rng(c["seed"] + draw), q0, lim[:, 0], lim[:, 1], np.asarray(c["vmax"]),
+                        0.1, secs, dt)
+        base = qr.copy()
+        top = (np.array([c["modes"].get(j, 0.0) for j in range(n)]) if c.get("own_top", True) else
+               max(c["modes"].values(), default=0.0))
+        qr = with_mode_excitation(qr, elastic, top, dt, np.random.default_rng(c["seed"] + 5 * draw))
+        qr = base + (qr - base) * np.asarray(c["mode_amplitude"]) / 0.02
+        u0 = pin.computeGeneralizedGravity(model, data, qr[0]) + offset
+        args = (model, Ia, Fv, Fc, offset, lambda v: friction_shape(c["law"], v / eps), K, Dm, elastic, ctl, qr, dt,
+                c["substeps"], step, u0)
+        clean, qm0, ql0 = pin_elastic_loop(*args, link=True)
+        rms = np.sqrt(np.mean(clean ** 2, axis=0))
+        noise = np.random.default_rng(c["seed"] + 10 * draw).normal(size=(len(qr), n)) * 0.007 * rms
+        force, qm, ql = pin_elastic_loop(*args, noise=noise, link=True)
+        floor = float(np.linalg.norm(force - clean) / np.linalg.norm(force))
+        floor_j = np.linalg.norm(force - clean, axis=0) / np.linalg.norm(force, axis=0)
+        csv = pathlib.Path(tmp) / f"{name}_{part}.csv"
+        write_record(csv, qr, force, qm, dt, ql=ql, ql_joints=np.flatnonzero(elastic))
+        records[part] = (didim.load_record(csv, robot=cad, controller=ctl_path), floor, floor_j)
+    return cad, truth, records, time.perf_counter() - t0
+
+
+def replay_truth(rec, cad, t):
+    """The truth's parameters in didim's elastic closed loop on ``rec`` (its encoders, first force): the force, and the
+    deflection where the record has link positions."""
+    n = cad.ndof
+    K = [k if e else math.inf for k, e in zip(t["K"], t["elastic"])]
+    Dm = [d if e else 0.0 for d, e in zip(t["D"], t["elastic"])]
+    return _core.simulate_robot(cad.with_inertial_params(t["pi"])._core, t["Ia"], t["Fv"], t["Fc"], t["offset"],
+                                rec.core_controllers(), rec.qr, rec.dt, quantization=list(rec.encoder_step),
+                                force0=list(rec.force[0]), coulomb_eps=t["eps"], coulomb_law=[t["law"]] * n,
+                                stiffness=K, damping=Dm)
+
+
+def held_out(lines, names=tuple(HELD_OUT)):
+    """The three-step DIDIM, OE-LM from it, and the rigid DIDIM on the held-out elastic robots (one core), each
+    elastic joint against the truth: K, the mode at the method's mid-stroke pose (the truth's chain there), D, Ia, Fv,
+    Fc, the validation force over its truth floor, the validation deflection against the link side."""
+    lines += ["## Held-out elastic robots: a belt-driven lift and a PID-controlled UR10 (one core)", "",
+              "Robots of kinds the methods were not tuned on, made by this script's Python loop over Pinocchio "
+              "(`pin_elastic_loop`, RK4, 4 substeps; the truth's CAD values perturbed as the Panda's, the drives "
+              "drawn; torque noise inside the loop, 0.7 % of each joint's RMS force), each record's reference "
+              "carrying small harmonics on the elastic joints (`with_mode_excitation`: six from 2 Hz to 1.4 times the "
+              "joint's own mode, 0.02 rad/s each, 0.01 m/s on the lift). The link positions of the "
+              "elastic joints are in the records as `ql_` columns (checked, not fitted). Per elastic joint, the "
+              "relative error (%) against the truth; the mode is the method's `f_n_flex` against the truth's "
+              "locked-rotor mode √(K/M_jj) at the same pose (its `q_mid`); validation = force error on the "
+              "validation record over its truth floor; deflection = RMS error of the simulated link-minus-motor "
+              "deflection against the validation record's. Times on one core, wall clock.", ""]
+    for name in names:
+        c = HELD_OUT[name]
+        lines += [f"- **{name}**: {c['text']}. Train {c['seconds'][0]:.0f} s, validation {c['seconds'][1]:.0f} s."]
+    lines.append("")
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in names:
+            cad, t, records, gen = held_out_robot(name, tmp)
+            (rec, floor, floor_j), (val, vfloor, vfloor_j) = records["train"], records["valid"]
+            joints = t["joint_names"]
+            el = [joints[j] for j in np.flatnonzero(t["elastic"])]
+            truth_sim = replay_truth(val, cad, t)
+            truth_err, _ = force_errors(val, truth_sim["force"])
+            lines += [f"### {name}", "",
+                      f"Generating the records took {gen:.0f} s. The truth in didim's loop replays the validation "
+                      f"record to {100 * truth_err:.3f} % of its force (floor {100 * vfloor:.3f} %); the deflection "
+                      "to " + ", ".join(f"{j} {100 * v:.2f} %" for j, v in
+                                       deflection_errors(val, truth_sim, didim.Model(robot=cad, elastic=el)).items())
+                      + ".", "",
+                      "| method | time | joint | K | mode (Hz, truth) | D | Ia | Fv | Fc | validation / floor | "
+                      "deflection | converged |", "|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|---|"]
+            print(f"{name}: generated in {gen:.0f} s; truth replay {100 * truth_err:.3f} % (floor "
+                  f"{100 * vfloor:.3f} %)", flush=True)
+            start = None
+            for method in ("didim", "oe-lm"):
+                t0 = time.perf_counter()
+                try:
+                    if method == "didim":
+                        res = start = didim.identify(rec, cad, "didim", elastic=el)
+                    else:
+                        from didim.methods.robot import oe_lm
+
+                        res = oe_lm(rec, start.structure, start=start)
+                except didim.DidimError as e:
+                    lines.append(f"| {method} | failed after {time.perf_counter() - t0:.0f} s: {e} "
+                                 "| | | | | | | | | | |")
+                    if method == "didim":
+                        lines.append("| oe-lm | not run: it starts from DIDIM's estimate | | | | | | | | | | |")
+                    print(f"{name} {method}: failed: {e}", flush=True)
+                    break
+                elapsed = time.perf_counter() - t0 + (start.elapsed_s if method == "oe-lm" else 0.0)
+                vnote, vsim = "", None
+                try:
+                    vsim = simulate_robot(val, res)
+                except didim.DidimError as e:  # the estimate's loop on the validation record, didim's RK4 substeps
+                    lines.append(f"| {method} | | (validation with didim's own RK4 substeps: {e}; with 8 substeps "
+                                 "below) | | | | | | | | | |")
+                    vnote = " (8 substeps)"
+                    try:
+                        vsim = simulate_robot(val, res, substeps=8)
+                    except didim.DidimError as e8:
+                        lines.append(f"| {method} | | (validation with 8 substeps: {e8}) | | | | | | | | | |")
+                ratio = math.nan if vsim is None else force_errors(val, vsim["force"])[0] / vfloor
+                defl = {} if vsim is None else deflection_errors(val, vsim, res.structure)
+                rows = {}
+                for j in el:
+                    i = joints.index(j)
+                    qmid = np.full(cad.ndof, np.nan)
+                    for jj, m in res.options["modes"].items():
+                        qmid[joints.index(jj)] = m["q_mid"]
+                    qmid = np.where(np.isnan(qmid), 0.5 * (rec.qm.min(axis=0) + rec.qm.max(axis=0)), qmid)
+                    t["model"].armature = np.zeros(cad.ndof)
+                    f_true = math.sqrt(t["K"][i] / pin.crba(t["model"], t["model"].createData(), qmid)[i, i]) \
+                        / (2 * math.pi)
+                    e = {p: 100 * (res.params[f"{p}_{j}"] / t[p][i] - 1) for p in ("K", "D", "Ia", "Fv", "Fc")}
+                    f = res.options["modes"][j]["f_n_flex"]
+                    e["mode"] = 100 * (f / f_true - 1)
+                    rows[j] = e
+                    lines.append(f"| {method} | {elapsed:.0f} s | {j} | {e['K']:+.2f} | {f:.2f} ({f_true:.2f}), "
+                                 f"{e['mode']:+.2f} % | {e['D']:+.1f} | {e['Ia']:+.2f} | {e['Fv']:+.2f} | "
+                                 f"{e['Fc']:+.2f} | {ratio:.3f}{vnote} | {100 * defl.get(j, math.nan):.1f} % | "
+                                 f"{'yes' if res.converged else 'no: ' + res.message} |")
+                rigid_j = [joints[j] for j in range(cad.ndof) if not t["elastic"][j]]
+                worst_rigid = {p: max(abs(100 * (res.params[f"{p}_{j}"] / t[p][joints.index(j)] - 1))
+                                      for j in rigid_j) for p in ("Fv", "Fc")}
+                lines.append(f"| {method} | | rigid joints (worst) | | | | | {worst_rigid['Fv']:.2f} | "
+                             f"{worst_rigid['Fc']:.2f} | | | |")
+                out[(name, method)] = (elapsed, rows, ratio, defl, worst_rigid)
+                print(f"{name} {method}: {elapsed:.1f} s, {rows}, rigid {worst_rigid}, valid/floor {ratio:.3f}, "
+                      f"deflection {defl}, converged {res.converged} {res.message}", flush=True)
+            # what a rigid inverse model makes of each elastic joint's inertia (its rotor's and its chain's at the
+            # start pose), against the truth's: the rigid step's start when the URDF's values cannot be simulated
+            idim = didim.identify(rec, cad, "idim-ls")
+            chain, drives = _model_of(idim.robot, idim.base, idim.offset, theta_of(idim))
+            m_idim = chain.mass_matrix(rec.qm[0])
+            t["model"].armature = np.zeros(cad.ndof)
+            m_true = pin.crba(t["model"], t["model"].createData(), rec.qm[0])
+            ej = np.flatnonzero(t["elastic"])
+            lines += ["", "The rigid inverse model (IDIM-LS, on the motor encoders) takes each elastic joint's inertia "
+                      "at the start pose (rotor and chain) as " + ", ".join(
+                          f"{joints[j]} {drives['armature'][j] + m_idim[j, j]:.4g} (truth "
+                          f"{t['Ia'][j] + m_true[j, j]:.4g}, of which the rotor {t['Ia'][j]:.4g})" for j in ej)
+                      + "; its estimate has " + ("no negative mass" if np.all(chain.inertial_params[::10] > 0) else
+                                                 "a negative mass (" + ", ".join(f"{x:.3g} kg" for x in
+                                                                                 chain.inertial_params[::10]) + ")")
+                      + f" (the truth: {', '.join(f'{x:.3g}' for x in t['pi'][::10])} kg)."]
+            # the rigid model on the same records: which joint does it fail on?
+            t0 = time.perf_counter()
+            try:
+                rigid = didim.identify(rec, cad, "didim")
+            except didim.DidimError as e:
+                lines += ["", f"The rigid model (rigid DIDIM) on the same records: failed ({e}).", ""]
+                print(f"{name} rigid: failed: {e}", flush=True)
+                continue
+            t_rigid = time.perf_counter() - t0
+            verr, vper = force_errors(val, simulate_robot(val, rigid)["force"])
+            lines += ["", f"The rigid model (rigid DIDIM, {t_rigid:.0f} s, converged: "
+                      f"{'yes' if rigid.converged else 'no, ' + rigid.message}) on the same records, per joint: "
+                      "training force error over the joint's truth floor, validation over its floor:", "",
+                      "| joint | elastic | training error / floor | validation error / floor |", "|---|---|---:|---:|"]
+            for i, j in enumerate(joints):
+                lines.append(f"| {j} | {'yes' if t['elastic'][i] else 'no'} | "
+                             f"{100 * rigid.force_error_per_joint[j]:.2f} % / {100 * floor_j[i]:.2f} % = "
+                             f"{rigid.force_error_per_joint[j] / floor_j[i]:.1f} | {100 * vper[j]:.2f} % / "
+                             f"{100 * vfloor_j[i]:.2f} % = {vper[j] / vfloor_j[i]:.1f} |")
+            lines.append(f"| all | | {100 * rigid.force_error:.2f} % / {100 * floor:.2f} % | "
+                         f"{100 * verr:.2f} % / {100 * vfloor:.2f} % |")
+            lines.append("")
+            out[(name, "rigid")] = (t_rigid, rigid.force_error_per_joint, vper, floor_j, vfloor_j)
+            print(f"{name} rigid: {t_rigid:.1f} s, per joint {rigid.force_error_per_joint}, floors {floor_j}, "
+                  f"valid {vper}, {rigid.converged} {rigid.message}", flush=True)
+    return out
+
+
+def replace_section(path, lines):
+    """``lines`` (a section from its "## " heading) in the page at ``path``: in place of the section of the same
+    heading, or at the end."""
+    page = pathlib.Path(path).read_text().split("\n") if pathlib.Path(path).exists() else []
+    head = lines[0]
+    if head in page:
+        i = page.index(head)
+        k = next((m for m in range(i + 1, len(page)) if page[m].startswith("## ")), len(page))
+        page = page[:i] + lines + page[k:]
+    else:
+        page = page + ([""] if page and page[-1] else []) + lines
+    pathlib.Path(path).write_text("\n".join(page).rstrip("\n") + "\n")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default=str(ROOT / "docs" / "elastic_robots.md"))
     ap.add_argument("--quick", action="store_true", help="the speed comparison only")
     ap.add_argument("--own-only", action="store_true", help="the robot of this script's own making only")
+    ap.add_argument("--held-out", nargs="?", const=",".join(HELD_OUT), default=None, metavar="NAME[,NAME]",
+                    help="the held-out elastic robots only (default all of them): their section replaced in --out")
     args = ap.parse_args()
+    if args.held_out is not None:
+        section = []
+        held_out(section, [x for x in args.held_out.split(",") if x])
+        replace_section(args.out, section)
+        print(f"wrote {args.out}")
+        return
     lines = header("Elastic-joint robots: speed and accuracy", "benches/elastic_robots.py",
                    "Worst joint's relative error (%) against the truth.")
     if args.own_only:
@@ -339,6 +662,7 @@ def main():
         if not args.quick:
             flexrobots(lines)
             own_robot(lines)
+            held_out(lines)
     pathlib.Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
 

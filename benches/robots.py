@@ -157,7 +157,7 @@ def speed(lines):
 
 def excitation(rng, q0, lo, hi, vmax, f0, seconds, dt, harmonics=5):
     """A finite Fourier series per joint starting and ending each period at rest at q0, scaled into the limits' inner
-    80 % and under ``vmax``."""
+    80 % and under ``vmax`` (one speed for all joints, or one per joint: rad/s, m/s for a prismatic one)."""
     t = np.arange(int(round(seconds / dt)) + 1) * dt
     w = 2 * math.pi * f0
     n = len(q0)
@@ -171,7 +171,8 @@ def excitation(rng, q0, lo, hi, vmax, f0, seconds, dt, harmonics=5):
         x = sum(a[l - 1] / (w * l) * np.sin(w * l * t) - b[l - 1] / (w * l) * (np.cos(w * l * t) - 1) for l in ls)
         v = np.gradient(x, dt)
         room = 0.8 * min(hi[j] - q0[j], q0[j] - lo[j], 1.2)
-        s = min(room / max(np.max(np.abs(x)), 1e-12), vmax / max(np.max(np.abs(v)), 1e-12))
+        vcap = np.broadcast_to(vmax, (n,))[j]
+        s = min(room / max(np.max(np.abs(x)), 1e-12), vcap / max(np.max(np.abs(v)), 1e-12))
         q[:, j] = q0[j] + s * x
     return q
 
@@ -218,13 +219,17 @@ def write_controllers(path, ctl, dt) -> None:
          "a_y": list(c.a_y), "saturation": c.saturation, "gain": c.gain} for c in ctl]}))
 
 
-def write_record(path, qr, force, qm, dt) -> None:
-    """A robot record in didim's CSV layout."""
+def write_record(path, qr, force, qm, dt, ql=None, ql_joints=()) -> None:
+    """A robot record in didim's CSV layout; with ``ql``, the link-side positions of the joints ``ql_joints``
+    (indices) as ``ql_<i>`` columns (to check a model's deflection, not to fit)."""
     n = qr.shape[1]
     cols = ["t"] + [f"qr_{j + 1}" for j in range(n)] + [f"force_{j + 1}" for j in range(n)] + \
            [f"qm_{j + 1}" for j in range(n)]
-    np.savetxt(path, np.column_stack([np.arange(len(qr)) * dt, qr, force, qm]), delimiter=",",
-               header=",".join(cols), comments="", fmt="%.17g")
+    data = [np.arange(len(qr)) * dt, qr, force, qm]
+    if ql is not None:
+        cols += [f"ql_{j + 1}" for j in ql_joints]
+        data.append(ql[:, list(ql_joints)])
+    np.savetxt(path, np.column_stack(data), delimiter=",", header=",".join(cols), comments="", fmt="%.17g")
 
 
 def own_robot(lines, seed=11):
