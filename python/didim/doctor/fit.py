@@ -18,6 +18,15 @@ from ..signal import Decimation
 from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, simulate
 
 
+def cores() -> int:
+    """The processors this process may run on (its affinity: ``taskset -c 0`` gives one), not the machine's count: the
+    doctor's thread pools run their jobs in turn when there is one (threads on one processor only add switching)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # not every platform has affinities
+        return max(1, os.cpu_count() or 1)
+
+
 @dataclass(frozen=True)
 class State:
     """The model as the doctor grows it: the structure (:class:`didim.Model`: kind, offset, terms, delay, force lag,
@@ -169,7 +178,7 @@ def refit_each(data: Data, jobs: Sequence[Tuple[State, Dict[str, float]]], progr
         except DidimError as e:
             return e
 
-    workers = max(1, min(len(jobs), os.cpu_count() or 1))
+    workers = max(1, min(len(jobs), cores()))
     if workers == 1:
         return [one(j) for j in jobs]
     with ThreadPoolExecutor(workers) as pool:
@@ -237,7 +246,7 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
     fitted: Dict[Any, Tuple[State, IdentificationResult]] = {}
     known: Dict[Any, Optional[np.ndarray]] = {}
     start = state
-    workers = max(1, min(len(shapes) * 3, os.cpu_count() or 1))
+    workers = max(1, min(len(shapes) * 3, cores()))
 
     def evaluate(f, laws):
         if workers == 1 or len(laws) == 1:
