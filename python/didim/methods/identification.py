@@ -313,7 +313,7 @@ class _AxisPlant:
                          f"{MAX_STEP_RATIO:g}× or become non-positive")
 
     def __init__(self, *, rec, pb, names, free, fi, y_motor, yd_motor, ny, dec, m_fit, start_row, exclude, hint, tol,
-                 method, kind, progress):
+                 method, kind, progress, first=None):
         self.rec, self.pb, self.names, self.free_names, self.free = rec, pb, names, free, fi
         self.y_motor, self.yd_motor, self.ny, self.dec, self.m_fit = y_motor, yd_motor, ny, dec, m_fit
         self.start_row, self.exclude, self.hint, self.tol = start_row, exclude, hint, tol
@@ -322,10 +322,15 @@ class _AxisPlant:
         self.notes: List[str] = []
         self.masks: List[np.ndarray] = []  # the rows kept by the reversal exclusion in the last two iterations
         self.frozen_rows: Optional[np.ndarray] = None  # set when the iterates alternated between two masks
+        self.first = first  # (χ⁰, its system) when the caller simulated χ⁰ already: the first call uses it
 
     def simulate(self, chi: np.ndarray):
         # one call: simulate with χᵏ, build W of the simulated states, decimate Y, W and the simulated force
-        y_all, w_all, force_dec = self.pb.didim_system(chi, self.y_motor, self.free, self.dec.core)
+        if self.first is not None and np.array_equal(chi, self.first[0]):
+            y_all, w_all, force_dec = self.first[1][:3]
+        else:
+            y_all, w_all, force_dec = self.pb.didim_system(chi, self.y_motor, self.free, self.dec.core)
+        self.first = None
         if self.m_fit is not None:  # keep the training rows of each dof's block
             m = len(force_dec)
             keep = np.concatenate([np.arange(d * m, d * m + self.m_fit) for d in range(len(y_all) // m)])
@@ -495,16 +500,26 @@ def didim_iterate(
     chi = np.array([initial.get(n, frozen.get(n, 0.0)) for n in names], dtype=float)
     pb = problem(rec, model, substeps=substeps, integrator=integrator, tol=sim_tol)
     m_fit = None if fit_samples is None else -(-int(fit_samples) // dec.factor)
-    start_row = start_row_of(rec, pb, chi, dec, start)  # the first decimated row regressed
+    # the states answer the force applied: the command `delay` samples earlier, through the force lag
+    y_motor = pb.applied_force(rec.force)
+    # the first decimated row regressed, from the first iterate's own simulation (its system is the loop's first)
+    first = None
+    if start == "auto":
+        try:
+            first = (chi.copy(), pb.didim_system(chi, y_motor, fi, dec.core, with_q=True))
+            start_row = settled_row(rec, first[1][3], dec)
+        except DidimError:  # as start_row_of: 0 when the simulation fails (the iterations report it)
+            first = None
+            start_row = start_row_of(rec, pb, chi, dec, start)
+    else:
+        start_row = start_row_of(rec, pb, chi, dec, start)
     yd_motor = dec(rec.force)[:m_fit]
     ny = float(np.linalg.norm(yd_motor[start_row:]))  # the output errors leave the start out too
     _checks.measured_signal("force", ny, f"{method} ({kind})")
-    # the states answer the force applied: the command `delay` samples earlier, through the force lag
-    y_motor = pb.applied_force(rec.force)
 
     plant = _AxisPlant(rec=rec, pb=pb, names=names, free=free, fi=fi, y_motor=y_motor, yd_motor=yd_motor, ny=ny,
                        dec=dec, m_fit=m_fit, start_row=start_row, exclude=exclude, hint=hint, tol=tol, method=method,
-                       kind=kind, progress=progress)
+                       kind=kind, progress=progress, first=first)
     loop = didim_loop(plant, chi, max_iter=max_iter, divergence_factor=divergence_factor, notes=plant.notes)
     history, notes = plant.iterations, plant.notes
     chi, converged, message, n_sim, stop = loop.theta, loop.converged, loop.message, loop.simulations, loop.stop
