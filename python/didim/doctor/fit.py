@@ -155,12 +155,14 @@ class Data:
         return self.decimated_columns(columns, self.train_rows)
 
 
-def refit(data: Data, state: State, init: Dict[str, float], progress) -> Tuple[State, IdentificationResult]:
-    """DIDIM refit of ``state`` (with its new terms) from ``init``, on the training samples."""
+def refit(data: Data, state: State, init: Dict[str, float], progress,
+          give_up_above: Optional[float] = None) -> Tuple[State, IdentificationResult]:
+    """DIDIM refit of ``state`` (with its new terms) from ``init``, on the training samples; ``give_up_above`` as for
+    :func:`didim.methods.identification.didim_iterate`."""
     free_init = {k: v for k, v in {**state.params, **init}.items() if k not in state.frozen}
     # every sample: the effects the doctor looks for (Stribeck, backlash, ...) live around reversals and stops
     r = didim_iterate(data.rec, state.model, free_init, frozen=state.frozen, decimation=data.dec, tol=1e-4,
-                      max_iter=30, fit_samples=data.n_train, reversals="keep")
+                      max_iter=30, fit_samples=data.n_train, reversals="keep", give_up_above=give_up_above)
     r.set_axis(state.axis)
     return replace(state, params=dict(r.params)), r
 
