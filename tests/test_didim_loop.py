@@ -71,3 +71,21 @@ def test_an_iteration_that_goes_well_is_left_alone():
     assert loop.converged and not loop.notes
     assert plant.sims == [1.5, 1.95, 1.99, 2.0, 2.0]
     assert math.isclose(loop.theta[0], 2.0)
+
+
+def test_give_up_ends_an_iteration_that_wanders_with_its_best_iterate():
+    plant = Toy([1.4, 1.3, 1.45, 1.35, 1.42, 1.38] * 5, tol=0.0)  # wanders far from the truth, never settles
+
+    def stop(loop):
+        return "stopped: far off" if len(loop.history) >= 3 and loop.best[0] > 0.5 else None
+
+    loop = didim_loop(plant, np.array([1.5]), max_iter=30, give_up=stop)
+    assert not loop.converged and loop.message == "stopped: far off"
+    assert len(loop.history) == 3 and plant.sims == [1.5, 1.4, 1.3]
+    assert loop.best[1][0] == pytest.approx(1.5)  # the iterate closest to the truth so far
+
+
+def test_give_up_is_not_asked_once_the_iteration_has_converged():
+    asked = []
+    loop = didim_loop(Toy([1.95, 1.99]), np.array([1.5]), give_up=lambda lp: asked.append(len(lp.history)))
+    assert loop.converged and asked == [1, 2, 3, 4]  # after each iteration before the one that converged

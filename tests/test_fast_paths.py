@@ -107,6 +107,11 @@ def test_core_objectives_equal_their_python_definitions(emps):
     np.testing.assert_allclose(y, np.concatenate([p[0] for p in parts]), rtol=0, atol=1e-9)
     np.testing.assert_allclose(w, np.vstack([p[1] for p in parts]), rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(force_dec, dec(sim.force))
+    # with the simulated motor position, from the same simulation (DIDIM's start row without simulating χ⁰ twice)
+    y_q, w_q, f_q, q = pb.didim_system(TABLE3, emps.force, free, dec.core, with_q=True)
+    np.testing.assert_array_equal(q, pb.simulate(TABLE3)["q"][0])
+    for a, b in ((y_q, y), (w_q, w), (f_q, force_dec)):
+        np.testing.assert_array_equal(a, b)
     # the exact-sensitivity linearization
     r, jac = pb.linearize(TABLE3, emps.force, [0, 6], dec.core)
     s = pb.simulate_sensitivity(TABLE3)

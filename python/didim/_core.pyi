@@ -1,6 +1,6 @@
 """Type stubs of the compiled core (``crates/didim-py``). Use the ``didim`` package, not this module."""
 
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Literal, Optional, Sequence, Tuple, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -200,9 +200,14 @@ class Problem:
     def squared_error_batch(
         self, params: _F64, measured_dec: _F64, decimator: Decimation, *, output: str = "force", skip: int = 0
     ) -> Tuple[_F64, List[Optional[str]]]: ...
+    @overload
     def didim_system(
-        self, params: _F64, force: _F64, free: Sequence[int], decimator: Decimation
+        self, params: _F64, force: _F64, free: Sequence[int], decimator: Decimation, *, with_q: Literal[False] = ...
     ) -> Tuple[_F64, _F64, _F64]: ...
+    @overload
+    def didim_system(
+        self, params: _F64, force: _F64, free: Sequence[int], decimator: Decimation, *, with_q: Literal[True]
+    ) -> Tuple[_F64, _F64, _F64, _F64]: ...
     def linearize(
         self, params: _F64, measured: _F64, free: Sequence[int], decimator: Decimation, *, output: str = "force"
     ) -> Tuple[_F64, _F64]: ...

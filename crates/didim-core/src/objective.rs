@@ -43,6 +43,9 @@ pub struct DidimSystem {
     pub w: Vec<f64>,
     /// The decimated simulated force (for the output error of the iterate).
     pub force_dec: Vec<f64>,
+    /// The simulated motor position (dof 0) at the full rate: where the simulation joins the
+    /// record (the caller's start row) without simulating the iterate again.
+    pub q_motor: Vec<f64>,
 }
 
 /// The decimated residual and Jacobian of the output-error criterion.
@@ -190,7 +193,14 @@ impl<const N: usize> Problem<'_, N> {
                 wd.extend_from_slice(&blocks[d * per + 1 + f]);
             }
         }
-        Ok(DidimSystem { y, w: wd, force_dec })
+        let mut q_motor = out.q.into_flat();
+        q_motor.truncate(n);
+        Ok(DidimSystem {
+            y,
+            w: wd,
+            force_dec,
+            q_motor,
+        })
     }
 
     /// The decimated residual `dec(measured − simulated)` and Jacobian `dec(∂simulated/∂χ_free)`

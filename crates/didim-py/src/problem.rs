@@ -10,7 +10,7 @@ use didim_core::sim::{self, SimOutput};
 use didim_core::Controller;
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 
 use crate::convert::*;
 use crate::{core_error, interrupted, make_controller, quick, run, sim_options, AnyModel, Decimated};
@@ -416,7 +416,8 @@ impl Problem {
 
     /// DIDIM's decimated system at params: (y (r,), w (r, len(free)), force_dec) with the rows of
     /// every dof stacked (motor row against force minus the frozen terms, the others against minus
-    /// the frozen terms).
+    /// the frozen terms); with `with_q`, the simulated motor position (n,) as a fourth item.
+    #[pyo3(signature = (params, force, free, decimator, *, with_q=false))]
     fn didim_system<'py>(
         &self,
         py: Python<'py>,
@@ -424,7 +425,8 @@ impl Problem {
         force: PyReadonlyArray1<'py, f64>,
         free: Vec<usize>,
         decimator: &Decimation,
-    ) -> PyResult<System<'py>> {
+        with_q: bool,
+    ) -> PyResult<Bound<'py, PyTuple>> {
         let chi = slice1(&params);
         let f = slice1(&force);
         let (chi, f): (&[f64], &[f64]) = (&chi, &f);
@@ -434,11 +436,17 @@ impl Problem {
             || with_problem!(self, pb => pb.didim_system(chi, f, &free, &decimator.inner)),
         )?;
         let rows = sys.y.len();
-        Ok((
+        let system: System<'py> = (
             sys.y.into_pyarray(py),
             colmajor_to_array(py, sys.w, rows, nfree)?,
             sys.force_dec.into_pyarray(py),
-        ))
+        );
+        if with_q {
+            let (y, w, f) = system;
+            (y, w, f, sys.q_motor.into_pyarray(py)).into_pyobject(py)
+        } else {
+            system.into_pyobject(py)
+        }
     }
 
     /// The decimated residual dec(measured − simulated) and Jacobian dec(∂simulated/∂χ_free)

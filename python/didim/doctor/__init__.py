@@ -24,7 +24,6 @@ Layout: :mod:`.effects` holds one :class:`~didim.doctor.effects.Effect` per effe
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
@@ -43,7 +42,7 @@ from ..simulation import SimResult, coulomb_eps_of, default_coulomb_eps, param_n
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect, final_values,
                       params_text, separating_experiment)
-from .fit import Data, State, base_columns, fit_friction_law, refit
+from .fit import Data, State, base_columns, cores, fit_friction_law, refit
 from .words import lead_in_words, start_words
 
 #: Practical significance: an accepted effect must lower the held-out closed-loop force error by at least this share
@@ -536,10 +535,14 @@ class _Search:
         def best(e: Effect) -> Optional[Candidate]:  # the core and numpy's large operations release the interpreter
             return _best_of(e.candidates(state, sim, self.data), rt, wb, self.data, a)
 
-        from concurrent.futures import ThreadPoolExecutor
+        workers = min(2, cores())
+        if workers == 1:
+            ranked = _holm_ranked([c for c in map(best, effects) if c is not None])
+        else:
+            from concurrent.futures import ThreadPoolExecutor
 
-        with ThreadPoolExecutor(max(1, min(2, os.cpu_count() or 1))) as pool:
-            ranked = _holm_ranked([c for c in pool.map(best, effects) if c is not None])
+            with ThreadPoolExecutor(workers) as pool:
+                ranked = _holm_ranked([c for c in pool.map(best, effects) if c is not None])
         self.rounds.append({"round": len(self.rounds) + 1, "candidates": [
             {"effect": c.effect, "hyper": c.hyper, "wald": c.test.statistic, "dof": c.test.dof, "p_value": c.test.p_value,
              "p_adjusted": c.p_adj, "explained_pct": 100 * c.test.explained} for c in ranked]})

@@ -18,6 +18,15 @@ from ..signal import Decimation
 from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, simulate
 
 
+def cores() -> int:
+    """The processors this process may run on (its affinity: ``taskset -c 0`` gives one), not the machine's count: the
+    doctor's thread pools run their jobs in turn when there is one (threads on one processor only add switching)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # not every platform has affinities
+        return max(1, os.cpu_count() or 1)
+
+
 @dataclass(frozen=True)
 class State:
     """The model as the doctor grows it: the structure (:class:`didim.Model`: kind, offset, terms, delay, force lag,
@@ -146,12 +155,14 @@ class Data:
         return self.decimated_columns(columns, self.train_rows)
 
 
-def refit(data: Data, state: State, init: Dict[str, float], progress) -> Tuple[State, IdentificationResult]:
-    """DIDIM refit of ``state`` (with its new terms) from ``init``, on the training samples."""
+def refit(data: Data, state: State, init: Dict[str, float], progress,
+          give_up_above: Optional[float] = None) -> Tuple[State, IdentificationResult]:
+    """DIDIM refit of ``state`` (with its new terms) from ``init``, on the training samples; ``give_up_above`` as for
+    :func:`didim.methods.identification.didim_iterate`."""
     free_init = {k: v for k, v in {**state.params, **init}.items() if k not in state.frozen}
     # every sample: the effects the doctor looks for (Stribeck, backlash, ...) live around reversals and stops
     r = didim_iterate(data.rec, state.model, free_init, frozen=state.frozen, decimation=data.dec, tol=1e-4,
-                      max_iter=30, fit_samples=data.n_train, reversals="keep")
+                      max_iter=30, fit_samples=data.n_train, reversals="keep", give_up_above=give_up_above)
     r.set_axis(state.axis)
     return replace(state, params=dict(r.params)), r
 
@@ -169,7 +180,7 @@ def refit_each(data: Data, jobs: Sequence[Tuple[State, Dict[str, float]]], progr
         except DidimError as e:
             return e
 
-    workers = max(1, min(len(jobs), os.cpu_count() or 1))
+    workers = max(1, min(len(jobs), cores()))
     if workers == 1:
         return [one(j) for j in jobs]
     with ThreadPoolExecutor(workers) as pool:
@@ -237,7 +248,7 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
     fitted: Dict[Any, Tuple[State, IdentificationResult]] = {}
     known: Dict[Any, Optional[np.ndarray]] = {}
     start = state
-    workers = max(1, min(len(shapes) * 3, os.cpu_count() or 1))
+    workers = max(1, min(len(shapes) * 3, cores()))
 
     def evaluate(f, laws):
         if workers == 1 or len(laws) == 1:

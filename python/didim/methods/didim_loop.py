@@ -108,9 +108,12 @@ class DidimLoop:
 
 def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
                divergence_factor: float = DIVERGENCE_FACTOR, notes: Optional[List[str]] = None,
-               progress: Optional[Callable[[str], None]] = None) -> DidimLoop:
+               progress: Optional[Callable[[str], None]] = None,
+               give_up: Optional[Callable[["DidimLoop"], Optional[str]]] = None) -> DidimLoop:
     """DIDIM's iterations on ``plant`` from θ⁰ (see the module's text): at most ``max_iter`` least squares. The
-    safeguards' notes go to ``notes`` (the plant's own list, so that its notes and the loop's keep their order)."""
+    safeguards' notes go to ``notes`` (the plant's own list, so that its notes and the loop's keep their order).
+    ``give_up``, called after each iteration that has not converged, may end the iterations early: it returns the
+    message that says why (the outcome is then that of iterations that did not converge), or None to go on."""
     loop = DidimLoop(theta=np.array(theta0, dtype=float), notes=notes if notes is not None else [])
     fi = list(plant.free)
     backtracks, last_rise = 0, ""
@@ -191,6 +194,11 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
             if verdict == "restart":
                 loop.best = (math.inf, None, None, None)
                 loop.since, loop.since_step = len(loop.errors), len(loop.history)
+        if give_up is not None and not loop.converged:
+            why = give_up(loop)
+            if why:
+                loop.message = why
+                break
     if not loop.converged and not loop.message:
         loop.message = f"no convergence in {max_iter} iterations"
     return loop
