@@ -1309,7 +1309,11 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     robot, offset = _check(rec, model)
     _checks.options(max_iter=max_iter, tol=tol)
     if model.elastic:
-        return didim_elastic(rec, model, max_iter=max_iter, tol=tol, progress=progress, start=start)
+        # a rigid start of the same model is step 1's result; an elastic one, step 3's start
+        rigid = start if start is not None and not start.structure.elastic and start.structure.terms == model.terms \
+            and start.offset == model.offset and start.structure.robot is robot else None
+        return didim_elastic(rec, model, max_iter=max_iter, tol=tol, progress=progress, rigid=rigid,
+                             start=None if rigid is not None else start)
     say = progress or (lambda s: None)
     base = base_parameters(robot)
     dec = _decimation(rec)
