@@ -308,22 +308,12 @@ def own_robot(lines, seed=21, seconds=20.0):
               f"generating them took {sum(r[2] for r in records.values()):.0f} s.", "",
               "| method | time | Ia | Fv | Fc | K | D | validation / floor |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
     out = {}
-    start = None
     el = [joints[j] for j in range(n) if elastic[j]]
-    for method in ("didim", "oe-lm"):
-        t0 = time.perf_counter()
-        try:
-            if method == "didim":
-                res = start = didim.identify(rec, cad, "didim", elastic=el)
-            else:
-                from didim.methods.robot import oe_lm
-
-                res = oe_lm(rec, start.structure, start=start)
-        except didim.DidimError as e:
-            lines.append(f"| {method} | failed: {e} | | | | | | |")
-            print(f"Panda {method}: failed: {e}", flush=True)
+    for method, res, elapsed in three_step_then_oe(rec, cad, el):
+        if isinstance(res, didim.DidimError):
+            lines.append(f"| {method} | failed: {res} | | | | | | |")
+            print(f"Panda {method}: failed: {res}", flush=True)
             continue
-        elapsed = time.perf_counter() - t0 + (start.elapsed_s if method == "oe-lm" else 0.0)
         errs = truth_errors(res, truth)
         worst = {p: max(abs(x) for x in v) for p, v in errs.items()}
         err, _ = force_errors(val, simulate_robot(val, res)["force"])
@@ -333,6 +323,24 @@ def own_robot(lines, seed=21, seconds=20.0):
         print(f"Panda {method}: {elapsed:.1f} s, worst {worst}, valid/floor {err / vfloor:.3f}", flush=True)
     lines.append("")
     return out
+
+
+def three_step_then_oe(rec, cad, elastic):
+    """The three-step DIDIM on ``rec`` with the joints ``elastic``, then OE-LM from it: (method, result or the
+    DidimError it raised, seconds; OE-LM's with DIDIM's), one at a time; nothing after a failure."""
+    from didim.methods.robot import oe_lm
+
+    start = None
+    for method in ("didim", "oe-lm"):
+        t0 = time.perf_counter()
+        try:
+            res = didim.identify(rec, cad, "didim", elastic=elastic) if method == "didim" else \
+                oe_lm(rec, start.structure, start=start)
+        except didim.DidimError as e:
+            yield method, e, time.perf_counter() - t0
+            return
+        yield method, res, time.perf_counter() - t0 + (start.elapsed_s if method == "oe-lm" else 0.0)
+        start = res
 
 
 # ------------------------------------------------------------------------------------------ held-out elastic robots
@@ -522,24 +530,13 @@ def held_out(lines, names=tuple(HELD_OUT)):
                       "deflection | converged |", "|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|---|"]
             print(f"{name}: generated in {gen:.0f} s; truth replay {100 * truth_err:.3f} % (floor "
                   f"{100 * vfloor:.3f} %)", flush=True)
-            start = None
-            for method in ("didim", "oe-lm"):
-                t0 = time.perf_counter()
-                try:
-                    if method == "didim":
-                        res = start = didim.identify(rec, cad, "didim", elastic=el)
-                    else:
-                        from didim.methods.robot import oe_lm
-
-                        res = oe_lm(rec, start.structure, start=start)
-                except didim.DidimError as e:
-                    lines.append(f"| {method} | failed after {time.perf_counter() - t0:.0f} s: {e} "
-                                 "| | | | | | | | | | |")
+            for method, res, elapsed in three_step_then_oe(rec, cad, el):
+                if isinstance(res, didim.DidimError):
+                    lines.append(f"| {method} | failed after {elapsed:.0f} s: {res} | | | | | | | | | | |")
                     if method == "didim":
                         lines.append("| oe-lm | not run: it starts from DIDIM's estimate | | | | | | | | | | |")
-                    print(f"{name} {method}: failed: {e}", flush=True)
+                    print(f"{name} {method}: failed: {res}", flush=True)
                     break
-                elapsed = time.perf_counter() - t0 + (start.elapsed_s if method == "oe-lm" else 0.0)
                 vnote, vsim = "", None
                 try:
                     vsim = simulate_robot(val, res)
