@@ -364,6 +364,10 @@ def iterations_of(errors) -> List[Iteration]:
             for i, e in enumerate(errors)]
 
 
+#: What an elastic robot result keeps of its steps in its options (saved with it).
+ELASTIC_OPTIONS = ("modes", "rigid_force_error", "rigid_force_error_per_joint")
+
+
 def _robot_dict(res: IdentificationResult) -> Dict[str, Any]:
     """A robot result as JSON (``"kind": "robot"``, read back by :func:`_robot_from_dict`)."""
 
@@ -374,6 +378,8 @@ def _robot_dict(res: IdentificationResult) -> Dict[str, Any]:
                      "iterations": res.iterations, "message": res.message, "elapsed_s": res.elapsed_s,
                      "notes": res.notes, "history": [h.output_error for h in res.history],
                      "controller_check": res.options.get("controller_check"),
+                     # an elastic result's modes and its rigid step's errors (a start for step 3: didim_elastic)
+                     "elastic_steps": {k: res.options[k] for k in ELASTIC_OPTIONS if k in res.options},
                      "friction_law": None if res.law is None else {"shape": res.law[0], "eps": list(res.law[1])},
                      "robot": {"name": res.robot.name, "joints": res.robot.joint_names, "urdf": res.robot.urdf},
                      "elastic": list(res.structure.elastic),
@@ -449,7 +455,8 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
                          converged=bool(d.get("converged", True)), iterations=int(d.get("iterations", 0)),
                          message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
                          notes=list(d.get("notes", [])), history=iterations_of(d.get("history", [])),
-                         options={"controller_check": d.get("controller_check")})
+                         options={"controller_check": d.get("controller_check"),
+                                  **{k: v for k, v in (d.get("elastic_steps") or {}).items() if k in ELASTIC_OPTIONS}})
 
 
 def _terms_from(d: Dict[str, Any]) -> tuple:

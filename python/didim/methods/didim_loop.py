@@ -104,6 +104,8 @@ class DidimLoop:
     since: int = 0
     #: Where in ``history`` they began again.
     since_step: int = 0
+    #: The best iterate before the plant changed its model (kept when none after it can be simulated).
+    before_restart: tuple = (math.inf, None, None, None)
 
 
 def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
@@ -192,6 +194,7 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
                 loop.converged = True
                 break
             if verdict == "restart":
+                loop.before_restart = loop.best if loop.best[2] is not None else loop.before_restart
                 loop.best = (math.inf, None, None, None)
                 loop.since, loop.since_step = len(loop.errors), len(loop.history)
         if give_up is not None and not loop.converged:
@@ -201,6 +204,12 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
                 break
     if not loop.converged and not loop.message:
         loop.message = f"no convergence in {max_iter} iterations"
+    if loop.best[2] is None and loop.before_restart[2] is not None:
+        # nothing after the plant changed its model could be simulated (a friction law chosen in closed loop whose
+        # loop then went unstable: the KR300 from its published values): the best before it is the outcome
+        loop.best = loop.before_restart
+        loop.notes.append("no iterate after the model's change (its friction law chosen in closed loop) could be "
+                          "simulated: the best iterate before it is kept")
     return loop
 
 
