@@ -8,7 +8,8 @@ Needs the records of ``make_kr300.py`` (``kr300_A.csv``, ``kr300_B.csv``, ``kr30
 Writes, into --out: the loop's records ``A.csv``/``B.csv`` (with the counterbalance as a known torque, below) and
 ``A_plain.csv``/``B_plain.csv`` (without it, for the doctor), the controller file ``controller.json``, the results
 ``published_rigid.json``, ``published_elastic.json`` (the authors' values as didim results), ``rigid_A.json``,
-``elastic_A.json`` (didim's), ``doctor.json`` and ``kr300_loop.json`` (every number docs/kr300.md's section
+``elastic_A.json``, ``elastic_c_A.json`` (didim's: ``elastic_c`` is step 3 from the published elastic model),
+``doctor_plain.json``/``.txt`` (``doctor_cb_known`` with ``--steps doctor_cb``) and ``kr300_loop.json`` (every number docs/kr300.md's section
 "Closed-loop identification" quotes). Each step reads what the previous ones wrote: ``--steps report`` recomputes the
 tables from the saved results.
 
