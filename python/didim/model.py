@@ -358,21 +358,30 @@ class Model:
         return dict(zip(self.core().names, self.core().units))
 
     def _robot_units(self) -> Dict[str, str]:
-        from .units import label
-
+        """Each parameter's SI unit as one axis names it (m, N on the load side: "N/(m/s)"), the joint it belongs to
+        saying whether it reads per rad (:attr:`didim.IdentificationResult.units` names them so); the bodies'
+        standard parameters in their own (m kg, mx kg·m, Ixx kg·m²)."""
         out: Dict[str, str] = {}
-        axis = {j: "linear" if k == "prismatic" else "rotary" for j, k in zip(self.robot.joint_names,
-                                                                             self.robot.joint_kinds)}
         for j in self.robot.joint_names:
             for p, si in (("Ia", "kg"), ("Fv", "N/(m/s)"), ("Fc", "N"), ("OF", "N"), ("K", "N/m"), ("D", "N/(m/s)")):
-                out[f"{p}_{j}"] = label(si, axis[j])
+                out[f"{p}_{j}"] = si
             out[f"Fl_{j}"] = "-"
         for name in self.robot.param_names:
             out[name] = {"m": "kg", "mx": "kg·m", "my": "kg·m", "mz": "kg·m"}.get(name.split("_")[0], "kg·m²")
         for t in self.terms:
             core = _core_model("rigid", False, (_freeze(t.axis_spec()),), None, 1.0, "algebraic")
-            out[t.name] = label(dict(zip(core.names, core.units))[t.name], axis[t.dof])
+            out[t.name] = dict(zip(core.names, core.units))[t.name]
         return out
+
+    def joint_of(self, name: str) -> Optional[str]:
+        """The robot joint a drive parameter or term belongs to (None for a body's parameter or one axis's)."""
+        if self.robot is None:
+            return None
+        term = next((t for t in self.terms if t.name == name), None)
+        if term is not None:
+            return term.dof
+        head, _, rest = name.partition("_")
+        return rest if head in ("Ia", "Fv", "Fc", "OF", "K", "D", "Fl") and rest in self.robot.joint_names else None
 
     def roles(self) -> Dict[str, str]:
         """What each parameter is ("mass", "friction", "stiffness", "damping", "force"), from the core."""

@@ -122,7 +122,16 @@ class IdentificationResult:
 
         if self.robot is not None:  # each joint's own units; a base parameter's its first standard parameter's
             known = self.structure.units()
-            return {k: known.get(k, known.get(k.split(" ")[0], "")) for k in (*self.params, *self.frozen)}
+            kinds = dict(zip(self.robot.joint_names, self.robot.joint_kinds))
+
+            def unit(k: str) -> str:
+                first = k if k in known else k.split(" ")[0]  # a base parameter: its first standard parameter's
+                joint = self.structure.joint_of(first)
+                if joint is None:
+                    return known.get(first, "")
+                return label(known.get(first, ""), "linear" if kinds[joint] == "prismatic" else "rotary")
+
+            return {k: unit(k) for k in (*self.params, *self.frozen)}
         known = self.structure.units() if self.structure is not None else {}
         return {k: label(known.get(k, UNITS.get(k, "")), self.axis) for k in (*self.params, *self.frozen)}
 

@@ -231,6 +231,13 @@ ROBOT_PHYSICS = {
 }
 
 
+def _physics(effect: str) -> str:
+    """The sentence of physics of an effect: a robot joint's own, or one axis's (the doctor's registry)."""
+    from .effects import REGISTRY
+
+    return ROBOT_PHYSICS[effect] if effect in ROBOT_PHYSICS else REGISTRY[effect].physics if effect in REGISTRY else ""
+
+
 @dataclass
 class _Candidate:
     """One effect on one joint (``joint`` None: on every joint), as its full-rate regressor columns on each joint it
@@ -624,7 +631,7 @@ def _attempt(c: _Candidate, state: _State, alpha: float, dec, progress):
     """Adopts ``c`` and judges it on the validation record (one-sided Diebold-Mariano on the decimated residual of
     the joints it acts on, and a practical gain of ``MIN_HELDOUT_GAIN`` of their force error): the finding, and the new
     state when accepted."""
-    from . import MIN_HELDOUT_GAIN, PHYSICS, Finding
+    from .finding import MIN_HELDOUT_GAIN, Finding
     from ..methods.robot import simulate_robot
     from ..stats import diebold_mariano
 
@@ -637,7 +644,7 @@ def _attempt(c: _Candidate, state: _State, alpha: float, dec, progress):
         after = simulate_robot(new.valid, new.res)["force"]
     except DidimError as e:
         return Finding(c.effect, {}, {}, {"p_adjusted": c.p_adj}, f"refit failed: {e}",
-                       ROBOT_PHYSICS.get(c.effect, PHYSICS.get(c.effect, "")), accepted=False, joint=jn), None, None
+                       _physics(c.effect), accepted=False, joint=jn), None, None
     rv0, rv1 = (_joint_residuals(state.valid, f, joints, dec) for f in (before, after))
     dm, p_dm, gain = diebold_mariano(rv0, rv1)
 
@@ -675,7 +682,7 @@ def _attempt(c: _Candidate, state: _State, alpha: float, dec, progress):
                      f"{100 * MIN_HELDOUT_GAIN:.0f} % of itself")
     evidence += evidence_own
     unit = "N" if c.joint is not None and robot.joint_kinds[c.joint] == "prismatic" else "N·m"
-    f = Finding(c.effect, params, std, stat, evidence, ROBOT_PHYSICS.get(c.effect, PHYSICS.get(c.effect, "")), fit,
+    f = Finding(c.effect, params, std, stat, evidence, _physics(c.effect), fit,
                 where={"hyper": c.hyper}, accepted=bool(p_dm < alpha and practical),
                 words=_words(c.effect, params, unit), joint=jn)
     return f, (new if f.accepted else None), (joints, before, after)
@@ -735,7 +742,8 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
     from ..check import enforce
     from ..methods.robot import force_errors, simulate_robot, top_speeds
     from ..signal import Decimation
-    from . import PHYSICS, Finding, separating_experiment
+    from .effects import separating_experiment
+    from .finding import Finding
 
     if validate is not None and not (isinstance(validate, Recording) and validate.has_joint_columns):
         raise DataError(f"validate must be a robot's record like the training one, got {type(validate).__name__}")
@@ -813,7 +821,7 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
                                     f"{_names(c, robot)[1]} (adjusted p = {c.p_adj:.2g}), but its training fit does "
                                     f"not carry over to the held-out record (it would change the mean square of its "
                                     f"residual there by {-100 * gain:+.1f} %): not adopted",
-                                    ROBOT_PHYSICS.get(c.effect, PHYSICS.get(c.effect, "")), accepted=False,
+                                    _physics(c.effect), accepted=False,
                                     joint=_names(c, robot)[0])
                         rejected.append(f)
                         say(f"rejected {c.effect} {_names(c, robot)[1]}: {f.evidence}")
