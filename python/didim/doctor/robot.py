@@ -642,7 +642,8 @@ def _attempt(c: _Candidate, state: _State, alpha: float, dec, progress):
         new, params, std = _adopt(c, state, progress)
         before = simulate_robot(state.valid, state.res)["force"]
         after = simulate_robot(new.valid, new.res)["force"]
-    except DidimError as e:
+        own = _own_share(c, new, before)
+    except DidimError as e:  # the refit, or its loop on the held-out record, failed: the effect is not adopted
         return Finding(c.effect, {}, {}, {"p_adjusted": c.p_adj}, f"refit failed: {e}",
                        _physics(c.effect), accepted=False, joint=jn), None, None
     rv0, rv1 = (_joint_residuals(state.valid, f, joints, dec) for f in (before, after))
@@ -662,7 +663,6 @@ def _attempt(c: _Candidate, state: _State, alpha: float, dec, progress):
                 f"{where} {100 * fit['valid_before']:.2f} % -> {100 * fit['valid_after']:.2f} % (Diebold-Mariano p = "
                 f"{p_dm:.2g})")
     practical = fit["valid_after"] < (1 - MIN_HELDOUT_GAIN) * fit["valid_before"]
-    own = _own_share(c, new, before)
     if own is not None:
         # a refit moves every parameter, and a joint's held-out error can fall with them: the term's own torque on
         # the held-out record must make the practical share of the joint's residual (a Stribeck hump of 0.4 % of a
@@ -792,7 +792,12 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
             # the tests on the loop without the encoders' rounding: the rounding's chatter of a simulated loop moves
             # its force and its states together, and would correlate with any fast column built on them (a mode's
             # fourth derivative of position took 6 % of the rigid UR5's residual that way)
-            sim = simulate_robot(state.train, state.res, quantize=False)
+            try:
+                sim = simulate_robot(state.train, state.res, quantize=False)
+            except DidimError as e:
+                notes.append(f"the rounds stopped: the model's loop without the encoders' rounding cannot be "
+                             f"simulated ({e})")
+                break
             resid = _Residuals(state.train, state.res, sim, dec)
             ranked = _rank(resid, _candidates(state.train, state.res, sim, done))
             rounds.append({"round": len(rounds) + 1, "candidates": [
@@ -813,7 +818,10 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
             for c in significant[:TRIES_PER_ROUND]:
                 done.add((c.effect, c.joint))
                 if c.joint is not None and c.effect not in ("flexibility",):
-                    carries, gain = _carries_over(c, state, dec, alpha)
+                    try:
+                        carries, gain = _carries_over(c, state, dec, alpha)
+                    except DidimError:  # the current model's loop on the held-out record: the refit will say
+                        carries, gain = True, math.nan
                     if not carries:
                         f = Finding(c.effect, {}, {}, {"p_adjusted": c.p_adj, "explained_pct": 100 * c.test.explained,
                                                        "valid_predicted_reduction_pct": 100 * gain},
