@@ -33,6 +33,10 @@ cascade (P position loop, PI velocity loop, velocity feed-forward, velocity = fi
 difference of qm). Every record's force column is replayed from the CSV and the JSON by a second, independent filter
 implementation (direct form I) and the mismatch is printed and stored.
 
+``closed_loop(..., effect=...)`` conceals one effect the rigid model lacks (Stribeck, asymmetric Coulomb, a
+counterbalance spring, load-dependent friction, a one-sample delay, a force lag): benches/robot_doctor_heldout.py's
+records; this script's own records are rigid.
+
 Truth floor of a record: the same closed loop with the truth and without d (same qr, same encoder);
 ||force_record - force_sim|| / ||force_record|| over all samples, and per joint.
 """
