@@ -43,7 +43,7 @@ FLEX = pathlib.Path(os.environ.get("DIDIM_FLEXROBOTS_DIR", ROOT.parent / "shared
 
 
 def pin_elastic_loop(model, Ia, Fv, Fc, offset, friction, K, D, elastic, controllers, qr, dt, substeps, step, force0,
-                     noise=None, link=False):
+                     noise=None, link=False, backlash=None):
     """The closed loop in Python over Pinocchio's aba: rigid joints with their rotor as armature and their friction
     at the link's speed; elastic joints (``elastic``, a mask) with their rotor, friction and the drive's torque on the
     motor side, whose position the encoder reads, and the spring K (θ − q) + D (θ̇ − q̇) on the link (N·m/rad, or N/m
@@ -51,8 +51,10 @@ def pin_elastic_loop(model, Ia, Fv, Fc, offset, friction, K, D, elastic, control
     the sample; from rest at the first reference, the links where the springs hold gravity. ``step``: the encoders'
     step, one for every joint or one per joint (rad, m; 0: no rounding); ``friction(v)``: the Coulomb law's shape of
     the joints' speeds (a vector). Returns the force and the motor encoders, and with ``link`` the link positions q
-    too."""
+    too. ``backlash`` (per joint, the total width b of a dead zone, rad or m; None: none): the elastic joints' motor
+    and link coupled through it, K (x − clip(x, −b/2, b/2)) + D (θ̇ − q̇)·[|x| > b/2], x = θ − q."""
     data = model.createData()
+    gap = 0.5 * np.broadcast_to(np.asarray(0.0 if backlash is None else backlash, float), (model.nv,))
     el = np.asarray(elastic, bool)
     Ia, Fv, Fc, offset, K, D = (np.asarray(x, float) for x in (Ia, Fv, Fc, offset, K, D))
     model.armature = np.where(el, 0.0, Ia)
@@ -61,7 +63,8 @@ def pin_elastic_loop(model, Ia, Fv, Fc, offset, friction, K, D, elastic, control
     th = qr[0].copy()
     q = th.copy()
     for _ in range(100):  # K (θ − q) = g(q) on the elastic joints
-        q = np.where(el, th - pin.computeGeneralizedGravity(model, data, q) / np.where(el, K, 1.0), th)
+        g = pin.computeGeneralizedGravity(model, data, q)
+        q = np.where(el, th - g / np.where(el, K, 1.0) - np.sign(g) * gap, th)
     v, w = np.zeros(n), np.zeros(n)
     qr0 = qr[0]
     force, qm_log, ql_log = np.empty((N, n)), np.empty((N, n)), np.empty((N, n))
@@ -70,7 +73,11 @@ def pin_elastic_loop(model, Ia, Fv, Fc, offset, friction, K, D, elastic, control
     unit = np.where(step > 0, step, 1.0)
 
     def deriv(q, v, th, w, u):
-        spring = K * (th - q) + D * (w - v)
+        if backlash is None:
+            spring = K * (th - q) + D * (w - v)
+        else:
+            x = th - q
+            spring = K * (x - np.clip(x, -gap, gap)) + D * (w - v) * (np.abs(x) > gap)
         fr_link = Fv * v + Fc * friction(v) + offset
         fr_motor = Fv * w + Fc * friction(w) + offset
         tau = np.where(el, spring, u - fr_link)

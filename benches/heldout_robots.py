@@ -33,6 +33,10 @@ cascade (P position loop, PI velocity loop, velocity feed-forward, velocity = fi
 difference of qm). Every record's force column is replayed from the CSV and the JSON by a second, independent filter
 implementation (direct form I) and the mismatch is printed and stored.
 
+``closed_loop(..., effect=...)`` conceals one effect the rigid model lacks (Stribeck, asymmetric Coulomb, a
+counterbalance spring, load-dependent friction, a one-sample delay, a force lag): benches/robot_doctor_heldout.py's
+records; this script's own records are rigid.
+
 Truth floor of a record: the same closed loop with the truth and without d (same qr, same encoder);
 ||force_record - force_sim|| / ||force_record|| over all samples, and per joint.
 """
@@ -618,9 +622,40 @@ def ideal_torque(model, data, Ia, Fv, Fc, off, law, eps, qs, vs, accs):
 # the closed loop
 
 
-def closed_loop(model, Ia, Fv, Fc, off, law, eps, ctl_json, qr, dt, substeps, steps, force0, noise=None):
+def load_friction_acc(model, data, q, v, tau, Ia, j, c):
+    """The acceleration of (M(q) + diag Ia) qdd + nle(q, v) = tau - x e_j with the load-dependent friction
+    x = c |tau_L,j| (c = mu s(v_j)), tau_L = M(q) qdd + nle(q, v) the links' torque (without the rotor's Ia qdd),
+    solved exactly: x moves qdd along (M + Ia)^-1 e_j, so tau_L,j = a - b x is affine in x and x = c |a - b x| has
+    the root of the sign it takes (unique for |c b| < 1). ``model.armature`` = Ia."""
+    e_j = np.zeros(model.nv)
+    e_j[j] = 1.0
+    a0 = pin.aba(model, data, q, v, tau).copy()
+    unit = pin.aba(model, data, q, v, tau + e_j) - a0  # (M + Ia)^-1 e_j
+    a, b = tau[j] - Ia[j] * a0[j], 1.0 - Ia[j] * unit[j]
+    x = c * a / (1.0 + c * b)
+    if a - b * x < 0.0:
+        x = -c * a / (1.0 - c * b)
+    return a0 - x * unit
+
+
+def closed_loop(model, Ia, Fv, Fc, off, law, eps, ctl_json, qr, dt, substeps, steps, force0, noise=None,
+                effect=None):
     """RK4 over pin.aba (armature = Ia), ``substeps`` per sample, u + noise held over the sample; ``steps`` the encoder
-    steps (None: no quantisation, qm = q). Returns force, qm, and the true q and v at the sample instants."""
+    steps (None: no quantisation, qm = q). Returns force, qm, and the true q and v at the sample instants.
+
+    ``effect`` (None: the rigid plant above) adds ONE effect the rigid model lacks, a dict with ``kind`` and, on one
+    joint, ``joint`` (0-based):
+
+    - ``stribeck``: friction += dF exp(-(v/vst)^2) s(v) on the joint (s the Coulomb shape of ``law``);
+    - ``asymmetric``: the joint's Coulomb term Fc s(v) becomes Fc_plus max(s, 0) + Fc_minus min(s, 0);
+    - ``spring``: the link torque += -k sin(q + phi) + c on the joint (a counterbalance or a cable);
+    - ``load``: friction += mu s(v) |tau_L| on the joint, tau_L = M(q) qdd + C qd + g (the links only, without
+      the rotor's Ia qdd), solved exactly (tau_L is affine in the added torque x: x = mu s |a - b x|);
+    - ``delay``: u[k] (logged at row k) is applied over [t_{k+1}, t_{k+2}) on every joint, u[-1] = force0; the
+      noise d[k] still acts over [t_k, t_{k+1});
+    - ``lag``: the applied torque tau_a lags u by a first-order lag on every joint, tau_a' = (u - tau_a)/T (solved
+      exactly over the sample, u held), tau_a(0) = force0; the plant gets tau_a + d.
+    """
     model = model.copy()
     model.armature = np.asarray(Ia, float).copy()
     data = model.createData()
@@ -642,8 +677,29 @@ def closed_loop(model, Ia, Fv, Fc, off, law, eps, ctl_json, qr, dt, substeps, st
     shape = {"algebraic": lambda x: x / np.sqrt(1.0 + x * x), "tanh": np.tanh,
              "atan": lambda x: (2.0 / math.pi) * np.arctan((math.pi / 2.0) * x),
              "exp": lambda x: np.sign(x) * (-np.expm1(-np.abs(x)))}[law]
+    kind = effect["kind"] if effect else None
+    j = effect.get("joint") if effect else None
+    e_j = np.zeros(n)
+    if j is not None:
+        e_j[j] = 1.0
+
+    def acc(q, v, tau):
+        """The plant's acceleration under the drive torque ``tau`` (friction and the effect subtracted here)."""
+        s = shape(v * inv_eps)
+        t = tau - Fv * v - Fc * s
+        if kind == "stribeck":
+            t = t - e_j * (effect["dF"] * math.exp(-(v[j] / effect["vst"]) ** 2) * s[j])
+        elif kind == "asymmetric":
+            t = t + e_j * (Fc[j] * s[j] - effect["Fc_plus"] * max(s[j], 0.0) - effect["Fc_minus"] * min(s[j], 0.0))
+        elif kind == "spring":
+            t = t + e_j * (-effect["k"] * math.sin(q[j] + effect["phi"]) + effect["c"])
+        elif kind == "load":
+            return load_friction_acc(model, data, q, v, t, Ia, j, effect["mu"] * s[j])
+        return aba(model, data, q, v, t)
+
     saturated = False
     force0_ld = np.asarray(force0, np.longdouble) / np.asarray(gain, np.longdouble)
+    u_prev = np.asarray(force0, float).copy()  # the delay's u[k - 1] and the lag's tau_a at t_k
     for k in range(N):
         qm = np.round(q / steps) * steps if steps is not None else q.copy()
         u = np.asarray(Fr.step(qr[k] - qr0) - Fy.step(qm - qr0) + force0_ld, np.float64)
@@ -652,15 +708,28 @@ def closed_loop(model, Ia, Fv, Fc, off, law, eps, ctl_json, qr, dt, substeps, st
             u = np.clip(u, -sat, sat)
         u = gain * u
         force[k], qm_log[k], q_log[k], v_log[k] = u, qm, q, v
-        tau = u - off if noise is None else u + noise[k] - off
-        for _ in range(substeps):
-            k1 = aba(model, data, q, v, tau - Fv * v - Fc * shape(v * inv_eps))
+        d = 0.0 if noise is None else noise[k]
+        if kind == "delay":
+            tau, u_prev = u_prev + d - off, u
+        else:
+            tau = u + d - off
+        if kind == "lag":
+            # tau_a(s) = u + (tau_a(t_k) - u) exp(-s/T) over the sample, s from t_k
+            lag0, T = u_prev - u, effect["T"]
+            u_prev = u + lag0 * math.exp(-dt / T)
+        for i in range(substeps):
+            if kind == "lag":
+                s0 = i * h
+                t1, t2, t4 = (tau + lag0 * math.exp(-(s0 + x) / T) for x in (0.0, hh, h))
+            else:
+                t1 = t2 = t4 = tau
+            k1 = acc(q, v, t1)
             v2 = v + hh * k1
-            k2 = aba(model, data, q + hh * v, v2, tau - Fv * v2 - Fc * shape(v2 * inv_eps))
+            k2 = acc(q + hh * v, v2, t2)
             v3 = v + hh * k2
-            k3 = aba(model, data, q + hh * v2, v3, tau - Fv * v3 - Fc * shape(v3 * inv_eps))
+            k3 = acc(q + hh * v2, v3, t2)
             v4 = v + h * k3
-            k4 = aba(model, data, q + h * v3, v4, tau - Fv * v4 - Fc * shape(v4 * inv_eps))
+            k4 = acc(q + h * v3, v4, t4)
             q = q + h6 * (v + 2 * v2 + 2 * v3 + v4)
             v = v + h6 * (k1 + 2 * k2 + 2 * k3 + k4)
     return dict(force=force, qm=qm_log, q=q_log, v=v_log, saturated=saturated)
