@@ -48,7 +48,9 @@ def test_a_term_on_a_dof_the_model_lacks_is_refused_by_name(emps):
     with pytest.raises(didim.DataError, match="term Fs2 refers to a degree of freedom outside this 1-dof model"):
         didim.simulate(emps, {"M": 95.0, "Fv": 200.0, "Fc": 20.0, "Fs2": 1.0}, "rigid",
                        terms=[didim.Term("Fs2", "stribeck", 0.01, "load")])
-    with pytest.raises(didim.DataError, match="term Fs2's dof must be one of 'motor', 'load', got 'joint'"):
-        didim.Term("Fs2", "stribeck", 0.01, "joint")
+    # a dof that is neither is a robot joint's name: one axis's model refuses it, naming the two it has
+    with pytest.raises(didim.DataError, match="term Fs2's dof is 'joint': one axis's terms act on the 'motor' or the "
+                                              "'load'"):
+        didim.Model("rigid", terms=[didim.Term("Fs2", "stribeck", 0.01, "joint")])
     with pytest.raises(didim.DataError, match="a damper couples the motor and the load"):
         didim.Term("C12", "damper", 0.0, "load")
