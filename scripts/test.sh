@@ -12,4 +12,6 @@ cargo fmt --all -- --check
 cargo clippy --workspace --all-targets -- -D warnings
 cargo test --workspace --all-targets
 python3 -m mypy.stubtest didim._core
-python3 -m pytest -q tests
+# one pytest worker per core (pytest-xdist): the robot and doctor tests are long and mostly one-threaded; a
+# worker takes the next test when it is free, so the long ones do not queue behind each other
+python3 -m pytest -q -n auto --dist worksteal tests

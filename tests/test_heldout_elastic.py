@@ -3,7 +3,10 @@ loop over Pinocchio written apart from didim, and didim's elastic closed loop ar
 parameters in didim's loop replay each record to its truth floor (the noise inside the loop, which didim's loop does
 not have) and the link side to the deflection the record logs: on a belt-driven prismatic lift under gravity (K in
 N/m, 1 µm encoder, exponential friction law, P + PI cascade, 1 kHz) and on the UR10 (PID, 500 Hz, tanh law), each
-with two elastic joints. What didim identifies from these records is measured in docs/elastic_robots.md."""
+with two elastic joints. What didim identifies from these records is measured in docs/elastic_robots.md
+(`python benches/elastic_robots.py --held-out`), the three-step DIDIM's failure on the vertical lift among it: not a
+test here, because since step 2 starts inside its bounds its search on that stiff 12 s loop runs for more than 15
+minutes before it fails."""
 
 import numpy as np
 import pytest
@@ -32,20 +35,6 @@ def test_the_truth_in_didims_loop_replays_a_held_out_elastic_robots_record_to_it
     defl = deflection_errors(rec, sim, didim.Model(robot=cad, elastic=elastic))
     assert sorted(defl) == sorted(elastic)
     assert max(defl.values()) < 0.03, defl
-
-
-@pytest.mark.xfail(strict=True, raises=didim.SimulationError,
-                   reason="step 2 keeps the rigid step's total inertia of the lift (10.5 kg) below its moved mass "
-                          "(17.2 kg, from gravity) and moves the rotor's share into the carriage's mass: every split "
-                          "needs a negative mass, and step 3 stops on its start (docs/elastic_robots.md)")
-def test_the_three_step_didim_finds_the_spring_of_a_vertical_elastic_lift(tmp_path):
-    """The held-out lift's belt (a vertical prismatic joint, K in N/m) within 5 % after the three-step DIDIM, as the
-    same robot's horizontal axis is (the gantry: 0.14 %)."""
-    bench = bench_module("elastic_robots")
-    cad, truth, records, _ = bench.held_out_robot("lift", tmp_path, seconds=(12.0, 1.0))
-    rec = records["train"][0]
-    res = didim.identify(rec, cad, "didim", elastic=["lift", "shoulder"])
-    assert res.params["K_lift"] == pytest.approx(truth["K"][0], rel=0.05)
 
 
 def test_a_rigid_step_that_cannot_start_on_an_elastic_record_does_not_blame_a_right_urdf(tmp_path):

@@ -73,7 +73,7 @@ def test_unknown_scenario_is_a_user_error(tmp_path):
 
 
 def test_killed_at_random_moments_a_command_leaves_previous_outputs_intact(tmp_path, emps_path):
-    """Fault injection: the doctor writing over existing outputs is killed (SIGINT, SIGTERM, SIGKILL) at 50 random
+    """Fault injection: the doctor writing over existing outputs is killed (SIGINT, SIGTERM, SIGKILL) at 18 random
     moments spread over a whole run (the first run, uninterrupted, gives its length); every time, each output holds
     either its previous content or a complete new one, the exit code is the signal's, and no temporary file remains.
     The record is the first 9 s of DATA_EMPS, so that a run lasts seconds. (Seeded: the same moments on every run.)"""
@@ -96,7 +96,7 @@ def test_killed_at_random_moments_a_command_leaves_previous_outputs_intact(tmp_p
     html.write_text("<p>previous</p>\n")
     rng = random.Random(13)
     outcomes = {"complete": 0, "killed": 0}
-    for i in range(50):
+    for i in range(18):
         sig = (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)[i % 3]
         p = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         first = p.stderr.readline()  # the doctor has started (Python's own start-up is not what is tested)
@@ -115,7 +115,7 @@ def test_killed_at_random_moments_a_command_leaves_previous_outputs_intact(tmp_p
         assert page == "<p>previous</p>\n" or page.rstrip().endswith("</html>"), page[-200:]
         leftovers = [f for f in os.listdir(tmp_path) if f not in ("rec.mat", "d.json", "d.html")]
         assert leftovers == [], leftovers
-    assert outcomes["killed"] >= 25, outcomes  # most signals land while the doctor runs
+    assert outcomes["killed"] >= 9, outcomes  # most signals land while the doctor runs
 
 
 def test_an_unused_compressed_variable_is_never_expanded(tmp_path, emps_path):

@@ -18,6 +18,7 @@ import numpy as np
 
 from .._errors import DataError, DidimError
 from ..recording import Recording
+from .finding import MIN_HELDOUT_GAIN
 
 #: Bands of each joint's speed (shares of its top reference speed) and of its stroke the residual is reported in.
 SPEED_EDGES = (0.0, 0.05, 0.25, 0.5, 1.0)
@@ -512,9 +513,14 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
 
         new = replace(model, kind="flexible", elastic=(*model.elastic, jn), coulomb_eps=None, coulomb_law="algebraic")
         rigid = res if not model.elastic else None
+        modes = None
         if rigid is not None:
+            from ..methods.robot import elastic_modes
+
             _mode_screen(state, c, progress)  # raises when the grid finds no mode
-        r = didim_elastic(state.train, new, progress=progress, rigid=rigid)
+            modes = elastic_modes(state.train, rigid, new, progress)
+            _a_mode(modes[0], jn, state.train.dt)  # raises when step 2's best is no mode
+        r = didim_elastic(state.train, new, progress=progress, rigid=rigid, modes=modes)
         mode = r.options.get("modes", {}).get(jn, {})
         params = {f"K_{jn}": r.params[f"K_{jn}"], f"D_{jn}": r.params[f"D_{jn}"], f"Ia_{jn}": r.params[f"Ia_{jn}"],
                   "f_n_flex": float(mode.get("f_n_flex", math.nan))}
@@ -545,17 +551,51 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
     return _State(r, state.train, state.valid), params, {t.name: r.std.get(t.name, math.nan) for t in terms}
 
 
+#: Step 2's bounds on the rotor's share λ of a joint's inertia (:func:`didim.methods.robot.elastic_modes`): a split
+#: within this much of either has the search's bound for its answer, not the joint's
+LAMBDA_EDGE = 2e-3
+
+
+def _a_mode(x: np.ndarray, jn: str, dt: float) -> None:
+    """A DidimError unless step 2's best split and mode of the joint just made elastic (the last row of ``x``: λ, f in
+    Hz, ζ) is an oscillating mode inside the search's bounds: a rotor's share at a bound of λ, a damping ratio of 1
+    or more (no oscillation) or a mode at the Nyquist frequency say that the record shows none, and step 3's loop
+    there is as stiff as it is meaningless (on robotdoctor's d5, λ = 0.001, 143 Hz, ζ = 2.8: 90 s per iteration)."""
+    lam, f, zeta = (float(v) for v in x[-1])
+    why = []
+    if not LAMBDA_EDGE < lam < 1 - LAMBDA_EDGE:
+        why.append(f"the rotor's share of its inertia λ = {lam:.3g} at the search's bound")
+    if not zeta < 1:
+        why.append(f"its damping ratio {zeta:.3g} is not below 1 (no oscillation)")
+    if not f < 0.45 / dt:
+        why.append(f"its mode {f:.4g} Hz is at the Nyquist frequency {0.5 / dt:.4g} Hz")
+    if why:
+        raise DidimError(f"step 2 finds no mode of {jn}: " + "; ".join(why))
+
+
 def _mode_screen(state: _State, c: _Candidate, progress) -> float:
     """Step 2's grid (eq. (28)) for joint ``c.joint`` made elastic on the current rigid model: the share by which its
     best split and mode lower the joints' force errors (RMS of the relative ones, both simulated without the
     encoders' rounding, as step 2's search); a DidimError when they do not (no mode of that joint: neither step 2's
-    search nor step 3 is run). Kept on the candidate (``hyper["screen_gain"]``, ``hyper["f_grid_hz"]``)."""
+    search nor step 3 is run), or lower them by less than the practical gain :data:`MIN_HELDOUT_GAIN` (the grid's best
+    point is coarse, but a mode it misses by that much is not one the held-out record would confirm). Kept on the
+    candidate (``hyper["screen_gain"]``, ``hyper["f_grid_hz"]``), its verdict given again each time it is asked."""
+    if "screen_gain" not in c.hyper:
+        _grid_screen(state, c, progress)
+    if not c.hyper["screen_gain"] >= MIN_HELDOUT_GAIN:
+        raise DidimError(f"step 2's grid finds no mode of {state.res.robot.joint_names[c.joint]}: its best split and "
+                         f"mode ({c.hyper['f_grid_hz']:.4g} Hz) lower the joints' force errors on the training record "
+                         f"by {100 * c.hyper['screen_gain']:+.1f} % of the rigid joint's, not by "
+                         f"{100 * MIN_HELDOUT_GAIN:.0f} % at least")
+    return c.hyper["screen_gain"]
+
+
+def _grid_screen(state: _State, c: _Candidate, progress) -> None:
+    """:func:`_mode_screen`'s grid, its gain kept on the candidate."""
     from dataclasses import replace
 
     from ..methods.robot import elastic_modes, simulate_robot
 
-    if "screen_gain" in c.hyper:
-        return c.hyper["screen_gain"]
     res = state.res
     jn = res.robot.joint_names[c.joint]
     new = replace(res.structure, kind="flexible", elastic=(jn,), coulomb_eps=None, coulomb_law="algebraic")
@@ -566,11 +606,10 @@ def _mode_screen(state: _State, c: _Candidate, progress) -> float:
     rigid_crit = float(np.sqrt(np.mean(per ** 2)))
     c.hyper["f_grid_hz"] = float(x[0, 1])
     c.hyper["screen_gain"] = 1 - search["criterion"] / rigid_crit
-    if not search["criterion"] < rigid_crit:
-        raise DidimError(f"step 2's grid finds no mode of {jn}: its best split and mode ({x[0, 1]:.4g} Hz) fit the "
-                         f"training record no better than the rigid joint (joints' force errors RMS "
-                         f"{100 * search['criterion']:.3f} % against {100 * rigid_crit:.3f} %)")
-    return c.hyper["screen_gain"]
+    if progress is not None:
+        progress(f"step 2's grid on {jn}: λ = {x[0, 0]:.2f}, f = {x[0, 1]:.4g} Hz: joints' force errors RMS "
+                 f"{100 * search['criterion']:.3f} % against {100 * rigid_crit:.3f} % rigid "
+                 f"({100 * c.hyper['screen_gain']:+.1f} %)")
 
 
 def _order_modes(state: _State, significant: List[_Candidate], progress) -> List[_Candidate]:
