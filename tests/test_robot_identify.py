@@ -145,6 +145,18 @@ def test_the_command_line_identifies_simulates_and_weighs_the_payload(robots_dir
     # a one-axis option with a robot is refused by name
     assert main(["identify", str(d / "pendulum_train.csv"), "--urdf", str(d / "pendulum_cad.urdf"), "--controller", ctl,
                  "--model", "flexible"]) == 2
+    # --start: DIDIM from a saved result (published values, or this fit) instead of the URDF's: started at its own
+    # converged fit it stays within each parameter's σ of it, in fewer iterations (measured 6 against 10)
+    again = tmp_path / "again.json"
+    assert main(["identify", str(d / "pendulum_train.csv"), "--urdf", str(d / "pendulum_cad.urdf"), "--controller", ctl,
+                 "--start", str(out), "--json", str(again), "--quiet"]) == 0
+    r2 = json.loads(again.read_text())
+    for k, v in r["params"].items():
+        assert abs(r2["params"][k] - v) <= r["std"][k], (k, v, r2["params"][k], r["std"][k])
+    assert r2["iterations"] < r["iterations"]
+    # --start is a robot's: one axis's identify and doctor refuse it by name
+    for cmd in ("identify", "doctor"):
+        assert main([cmd, str(d / "pendulum_train.csv"), "--controller", ctl, "--start", str(out)]) == 2
 
 
 def test_bad_robot_inputs_are_refused_by_name(data, robots_dir, tmp_path):

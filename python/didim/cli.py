@@ -115,6 +115,8 @@ def cmd_identify_robot(args) -> int:
     if elastic == ["all"]:
         elastic = list(robot.joint_names)
     model = as_model(robot, offset=args.offset, elastic=elastic)  # the robot's model, carried whole to the fit
+    if args.start:
+        opts["initial"] = _start_result(args.start)
     res = identify(rec, model, args.method, progress=_progress(args.quiet), controller_check=args.controller_check,
                    **opts)
     print(res.summary())
@@ -148,6 +150,10 @@ def cmd_identify(args) -> int:
 
         raise DataError(f"{'--joints' if args.joints else '--elastic'} names a robot's joints: give the robot with "
                         "--urdf (one axis's two masses are --model flexible)")
+    if args.start:
+        from ._errors import DataError
+
+        raise DataError("--start is a robot's (--urdf) result to start from; one axis starts from --apm")
     _check_outputs([args.file, args.controller], [args.json, args.plot])
     if args.plot:
         _check_figure_format(args.plot)
@@ -460,7 +466,12 @@ def cmd_doctor(args) -> int:
     from .formats._io import write_text
     from .doctor import doctor
 
-    _check_outputs([args.file, args.validate, args.controller, args.urdf], [args.json, args.html, args.result])
+    _check_outputs([args.file, args.validate, args.controller, args.urdf, args.start], [args.json, args.html,
+                                                                                         args.result])
+    if args.start and not args.urdf:
+        from ._errors import DataError
+
+        raise DataError("--start is a robot's (--urdf) result to start from; one axis's doctor starts from --apm")
     if args.urdf:
         d = _robot_diagnosis(args)
     else:
@@ -492,6 +503,19 @@ def cmd_doctor(args) -> int:
     return 0
 
 
+def _start_result(path: str):
+    """--start: a robot's saved result (``didim identify ... --json``, or one written from published values) that
+    DIDIM starts from instead of the URDF's values."""
+    from ._errors import DataError
+    from .result import load_result
+
+    res = load_result(path)
+    if res.robot is None:
+        raise DataError(f"{path}: --start takes a robot's result (didim identify REC --urdf U --json OUT), this one is "
+                        "a single axis's")
+    return res
+
+
 def _robot_diagnosis(args):
     """``didim doctor REC --urdf U``: the robot's base fit, where each joint's simulation and record differ, and the
     physics each joint misses (:func:`didim.doctor.robot.doctor_robot`)."""
@@ -506,7 +530,8 @@ def _robot_diagnosis(args):
     rec = _robot_record(args, args.file, robot)
     val = _robot_record(args, args.validate, robot) if args.validate else None
     return doctor(rec, robot, val, alpha=args.alpha, progress=_progress(args.quiet),
-                  controller_check=args.controller_check)
+                  controller_check=args.controller_check,
+                  initial=_start_result(args.start) if args.start else None)
 
 
 def _joints(args):
@@ -643,6 +668,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--elastic", metavar="J1,J2|all", help="with --urdf: the joints whose transmission is elastic (a "
                    "spring K and damping D between rotor and link), by name or number, or all; --method didim runs "
                    "the three-step DIDIM, --method oe-lm output error from there")
+    i.add_argument("--start", metavar="RESULT.json", help="with --urdf: a result of the same robot (a saved "
+                   "identification, or published values) that didim and oe-lm start from instead of the URDF's values")
     i.add_argument("--json", metavar="OUT", help="write the result as JSON")
     i.add_argument("--plot", metavar="PNG", help="write measured vs simulated force and the iterations")
     i.add_argument("--quiet", action="store_true", help="no progress messages")
@@ -662,6 +689,8 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--urdf", metavar="URDF", help="a robot's record: its URDF; the base model is fitted by DIDIM and "
                    "each joint's mismatch located")
     o.add_argument("--joints", metavar="J1,J2,..", help="with --urdf: the actuated joints, as for identify")
+    o.add_argument("--start", metavar="RESULT.json", help="with --urdf: a result of the same robot (didim identify "
+                   "--json, or published values) the base fit starts from instead of the URDF's values")
     o.set_defaults(func=cmd_doctor)
 
     m = sub.add_parser("simulate", help="apply a saved result to a record: simulated vs measured force (cross-test)")

@@ -811,6 +811,7 @@ def doctor(
     progress: Optional[Callable[[str], None]] = None,
     coulomb_eps: Union[str, float, None] = "fit",
     controller_check: str = "error",
+    initial=None,
 ) -> Diagnosis:
     """Diagnoses what the ``model`` ("rigid" or "flexible") misses on ``recording``; with a robot's record and its
     :class:`didim.Robot` as ``model``, where each joint's simulation and record differ (:mod:`didim.doctor.robot`).
@@ -820,7 +821,8 @@ def doctor(
     and of the residual analysis. ``coulomb_eps``: the Coulomb smoothing speed of the base model (m/s or rad/s),
     ``"fit"`` (default) to fit it with the base model before any effect is looked for
     (:func:`didim.doctor.fit.fit_friction_law`), None for didim's default. ``controller_check``: as for
-    :func:`didim.identify`, on both records."""
+    :func:`didim.identify`, on both records. ``initial``: a robot's result (of the same robot) its base fit starts
+    from instead of the URDF's values (published values, say: a robot whose URDF is far from it)."""
     from ..api import _has_joint_columns, _robot_plant
     from ..robots import Robot
 
@@ -836,7 +838,10 @@ def doctor(
         from .robot import doctor_robot
 
         return doctor_robot(recording, model, validate, progress=progress,  # type: ignore[return-value]
-                            controller_check=controller_check, offset=offset, alpha=alpha, max_findings=max_findings)
+                            controller_check=controller_check, offset=offset, alpha=alpha, max_findings=max_findings,
+                            initial=initial)
+    if initial is not None:
+        raise DataError("initial is a robot's result its doctor starts from; one axis's doctor starts from apM")
     apM, alpha, max_findings = _check_arguments(recording, model, validate, apM, alpha, max_findings, cutoff_hz,
                                                 holdout, progress)
     from ..check import enforce

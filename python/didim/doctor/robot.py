@@ -769,14 +769,15 @@ def _shared(resid: _Residuals, a: _Candidate, b: _Candidate) -> float:
 
 def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable[[str], None]] = None,
                  controller_check: str = "error", offset: Optional[bool] = None, alpha: float = 0.01,
-                 max_findings: int = MAX_FINDINGS) -> RobotDiagnosis:
+                 max_findings: int = MAX_FINDINGS, initial=None) -> RobotDiagnosis:
     """:func:`didim.doctor` of a robot's record with its :class:`didim.Robot` (see the module's text): the base
     model by DIDIM, where each joint's simulation and record differ, then rounds: each effect's regressor on each
     joint (and the delay on every joint) built on the current model's simulated states, tested on its decimated,
     AR-prewhitened residual beyond the model's own columns (Wald; a grid's size as a Bonferroni factor, Holm across
     the candidates), the best significant ones adopted in turn (the term on that joint, the joint made elastic, the
     drives' delay), refitted by DIDIM and kept when the held-out force error of the joints it acts on falls
-    (one-sided Diebold-Mariano at ``alpha``, and by ``MIN_HELDOUT_GAIN`` of itself)."""
+    (one-sided Diebold-Mariano at ``alpha``, and by ``MIN_HELDOUT_GAIN`` of itself). ``initial``: a result of the
+    robot the base fit starts from (:func:`didim.identify`'s), not the URDF's values."""
     from ..api import identify
     from ..check import enforce
     from ..methods.robot import force_errors, simulate_robot, top_speeds
@@ -795,7 +796,8 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
     t0 = time.perf_counter()
     if validate is not None:
         enforce(validate, controller_check)
-    base = identify(recording, robot, "didim", offset=offset, progress=progress, controller_check=controller_check)
+    base = identify(recording, robot, "didim", offset=offset, progress=progress, controller_check=controller_check,
+                    initial=initial)
     sim_t = simulate_robot(recording, base)
     _, per_t = force_errors(recording, sim_t["force"])
     if validate is not None:
