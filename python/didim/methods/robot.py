@@ -1348,9 +1348,11 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     n = robot.ndof
     pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
     theta0 = np.concatenate([base.of(pi0), np.zeros(_Layout.for_model(model, base).size - len(base.names))])
+    origin = "the URDF's values"
     if start is not None and start.structure.robot is robot and not start.structure.elastic \
             and tuple(start.base.names) == tuple(base.names):
         theta0 = np.array([start.params.get(k, 0.0) for k in _theta_names(model, base)])
+        origin = "its start (the result given)"
         say("DIDIM starts from the model it grows")
     notes: List[str] = []
     # a start whose closed loop is worse than predicting no force (or cannot be simulated) is no start: DIDIM begins
@@ -1361,20 +1363,19 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     if e0 > ABSURD_ERROR:
         why = (f"their closed-loop force error is {100 * e0:.0f} %" if math.isfinite(e0)
                else "their closed loop cannot be simulated")
-        say(f"DIDIM starts from IDIM-LS's estimate: not from the URDF's values ({why})")
-        notes.append(f"DIDIM started from IDIM-LS's estimate, not from the URDF's values ({why})")
+        say(f"DIDIM starts from IDIM-LS's estimate: not from {origin} ({why})")
+        notes.append(f"DIDIM started from IDIM-LS's estimate, not from {origin} ({why})")
         run, plant = _didim_run(rec, model, base, dec, measured.fit(law)[0], law, per_shape, max_iter, tol,
                                 say)
     else:
         run, plant = _didim_run(rec, model, base, dec, theta0, law, per_shape, max_iter, tol, say, plant=first)
         failed = run.best[2] is None or (not run.converged and not run.message.startswith("no convergence"))
         if failed:
-            say(f"DIDIM from the URDF's values failed ({run.message}): again from IDIM-LS's estimate")
+            say(f"DIDIM from {origin} failed ({run.message}): again from IDIM-LS's estimate")
             again, plant_again = _didim_run(rec, model, base, dec, measured.fit(law)[0], law, per_shape,
                                             max_iter, tol, say)
             if again.best[2] is not None and (run.best[2] is None or again.best[0] < run.best[0]):
-                notes.append(f"DIDIM from the URDF's values failed ({run.message}); it started from IDIM-LS's "
-                             "estimate")
+                notes.append(f"DIDIM from {origin} failed ({run.message}); it started from IDIM-LS's estimate")
                 run, plant = again, plant_again
     if run.best[2] is None:
         raise SimulationError(f"DIDIM could not simulate the robot's closed loop: {run.message}"
