@@ -551,19 +551,17 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
     return _State(r, state.train, state.valid), params, {t.name: r.std.get(t.name, math.nan) for t in terms}
 
 
-#: Step 2's bounds on the rotor's share λ of a joint's inertia (:func:`didim.methods.robot.elastic_modes`): a split
-#: within this much of either has the search's bound for its answer, not the joint's
-LAMBDA_EDGE = 2e-3
-
-
 def _a_mode(x: np.ndarray, jn: str, dt: float) -> None:
     """A DidimError unless step 2's best split and mode of the joint just made elastic (the last row of ``x``: λ, f in
     Hz, ζ) is an oscillating mode inside the search's bounds: a rotor's share at a bound of λ, a damping ratio of 1
     or more (no oscillation) or a mode at the Nyquist frequency say that the record shows none, and step 3's loop
     there is as stiff as it is meaningless (on robotdoctor's d5, λ = 0.001, 143 Hz, ζ = 2.8: 90 s per iteration)."""
+    from ..methods.robot import SPLIT_LAMBDA_BOUND
+
     lam, f, zeta = (float(v) for v in x[-1])
     why = []
-    if not LAMBDA_EDGE < lam < 1 - LAMBDA_EDGE:
+    edge = 2 * SPLIT_LAMBDA_BOUND  # within a bound's width of step 2's bound: the search's answer, not the joint's
+    if not edge < lam < 1 - edge:
         why.append(f"the rotor's share of its inertia λ = {lam:.3g} at the search's bound")
     if not zeta < 1:
         why.append(f"its damping ratio {zeta:.3g} is not below 1 (no oscillation)")

@@ -1398,6 +1398,8 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
 #: motor side, and its locked-rotor mode from fs/100 to fs/12.5, geometric (the paper's [0.1, 0.9] and [10, 80] Hz at
 #: the EMPS's 1 kHz). Each joint takes the grid point where its own force error is least.
 ELASTIC_GRID_LAMBDA = (0.1, 0.3, 0.5, 0.7, 0.9)
+#: Step 2's search keeps each rotor's share λ within [this, 1 - this]
+SPLIT_LAMBDA_BOUND = 1e-3
 ELASTIC_GRID_F_SHARE = tuple(float(x) for x in np.geomspace(1 / 100, 1 / 12.5, 8))
 #: The springs' damping ratio where step 2 starts (a transmission's is 1-5 %).
 ELASTIC_ZETA0 = 0.03
@@ -1509,8 +1511,8 @@ class _ElasticSplit:
             return np.column_stack([u[0::3], np.exp(u[1::3]), u[2::3]])
 
         u0 = np.column_stack([x0[:, 0], np.log(x0[:, 1]), x0[:, 2]]).ravel()
-        lower = np.tile([1e-3, -np.inf, 0.0], ne)
-        upper = np.tile([1 - 1e-3, math.log(0.5 * fs), np.inf], ne)
+        lower = np.tile([SPLIT_LAMBDA_BOUND, -np.inf, 0.0], ne)
+        upper = np.tile([1 - SPLIT_LAMBDA_BOUND, math.log(0.5 * fs), np.inf], ne)
         # a start at a bound (a mode at the Nyquist frequency: a joint the record shows rigid) inside it, as the
         # least squares need (a step 3 that ran to 499.99 Hz at 1 kHz stopped the held-out Panda's doctor)
         span = np.where(np.isfinite(upper - lower), upper - lower, 1.0)
