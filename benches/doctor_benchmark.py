@@ -189,17 +189,27 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--small", action="store_true")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--effects", default=None,
+                    help="only the records hiding these effects, comma-separated (none for the empty ones); a partial "
+                         "run prints its rows and writes nothing")
     ap.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "..", "docs", "doctor_benchmark"))
     a = ap.parse_args(argv)
     todo = jobs(a.small)
+    if a.effects:
+        keep = set(a.effects.split(","))
+        unknown = keep - set(EFFECTS) - {"none"}
+        if unknown:
+            ap.error(f"unknown effect(s) {', '.join(sorted(unknown))}: use {', '.join(EFFECTS)} or none")
+        todo = [j for j in todo if j[0] in keep]
     rows = []
     with ProcessPoolExecutor(max_workers=a.workers) as ex:
         for i, r in enumerate(ex.map(run_one, todo), 1):
             rows.append(r)
-            print(f"[{i}/{len(todo)}] {r['effect']}@{r['level']} {r['traj']} seed {r['seed']}: ENR {r['enr']:.2f} -> {r['named']}",
+            print(f"[{i}/{len(todo)}] {r['effect']}@{r['level']} {r['traj']} seed {r['seed']}: ENR {r['enr']:.2f} -> {r['named']}"
+                  f" ({r.get('seconds', float('nan')):.1f} s)",
                   file=sys.stderr, flush=True)
     s = summarize(rows)
-    if not a.small:
+    if not a.small and not a.effects:
         from didim.formats._io import write_text
 
         write_text(a.out + ".md", markdown(s))

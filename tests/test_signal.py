@@ -124,3 +124,21 @@ def test_core_lfilter_is_scipys_with_and_without_an_initial_state():
             assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want))
     with pytest.raises(ValueError, match="a\\[0\\] non-zero"):
         _core.lfilter([1.0], [0.0, 1.0], x)
+
+
+@pytest.mark.parametrize("kind, f_hz", [("butter", 20.0), ("butter", 60.0), ("butter", 79.0), ("butter", 110.0),
+                                        ("matlab", 30.0), ("matlab", 45.0)])
+def test_decimation_gain_is_the_share_of_a_sine_the_filter_passes(kind, f_hz):
+    """Decimation.gain against the filter itself: a sine at f_hz through scipy's zero-phase filter of the same design,
+    its amplitude in the middle of the record (away from the ends' transients) over the input's."""
+    fs = 1000.0
+    dec = Decimation.lowpass(60.0, fs) if kind == "butter" else Decimation.matlab(10)
+    t = np.arange(20000) / fs
+    x = np.sin(2 * np.pi * f_hz * t)
+    if kind == "butter":
+        y = sg.sosfiltfilt(sg.butter(4, 60.0 / (fs / 2), output="sos"), x)
+    else:
+        y = sg.filtfilt(*sg.cheby1(8, 0.05, 0.8 / 10), x)
+    mid = slice(5000, 15000)
+    got = np.sqrt(2 * np.mean(y[mid] ** 2))
+    assert dec.gain(f_hz, fs) == pytest.approx(got, rel=1e-3, abs=1e-6)

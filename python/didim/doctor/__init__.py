@@ -538,7 +538,7 @@ class _Search:
                 if alt is not None and self.data.rel(alt[0][1], True) < self.data.rel(new[1], True):
                     new, (st_new, params, std) = alt[0], alt[1]
         except DidimError as e:
-            self.rejected.append(Finding(c.effect, {}, {}, {"p_adjusted": c.p_adj}, f"refit failed: {e}",
+            self.rejected.append(Finding(c.effect, {}, {}, {"p_adjusted": c.p_adj}, f"not adopted: {e}",
                                          effect.physics, accepted=False))
             return None, None
         rt_n, rv_n = new[1], new[2]

@@ -78,6 +78,21 @@ class Data:
             self.yv = dec(validate.force)
         # the first decimated training and held-out rows the tests and errors use (see settle)
         self.t0, self.v0 = 0, 0
+        self._sims: List[Tuple[State, Recording, SimResult]] = []  # see simulate
+
+    #: How many recent simulations :meth:`simulate` keeps.
+    KEEP = 8
+
+    def simulate(self, state: State, rec: Recording) -> SimResult:
+        """``state.simulate(rec)``, kept for the states simulated last: the doctor asks for the same model's residuals,
+        force errors and views one after the other (a state is immutable; it is kept with its simulation, so an
+        identity match is the same model)."""
+        for st, r, sim in self._sims:
+            if st is state and r is rec:
+                return sim
+        sim = state.simulate(rec)
+        self._sims = [(state, rec, sim)] + self._sims[:self.KEEP - 1]
+        return sim
 
     def settle(self, state: State) -> None:
         """Leaves out of the decimated residuals the rows a record's start reaches when it began away from the
@@ -86,10 +101,10 @@ class Data:
         (on the EMPS, 47-61 % of the residual energy in the first 33-56 ms)."""
         from ..methods.identification import settled_row
 
-        sim = state.simulate(self.rec)
+        sim = self.simulate(state, self.rec)
         self.t0 = min(settled_row(self.rec, sim.q[0], self.dec), self.m_train // 2)
         if self.validate is not None:
-            simv = state.simulate(self.validate)
+            simv = self.simulate(state, self.validate)
             self.v0 = min(settled_row(self.validate, simv.q[0], self.dec), len(self.yv) // 2)
 
     @property
@@ -99,13 +114,13 @@ class Data:
     def errors(self, state: State) -> Tuple[np.ndarray, np.ndarray, SimResult]:
         """Decimated residuals on the training and validation rows past a record's start (see :meth:`settle`), and
         the training simulation."""
-        sim = state.simulate(self.rec)
+        sim = self.simulate(state, self.rec)
         ys = self.dec(sim.force)
         rt = self.y[self.train_rows] - ys[self.train_rows]
         if self.validate is None:
             rv = self.yv - ys[self.m_train:]
         else:
-            simv = state.simulate(self.validate)
+            simv = self.simulate(state, self.validate)
             rv = self.yv[self.v0:] - self.dec(simv.force)[self.v0:]
         return rt, rv, sim
 
@@ -115,21 +130,21 @@ class Data:
         def rel(y, ys):
             return float(np.linalg.norm(y - ys) / np.linalg.norm(y))
 
-        ys = state.simulate(self.rec).force
+        ys = self.simulate(state, self.rec).force
         y, n = self.rec.force, self.n_train
         if self.validate is None:
             return rel(y[:n], ys[:n]), rel(y[n:], ys[n:])
-        yv = state.simulate(self.validate).force
+        yv = self.simulate(state, self.validate).force
         return rel(y, ys), rel(self.validate.force, yv)
 
     def views(self, state: State) -> List[Tuple[SimResult, slice]]:
         """The simulations of ``state`` behind the training and the held-out residual, each with the decimated rows
         that residual covers (the held-out rows are the tail of the training record's simulation when no separate
         record validates)."""
-        sim = state.simulate(self.rec)
+        sim = self.simulate(state, self.rec)
         if self.validate is None:
             return [(sim, self.train_rows), (sim, slice(self.m_train, None))]
-        simv = state.simulate(self.validate)
+        simv = self.simulate(state, self.validate)
         return [(sim, self.train_rows), (simv, slice(self.v0, None))]
 
     def decimated_columns(self, columns: np.ndarray, rows: slice) -> np.ndarray:

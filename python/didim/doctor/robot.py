@@ -681,7 +681,7 @@ def _attempt(c: _Candidate, state: _State, alpha: float, dec, progress):
         after = simulate_robot(new.valid, new.res)["force"]
         own = _own_share(c, new, before)
     except DidimError as e:  # the refit, or its loop on the held-out record, failed: the effect is not adopted
-        return Finding(c.effect, {}, {}, {"p_adjusted": c.p_adj}, f"refit failed: {e}",
+        return Finding(c.effect, {}, {}, {"p_adjusted": c.p_adj}, f"not adopted: {e}",
                        _physics(c.effect), accepted=False, joint=jn), None, None
     rv0, rv1 = (_joint_residuals(state.valid, f, joints, dec) for f in (before, after))
     dm, p_dm, gain = diebold_mariano(rv0, rv1)
