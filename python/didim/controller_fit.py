@@ -44,10 +44,12 @@ def free_responses(tf: TransferFunction, n: int) -> np.ndarray:
     den = np.array(tf.a_r) if tf.a_r == tf.a_y else np.convolve(tf.a_r, tf.a_y)
     k = len(den) - 1
     out = np.zeros((n, k))
-    for i in range(k):
+    if k:
         x = np.zeros(n)
-        x[i] = 1.0
-        out[:, i] = _core.lfilter([1.0], list(den), x)
+        x[0] = 1.0
+        h = _core.lfilter([1.0], list(den), x)  # the impulse response; column i is it i samples later
+        for i in range(k):
+            out[i:, i] = h[:n - i]
     return out
 
 
@@ -227,35 +229,59 @@ def _resonant(poles: np.ndarray, dt: float) -> bool:
     return bool(np.any(-s.real < MIN_POLE_DAMPING * np.abs(s)))
 
 
-def _fit(qr, qm, f, rows, na, nb, d, integral) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Equation-error least squares with a denominator of order ``na``, numerators of ``nb + 1`` taps and a delay of
-    ``d`` samples on ``rows``: (b_r, b_y, a) or None. The law is regressed on the tracking error ``qr − qm`` (through
-    C_y) and the reference (through the feedforward C_r − C_y): the two positions themselves are nearly the same
-    column (the axis tracks its reference), which leaves the least squares ill-conditioned. With ``integral`` the
-    denominator holds the integrator ``1 − z⁻¹`` exactly and the feedforward has no gain at rest (a constant reference
-    gives a constant command): the law is regressed on the differenced force and reference. Replayed from rest, an
-    integrator only estimated (a pole at 1 ± 1e-9) accumulates the least error of the feedforward into a drift."""
-    lags = range(d, d + nb + 1)
-    diff = (lambda x: np.r_[0.0, np.diff(x)]) if integral else (lambda x: x)
-    y_all = diff(f)
-    x = np.hstack([_lagged(qr - qm, lags), _lagged(diff(qr), lags), -_lagged(y_all, range(1, na + 1))])[rows]
-    y = y_all[rows]
-    scale = np.linalg.norm(x, axis=0)
-    scale[scale == 0] = 1.0
-    try:
-        theta, *_ = np.linalg.lstsq(x / scale, y, rcond=None)
-    except np.linalg.LinAlgError:
-        return None
-    theta = theta / scale
-    if not np.all(np.isfinite(theta)):
-        return None
-    k = nb + 1
-    pad = np.zeros(d)
-    b_y, b_ff, a = theta[:k], theta[k:2 * k], np.r_[1.0, theta[2 * k:]]
-    if integral:
-        b_ff, a = np.convolve([1.0, -1.0], b_ff), np.convolve([1.0, -1.0], a)
-        b_y = np.r_[b_y, 0.0]
-    return np.r_[pad, b_ff + b_y], np.r_[pad, b_y], a
+class _Design:
+    """The equation-error least squares of every order for one delay ``d`` (and with or without ``integral``), from
+    one QR factorization. The law is regressed on the tracking error ``qr − qm`` (through C_y) and the reference
+    (through the feedforward C_r − C_y): the two positions themselves are nearly the same column (the axis tracks its
+    reference), which leaves the least squares ill-conditioned. With ``integral`` the denominator holds the integrator
+    ``1 − z⁻¹`` exactly and the feedforward has no gain at rest (a constant reference gives a constant command): the
+    law is regressed on the differenced force and reference. Replayed from rest, an integrator only estimated (a pole
+    at 1 ± 1e-9) accumulates the least error of the feedforward into a drift.
+
+    Every order's columns are a subset of the largest order's (the same lags of the same signals), and its rows a
+    superset of the rows every order can use (``common``). With ``[X y]`` on those rows factored once (R, whose last
+    column holds Qᵀy), one order's least squares over its own rows is the small problem ``[R_S; X_S on its other
+    rows] θ = [Qᵀy; y there]``: exactly the same solution as on the whole matrix, at a few hundredths of its cost
+    (120 problems of 17,000 rows each on the EMPS)."""
+
+    def __init__(self, qr, qm, f, d: int, integral: bool, nb_max: int, na_max: int, common: np.ndarray):
+        diff = (lambda x: np.r_[0.0, np.diff(x)]) if integral else (lambda x: x)
+        self.d, self.integral, self.nb_max, self.na_max = d, integral, nb_max, na_max
+        self.y = diff(f)
+        lags = range(d, d + nb_max + 1)
+        self.x = np.hstack([_lagged(qr - qm, lags), _lagged(diff(qr), lags), -_lagged(self.y, range(1, na_max + 1))])
+        self.common = common
+        xy = np.column_stack([self.x[common], self.y[common]])
+        # R of [X y] on the common rows (fewer rows than columns: R is as many rows high, and still exact)
+        self.r = np.linalg.qr(xy, mode="r")[: xy.shape[1]] if len(common) else np.zeros((0, xy.shape[1]))
+
+    def columns(self, na: int, nb: int) -> np.ndarray:
+        k = self.nb_max + 1
+        return np.r_[np.arange(nb + 1), k + np.arange(nb + 1), 2 * k + np.arange(na)]
+
+    def fit(self, rows: np.ndarray, na: int, nb: int) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """(b_r, b_y, a) of the law of denominator order ``na`` and numerators of ``nb + 1`` taps on ``rows`` (a
+        superset of the common rows), or None."""
+        cols = self.columns(na, nb)
+        extra = np.setdiff1d(rows, self.common, assume_unique=True)
+        m = np.vstack([self.r[:, cols], self.x[np.ix_(extra, cols)]])
+        rhs = np.r_[self.r[:, -1], self.y[extra]]
+        scale = np.linalg.norm(m, axis=0)  # the columns' norms on the rows: Q keeps them
+        scale[scale == 0] = 1.0
+        try:  # the cutoff of the whole problem's least squares (eps times its larger dimension)
+            theta, *_ = np.linalg.lstsq(m / scale, rhs, rcond=np.finfo(float).eps * max(len(rows), len(cols)))
+        except np.linalg.LinAlgError:
+            return None
+        theta = theta / scale
+        if not np.all(np.isfinite(theta)):
+            return None
+        k = nb + 1
+        pad = np.zeros(self.d)
+        b_y, b_ff, a = theta[:k], theta[k:2 * k], np.r_[1.0, theta[2 * k:]]
+        if self.integral:
+            b_ff, a = np.convolve([1.0, -1.0], b_ff), np.convolve([1.0, -1.0], a)
+            b_y = np.r_[b_y, 0.0]
+        return np.r_[pad, b_ff + b_y], np.r_[pad, b_y], a
 
 
 def fit_controller(rec_or_signals, *, holdout: float = 0.3, max_order: int = MAX_ORDER,
@@ -281,15 +307,23 @@ def fit_controller(rec_or_signals, *, holdout: float = 0.3, max_order: int = MAX
     n_train = int(round(n_all * (1 - holdout)))
     tried: List[Tuple[int, int, float]] = []
     best: Dict[Tuple[int, int, int], Tuple[float, TransferFunction]] = {}
-    for n, nb in [(na, na + extra) for na in range(0, max_order + 1) for extra in (0, 1, 2) if na + extra >= 1]:
-        # rows whose window (the force's n past samples) holds no clipped sample
+    orders = [(na, na + extra) for na in range(0, max_order + 1) for extra in (0, 1, 2) if na + extra >= 1]
+
+    def usable(n: int, nb: int) -> np.ndarray:
+        # rows whose window (the force's n past samples) holds no clipped sample, past the longest lag
         bad = np.convolve(clipped.astype(float), np.ones(n + 1), "full")[:n_all] > 0
         rows = np.flatnonzero(~bad[:n_train])
-        rows = rows[rows >= nb + max(DELAYS)]
+        return rows[rows >= nb + max(DELAYS)]
+
+    na_max, nb_max = max(n for n, _ in orders), max(nb for _, nb in orders)
+    common = usable(na_max, nb_max)
+    designs = {(d, i): _Design(qr, qm, f, d, i, nb_max, na_max, common) for d in DELAYS for i in (False, True)}
+    for n, nb in orders:
+        rows = usable(n, nb)
         if rows.size < 10 * (n + 2 * nb + 2):
             continue
         for d, integral in [(d, i) for d in DELAYS for i in (False, True)]:
-            got = _fit(qr, qm, f, rows, n, nb, d, integral)
+            got = designs[(d, integral)].fit(rows, n, nb)
             if got is None:
                 continue
             b_r, b_y, a = got
