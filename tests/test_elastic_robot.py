@@ -173,3 +173,29 @@ def test_an_elastic_model_on_a_rigid_robot_s_record_says_it_sees_no_mode(robots_
     res = didim.identify(rec, robot, "didim", elastic="all")
     assert not res.converged
     assert "no elastic mode" in res.message and all(j in res.message for j in robot.joint_names), res.message
+
+
+def test_three_steps_stop_where_step_2_finds_no_mode(robots_dir):
+    """Step 2 whose best split of a joint is at a bound of its search is no mode (``no_mode``): step 3 is not run (as
+    for one axis), and the result holds step 2's parameters, not converged, its message naming the joint, why, and
+    what to do; its force error is that of step 2's model in closed loop."""
+    import math
+    from dataclasses import replace
+
+    from didim.methods.robot import didim as rigid_didim, didim_elastic, elastic_modes
+
+    robot = didim.Robot.from_urdf(robots_dir / "pendulum_cad.urdf")
+    rec = didim.load_record(robots_dir / "pendulum_train.csv", robot=robot,
+                            controller=robots_dir / "pendulum_controller.json")
+    model = didim.Model(robot=robot, elastic=(robot.joint_names[0],))
+    rigid = rigid_didim(rec, replace(model, elastic=(), kind="rigid"))
+    x, split, search = elastic_modes(rec, rigid, model, search=False)
+    bad = x.copy()
+    bad[0] = (1e-3, x[0, 1], 0.03)
+    res = didim_elastic(rec, model, rigid=rigid, modes=(bad, split, search))
+    assert not res.converged and res.iterations == 0
+    assert list(res.options["no_mode"]) == [robot.joint_names[0]], res.options["no_mode"]
+    assert f"no elastic mode of {robot.joint_names[0]}" in res.message and "λ = 0.001" in res.message
+    assert "step 3 was not run" in res.message and "rigid" in res.message
+    assert res.options["modes"][robot.joint_names[0]]["lambda"] == pytest.approx(1e-3, rel=1e-6)
+    assert math.isfinite(res.force_error) and res.force_error > 0

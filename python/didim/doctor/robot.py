@@ -518,9 +518,10 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
             from ..methods.robot import elastic_modes
 
             _mode_screen(state, c, progress)  # raises when the grid finds no mode
-            modes = elastic_modes(state.train, rigid, new, progress)
-            _a_mode(modes[0], jn, state.train.dt)  # raises when step 2's best is no mode
+            modes = elastic_modes(state.train, rigid, new, progress, start=c.hyper.get("x_grid"))
         r = didim_elastic(state.train, new, progress=progress, rigid=rigid, modes=modes)
+        if r.options.get("no_mode"):  # step 2 finds no mode of a joint made elastic: step 3 was not run
+            raise DidimError(r.message.split(": step 3 was not run")[0])
         mode = r.options.get("modes", {}).get(jn, {})
         params = {f"K_{jn}": r.params[f"K_{jn}"], f"D_{jn}": r.params[f"D_{jn}"], f"Ia_{jn}": r.params[f"Ia_{jn}"],
                   "f_n_flex": float(mode.get("f_n_flex", math.nan))}
@@ -549,26 +550,6 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
         a, b = params[f"A_{jn}"], params[f"B_{jn}"]
         params["amplitude"], params["phase_rad"] = math.hypot(a, b), math.atan2(b, a)
     return _State(r, state.train, state.valid), params, {t.name: r.std.get(t.name, math.nan) for t in terms}
-
-
-def _a_mode(x: np.ndarray, jn: str, dt: float) -> None:
-    """A DidimError unless step 2's best split and mode of the joint just made elastic (the last row of ``x``: λ, f in
-    Hz, ζ) is an oscillating mode inside the search's bounds: a rotor's share at a bound of λ, a damping ratio of 1
-    or more (no oscillation) or a mode at the Nyquist frequency say that the record shows none, and step 3's loop
-    there is as stiff as it is meaningless (on robotdoctor's d5, λ = 0.001, 143 Hz, ζ = 2.8: 90 s per iteration)."""
-    from ..methods.robot import SPLIT_LAMBDA_BOUND
-
-    lam, f, zeta = (float(v) for v in x[-1])
-    why = []
-    edge = 2 * SPLIT_LAMBDA_BOUND  # within a bound's width of step 2's bound: the search's answer, not the joint's
-    if not edge < lam < 1 - edge:
-        why.append(f"the rotor's share of its inertia λ = {lam:.3g} at the search's bound")
-    if not zeta < 1:
-        why.append(f"its damping ratio {zeta:.3g} is not below 1 (no oscillation)")
-    if not f < 0.45 / dt:
-        why.append(f"its mode {f:.4g} Hz is at the Nyquist frequency {0.5 / dt:.4g} Hz")
-    if why:
-        raise DidimError(f"step 2 finds no mode of {jn}: " + "; ".join(why))
 
 
 def _mode_screen(state: _State, c: _Candidate, progress) -> float:
@@ -603,6 +584,7 @@ def _grid_screen(state: _State, c: _Candidate, progress) -> None:
     per = np.linalg.norm(tr - smooth, axis=0) / np.maximum(np.linalg.norm(tr, axis=0), 1e-300)
     rigid_crit = float(np.sqrt(np.mean(per ** 2)))
     c.hyper["f_grid_hz"] = float(x[0, 1])
+    c.hyper["x_grid"] = x.tolist()  # step 2's search starts here (elastic_modes' start): its grid is not run again
     c.hyper["screen_gain"] = 1 - search["criterion"] / rigid_crit
     if progress is not None:
         progress(f"step 2's grid on {jn}: λ = {x[0, 0]:.2f}, f = {x[0, 1]:.4g} Hz: joints' force errors RMS "

@@ -14,7 +14,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -1598,14 +1598,16 @@ def _spring_search(rec: Recording, theta_of_u: Callable[[np.ndarray], np.ndarray
     return out.x, float(np.linalg.norm(out.fun))
 
 
-def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say=None, search: bool = True
-                  ) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
+def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say=None, search: bool = True,
+                  start=None) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
     """Step 2 for a robot's elastic joints: from eq. (28)'s grid (every joint at once, each taking the point where its
     own force error is least), the least squares of the joints' relative closed-loop force residuals over every
     elastic joint's (λ, ln f, ζ) at once (:func:`_spring_search`: Levenberg-Marquardt, where the paper's Nelder-Mead
     searched one joint's two; the criterion is the paper's (25), the RMS of the joints' relative force errors).
     Returns each joint's (λ, f in Hz, ζ), the split model, and the search's record (criterion, simulations).
-    ``search=False``: the grid's best point alone (its criterion; no least squares): a screen for a mode."""
+    ``search=False``: the grid's best point alone (its criterion; no least squares): a screen for a mode. ``start``:
+    the grid's best point when it is known (that screen's, one row (λ, f, ζ) per elastic joint): the search starts
+    there and the grid is not run again."""
     from concurrent.futures import ThreadPoolExecutor
 
     say = say or (lambda s: None)
@@ -1620,6 +1622,12 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
         sims[0] += 1
         return split.errors(x, law)
 
+    if start is not None:
+        x = np.asarray(start, dtype=float)
+        if x.shape != (ne, 3):
+            raise DataError(f"step 2's start holds one row (λ, f in Hz, ζ) per elastic joint ({ne}), got shape "
+                            f"{x.shape}")
+        return _step2_search(split, x, law, names, sims, say)
     grid = [(lam, share * fs) for lam in ELASTIC_GRID_LAMBDA for share in ELASTIC_GRID_F_SHARE]
     points = [np.array([[lam, f, ELASTIC_ZETA0]] * ne) for lam, f in grid]
     with ThreadPoolExecutor(max_workers=max(1, min(len(points), _core_count()))) as pool:
@@ -1653,6 +1661,12 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
     if not search:
         return x, split, {"criterion": _joints_error(errors(x)), "simulations": sims[0]}
 
+    return _step2_search(split, x, law, names, sims, say)
+
+
+def _step2_search(split: _ElasticSplit, x: np.ndarray, law: Law, names: List[str], sims: List[int], say
+                  ) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
+    """:func:`elastic_modes`' least squares from ``x``."""
     x, best = split.search(x, law, sims)
     say("step 2: " + "; ".join(f"{nm} λ = {x[e, 0]:.3f}, f = {x[e, 1]:.2f} Hz, ζ = {x[e, 2]:.3f}"
                                for e, nm in enumerate(names)) + f"; joints' force errors RMS {100 * best:.3f} %")
@@ -1714,9 +1728,64 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
     x, split, search = modes if modes is not None else elastic_modes(rec, rigid, model, say)
     theta0 = split.theta(x)
     law = rigid.law if rigid.law is not None else _default_law(rec)
+    why = no_mode(x, [robot.joint_names[j] for j in split.elastic], rec.dt)
+    if why:
+        return _no_mode_result(rec, model, split, theta0, law, why, rigid, search, t0, sims0)
     plant = _RobotPlant(rec, model, split.base, _decimation(rec), law, {}, tol, say)
     return _elastic_steps(rec, model, plant, theta0, split, search, rigid.force_error, rigid.force_error_per_joint,
                           max_iter, say, t0, sims0)
+
+
+def no_mode(x: np.ndarray, names: Sequence[str], dt: float) -> Dict[str, str]:
+    """Why step 2's best split and mode of each elastic joint (rows of ``x``: λ, f in Hz, ζ) is no mode the record
+    shows, by joint name (the joints whose mode it is are left out): a rotor's share at a bound of λ (within twice
+    :data:`SPLIT_LAMBDA_BOUND`: the search's answer, not the joint's), a damping ratio of 1 or more (no oscillation),
+    or a mode at the Nyquist frequency (0.45 of the sample rate). One axis's step 2 says the same of its optimum
+    (a mass ratio at 0 or 1, a mode above the analysed band). Step 3 from such a point is a loop as stiff as it is
+    meaningless (on robotdoctor's d5: λ = 0.001, 143 Hz, ζ = 2.8, 90 s per iteration)."""
+    out = {}
+    edge = 2 * SPLIT_LAMBDA_BOUND
+    for name, (lam, f, zeta) in zip(names, np.asarray(x, dtype=float)):
+        why = []
+        if not edge < lam < 1 - edge:
+            why.append(f"the rotor's share of its inertia λ = {lam:.3g} at the search's bound")
+        if not zeta < 1:
+            why.append(f"its damping ratio {zeta:.3g} is not below 1 (no oscillation)")
+        if not f < 0.45 / dt:
+            why.append(f"its mode {f:.4g} Hz is at the Nyquist frequency {0.5 / dt:.4g} Hz")
+        if why:
+            out[name] = "; ".join(why)
+    return out
+
+
+def _no_mode_result(rec: Recording, model: Model, split: "_ElasticSplit", theta0: np.ndarray, law: Law,
+                    why: Dict[str, str], rigid: IdentificationResult, search: Dict[str, Any], t0: float,
+                    sims0: int) -> IdentificationResult:
+    """:func:`didim_elastic`'s result when step 2 finds no mode of some elastic joints (:func:`no_mode`): step 3 is
+    not run (as for one axis); the result holds step 2's parameters, not converged, its message naming the joints,
+    why, and what to do; ``options["no_mode"]`` the reasons by joint."""
+    robot = model.robot
+    message = ("step 2 finds no elastic mode of " + "; ".join(f"{j}: {w}" for j, w in why.items())
+               + ": step 3 was not run, and these parameters are step 2's. Model "
+               + ("that joint" if len(why) == 1 else "those joints") + " rigid, or record a trajectory that excites "
+               "the mode (a chirp of the joint's reference through its expected frequencies)")
+    nt = len(_theta_names(model, split.base))
+    res = _result("didim", rec, model.with_law(law), split.base, theta0, np.full((nt, nt), np.nan), converged=False,
+                  iterations=0, message=message,
+                  notes=[f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid.force_error:.2f} %", message])
+    names = [robot.joint_names[j] for j in split.elastic]
+    x = split.x_of(theta0)
+    res.options["modes"] = {nm: {"lambda": float(x[e, 0]), "f_n_flex": float(x[e, 1]), "zeta": float(x[e, 2]),
+                                 "q_mid": float(split.qmid[j])} for e, (nm, j) in enumerate(zip(names, split.elastic))}
+    res.options["no_mode"] = dict(why)
+    res.options["rigid_force_error"] = rigid.force_error
+    res.options["rigid_force_error_per_joint"] = dict(rigid.force_error_per_joint)
+    try:
+        res.force_error, res.force_error_per_joint = force_errors(rec, simulate_robot(rec, res)["force"])
+    except (SimulationError, DataError):
+        res.force_error, res.force_error_per_joint = math.nan, {}
+    res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
+    return res
 
 
 def _elastic_from(rec: Recording, model: Model, start: IdentificationResult, max_iter: int, tol: float, say, t0: float,
