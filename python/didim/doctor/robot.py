@@ -514,10 +514,10 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
         new = replace(model, kind="flexible", elastic=(*model.elastic, jn), coulomb_eps=None, coulomb_law="algebraic")
         rigid = res if not model.elastic else None
         modes = None
+        _mode_screen(state, c, progress)  # raises when the grid finds no mode
         if rigid is not None:
             from ..methods.robot import elastic_modes
 
-            _mode_screen(state, c, progress)  # raises when the grid finds no mode
             modes = elastic_modes(state.train, rigid, new, progress, start=c.hyper.get("x_grid"))
         r = didim_elastic(state.train, new, progress=progress, rigid=rigid, modes=modes)
         if r.options.get("no_mode"):  # step 2 finds no mode of a joint made elastic: step 3 was not run
@@ -564,7 +564,7 @@ def _mode_screen(state: _State, c: _Candidate, progress) -> float:
     if not c.hyper["screen_gain"] >= MIN_HELDOUT_GAIN:
         raise DidimError(f"step 2's grid finds no mode of {state.res.robot.joint_names[c.joint]}: its best split and "
                          f"mode ({c.hyper['f_grid_hz']:.4g} Hz) lower the joints' force errors on the training record "
-                         f"by {100 * c.hyper['screen_gain']:+.1f} % of the rigid joint's, not by "
+                         f"by {100 * c.hyper['screen_gain']:+.1f} % of the model's with it rigid, not by "
                          f"{100 * MIN_HELDOUT_GAIN:.0f} % at least")
     return c.hyper["screen_gain"]
 
@@ -573,22 +573,25 @@ def _grid_screen(state: _State, c: _Candidate, progress) -> None:
     """:func:`_mode_screen`'s grid, its gain kept on the candidate."""
     from dataclasses import replace
 
-    from ..methods.robot import elastic_modes, simulate_robot
+    from ..methods.robot import elastic_modes, elastic_of, simulate_robot
 
     res = state.res
     jn = res.robot.joint_names[c.joint]
-    new = replace(res.structure, kind="flexible", elastic=(jn,), coulomb_eps=None, coulomb_law="algebraic")
+    # the joints already elastic keep their split and mode; the grid is the added joint's
+    new = replace(res.structure, kind="flexible", elastic=(*res.structure.elastic, jn), coulomb_eps=None,
+                  coulomb_law="algebraic")
     x, _, search = elastic_modes(state.train, res, new, progress, search=False)
+    e = list(elastic_of(new)).index(c.joint)  # its row of step 2's split (the split's order of the joints)
     smooth = simulate_robot(state.train, res, quantize=False)["force"]
     tr = state.train.force
     per = np.linalg.norm(tr - smooth, axis=0) / np.maximum(np.linalg.norm(tr, axis=0), 1e-300)
     rigid_crit = float(np.sqrt(np.mean(per ** 2)))
-    c.hyper["f_grid_hz"] = float(x[0, 1])
+    c.hyper["f_grid_hz"] = float(x[e, 1])
     c.hyper["x_grid"] = x.tolist()  # step 2's search starts here (elastic_modes' start): its grid is not run again
     c.hyper["screen_gain"] = 1 - search["criterion"] / rigid_crit
     if progress is not None:
-        progress(f"step 2's grid on {jn}: λ = {x[0, 0]:.2f}, f = {x[0, 1]:.4g} Hz: joints' force errors RMS "
-                 f"{100 * search['criterion']:.3f} % against {100 * rigid_crit:.3f} % rigid "
+        progress(f"step 2's grid on {jn}: λ = {x[e, 0]:.2f}, f = {x[e, 1]:.4g} Hz: joints' force errors RMS "
+                 f"{100 * search['criterion']:.3f} % against {100 * rigid_crit:.3f} % with it rigid "
                  f"({100 * c.hyper['screen_gain']:+.1f} %)")
 
 
@@ -598,7 +601,7 @@ def _order_modes(state: _State, significant: List[_Candidate], progress) -> List
     the test's column can rank a neighbour first (the robotdoctor UR5's elbow mode ranked its shoulder first). A
     flexible candidate whose screen finds no mode keeps its place: its adoption says so."""
     flex = [c for c in significant if c.effect == "flexibility"]
-    if len(flex) < 2 or state.res.structure.elastic:
+    if len(flex) < 2:
         return significant
     gains = {}
     for c in flex:
