@@ -97,7 +97,10 @@ def main() -> int:
         "| record | concealed | named | right | held-out error of its joints | fitted against truth | not confirmed | time |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    Path(args.out).write_text("\n".join(head + rows) + "\n\n## Each record's summary\n\n" + "\n".join(details))
+    tail = ["", "Held-out robots of other kinds (Panda, UR10, an RPR arm with a prismatic quill; 500 Hz–2 kHz; PID and "
+            "cascades; exp, atan, tanh laws): `python benches/robot_doctor_heldout.py`, "
+            "[docs/robot_doctor_heldout.md](robot_doctor_heldout.md)."]
+    Path(args.out).write_text("\n".join(head + rows + tail) + "\n\n## Each record's summary\n\n" + "\n".join(details))
     print(f"wrote {args.out}")
     return 0
 
