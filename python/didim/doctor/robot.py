@@ -404,6 +404,21 @@ def _candidates(rec: Recording, res, sim: Dict[str, np.ndarray], done: set) -> L
 CARRY_OVER_BEND = 2.0
 
 
+def _with_look_alikes(tries: List[_Candidate], ranked: List[_Candidate], done: set) -> List[_Candidate]:
+    """The candidates to try, each followed by its look-alike (:attr:`didim.doctor.effects.Effect.tried_with`, as one
+    axis tries them: a force lag and a mode both shift the force's phase), its best-ranked candidate not tried yet,
+    significant or not: the held-out record judges it alone (a 3 ms force lag on every Panda joint ranked
+    flexibility first, and the delay candidate never came up)."""
+    from .effects import REGISTRY
+
+    out = list(tries)
+    for lead in tries:
+        partner = REGISTRY[lead.effect].tried_with if lead.effect in REGISTRY else None
+        if partner and not any(c.effect == partner for c in out):
+            out += [c for c in ranked if c.effect == partner and (c.effect, c.joint) not in done][:1]
+    return out
+
+
 def _carries_over(c: _Candidate, state: "_State", dec, alpha: float) -> Tuple[bool, float]:
     """Whether a term candidate's training coefficients lower the validation record's residual at all (on the
     current model's loop without the encoders' rounding, its columns beyond the model's own there; the decimated
@@ -698,6 +713,12 @@ def _attempt(c: _Candidate, state: _State, alpha: float, dec, progress):
                 f"{c.test.statistic:.1f} on {c.test.dof} dof, adjusted p = {c.p_adj:.2g}); held-out force error "
                 f"{where} {100 * fit['valid_before']:.2f} % -> {100 * fit['valid_after']:.2f} % (Diebold-Mariano p = "
                 f"{p_dm:.2g})")
+    if c.p_adj >= alpha:  # tried as a look-alike (_with_look_alikes), not on its own training test
+        from .effects import REGISTRY
+
+        partners = [e.name for e in REGISTRY.values() if e.tried_with == c.effect]
+        evidence += (f"; not significant on the training record itself: tried as the look-alike of "
+                     f"{' / '.join(partners) or 'another effect'}, judged on the held-out data alone")
     practical = fit["valid_after"] < (1 - MIN_HELDOUT_GAIN) * fit["valid_before"]
     if own is not None:
         # a refit moves every parameter, and a joint's held-out error can fall with them: the term's own torque on
@@ -853,7 +874,7 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
                              + ", ".join(f"{c.effect} {_names(c, robot)[1]}" for c in significant) + " left untried")
                 break
             significant = _order_modes(state, significant, progress)
-            for c in significant[:TRIES_PER_ROUND]:
+            for c in _with_look_alikes(significant[:TRIES_PER_ROUND], ranked, done):
                 done.add((c.effect, c.joint))
                 if c.joint is not None and c.effect not in ("flexibility",):
                     try:
