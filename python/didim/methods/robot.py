@@ -1617,27 +1617,31 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
     ne, fs = len(elastic), 1 / rec.dt
     names = [rigid.robot.joint_names[j] for j in elastic]
     sims = [0]
-    # joints already elastic in the start (an elastic result: the doctor screening one more joint) keep their split
-    held = {e: rigid.options["modes"][nm] for e, nm in enumerate(names) if nm in rigid.structure.elastic}
-    if held and start is None and not search:
-        x = np.array([[held[e]["lambda"], held[e]["f_n_flex"], held[e]["zeta"]] if e in held
-                      else [0.5, 0.1 * fs, ELASTIC_ZETA0] for e in range(ne)])
-        return _joint_grids(split, x, [e for e in range(ne) if e not in held], law, names, sims, say)
-    if held:
-        raise DataError("step 2 from an elastic result screens the joints it adds (search=False); the three steps "
-                        "start from the rigid model's result")
 
     def errors(x):
         sims[0] += 1
         return split.errors(x, law)
 
+    grid = [(lam, share * fs) for lam in ELASTIC_GRID_LAMBDA for share in ELASTIC_GRID_F_SHARE]
+    # joints already elastic in the start (an elastic result: the doctor screening one more joint) keep their split
+    held = {e: rigid.options["modes"][nm] for e, nm in enumerate(names) if nm in rigid.structure.elastic}
+    if held and start is None and not search:
+        x = np.array([[held[e]["lambda"], held[e]["f_n_flex"], held[e]["zeta"]] if e in held
+                      else [0.5, 0.1 * fs, ELASTIC_ZETA0] for e in range(ne)])
+        free = [e for e in range(ne) if e not in held]
+        best = _grid_each(x, free, grid, errors)
+        say("step 2 start (eq. (28)'s grid, the joints added at their best points): " + "; ".join(
+            f"{names[e]} λ = {x[e, 0]:.2f}, f = {x[e, 1]:.1f} Hz" for e in free))
+        return x, split, {"criterion": best, "simulations": sims[0]}
+    if held:
+        raise DataError("step 2 from an elastic result screens the joints it adds (search=False); the three steps "
+                        "start from the rigid model's result")
     if start is not None:
         x = np.asarray(start, dtype=float)
         if x.shape != (ne, 3):
             raise DataError(f"step 2's start holds one row (λ, f in Hz, ζ) per elastic joint ({ne}), got shape "
                             f"{x.shape}")
         return _step2_search(split, x, law, names, sims, say)
-    grid = [(lam, share * fs) for lam in ELASTIC_GRID_LAMBDA for share in ELASTIC_GRID_F_SHARE]
     points = [np.array([[lam, f, ELASTIC_ZETA0]] * ne) for lam, f in grid]
     with ThreadPoolExecutor(max_workers=max(1, min(len(points), _core_count()))) as pool:
         got = list(pool.map(errors, points))
@@ -1653,41 +1657,22 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
         vals = [g[j] if g is not None else math.inf for g in got]
         i = int(np.argmin(vals))
         x[e] = (grid[i][0], grid[i][1], ELASTIC_ZETA0)
-    if ne > 1:
-        # each joint's grid again with the others at their best points: the modes of a chain couple
-        for e, j in enumerate(elastic):
-            pts = []
-            for lam, f in grid:
-                xx = x.copy()
-                xx[e] = (lam, f, ELASTIC_ZETA0)
-                pts.append(xx)
-            with ThreadPoolExecutor(max_workers=max(1, min(len(pts), _core_count()))) as pool:
-                got = list(pool.map(errors, pts))
-            i = int(np.argmin([_joints_error(g) for g in got]))
-            x[e] = (grid[i][0], grid[i][1], ELASTIC_ZETA0)
+    if ne > 1:  # each joint's grid again with the others at their best points: the modes of a chain couple
+        _grid_each(x, range(ne), grid, errors)
     say("step 2 start (eq. (28)'s grid, each elastic joint at its best point): " + "; ".join(
         f"{nm} λ = {x[e, 0]:.2f}, f = {x[e, 1]:.1f} Hz" for e, nm in enumerate(names)))
     if not search:
         return x, split, {"criterion": _joints_error(errors(x)), "simulations": sims[0]}
-
     return _step2_search(split, x, law, names, sims, say)
 
 
-def _joint_grids(split: _ElasticSplit, x: np.ndarray, free: List[int], law: Law, names: List[str], sims: List[int],
-                 say) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
-    """Eq. (28)'s grid of each elastic joint of ``free`` in turn, the others at their rows of ``x``: the best point
-    (the joints' criterion, :func:`_joints_error`) and its criterion, no least squares."""
+def _grid_each(x: np.ndarray, joints, grid: List[Tuple[float, float]], errors) -> float:
+    """Eq. (28)'s ``grid`` of each elastic joint of ``joints`` in turn (rows of ``x``), the others at their rows:
+    each row set in place to its best point by the joints' criterion (:func:`_joints_error`); the last criterion."""
     from concurrent.futures import ThreadPoolExecutor
 
-    fs = 1 / split.rec.dt
-    grid = [(lam, share * fs) for lam in ELASTIC_GRID_LAMBDA for share in ELASTIC_GRID_F_SHARE]
-
-    def errors(xx):
-        sims[0] += 1
-        return split.errors(xx, law)
-
     best = math.inf
-    for e in free:
+    for e in joints:
         pts = []
         for lam, f in grid:
             xx = x.copy()
@@ -1697,9 +1682,7 @@ def _joint_grids(split: _ElasticSplit, x: np.ndarray, free: List[int], law: Law,
             vals = [_joints_error(g) for g in pool.map(errors, pts)]
         i = int(np.argmin(vals))
         x[e], best = (grid[i][0], grid[i][1], ELASTIC_ZETA0), vals[i]
-    say("step 2 start (eq. (28)'s grid, the joints added at their best points): " + "; ".join(
-        f"{names[e]} λ = {x[e, 0]:.2f}, f = {x[e, 1]:.1f} Hz" for e in free))
-    return x, split, {"criterion": best, "simulations": sims[0]}
+    return best
 
 
 def _step2_search(split: _ElasticSplit, x: np.ndarray, law: Law, names: List[str], sims: List[int], say
