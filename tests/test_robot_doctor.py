@@ -93,3 +93,28 @@ def test_a_spring_that_bends_the_base_fit_is_named_on_its_joint(tmp_path):
     f = d.findings[0]
     assert (f.effect, f.joint) == ("position_dependent_torque", "base_yaw"), d.summary()
     assert f.params["amplitude"] == pytest.approx(t["parameters"]["k"], rel=0.15), f.params
+
+
+def test_a_candidate_tried_brings_its_look_alike_significant_or_not():
+    """As for one axis (Effect.tried_with), a mode on a joint and a delay on every joint are tried together: a
+    flexibility candidate brings the best-ranked delay not tried yet, whatever its training p-value (held-out e8: a
+    3 ms force lag on every Panda joint ranked flexibility first, and the delay never came up); a look-alike already
+    among the tries, or tried on this model, is not added again."""
+    import numpy as np
+
+    from didim.doctor.robot import _Candidate, _with_look_alikes
+
+    def cand(effect, joint, p):
+        c = _Candidate(effect, joint, {} if joint is None else {joint: np.zeros((3, 1))}, {})
+        c.p_adj = p
+        return c
+
+    flex, asym, delay = cand("flexibility", 1, 1e-9), cand("asymmetric_friction", 0, 1e-5), cand("delay", None, 0.96)
+    ranked = [flex, asym, cand("stribeck", 2, 0.5), delay]
+    assert _with_look_alikes([flex, asym], ranked, set()) == [flex, asym, delay]
+    assert _with_look_alikes([flex, delay], ranked, set()) == [flex, delay]
+    assert _with_look_alikes([flex], ranked, {("delay", None)}) == [flex]
+    assert _with_look_alikes([asym], ranked, set()) == [asym]
+    # a delay brings the best-ranked mode not tried yet
+    flex2 = cand("flexibility", 3, 0.2)
+    assert _with_look_alikes([delay], [delay, flex2, flex], set()) == [delay, flex2]
