@@ -149,18 +149,13 @@ class Decimation:
 
     def gain(self, f_hz: float, fs_hz: Optional[float] = None) -> float:
         """The share of a sinusoid's amplitude at ``f_hz`` that the zero-phase filter passes (forward and backward:
-        |H|², 1/2 at a Butterworth's cutoff), before the down-sampling. ``fs_hz``: the record's rate, needed for
-        :meth:`matlab`'s design (whose cutoff follows the rate); a Butterworth decimation knows its own."""
+        |H|², 1/2 at a Butterworth's cutoff), before the down-sampling: the core's own filter's response.
+        ``fs_hz``: the record's rate, needed for :meth:`matlab` (whose cutoff follows the rate); a Butterworth
+        decimation knows its own."""
         fs = self.fs_hz if fs_hz is None else float(fs_hz)
         if fs is None:
             raise DataError("the gain of a MATLAB-style decimation needs the record's sampling frequency (fs_hz)")
-        if self.kind == "matlab":
-            b, a = _core.cheby1(self.order, 0.05, 0.8 / self.factor)
-        else:
-            b, a = _core.butter(self.order, _wn(self.cutoff_hz, fs))
-        z = np.exp(-1j * math.pi * min(float(f_hz) / (fs / 2), 1.0))
-        h = np.polyval(np.asarray(b)[::-1], z) / np.polyval(np.asarray(a)[::-1], z)
-        return float(abs(h) ** 2)
+        return float(self.core.gain(float(f_hz) / (fs / 2)))
 
     def __call__(self, x) -> np.ndarray:
         """Decimates one signal."""

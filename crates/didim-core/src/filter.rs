@@ -131,3 +131,29 @@ pub enum ZeroPhase {
     /// Second-order sections, applied with [`sosfiltfilt`].
     Sos(Sos),
 }
+
+/// `|P(e^{-jω})|²` of the polynomial `p[0] + p[1] z⁻¹ + …` at `ω` (rad per sample).
+fn poly_power(p: &[f64], w: f64) -> f64 {
+    let (mut re, mut im) = (0.0, 0.0);
+    for (k, c) in p.iter().enumerate() {
+        let x = -(k as f64) * w;
+        re += c * x.cos();
+        im += c * x.sin();
+    }
+    re * re + im * im
+}
+
+impl ZeroPhase {
+    /// The share of a sinusoid's amplitude at `w` (rad per sample, `0 ≤ w ≤ π`)
+    /// that the filter passes applied forward and backward: `|H(e^{jω})|²`.
+    pub fn power_gain(&self, w: f64) -> f64 {
+        match self {
+            ZeroPhase::Ba(tf) => poly_power(&tf.b, w) / poly_power(&tf.a, w),
+            ZeroPhase::Sos(sos) => sos
+                .sections()
+                .iter()
+                .map(|s| poly_power(&s[..3], w) / poly_power(&s[3..], w))
+                .product(),
+        }
+    }
+}

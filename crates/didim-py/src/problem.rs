@@ -75,6 +75,12 @@ impl Decimation {
         Ok(Self { inner })
     }
 
+    /// The share of a sinusoid's amplitude at `f_rel` (its frequency over the Nyquist frequency) that the
+    /// zero-phase filter passes.
+    fn gain(&self, f_rel: f64) -> f64 {
+        self.inner.gain(f_rel)
+    }
+
     /// Number of samples kept from `n`.
     fn output_len(&self, n: usize) -> usize {
         self.inner.output_len(n)

@@ -176,6 +176,15 @@ impl Decimation {
         self.factor
     }
 
+    /// The share of a sinusoid's amplitude at `f_rel` (its frequency over the
+    /// Nyquist frequency, clamped to `0..=1`) that the zero-phase filter passes
+    /// before the down-sampling (1 for the identity).
+    pub fn gain(&self, f_rel: f64) -> f64 {
+        self.filter
+            .as_ref()
+            .map_or(1.0, |f| f.power_gain(PI * f_rel.clamp(0.0, 1.0)))
+    }
+
     /// The zero-phase filter, `None` for the identity (`Decimation::matlab(1)`).
     pub fn filter(&self) -> Option<&ZeroPhase> {
         self.filter.as_ref()
