@@ -1463,6 +1463,13 @@ class _ElasticSplit:
                       theta[lay.d(e)] / (2 * math.sqrt(k * m[j, j])))
         return out
 
+    def modes(self, x: np.ndarray) -> Dict[str, Dict[str, float]]:
+        """Each elastic joint's row of ``x`` (λ, f in Hz, ζ) by name, with the mid-stroke position it is taken at:
+        a result's ``options["modes"]``."""
+        return {self.robot.joint_names[j]: {"lambda": float(x[e, 0]), "f_n_flex": float(x[e, 1]),
+                                            "zeta": float(x[e, 2]), "q_mid": float(self.qmid[j])}
+                for e, j in enumerate(self.elastic)}
+
     def theta(self, x: np.ndarray) -> np.ndarray:
         """θ of the elastic model (:class:`_Layout`) at ``x`` (one row (λ, f in Hz, ζ) per elastic joint)."""
         n, lay = self.robot.ndof, self.lay
@@ -1785,7 +1792,6 @@ def _no_mode_result(rec: Recording, model: Model, split: "_ElasticSplit", theta0
     """:func:`didim_elastic`'s result when step 2 finds no mode of some elastic joints (:func:`no_mode`): step 3 is
     not run (as for one axis); the result holds step 2's parameters, not converged, its message naming the joints,
     why, and what to do; ``options["no_mode"]`` the reasons by joint."""
-    robot = model.robot
     message = ("step 2 finds no elastic mode of " + "; ".join(f"{j}: {w}" for j, w in why.items())
                + ": step 3 was not run, and these parameters are step 2's. Model "
                + ("that joint" if len(why) == 1 else "those joints") + " rigid, or record a trajectory that excites "
@@ -1794,10 +1800,7 @@ def _no_mode_result(rec: Recording, model: Model, split: "_ElasticSplit", theta0
     res = _result("didim", rec, model.with_law(law), split.base, theta0, np.full((nt, nt), np.nan), converged=False,
                   iterations=0, message=message,
                   notes=[f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid.force_error:.2f} %", message])
-    names = [robot.joint_names[j] for j in split.elastic]
-    x = split.x_of(theta0)
-    res.options["modes"] = {nm: {"lambda": float(x[e, 0]), "f_n_flex": float(x[e, 1]), "zeta": float(x[e, 2]),
-                                 "q_mid": float(split.qmid[j])} for e, (nm, j) in enumerate(zip(names, split.elastic))}
+    res.options["modes"] = split.modes(split.x_of(theta0))
     res.options["no_mode"] = dict(why)
     res.options["rigid_force_error"] = rigid.force_error
     res.options["rigid_force_error_per_joint"] = dict(rigid.force_error_per_joint)
@@ -1849,10 +1852,8 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
             break
         run = again
     err, theta, sol, _ = run.best
-    names = [robot.joint_names[j] for j in elastic]
     x = _ElasticSplit.of_elastic(rec, plant, theta).x_of(theta)  # the final model's split, modes and damping
-    modes = {nm: {"lambda": float(x[e, 0]), "f_n_flex": float(x[e, 1]), "zeta": float(x[e, 2]),
-                  "q_mid": float(split.qmid[j])} for e, (nm, j) in enumerate(zip(names, elastic))}
+    modes = split.modes(x)
     notes = [f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid_error:.2f} %"
              + "".join(f"; {j} {100 * v:.2f} %" for j, v in rigid_per.items()),
              "steps 2 and 3 (each elastic joint's mass ratio λ, locked-rotor mode f_n_flex at mid-stroke and damping "
