@@ -1249,15 +1249,33 @@ impl<const N: usize> Model<N> {
         let n = check_series::<N, R>(q, qd, qdd)?;
         let p = self.n_params();
         let mut w = vec![0.0; N * p * n];
-        let mut row = vec![0.0; N * p];
-        for k in 0..n {
-            let qk = SVector::<f64, N>::from_fn(|d, _| q[d].as_ref()[k]);
-            let qdk = SVector::<f64, N>::from_fn(|d, _| qd[d].as_ref()[k]);
-            let qddk = SVector::<f64, N>::from_fn(|d, _| qdd[d].as_ref()[k]);
-            self.regressor_into(&qk, &qdk, &qddk, &mut row);
-            for d in 0..N {
-                for j in 0..p {
-                    w[(d * p + j) * n + k] = row[d * p + j];
+        let mut col = vec![0.0; n];
+        // column by column, each basis function over the whole series (a sample's row, as
+        // `regressor_into` builds it, visited every column's block n apart): the same values,
+        // 0 + φ on the term's dof and 0 − φ on its second dof
+        for (j, b) in self.basis.iter().enumerate() {
+            match (*b, b.dofs()) {
+                (Basis::Inertia { dof }, _) => col.copy_from_slice(qdd[dof].as_ref()),
+                (_, (a, None)) => {
+                    let (x, v) = (q[a].as_ref(), qd[a].as_ref());
+                    for ((c, &x), &v) in col.iter_mut().zip(x).zip(v) {
+                        *c = b.local(x, v, self.law).0;
+                    }
+                }
+                (_, (a, Some(o))) => {
+                    let (xa, va, xo, vo) = (q[a].as_ref(), qd[a].as_ref(), q[o].as_ref(), qd[o].as_ref());
+                    for (k, c) in col.iter_mut().enumerate() {
+                        *c = b.local(xa[k] - xo[k], va[k] - vo[k], self.law).0;
+                    }
+                }
+            }
+            let (a, other) = b.dofs();
+            for (o, &c) in w[(a * p + j) * n..(a * p + j + 1) * n].iter_mut().zip(&col) {
+                *o = 0.0 + c;
+            }
+            if let Some(o2) = other {
+                for (o, &c) in w[(o2 * p + j) * n..(o2 * p + j + 1) * n].iter_mut().zip(&col) {
+                    *o = 0.0 - c;
                 }
             }
         }
@@ -1664,6 +1682,101 @@ mod tests {
         assert!((r0 - t1).abs() < 1e-9 && (r1 - t2).abs() < 1e-9);
         assert_eq!(row[6], -q2);
         assert_eq!(row[13], q2);
+    }
+
+    #[test]
+    fn the_trajectory_regressor_is_each_sample_s_row_bit_for_bit() {
+        // every kind of basis function, on two dofs, through every friction-law shape
+        let terms: Vec<(String, Basis)> = vec![
+            ("M1".into(), Basis::Inertia { dof: 0 }),
+            ("M2".into(), Basis::Inertia { dof: 1 }),
+            ("Fv".into(), Basis::Viscous { dof: 0 }),
+            ("Fc".into(), Basis::Coulomb { dof: 1 }),
+            ("OF".into(), Basis::Offset { dof: 0 }),
+            ("K".into(), Basis::Spring { a: 1, b: 0 }),
+            ("D".into(), Basis::Damper { a: 0, b: 1 }),
+            ("AV".into(), Basis::AbsViscous { dof: 0 }),
+            ("AC".into(), Basis::AbsCoulomb { dof: 1 }),
+            ("S".into(), Basis::Stribeck { dof: 0, vs: 0.02 }),
+            (
+                "R".into(),
+                Basis::Ripple {
+                    dof: 1,
+                    period: 0.03,
+                    phase: 0.4,
+                },
+            ),
+            (
+                "CR".into(),
+                Basis::CoulombRipple {
+                    dof: 0,
+                    period: 0.05,
+                    phase: -1.0,
+                },
+            ),
+            (
+                "CS".into(),
+                Basis::CoulombSpline {
+                    dof: 0,
+                    center: 0.01,
+                    width: 0.02,
+                    side: -1,
+                },
+            ),
+            (
+                "SP".into(),
+                Basis::Spline {
+                    dof: 1,
+                    center: -0.01,
+                    width: 0.03,
+                },
+            ),
+            (
+                "G".into(),
+                Basis::Gravity {
+                    dof: 0,
+                    angle_offset: 0.3,
+                    phase: 0.1,
+                },
+            ),
+            (
+                "B".into(),
+                Basis::Backlash {
+                    a: 1,
+                    b: 0,
+                    gap: 1e-3,
+                },
+            ),
+        ];
+        let base = Model::<2>::new(terms, 1e-3).unwrap();
+        let n = 500;
+        let series = |f: &dyn Fn(f64) -> f64| -> Vec<Vec<f64>> {
+            (0..2)
+                .map(|d| (0..n).map(|k| f(k as f64 * 0.01 + d as f64)).collect())
+                .collect()
+        };
+        let q = series(&|t| 0.05 * (1.3 * t).sin() + 1e-3 * (7.0 * t).cos());
+        let qd = series(&|t| 0.06 * (1.3 * t).cos() - 2e-3 * (9.0 * t).sin());
+        let qdd = series(&|t| -0.08 * (1.3 * t).sin());
+        for shape in [LawShape::Algebraic, LawShape::Tanh, LawShape::Atan, LawShape::Exp] {
+            let m = base.with_law_shape(shape);
+            let p = m.n_params();
+            let w = m.regressor(&q, &qd, &qdd).unwrap();
+            let mut row = vec![0.0; 2 * p];
+            for k in 0..n {
+                let at = |s: &Vec<Vec<f64>>| Vector2::new(s[0][k], s[1][k]);
+                m.regressor_into(&at(&q), &at(&qd), &at(&qdd), &mut row);
+                for d in 0..2 {
+                    for j in 0..p {
+                        assert_eq!(
+                            w[(d * p + j) * n + k].to_bits(),
+                            row[d * p + j].to_bits(),
+                            "{shape:?} {d} {j} {k}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     #[test]
