@@ -49,3 +49,39 @@ def test_a_rigid_step_that_cannot_start_on_an_elastic_record_does_not_blame_a_ri
         didim.identify(rec, cad, "didim")
     except didim.SimulationError as e:
         assert "URDF probably does not describe" not in str(e)
+
+
+def test_step_2_splits_a_vertical_lift_without_changing_the_weight_it_holds(tmp_path):
+    """Step 2's split of a rigid estimate into rotor and link (eqs. (23)-(27)) keeps a joint's total inertia and moves
+    the rotor's share into its own body. On a vertical prismatic joint that body's mass is the weight the joint holds,
+    which the rigid step fixes from the static force (the lift: 17.2 kg, while the motor sees 10.5 kg through the
+    belt above its mode), and every split of that total needed a negative mass: none of step 2's grid could be
+    simulated. Such a joint keeps its chain (its static torques those of the rigid step, to rounding) and takes its
+    rotor from λ: Ia = λ/(1 − λ) M_jj, positive at every λ; the revolute shoulder keeps its total. (λ, f, ζ) come back
+    from the split's θ."""
+    from didim.methods.robot import ELASTIC_GRID_LAMBDA, _ElasticSplit, _model_of
+
+    bench = bench_module("elastic_robots")
+    cad, truth, records, _ = bench.held_out_robot("lift", tmp_path, seconds=(3.0, 1.0))
+    rec = records["train"][0]
+    rigid = didim.identify(rec, cad, "idim-ls")
+    model = didim.Model(robot=cad, elastic=["lift", "shoulder"])
+    split = _ElasticSplit.of_rigid(rec, rigid, model)
+    assert split.holds == [True, False]
+    q = split.qmid[None]
+    zero = np.zeros_like(q)
+    chain0 = cad.with_inertial_params(split.pi1[cad.ndof:])
+    g0 = chain0.rnea(q, zero, zero)[0]
+    total = split.total[1]
+    for lam in ELASTIC_GRID_LAMBDA:
+        x = np.array([[lam, 14.0, 0.03], [lam, 19.0, 0.02]])
+        theta = split.theta(x)
+        chain, d = _model_of(model, split.base, theta)
+        g = chain.rnea(q, zero, zero)[0]
+        assert np.allclose(g[0], g0[0], rtol=1e-9, atol=0), (lam, g, g0)
+        m = chain.mass_matrix(split.qmid)
+        ia = d["armature"]
+        assert ia[0] == pytest.approx(lam / (1 - lam) * m[0, 0], rel=1e-9)
+        assert ia[0] > 0
+        assert ia[1] + m[1, 1] == pytest.approx(total, rel=1e-9)
+        assert np.allclose(split.x_of(theta), x, rtol=1e-9, atol=1e-12)

@@ -1437,6 +1437,15 @@ class _ElasticSplit:
         m = chain.mass_matrix(self.qmid)
         self.total = np.array([self.pi1[j] + m[j, j] for j in elastic])
         self.partner = [_own_inertia(chain, j, self.qmid) for j in elastic]
+        # a partner that gravity acts on (a prismatic joint's mass on a vertical axis): the rigid step fixed it by the
+        # static force it carries, not by the inertia the motor sees; moving the rotor's share into it would change the
+        # weight the joint holds (the vertical lift's rigid step: 17.2 kg from gravity, 10.5 kg seen by the motor above
+        # the belt's mode, and every split of that total needed a negative mass). Such a joint keeps its chain and
+        # takes its rotor from λ alone: Ia = λ/(1 − λ) M_jj(q_mid).
+        grav = chain.regressor(self.qmid[None], np.zeros((1, n)), np.zeros((1, n)))[0]
+        g = max(float(np.linalg.norm(chain.gravity_vector)), 1e-300)
+        self.holds = [bool(np.max(np.abs(grav[:, c - n])) > 1e-9 * g) for c, _ in self.partner]
+        self.chain_jj = np.array([m[j, j] for j in elastic])
         self.base = base_parameters(robot, elastic=elastic)
         self.lay = _Layout.for_model(model, self.base)
 
@@ -1475,6 +1484,9 @@ class _ElasticSplit:
         n, lay = self.robot.ndof, self.lay
         pi = self.pi1.copy()
         for e, j in enumerate(self.elastic):
+            if self.holds[e]:
+                pi[j] = x[e, 0] / (1 - x[e, 0]) * self.chain_jj[e]
+                continue
             ia = x[e, 0] * self.total[e]
             c, coef = self.partner[e]
             pi[c] += (pi[j] - ia) / coef

@@ -129,6 +129,11 @@ class Robot:
         return self._core.ndof
 
     @property
+    def gravity_vector(self) -> np.ndarray:
+        """The gravity acceleration in the world frame (m/s²)."""
+        return np.array(self._core.gravity_vector, dtype=float)
+
+    @property
     def param_names(self) -> List[str]:
         return list(self._core.param_names)
 
