@@ -1022,7 +1022,7 @@ def _result(method: str, rec: Recording, model: Model, base: BaseParameters, the
                          f"friction (Ia_{jn}, Fv_{jn}, Fc_{jn}) are not identified by it and their values mean nothing; "
                          "record a move of every joint")
     res = robot_result(method, ordered, stds, model, base, notes=notes, **kw)
-    res.notes += plausibility(res)
+    res.notes += plausibility(res, rec)
     return res
 
 
@@ -1031,12 +1031,25 @@ def _result(method: str, rec: Recording, model: Model, base: BaseParameters, the
 POOR_EXCITATION = 0.1
 
 
-def plausibility(res: IdentificationResult) -> List[str]:
+def plausibility(res: IdentificationResult, rec: Optional[Recording] = None) -> List[str]:
     """What a robotics engineer checks before trusting the estimate: the base parameters the record excites poorly
-    (relative standard deviation above :data:`POOR_EXCITATION`), and whether the standard parameters closest to the
+    (relative standard deviation above :data:`POOR_EXCITATION`), whether the standard parameters closest to the
     URDF's that give these base parameters are those of physical bodies (mass > 0, pseudo-inertia positive definite:
-    a density can have them) and of physical drives (rotor inertia, friction ≥ 0)."""
+    a density can have them) and of physical drives (rotor inertia, friction ≥ 0), and, given the record, whether the
+    arm's mass matrix is positive definite at its poses and around them (:func:`check_poses`; it follows from the base
+    parameters alone: where it is not, the estimate is no physical arm whatever its split, and a closed loop that
+    goes there cannot be simulated)."""
     out = []
+    if rec is not None:
+        robot, d = _model_of(res.structure, res.base, theta_of(res))
+        poses = check_poses(rec, robot)
+        if not mass_matrix_positive(robot, d, poses, elastic_of(res.structure)):
+            where = "at the record's own poses" if not mass_matrix_positive(robot, d, poses[:-POSE_DRAWS],
+                                                                            elastic_of(res.structure)) else \
+                f"at poses within {100 * POSE_MARGIN:.0f} % of each joint's range beyond the record's"
+            out.append(f"the estimate's mass matrix is not positive definite {where}: no physical arm has these base "
+                       "parameters, and a trajectory that goes there cannot be simulated with them (poorly excited "
+                       "inertial parameters: a record that moves further would pin them down)")
     poor = sorted(((res.std[b] / abs(res.params[b]), b) for b in res.base.names
                    if res.params[b] != 0 and res.std.get(b, 0) > POOR_EXCITATION * abs(res.params[b])), reverse=True)
     if poor:
@@ -1152,6 +1165,43 @@ def _model_of(model: Model, base: BaseParameters, theta: np.ndarray):
     return robot.with_inertial_params(pi[n:]), d
 
 
+#: How far beyond the record's range of each joint :func:`check_poses` looks, as a share of that range on each side.
+POSE_MARGIN = 0.25
+#: Poses drawn in that box (beside the record's own).
+POSE_DRAWS = 128
+
+
+def check_poses(rec: Recording, robot: Robot) -> np.ndarray:
+    """Poses at which an estimate's mass matrix must be positive definite: the record's own (its motor positions, at
+    most 512 spread over it) and ``POSE_DRAWS`` drawn (with a fixed seed: the same for every call) in the box of each
+    joint's range widened by ``POSE_MARGIN`` of it on each side, within the URDF's limits (a validation record moves
+    elsewhere in the workspace than the training one; a physical arm's mass matrix is positive everywhere)."""
+    q = np.asarray(rec.qm, dtype=float)
+    own = q[np.linspace(0, len(q) - 1, min(len(q), 512)).astype(int)]
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    span = hi - lo
+    lim = np.array([(l[0], l[1]) for l in robot.limits], dtype=float)
+    lo = np.maximum(lo - POSE_MARGIN * span, np.where(np.isfinite(lim[:, 0]), lim[:, 0], -np.inf))
+    hi = np.minimum(hi + POSE_MARGIN * span, np.where(np.isfinite(lim[:, 1]), lim[:, 1], np.inf))
+    lo, hi = np.minimum(lo, q.min(axis=0)), np.maximum(hi, q.max(axis=0))  # limits a record exceeds: its range
+    drawn = lo + (hi - lo) * np.random.default_rng(0).random((POSE_DRAWS, q.shape[1]))
+    return np.vstack([own, drawn])
+
+
+def mass_matrix_positive(robot: Robot, d: Dict[str, List[float]], poses: np.ndarray,
+                         elastic: Tuple[int, ...] = ()) -> bool:
+    """Whether the mass matrix of ``robot`` with the drives ``d`` (its rigid joints' rotor inertias on the diagonal;
+    an elastic joint's rotor moves on its own) is positive definite at every pose of ``poses``."""
+    arm = np.asarray(d["armature"], dtype=float).copy()
+    arm[list(elastic)] = 0.0
+    m = robot.mass_matrix(poses) + np.diag(arm)
+    try:
+        np.linalg.cholesky(m)
+    except np.linalg.LinAlgError:
+        return False
+    return bool(np.all(np.isfinite(m)))
+
+
 class _RobotPlant:
     """A robot as DIDIM's loop (:func:`didim.methods.didim_loop.didim_loop`) sees it: θ holds the base parameters, each
     joint's viscous and Coulomb friction (and offset); the closed loop of the arm with the standard parameters
@@ -1251,7 +1301,9 @@ class _RobotPlant:
 
     def physical(self, new: np.ndarray, old) -> bool:
         """Finite, and each elastic joint's rotor inertia and stiffness positive, its damping not negative (the
-        loop pulls an iterate that is not back toward the best)."""
+        loop pulls an iterate that is not back toward the best). The arm's mass matrix is not required positive
+        beyond the poses the record's simulation visits (:func:`plausibility` reports it): required in a box around
+        them, DIDIM on the held-out elastic Panda's rigid model stopped on steps it could not shorten into it."""
         lay = self.lay
         return bool(np.all(np.isfinite(new))) and all(
             new[lay.ia(e)] > 0 and new[lay.k(e)] > 0 and new[lay.d(e)] >= 0 for e in range(lay.ne))
