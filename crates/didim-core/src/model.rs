@@ -829,33 +829,25 @@ impl Basis {
     /// both integrators and the sensitivities all read it.
     #[inline(always)]
     pub(crate) fn local<L: Law>(&self, x: f64, xd: f64, law: L) -> (f64, f64, f64) {
-        self.local_with(x, xd, || law.sign_and_derivative(xd))
-    }
-
-    /// [`Basis::local`] with the friction law's sign and its derivative at `ẋ`, `(s(ẋ), s'(ẋ))`, from
-    /// `sign` (called at most once, by the terms that use it): a caller with several friction terms on one
-    /// velocity evaluates the law once for all of them, with the same values.
-    #[inline(always)]
-    pub(crate) fn local_with(&self, x: f64, xd: f64, sign: impl FnOnce() -> (f64, f64)) -> (f64, f64, f64) {
         match *self {
             Basis::Inertia { .. } => (0.0, 0.0, 0.0),
             Basis::Viscous { .. } | Basis::Damper { .. } => (xd, 0.0, 1.0),
             Basis::Offset { .. } => (1.0, 0.0, 0.0),
             Basis::Spring { .. } => (x, 1.0, 0.0),
             Basis::Coulomb { .. } => {
-                let (s, ds) = sign();
+                let (s, ds) = law.sign_and_derivative(xd);
                 (s, 0.0, ds)
             }
             Basis::AbsViscous { .. } => {
-                let (s, ds) = sign();
+                let (s, ds) = law.sign_and_derivative(xd);
                 (xd * s, 0.0, s + xd * ds)
             }
             Basis::AbsCoulomb { .. } => {
-                let (s, ds) = sign();
+                let (s, ds) = law.sign_and_derivative(xd);
                 (s.abs(), 0.0, s.signum() * ds)
             }
             Basis::Stribeck { vs, .. } => {
-                let (s, ds) = sign();
+                let (s, ds) = law.sign_and_derivative(xd);
                 let e = (-(xd / vs) * (xd / vs)).exp();
                 (s * e, 0.0, ds * e - s * e * 2.0 * xd / (vs * vs))
             }
@@ -867,7 +859,7 @@ impl Basis {
             Basis::CoulombRipple { period, phase, .. } => {
                 let w = std::f64::consts::TAU / period;
                 let (sn, cs) = (w * x + phase).sin_cos();
-                let (s, ds) = sign();
+                let (s, ds) = law.sign_and_derivative(xd);
                 (s * sn, s * w * cs, ds * sn)
             }
             Basis::Gravity {
@@ -884,7 +876,7 @@ impl Basis {
                 center, width, side, ..
             } => {
                 let (b, db) = cubic_bspline((x - center) / width);
-                let (s, ds) = sign();
+                let (s, ds) = law.sign_and_derivative(xd);
                 // the forward or backward part of the sign, s(1 ± s)/2: 1 or 0 (−1 or 0) away from rest, the two
                 // summing to s, and as smooth as s (max(s, 0) would kink the dynamics at every reversal); both: s
                 let (sigma, dsigma) = if side == 0 {

@@ -183,12 +183,8 @@ impl Drives {
         let law = self.laws[j];
         let mut f = self.viscous[j] * v + self.coulomb[j] * law.sign(v) + self.offset[j];
         if let Some(terms) = self.terms.get(j) {
-            // the law once for every term of the joint that reads it (the same values as each term's own)
-            let mut sign = None;
             for (b, value) in terms {
-                f += value
-                    * b.local_with(x, v, || *sign.get_or_insert_with(|| law.sign_and_derivative(v)))
-                        .0;
+                f += value * b.local(x, v, law).0;
             }
         }
         f

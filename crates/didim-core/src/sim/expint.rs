@@ -82,29 +82,6 @@ struct GTerm<const N: usize> {
     outer: Mat<N>,
 }
 
-/// The friction law's sign and derivative at each dof's velocity, evaluated at most once per evaluation of `g`
-/// however many friction terms (Coulomb, Stribeck, direction-dependent, profiles) act on that dof: the same
-/// values as each term's own evaluation, one square root, hyperbolic tangent or exponential instead of several.
-struct Signs<const N: usize>([Option<(f64, f64)>; N]);
-
-impl<const N: usize> Signs<N> {
-    #[inline(always)]
-    fn new() -> Self {
-        Self([None; N])
-    }
-
-    /// The law at the term's velocity `xd`: a one-dof term's is its dof's velocity, cached.
-    #[inline(always)]
-    fn of<L: Law>(&mut self, basis: &Basis, xd: f64, v: &V<N>, law: L) -> (f64, f64) {
-        match basis.dofs() {
-            (d, None) if v[d].to_bits() == xd.to_bits() => {
-                *self.0[d].get_or_insert_with(|| law.sign_and_derivative(xd))
-            }
-            _ => law.sign_and_derivative(xd),
-        }
-    }
-}
-
 /// The plant of one parameter set, split for the exponential integrator; `L` its friction
 /// law, a [`FrictionLaw`] or a [`crate::model::Shaped`] one whose shape is a type (a
 /// simulation's loop is compiled per shape, see [`FrictionLaw::dispatch`]).
@@ -325,13 +302,9 @@ impl<const N: usize, L: Law> Plant<N, L> {
             }
             return g.component_mul(&self.inv_mass);
         }
-        let mut signs = Signs::<N>::new();
         for t in &self.terms {
             let (x, xd) = t.basis.coordinates(q, v);
-            g += t.dir
-                * t.basis
-                    .local_with(x, xd, || signs.of(&t.basis, xd, v, self.law))
-                    .0;
+            g += t.dir * t.basis.local(x, xd, self.law).0;
         }
         g.component_mul(&self.inv_mass)
     }
@@ -366,10 +339,9 @@ impl<const N: usize, L: Law> Plant<N, L> {
     /// The general case of [`Plant::g_and_partials`]: the sums over the terms.
     #[inline(always)]
     fn accumulate_terms(&self, q: &V<N>, v: &V<N>, g: &mut V<N>, dq: &mut Mat<N>, dv: &mut Mat<N>) {
-        let mut signs = Signs::<N>::new();
         for t in &self.terms {
             let (x, xd) = t.basis.coordinates(q, v);
-            let (phi, px, pv) = t.basis.local_with(x, xd, || signs.of(&t.basis, xd, v, self.law));
+            let (phi, px, pv) = t.basis.local(x, xd, self.law);
             *g += t.dir * phi;
             *dq += t.outer * px;
             *dv += t.outer * pv;
