@@ -586,7 +586,7 @@ def held_out(lines, names=tuple(HELD_OUT)):
             # what a rigid inverse model makes of each elastic joint's inertia (its rotor's and its chain's at the
             # start pose), against the truth's: the rigid step's start when the URDF's values cannot be simulated
             idim = didim.identify(rec, cad, "idim-ls")
-            chain, drives = _model_of(idim.robot, idim.base, idim.offset, theta_of(idim))
+            chain, drives = _model_of(idim.structure, idim.base, theta_of(idim))
             m_idim = chain.mass_matrix(rec.qm[0])
             t["model"].armature = np.zeros(cad.ndof)
             m_true = pin.crba(t["model"], t["model"].createData(), rec.qm[0])
