@@ -299,3 +299,30 @@ def test_an_estimate_whose_mass_matrix_is_not_positive_near_the_record_is_named(
     bad = replace(res, params={**res.params, name: res.params[name] - 2 * lowest - 1.0})
     notes = [n for n in plausibility(bad, rec) if "mass matrix is not positive" in n]
     assert len(notes) == 1 and "record's own poses" in notes[0], notes
+
+
+def test_frozen_parameters_are_held_and_the_others_fitted_around_them(robots_dir):
+    """``frozen`` on a robot's DIDIM, as on one axis's: the parameters named keep the values given (σ 0, listed in
+    ``frozen``), every fit of the iterations works around them, and the rest is identified. On the data folder's
+    pendulum: Fv held at the truth gives Fc within 3 % of the truth and the force error of the free fit (within
+    10 %); Fv held at twice the truth is used by the loop (its force error rises above the truth-held fit's by half
+    at least). Unknown names and non-finite values are refused by name."""
+    truth = json.loads((robots_dir / "truth.json").read_text())["robots"]["pendulum"]
+    robot = didim.Robot.from_urdf(robots_dir / "pendulum_cad.urdf")
+    rec = didim.load_record(robots_dir / "pendulum_train.csv", robot=robot,
+                            controller=robots_dir / "pendulum_controller.json")
+    joints = robot.joint_names
+    free = didim.identify(rec, robot, "didim")
+    held = {f"Fv_{j}": truth["Fv"][i] for i, j in enumerate(joints)}
+    res = didim.identify(rec, robot, "didim", frozen=held)
+    for k, v in held.items():
+        assert res.params[k] == v and res.std[k] == 0.0 and res.frozen[k] == v
+    for i, j in enumerate(joints):
+        assert res.params[f"Fc_{j}"] == pytest.approx(truth["Fc"][i], rel=0.03)
+    assert res.force_error == pytest.approx(free.force_error, rel=0.10)
+    wrong = didim.identify(rec, robot, "didim", frozen={k: 2 * v for k, v in held.items()})
+    assert wrong.force_error > 1.5 * res.force_error
+    with pytest.raises(didim.DataError, match="Fv_elbow"):
+        didim.identify(rec, robot, "didim", frozen={"Fv_elbow": 1.0})
+    with pytest.raises(didim.DataError, match="finite"):
+        didim.identify(rec, robot, "didim", frozen={f"Fv_{joints[0]}": float("nan")})

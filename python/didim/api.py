@@ -316,7 +316,8 @@ def _identify_robot(recording, robot, method: str, *, offset, apM, initial, crit
     robot = model.robot
     if method not in ("didim", "idim-ls", "oe-lm"):
         raise DataError(f"method {method!r} is not available for robots: use 'didim', 'oe-lm' or 'idim-ls'")
-    allowed = {"max_iter", "tol"} if method in ("didim", "oe-lm") else set()
+    allowed = {"max_iter", "tol", "frozen"} if method == "didim" else {"max_iter", "tol"} if method == "oe-lm" \
+        else set()
     unknown = sorted(set(options) - allowed)
     if unknown:
         raise DataError(f"unknown option(s) {', '.join(unknown)} for a robot's {method}; it takes "

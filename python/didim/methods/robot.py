@@ -318,10 +318,23 @@ def top_speeds(rec: Recording) -> np.ndarray:
     return np.max(np.abs(np.diff(rec.qr, axis=0)), axis=0) / rec.dt
 
 
-def _weighted_fit(parts: List[Tuple[np.ndarray, np.ndarray]]) -> Tuple[np.ndarray, np.ndarray, Dict[str, float]]:
+def _weighted_fit(parts: List[Tuple[np.ndarray, np.ndarray]], held: Optional[Dict[int, float]] = None
+                  ) -> Tuple[np.ndarray, np.ndarray, Dict[str, float]]:
     """Least squares of the joints' rows, ordinary first, then each joint's rows divided by its residual's σ: the
     estimate, its covariance, and the regression's residual ‖y − Wθ̂‖ on the rows it kept (unweighted: the weights are
-    the residuals' own and change with them) with its share of ‖y‖: what criterion (21) follows."""
+    the residuals' own and change with them) with its share of ‖y‖: what criterion (21) follows. ``held``: columns
+    (by index) held at given values: their part of the force is taken off y, the rest fitted, and they come back in
+    the estimate with no variance."""
+    if held:
+        p = parts[0][1].shape[1]
+        idx = np.array(sorted(held), dtype=int)
+        vals = np.array([held[i] for i in idx], dtype=float)
+        free = np.setdiff1d(np.arange(p), idx)
+        est, cov, res = _weighted_fit([(yd - wd[:, idx] @ vals, wd[:, free]) for yd, wd in parts])
+        full, cfull = np.zeros(p), np.zeros((p, p))
+        full[free], full[idx] = est, vals
+        cfull[np.ix_(free, free)] = cov
+        return full, cfull, res
     parts = [p for p in parts if len(p[0]) >= 2]
     if not parts:
         from .._errors import IdentifiabilityError
@@ -542,10 +555,11 @@ class _InverseModel:
             out.append((yd, wl))
         return out
 
-    def fit(self, law: Law, coulomb: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray, Dict[str, float]]:
+    def fit(self, law: Law, coulomb: Optional[np.ndarray] = None, held: Optional[Dict[int, float]] = None
+            ) -> Tuple[np.ndarray, np.ndarray, Dict[str, float]]:
         """Weighted least squares (:func:`_weighted_fit`) under ``law``: the estimate, its covariance and the
-        regression's residual."""
-        return _weighted_fit(self.rows(law, coulomb))
+        regression's residual; ``held``: parameters (by index in θ) held at given values."""
+        return _weighted_fit(self.rows(law, coulomb), held)
 
 
 #: Relative step of ε in the law's central difference.
@@ -1211,8 +1225,9 @@ class _RobotPlant:
     (:func:`closed_loop_law`) and the iterations go on until they settle again, each joint's ε estimated with the
     parameters where the closed loop kept the shape the tail chose (:func:`_fit`)."""
 
-    def __init__(self, rec, model: Model, base, dec, law, per_shape, tol, say):
+    def __init__(self, rec, model: Model, base, dec, law, per_shape, tol, say, held: Optional[Dict[int, float]] = None):
         self.rec, self.structure, self.robot, self.base, self.dec = rec, model, model.robot, base, dec
+        self.held = dict(held or {})  # parameters held at given values (by index in θ): every fit keeps them
         self.offset = model.offset
         self.law, self.per_shape, self.tol, self.say = law, per_shape, tol, say
         self.n, self.nb = self.robot.ndof, len(base.names)
@@ -1286,7 +1301,7 @@ class _RobotPlant:
         if self.law_chosen and min(self.law[1]) > 0 and self.law[0] == self.tail_shape and not self.elastic:
             # each joint's ε with the parameters, once the closed loop has confirmed the shape that the tail chose:
             # the fits keep the tail's rows, and a shape the closed loop chose against it has its ε set near zero speed
-            theta_e, cov_e, _ = inverse.fit(self.law, coulomb=theta[nb + n:nb + 2 * n])
+            theta_e, cov_e, _ = inverse.fit(self.law, coulomb=theta[nb + n:nb + 2 * n], held=self.held)
             step = theta_e[-n:]
             sd = np.sqrt(np.maximum(np.diag(cov_e)[-n:], 0.0))
             eps = np.asarray(self.law[1])
@@ -1295,7 +1310,7 @@ class _RobotPlant:
                 new = np.where(moved, np.clip(eps + step, eps / 2, 2 * eps), eps)
                 self.law = (self.law[0], tuple(float(e) for e in new))
                 self.say("smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new))
-        est, cov, res = inverse.fit(self.law)
+        est, cov, res = inverse.fit(self.law, held=self.held)
         return {"params": est, "covariance": cov, "std": np.sqrt(np.maximum(np.diag(cov), 0.0)), "law": sim["law"],
                 "force_errors": force_errors(rec, sim["force"]), **res}
 
@@ -1330,7 +1345,7 @@ class _RobotPlant:
             inverse = self.inverse(best, self.simulate(best))
 
         def refit(lw: Law):
-            return self.model(inverse.fit(lw)[0])
+            return self.model(inverse.fit(lw, held=self.held)[0])
 
         if self.elastic and not self.per_shape:
             # an elastic model starts from its rigid step's law: each shape's smoothing speeds from the tail of the
@@ -1355,17 +1370,17 @@ def _start_error(plant: _RobotPlant, theta: np.ndarray) -> float:
         return math.inf
 
 
-def _didim_run(rec, model, base, dec, theta, law, per_shape, max_iter, tol, say, plant=None):
+def _didim_run(rec, model, base, dec, theta, law, per_shape, max_iter, tol, say, plant=None, held=None):
     """DIDIM's iterations on the robot (:class:`_RobotPlant`) from ``theta``: the loop's outcome and the plant."""
     if plant is None:
-        plant = _RobotPlant(rec, model, base, dec, law, per_shape, tol, say)
+        plant = _RobotPlant(rec, model, base, dec, law, per_shape, tol, say, held)
         plant.set_start(theta)
     return didim_loop(plant, theta, max_iter=max_iter, progress=say), plant
 
 
 def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
-          progress: Optional[Callable[[str], None]] = None, start: Optional[IdentificationResult] = None
-          ) -> IdentificationResult:
+          progress: Optional[Callable[[str], None]] = None, start: Optional[IdentificationResult] = None,
+          frozen: Optional[Dict[str, float]] = None) -> IdentificationResult:
     """DIDIM from the URDF's values (rotor inertias and friction 0): the closed loop simulated with the current
     estimate, weighted least squares of the measured force on the simulated states, until the regression's residual
     changes by less than ``tol`` of itself over a step (the paper's criterion (21), every plant's); the iterations and their safeguards are those of every plant (:func:`didim.methods.didim_loop.didim_loop`): an iterate whose
@@ -1380,10 +1395,18 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     ``start``: a result of the same robot (the model it grows by a term, as the doctor does): DIDIM starts from its
     parameters where the model has them (a new term's at 0) instead of the URDF's values; with elastic joints, the
     three-step DIDIM's step 3 (:func:`didim_elastic`).
+
+    ``frozen``: parameters (by their names in the result: base parameters, ``Fv_<joint>``, ...) held at the values
+    given, the others fitted around them, as one axis's ``frozen``: e.g. a manufacturer's body parameters trusted and
+    the drives' identified (a record too short to pin every body parameter: the KR300's). Their σ is 0; the result
+    lists them in ``frozen`` too.
     """
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     _checks.options(max_iter=max_iter, tol=tol)
+    if frozen and model.elastic:
+        raise DataError("frozen parameters are for a rigid robot's DIDIM; the three-step DIDIM of elastic joints "
+                        "fits every parameter (identify the rigid model with frozen=..., or leave frozen out)")
     if model.elastic:
         # a rigid start of the same model is step 1's result; an elastic one, step 3's start
         rigid = start if start is not None and not start.structure.elastic and start.structure.terms == model.terms \
@@ -1406,10 +1429,14 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
         theta0 = np.array([start.params.get(k, 0.0) for k in _theta_names(model, base)])
         origin = "its start (the result given)"
         say("DIDIM starts from the model it grows")
+    held = _held(model, base, frozen)
+    theta0[list(held)] = list(held.values())
     notes: List[str] = []
+    if held:
+        notes.append(f"{len(held)} parameter(s) held at the values given (frozen), the others fitted around them")
     # a start whose closed loop is worse than predicting no force (or cannot be simulated) is no start: DIDIM begins
     # at IDIM-LS's estimate instead, without iterating from it first
-    first = _RobotPlant(rec, model, base, dec, law, per_shape, tol, say)
+    first = _RobotPlant(rec, model, base, dec, law, per_shape, tol, say, held)
     first.set_start(theta0)
     e0 = _start_error(first, theta0)
     if e0 > ABSURD_ERROR:
@@ -1417,15 +1444,15 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
                else "their closed loop cannot be simulated")
         say(f"DIDIM starts from IDIM-LS's estimate: not from {origin} ({why})")
         notes.append(f"DIDIM started from IDIM-LS's estimate, not from {origin} ({why})")
-        run, plant = _didim_run(rec, model, base, dec, measured.fit(law)[0], law, per_shape, max_iter, tol,
-                                say)
+        run, plant = _didim_run(rec, model, base, dec, measured.fit(law, held=held)[0], law, per_shape, max_iter,
+                                tol, say, held=held)
     else:
         run, plant = _didim_run(rec, model, base, dec, theta0, law, per_shape, max_iter, tol, say, plant=first)
         failed = run.best[2] is None or (not run.converged and not run.message.startswith("no convergence"))
         if failed:
             say(f"DIDIM from {origin} failed ({run.message}): again from IDIM-LS's estimate")
-            again, plant_again = _didim_run(rec, model, base, dec, measured.fit(law)[0], law, per_shape,
-                                            max_iter, tol, say)
+            again, plant_again = _didim_run(rec, model, base, dec, measured.fit(law, held=held)[0], law, per_shape,
+                                            max_iter, tol, say, held=held)
             if again.best[2] is not None and (run.best[2] is None or again.best[0] < run.best[0]):
                 notes.append(f"DIDIM from {origin} failed ({run.message}); it started from IDIM-LS's estimate")
                 run, plant = again, plant_again
@@ -1441,7 +1468,37 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     if plant.skip:
         res.start_s, res.force_error_after_start = plant.skip * rec.dt, plant.force_error(plant.simulate(theta))
     res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
+    names = _theta_names(model, base)
+    res.frozen = {names[i]: float(v) for i, v in held.items()}
     return res
+
+
+def _held(model: Model, base: BaseParameters, frozen: Optional[Dict[str, float]]) -> Dict[int, float]:
+    """``frozen`` (parameter names → values) as indices in θ; an unknown name or a value that is not a finite number
+    is refused, naming it."""
+    if not frozen:
+        return {}
+    if not isinstance(frozen, dict):
+        raise DataError(f"frozen is a dict of parameter names and values (e.g. {{'Fv_joint_1': 2.0}}), got "
+                        f"{type(frozen).__name__}")
+    names = _theta_names(model, base)
+    unknown = [k for k in frozen if k not in names]
+    if unknown:
+        raise DataError(f"frozen names parameter(s) the model does not have: {', '.join(map(str, unknown[:5]))}"
+                        f"{' …' if len(unknown) > 5 else ''}; its parameters are {', '.join(names[:8])}, … (a "
+                        "result's params and base.names)")
+    held = {}
+    for k, v in frozen.items():
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            x = math.nan
+        if not math.isfinite(x):
+            raise DataError(f"frozen value of {k} must be a finite number, got {v!r}")
+        held[names.index(k)] = x
+    if len(held) == len(names):
+        raise DataError("frozen holds every parameter of the model: nothing is left to identify")
+    return held
 
 
 # ------------------------------------------------------------------------------------------------ elastic joints
