@@ -309,7 +309,13 @@ def step_identify(out: str, F: Dict, label: str) -> None:
     else:
         m = didim.Model(robot=rb, offset=True, elastic=tuple(JOINTS[:ARM]))
         rigid = didim.load_result(os.path.join(out, "rigid_A.json"))
-        if label == "elastic":
+        if label == "elastic_drives":
+            # step 1 = rigid_drives (the published bodies held); the bodies held through steps 2 and 3, the springs
+            # and drives fitted
+            start = didim.load_result(os.path.join(out, "rigid_drives_A.json"))
+            pub = published_result(out, True)
+            frozen = {b: pub.params[b] for b in pub.base.names if "Ia_" not in b}
+        elif label == "elastic":
             start = rigid
         else:
             # elastic_c: step 3 from the published elastic model (K = c_rad). didim takes an elastic result as step
@@ -357,7 +363,7 @@ def step_report(out: str, F: Dict) -> None:
     F["skew_A"] = sk
     F["skew_B"] = skew_fit(recs["B"])
     table = {}
-    for label in ("rigid", "rigid_drives", "elastic", "elastic_c"):
+    for label in ("rigid", "rigid_drives", "elastic", "elastic_c", "elastic_drives"):
         path = os.path.join(out, f"{label}_A.json")
         if not os.path.exists(path):
             table.pop(label, None)
@@ -434,7 +440,7 @@ def print_tables(F: Dict) -> None:
             print(k, "K", F["identified"][k]["K"], "c_rad", published()["authors"]["c_rad_ode"][:3])
 
 
-STEPS = ("records", "published", "rigid", "rigid_drives", "elastic", "elastic_c", "report", "doctor")
+STEPS = ("records", "published", "rigid", "rigid_drives", "elastic", "elastic_c", "elastic_drives", "report", "doctor")
 
 
 def main(argv=None) -> Dict:
@@ -464,7 +470,7 @@ def main(argv=None) -> Dict:
             step_published(a.out, F)
         elif s == "scan":
             step_scan(a.out, F)
-        elif s in ("rigid", "rigid_drives", "elastic", "elastic_c"):
+        elif s in ("rigid", "rigid_drives", "elastic", "elastic_c", "elastic_drives"):
             step_identify(a.out, F, s)
         elif s == "report":
             step_report(a.out, F)

@@ -386,6 +386,7 @@ def _robot_dict(res: IdentificationResult) -> Dict[str, Any]:
                      "force_error_per_joint": res.force_error_per_joint, "converged": res.converged,
                      "iterations": res.iterations, "message": res.message, "elapsed_s": res.elapsed_s,
                      "notes": res.notes, "history": [h.output_error for h in res.history],
+                     "frozen": res.frozen,
                      "controller_check": res.options.get("controller_check"),
                      # an elastic result's modes and its rigid step's errors (a start for step 3: didim_elastic)
                      "elastic_steps": {k: res.options[k] for k in ELASTIC_OPTIONS if k in res.options},
@@ -463,6 +464,7 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
                          force_error_after_start=float(d.get("force_error_after_start") or math.nan),
                          converged=bool(d.get("converged", True)), iterations=int(d.get("iterations", 0)),
                          message=d.get("message", ""), elapsed_s=float(d.get("elapsed_s", 0.0)),
+                         frozen={str(k): float(v) for k, v in (d.get("frozen") or {}).items()},
                          notes=list(d.get("notes", [])), history=iterations_of(d.get("history", [])),
                          options={"controller_check": d.get("controller_check"),
                                   **{k: v for k, v in (d.get("elastic_steps") or {}).items() if k in ELASTIC_OPTIONS}})

@@ -1421,15 +1421,12 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     _checks.options(max_iter=max_iter, tol=tol)
-    if frozen and model.elastic:
-        raise DataError("frozen parameters are for a rigid robot's DIDIM; the three-step DIDIM of elastic joints "
-                        "fits every parameter (identify the rigid model with frozen=..., or leave frozen out)")
     if model.elastic:
         # a rigid start of the same model is step 1's result; an elastic one, step 3's start
         rigid = start if start is not None and not start.structure.elastic and start.structure.terms == model.terms \
             and start.offset == model.offset and start.structure.robot is robot else None
         return didim_elastic(rec, model, max_iter=max_iter, tol=tol, progress=progress, rigid=rigid,
-                             start=None if rigid is not None else start)
+                             start=None if rigid is not None else start, frozen=frozen)
     say = progress or (lambda s: None)
     base = base_parameters(robot)
     dec = _decimation(rec)
@@ -1553,7 +1550,8 @@ class _ElasticSplit:
     joint's locked-rotor mode there, ζ_j its damping ratio); the friction and offsets the model's, on the motor side
     (eq. (27): all friction on the motor)."""
 
-    def __init__(self, rec: Recording, model: Model, pi: np.ndarray, drives: Dict[str, List[float]]):
+    def __init__(self, rec: Recording, model: Model, pi: np.ndarray, drives: Dict[str, List[float]],
+                 keep_chain: bool = False):
         robot, elastic = model.robot, elastic_of(model)
         self.rec, self.model, self.robot, self.elastic, self.offset = rec, model, robot, elastic, model.offset
         self.pi1, self.d1 = np.asarray(pi, dtype=float), drives
@@ -1570,21 +1568,25 @@ class _ElasticSplit:
         # takes its rotor from λ alone: Ia = λ/(1 − λ) M_jj(q_mid).
         grav = chain.regressor(self.qmid[None], np.zeros((1, n)), np.zeros((1, n)))[0]
         g = max(float(np.linalg.norm(chain.gravity_vector)), 1e-300)
-        self.holds = [bool(np.max(np.abs(grav[:, c - n])) > 1e-9 * g) for c, _ in self.partner]
+        self.holds = [keep_chain or bool(np.max(np.abs(grav[:, c - n])) > 1e-9 * g) for c, _ in self.partner]
         self.chain_jj = np.array([m[j, j] for j in elastic])
         self.base = base_parameters(robot, elastic=elastic)
         self.lay = _Layout.for_model(model, self.base)
 
     @classmethod
     def of_rigid(cls, rec: Recording, rigid: IdentificationResult, model: Model) -> "_ElasticSplit":
-        """The split of the rigid step's result ``rigid`` into the elastic ``model`` (its structure but the springs)."""
+        """The split of the rigid step's result ``rigid`` into the elastic ``model`` (its structure but the springs);
+        where the rigid step held body parameters (``frozen``), every joint keeps its chain."""
         chain, d = _model_of(rigid.structure, rigid.base, theta_of(rigid))
-        return cls(rec, model, np.concatenate([d["armature"], chain.inertial_params]), d)
+        held_bodies = any(k in rigid.base.names and "Ia_" not in k for k in rigid.frozen)
+        return cls(rec, model, np.concatenate([d["armature"], chain.inertial_params]), d, keep_chain=held_bodies)
 
     @classmethod
     def of_elastic(cls, rec: Recording, plant: "_RobotPlant", theta: np.ndarray) -> "_ElasticSplit":
         chain, d = plant.model(theta)
-        return cls(rec, plant.structure, np.concatenate([d["armature"], chain.inertial_params]), d)
+        held_bodies = any(i < plant.nb for i in plant.held)
+        return cls(rec, plant.structure, np.concatenate([d["armature"], chain.inertial_params]), d,
+                   keep_chain=held_bodies)
 
     def x_of(self, theta: np.ndarray) -> np.ndarray:
         """Each elastic joint's (λ, f, ζ) in an elastic model's θ (of this split's layout)."""
@@ -1853,7 +1855,9 @@ def _refine_springs(rec: Recording, plant: "_RobotPlant", theta: np.ndarray, law
     sims = [0]
     x, _ = split.search(split.x_of(theta), law, sims)
     search["simulations"] += sims[0]
-    return split.theta(x)
+    th = split.theta(x)
+    th[list(plant.held)] = list(plant.held.values())  # exactly (the split's round trip through π rounds them)
+    return th
 
 
 def _core_count() -> int:
@@ -1865,7 +1869,8 @@ def _core_count() -> int:
 def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
                   progress: Optional[Callable[[str], None]] = None, rigid: Optional[IdentificationResult] = None,
                   modes: Optional[Tuple[np.ndarray, "_ElasticSplit", Dict[str, Any]]] = None,
-                  start: Optional[IdentificationResult] = None) -> IdentificationResult:
+                  start: Optional[IdentificationResult] = None,
+                  frozen: Optional[Dict[str, float]] = None) -> IdentificationResult:
     """The three-step DIDIM of the paper's section V for a robot with elastic joints (``model.elastic``): step 1,
     DIDIM on the rigid model (:func:`didim`); step 2, each elastic joint's mass ratio, mode and damping by
     Nelder-Mead on the closed-loop force error (:func:`elastic_modes`); step 3, DIDIM on the whole model from there:
@@ -1875,29 +1880,36 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
     result when it is at hand (DIDIM on the same model with every joint rigid); ``modes``: step 2's
     (:func:`elastic_modes` from it). ``start``: an elastic result of the same robot and elastic joints (a model it
     grows by a term, as the doctor does): steps 1 and 2 are its, step 3 starts from its parameters (a new term's at 0)
-    and law."""
+    and law. ``frozen``: parameters of the elastic model held at the values given (as :func:`didim`'s): step 1 holds
+    those the rigid model has; where body parameters are held, step 2's split keeps the chain and takes each rotor
+    from λ alone; step 3 holds them all."""
     from dataclasses import replace
 
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     say = progress or (lambda s: None)
+    held = _held(model, base_parameters(robot, elastic=elastic_of(model)), frozen)
     if start is not None and start.structure.robot is robot and start.structure.elastic == model.elastic \
             and start.offset == offset and "rigid_force_error_per_joint" in start.options:
-        return _elastic_from(rec, model, start, max_iter, tol, say, t0, sims0)
+        return _elastic_from(rec, model, start, max_iter, tol, say, t0, sims0, held)
     if rigid is None:
         say("step 1: DIDIM on the rigid model")
-        rigid = didim(rec, replace(model, elastic=(), kind="rigid"), max_iter=max_iter, tol=tol, progress=progress)
+        rigid_model = replace(model, elastic=(), kind="rigid")
+        names_r = set(_theta_names(rigid_model, base_parameters(robot)))
+        rigid = didim(rec, rigid_model, max_iter=max_iter, tol=tol, progress=progress,
+                      frozen={k: v for k, v in (frozen or {}).items() if k in names_r} or None)
     elif rigid.structure.elastic or rigid.structure.terms != model.terms or rigid.offset != model.offset:
         raise DataError("step 1's result is the rigid DIDIM of the same model (its terms and offset, no elastic "
                         f"joint), got {rigid.structure.describe()}")
     say(f"step 1: closed-loop force error {100 * rigid.force_error:.3f} %")
     x, split, search = modes if modes is not None else elastic_modes(rec, rigid, model, say)
     theta0 = split.theta(x)
+    theta0[list(held)] = list(held.values())
     law = rigid.law if rigid.law is not None else _default_law(rec)
     why = no_mode(x, [robot.joint_names[j] for j in split.elastic], rec.dt)
     if why:
         return _no_mode_result(rec, model, split, theta0, law, why, rigid, search, t0, sims0)
-    plant = _RobotPlant(rec, model, split.base, _decimation(rec), law, {}, tol, say)
+    plant = _RobotPlant(rec, model, split.base, _decimation(rec), law, {}, tol, say, held)
     return _elastic_steps(rec, model, plant, theta0, split, search, rigid.force_error, rigid.force_error_per_joint,
                           max_iter, say, t0, sims0)
 
@@ -1951,13 +1963,15 @@ def _no_mode_result(rec: Recording, model: Model, split: "_ElasticSplit", theta0
 
 
 def _elastic_from(rec: Recording, model: Model, start: IdentificationResult, max_iter: int, tol: float, say, t0: float,
-                  sims0: int) -> IdentificationResult:
+                  sims0: int, held: Optional[Dict[int, float]] = None) -> IdentificationResult:
     """Step 3 (and its rounds) of :func:`didim_elastic` from an elastic result ``start`` of the same robot and elastic
     joints: its parameters where the model has them (a new term's at 0), its law, its step 1's errors."""
     base = base_parameters(model.robot, elastic=elastic_of(model))
     theta0 = np.array([start.params.get(k, 0.0) for k in _theta_names(model, base)])
+    held = held or {}
+    theta0[list(held)] = list(held.values())
     law = start.law if start.law is not None else _default_law(rec)
-    plant = _RobotPlant(rec, model, base, _decimation(rec), law, {}, tol, say)
+    plant = _RobotPlant(rec, model, base, _decimation(rec), law, {}, tol, say, held)
     split = _ElasticSplit.of_elastic(rec, plant, theta0)
     return _elastic_steps(rec, model, plant, theta0, split, {"criterion": math.nan, "simulations": 0},
                           start.options["rigid_force_error"], start.options["rigid_force_error_per_joint"], max_iter,
@@ -2018,6 +2032,8 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
     res.options["rigid_force_error_per_joint"] = dict(rigid_per)
     res.force_error, res.force_error_per_joint = sol["force_errors"]
     res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
+    names = _theta_names(model, split.base)
+    res.frozen = {names[i]: float(v) for i, v in plant.held.items()}
     return res
 
 
