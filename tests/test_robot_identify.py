@@ -326,3 +326,26 @@ def test_frozen_parameters_are_held_and_the_others_fitted_around_them(robots_dir
         didim.identify(rec, robot, "didim", frozen={"Fv_elbow": 1.0})
     with pytest.raises(didim.DataError, match="finite"):
         didim.identify(rec, robot, "didim", frozen={f"Fv_{joints[0]}": float("nan")})
+
+
+def test_a_grown_model_holds_what_it_has_of_a_result_s_frozen_and_one_axis_refuses_it(robots_dir, emps):
+    """The doctor's refits hold a result's ``frozen`` where the grown model has those parameters
+    (:func:`didim.methods.robot.frozen_for`): a joint made elastic has its rotor as a parameter of its own, so a
+    rigid base parameter that regrouped that rotor with body parameters is not the elastic model's and is dropped;
+    every name kept is one of the elastic model's. One axis's doctor refuses ``frozen`` by name."""
+    from didim.methods.robot import _theta_names, frozen_for
+    from didim.robots import base_parameters
+
+    robot = didim.Robot.from_urdf(robots_dir / "ur5_cad.urdf")
+    rigid = didim.Model(robot=robot, offset=True)
+    base = base_parameters(robot)
+    frozen = {n: 1.0 for n in base.names}
+    assert frozen_for(rigid, frozen) == frozen
+    j = robot.joint_names[1]
+    elastic = didim.Model(robot=robot, offset=True, elastic=[j])
+    kept = frozen_for(elastic, frozen)
+    names = set(_theta_names(elastic, base_parameters(robot, elastic=(1,))))
+    assert kept and set(kept) <= names
+    assert not any(f"Ia_{j}" in k for k in kept) and any(f"Ia_{j}" in k for k in frozen)
+    with pytest.raises(didim.DataError, match="frozen"):
+        didim.doctor(emps, "rigid", frozen={"Fv": 1.0})

@@ -392,21 +392,24 @@ def step_report(out: str, F: Dict) -> None:
     F["identified"] = table
 
 
-def step_doctor(out: str, F: Dict, plain: bool) -> None:
+def step_doctor(out: str, F: Dict, plain: bool, bodies_held: bool = False) -> None:
     """The robot doctor on A with B held out: on the plain records (the counterbalance not in the model: does the
-    doctor name it?) or on those with the counterbalance as a known torque."""
+    doctor name it?) or on those with the counterbalance as a known torque; ``bodies_held``: the published bodies held
+    in every fit (``frozen``), as rigid_drives."""
     import didim
 
     recA, rb = load(out, "A", plain=plain)
     recB, _ = load(out, "B", plain=plain)
     t0 = time.perf_counter()
-    key = "doctor_plain" if plain else "doctor_cb_known"
+    key = ("doctor_plain" if plain else "doctor_cb_known") + ("_drives" if bodies_held else "")
+    start = published_result(out, False)
+    frozen = {b: start.params[b] for b in start.base.names if "Ia_" not in b} if bodies_held else None
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
         try:
             # its base fit from the published values (its rigid model), as identify's: from the URDF's values alone
             # the loop cannot be simulated
-            dg = didim.doctor(recA, rb, validate=recB, controller_check="warn", initial=published_result(out, False),
+            dg = didim.doctor(recA, rb, validate=recB, controller_check="warn", initial=start, frozen=frozen,
                               progress=lambda s: print("  " + s, flush=True))
         except didim.DidimError as e:
             F[key] = {"failed": f"{type(e).__name__}: {e}", "seconds": time.perf_counter() - t0}
@@ -447,7 +450,7 @@ def main(argv=None) -> Dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=os.path.join(HERE, "loop"))
     ap.add_argument("--steps", default="all",
-                    help=f"{','.join(STEPS)},elastic_c,doctor_cb,scan or all (= {','.join(STEPS)})")
+                    help=f"{','.join(STEPS)},doctor_cb,doctor_drives,scan or all (= {','.join(STEPS)})")
     a = ap.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     fpath = os.path.join(a.out, "kr300_loop.json")
@@ -478,6 +481,8 @@ def main(argv=None) -> Dict:
             step_doctor(a.out, F, plain=True)
         elif s == "doctor_cb":
             step_doctor(a.out, F, plain=False)
+        elif s == "doctor_drives":
+            step_doctor(a.out, F, plain=True, bodies_held=True)
         else:
             raise SystemExit(f"unknown step {s}")
         F.setdefault("step_seconds", {})[s] = time.perf_counter() - t0

@@ -812,6 +812,7 @@ def doctor(
     coulomb_eps: Union[str, float, None] = "fit",
     controller_check: str = "error",
     initial=None,
+    frozen: Optional[Dict[str, float]] = None,
 ) -> Diagnosis:
     """Diagnoses what the ``model`` ("rigid" or "flexible") misses on ``recording``; with a robot's record and its
     :class:`didim.Robot` as ``model``, where each joint's simulation and record differ (:mod:`didim.doctor.robot`).
@@ -822,7 +823,9 @@ def doctor(
     ``"fit"`` (default) to fit it with the base model before any effect is looked for
     (:func:`didim.doctor.fit.fit_friction_law`), None for didim's default. ``controller_check``: as for
     :func:`didim.identify`, on both records. ``initial``: a robot's result (of the same robot) its base fit starts
-    from instead of the URDF's values (published values, say: a robot whose URDF is far from it)."""
+    from instead of the URDF's values (published values, say: a robot whose URDF is far from it). ``frozen``: a
+    robot's parameters held at given values in the base fit and every refit (:func:`didim.identify`'s; trusted body
+    parameters, say)."""
     from ..api import _has_joint_columns, _robot_plant
     from ..robots import Robot
 
@@ -839,9 +842,12 @@ def doctor(
 
         return doctor_robot(recording, model, validate, progress=progress,  # type: ignore[return-value]
                             controller_check=controller_check, offset=offset, alpha=alpha, max_findings=max_findings,
-                            initial=initial)
+                            initial=initial, frozen=frozen)
     if initial is not None:
         raise DataError("initial is a robot's result its doctor starts from; one axis's doctor starts from apM")
+    if frozen:
+        raise DataError("frozen holds a robot's parameters in its doctor's fits; one axis's doctor fits every "
+                        "parameter (didim.identify(..., frozen=...) holds them in one fit)")
     apM, alpha, max_findings = _check_arguments(recording, model, validate, apM, alpha, max_findings, cutoff_hz,
                                                 holdout, progress)
     from ..check import enforce

@@ -503,10 +503,11 @@ def _refit(state: _State, model, train: Recording, progress) -> Any:
     the one fitted without the effect may have taken part of it)."""
     from dataclasses import replace
 
-    from ..methods.robot import didim as robot_didim
+    from ..methods.robot import didim as robot_didim, frozen_for
 
-    return robot_didim(train, replace(model, coulomb_eps=None, coulomb_law="algebraic"), progress=progress,
-                       start=state.res)
+    model = replace(model, coulomb_eps=None, coulomb_law="algebraic")
+    return robot_didim(train, model, progress=progress, start=state.res,
+                       frozen=frozen_for(model, state.res.frozen) or None)
 
 
 def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, float], Dict[str, float]]:
@@ -538,7 +539,7 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
                   else {"force_lag_s": float(kw["force_lag"][0])})
         return _State(r, tr, va), params, {}
     if c.effect == "flexibility":
-        from ..methods.robot import didim_elastic
+        from ..methods.robot import didim_elastic, frozen_for
 
         new = replace(model, kind="flexible", elastic=(*model.elastic, jn), coulomb_eps=None, coulomb_law="algebraic")
         rigid = res if not model.elastic else None
@@ -548,7 +549,8 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
             from ..methods.robot import elastic_modes
 
             modes = elastic_modes(state.train, rigid, new, progress, start=c.hyper.get("x_grid"))
-        r = didim_elastic(state.train, new, progress=progress, rigid=rigid, modes=modes)
+        r = didim_elastic(state.train, new, progress=progress, rigid=rigid, modes=modes,
+                          frozen=frozen_for(new, res.frozen) or None)
         if r.options.get("no_mode"):  # step 2 finds no mode of a joint made elastic: step 3 was not run
             raise DidimError(r.message.split(": step 3 was not run")[0])
         mode = r.options.get("modes", {}).get(jn, {})
@@ -787,7 +789,7 @@ def _shared(resid: _Residuals, a: _Candidate, b: _Candidate) -> float:
 
 def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable[[str], None]] = None,
                  controller_check: str = "error", offset: Optional[bool] = None, alpha: float = 0.01,
-                 max_findings: int = MAX_FINDINGS, initial=None) -> RobotDiagnosis:
+                 max_findings: int = MAX_FINDINGS, initial=None, frozen=None) -> RobotDiagnosis:
     """:func:`didim.doctor` of a robot's record with its :class:`didim.Robot` (see the module's text): the base
     model by DIDIM, where each joint's simulation and record differ, then rounds: each effect's regressor on each
     joint (and the delay on every joint) built on the current model's simulated states, tested on its decimated,
@@ -795,7 +797,8 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
     the candidates), the best significant ones adopted in turn (the term on that joint, the joint made elastic, the
     drives' delay), refitted by DIDIM and kept when the held-out force error of the joints it acts on falls
     (one-sided Diebold-Mariano at ``alpha``, and by ``MIN_HELDOUT_GAIN`` of itself). ``initial``: a result of the
-    robot the base fit starts from (:func:`didim.identify`'s), not the URDF's values."""
+    robot the base fit starts from (:func:`didim.identify`'s), not the URDF's values. ``frozen``: parameters held at
+    given values (:func:`didim.identify`'s) in the base fit and in every refit, where the refitted model has them."""
     from ..api import identify
     from ..check import enforce
     from ..methods.robot import force_errors, simulate_robot, top_speeds
@@ -815,7 +818,7 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
     if validate is not None:
         enforce(validate, controller_check)
     base = identify(recording, robot, "didim", offset=offset, progress=progress, controller_check=controller_check,
-                    initial=initial)
+                    initial=initial, **({"frozen": frozen} if frozen else {}))
     sim_t = simulate_robot(recording, base)
     _, per_t = force_errors(recording, sim_t["force"])
     if validate is not None:

@@ -1487,6 +1487,15 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     return res
 
 
+def frozen_for(model: Model, frozen: Dict[str, float]) -> Dict[str, float]:
+    """The parameters of ``frozen`` that ``model`` has (its rigid or elastic base, its drives and terms): what a refit
+    of a grown model holds of a result's ``frozen`` (an elastic joint's rotor is its own parameter there, so a base
+    parameter that regrouped it with body parameters is not the elastic model's)."""
+    base = base_parameters(model.robot, elastic=elastic_of(model))
+    names = set(_theta_names(model, base))
+    return {k: v for k, v in (frozen or {}).items() if k in names}
+
+
 def _held(model: Model, base: BaseParameters, frozen: Optional[Dict[str, float]]) -> Dict[int, float]:
     """``frozen`` (parameter names → values) as indices in θ; an unknown name or a value that is not a finite number
     is refused, naming it."""
