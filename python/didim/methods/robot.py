@@ -1587,7 +1587,9 @@ class _ElasticSplit:
         """The split of the rigid step's result ``rigid`` into the elastic ``model`` (its structure but the springs);
         where the rigid step held body parameters (``frozen``), every joint keeps its chain."""
         chain, d = _model_of(rigid.structure, rigid.base, theta_of(rigid))
-        held_bodies = any(k in rigid.base.names and "Ia_" not in k for k in rigid.frozen)
+        n = rigid.robot.ndof
+        held_bodies = any(k in rigid.base.names and not np.any(rigid.base.K[rigid.base.names.index(k), :n])
+                          for k in rigid.frozen)  # a base parameter of bodies alone, no rotor in it
         return cls(rec, model, np.concatenate([d["armature"], chain.inertial_params]), d, keep_chain=held_bodies)
 
     @classmethod
