@@ -305,7 +305,7 @@ def step_identify(out: str, F: Dict, label: str) -> None:
         if label == "rigid_drives":
             # the published bodies held (every base parameter without a rotor inertia in it), the drives fitted:
             # 10 s of one trajectory do not pin the 40 body parameters (row (b): unstable on B's poses)
-            frozen = {b: start.params[b] for b in start.base.names if "Ia_" not in b}
+            frozen = {b: start.params[b] for b in start.base.bodies_only}
     else:
         m = didim.Model(robot=rb, offset=True, elastic=tuple(JOINTS[:ARM]))
         rigid = didim.load_result(os.path.join(out, "rigid_A.json"))
@@ -314,7 +314,7 @@ def step_identify(out: str, F: Dict, label: str) -> None:
             # and drives fitted
             start = didim.load_result(os.path.join(out, "rigid_drives_A.json"))
             pub = published_result(out, True)
-            frozen = {b: pub.params[b] for b in pub.base.names if "Ia_" not in b}
+            frozen = {b: pub.params[b] for b in pub.base.bodies_only}
         elif label == "elastic":
             start = rigid
         else:
@@ -403,7 +403,7 @@ def step_doctor(out: str, F: Dict, plain: bool, bodies_held: bool = False) -> No
     t0 = time.perf_counter()
     key = ("doctor_plain" if plain else "doctor_cb_known") + ("_drives" if bodies_held else "")
     start = published_result(out, False)
-    frozen = {b: start.params[b] for b in start.base.names if "Ia_" not in b} if bodies_held else None
+    frozen = {b: start.params[b] for b in start.base.bodies_only} if bodies_held else None
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
         try:

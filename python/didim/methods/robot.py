@@ -1587,15 +1587,13 @@ class _ElasticSplit:
         """The split of the rigid step's result ``rigid`` into the elastic ``model`` (its structure but the springs);
         where the rigid step held body parameters (``frozen``), every joint keeps its chain."""
         chain, d = _model_of(rigid.structure, rigid.base, theta_of(rigid))
-        n = rigid.robot.ndof
-        held_bodies = any(k in rigid.base.names and not np.any(rigid.base.K[rigid.base.names.index(k), :n])
-                          for k in rigid.frozen)  # a base parameter of bodies alone, no rotor in it
+        held_bodies = any(k in rigid.base.bodies_only for k in rigid.frozen)
         return cls(rec, model, np.concatenate([d["armature"], chain.inertial_params]), d, keep_chain=held_bodies)
 
     @classmethod
     def of_elastic(cls, rec: Recording, plant: "_RobotPlant", theta: np.ndarray) -> "_ElasticSplit":
         chain, d = plant.model(theta)
-        held_bodies = any(i < plant.nb for i in plant.held)
+        held_bodies = any(i < plant.nb and plant.base.names[i] in plant.base.bodies_only for i in plant.held)
         return cls(rec, plant.structure, np.concatenate([d["armature"], chain.inertial_params]), d,
                    keep_chain=held_bodies)
 

@@ -238,6 +238,13 @@ class BaseParameters:
     def of(self, pi: np.ndarray) -> np.ndarray:
         return self.K @ pi
 
+    @property
+    def bodies_only(self) -> Tuple[str, ...]:
+        """The base parameters the bodies alone make, no rotor inertia in them (by the map, not by their names): what
+        a manufacturer's body data gives, to hold while the drives are fitted (``frozen``)."""
+        n = len(self.standard_names) // 11  # one rotor inertia, then ten body parameters, per joint
+        return tuple(nm for i, nm in enumerate(self.names) if not np.any(self.K[i, :n]))
+
     def standard_from(self, beta: np.ndarray, anchor: np.ndarray) -> np.ndarray:
         """The standard parameters closest to ``anchor`` (the URDF's, say) whose base parameters are ``beta``: every
         such set gives the same dynamics."""
