@@ -1980,23 +1980,32 @@ def _no_mode_result(rec: Recording, model: Model, split: "_ElasticSplit", theta0
                     sims0: int) -> IdentificationResult:
     """:func:`didim_elastic`'s result when step 2 finds no mode of some elastic joints (:func:`no_mode`): step 3 is
     not run (as for one axis); the result holds step 2's parameters, not converged, its message naming the joints,
-    why, and what to do; ``options["no_mode"]`` the reasons by joint."""
-    message = ("step 2 finds no elastic mode of " + "; ".join(f"{j}: {w}" for j, w in why.items())
-               + ": step 3 was not run, and these parameters are step 2's. Model "
-               + ("that joint" if len(why) == 1 else "those joints") + " rigid, or record a trajectory that excites "
-               "the mode (a chirp of the joint's reference through its expected frequencies)")
+    why, and what to do; ``options["no_mode"]`` the reasons by joint. The other elastic joints whose force step 2's
+    model explains no better than the rigid one (:data:`RIGID_LIMIT_MARGIN`, as step 3's verdict) are named too."""
     nt = len(_theta_names(model, split.base))
     res = _result("didim", rec, model.with_law(law), split.base, theta0, np.full((nt, nt), np.nan), converged=False,
-                  iterations=0, message=message,
-                  notes=[f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid.force_error:.2f} %", message])
-    res.options["modes"] = split.modes(split.x_of(theta0))
-    res.options["no_mode"] = dict(why)
-    res.options["rigid_force_error"] = rigid.force_error
-    res.options["rigid_force_error_per_joint"] = dict(rigid.force_error_per_joint)
+                  iterations=0, message="")
     try:
         res.force_error, res.force_error_per_joint = force_errors(rec, simulate_robot(rec, res)["force"])
     except (SimulationError, DataError):
         res.force_error, res.force_error_per_joint = math.nan, {}
+    per, rigid_per = res.force_error_per_joint, rigid.force_error_per_joint
+    why = dict(why)
+    for j in split.elastic:
+        nm = model.robot.joint_names[j]
+        if nm not in why and nm in per and nm in rigid_per and per[nm] >= RIGID_LIMIT_MARGIN * rigid_per[nm]:
+            why[nm] = (f"the elastic model explains its force no better than the rigid one ({100 * per[nm]:.2f} % "
+                       f"against {100 * rigid_per[nm]:.2f} %)")
+    message = ("step 2 finds no elastic mode of " + "; ".join(f"{j}: {w}" for j, w in why.items())
+               + ": step 3 was not run, and these parameters are step 2's. Model "
+               + ("that joint" if len(why) == 1 else "those joints") + " rigid, or record a trajectory that excites "
+               "the mode (a chirp of the joint's reference through its expected frequencies)")
+    res.message = message
+    res.notes = [f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid.force_error:.2f} %", message]
+    res.options["modes"] = split.modes(split.x_of(theta0))
+    res.options["no_mode"] = dict(why)
+    res.options["rigid_force_error"] = rigid.force_error
+    res.options["rigid_force_error_per_joint"] = dict(rigid.force_error_per_joint)
     res.elapsed_s, res.simulations = time.perf_counter() - t0, _simulations() - sims0
     return res
 
