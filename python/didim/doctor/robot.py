@@ -546,8 +546,17 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
         modes = None
         _mode_screen(state, c, progress)  # raises when the grid finds no mode
         if rigid is not None:
-            from ..methods.robot import elastic_modes
+            from ..methods.robot import didim as robot_didim, elastic_modes, rigid_step_cutoff
 
+            # step 1 of the three steps: the rigid model below the modes (the base was fitted through them), from
+            # the base's estimate
+            plain = replace(model, coulomb_eps=None, coulomb_law="algebraic")
+            try:
+                rigid = robot_didim(state.train, plain, progress=progress, start=res,
+                                    frozen=frozen_for(plain, res.frozen) or None,
+                                    cutoff_hz=rigid_step_cutoff(state.train))
+            except DidimError:
+                pass
             modes = elastic_modes(state.train, rigid, new, progress, start=c.hyper.get("x_grid"))
         r = didim_elastic(state.train, new, progress=progress, rigid=rigid, modes=modes,
                           frozen=frozen_for(new, res.frozen) or None)
