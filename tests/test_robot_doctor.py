@@ -118,3 +118,32 @@ def test_a_candidate_tried_brings_its_look_alike_significant_or_not():
     # a delay brings the best-ranked mode not tried yet
     flex2 = cand("flexibility", 3, 0.2)
     assert _with_look_alikes([delay], [delay, flex2, flex], set()) == [delay, flex2]
+
+
+def test_a_base_that_cannot_run_the_held_out_record_is_said_not_raised(robots_dir, monkeypatch):
+    """A base model that fits the training poses but cannot be simulated on the validation record's (a body that is no
+    physical arm there: the held-out Panda with backlash, e7, raised a SimulationError out of didim.doctor): the doctor
+    says so in a note naming both records and what to do, names no effect (nothing can be judged on held-out data),
+    and locates the mismatch on the training record."""
+    from didim import SimulationError
+    from didim.methods import robot as R
+
+    robot = didim.Robot.from_urdf(robots_dir / "pendulum_cad.urdf")
+    ctl = robots_dir / "pendulum_controller.json"
+    rec = didim.load_record(robots_dir / "pendulum_train.csv", robot=robot, controller=ctl)
+    val = didim.load_record(robots_dir / "pendulum_valid.csv", robot=robot, controller=ctl)
+    real = R.simulate_robot
+
+    def fails_on_val(r, res, *a, **k):
+        if r is val:
+            raise SimulationError("the robot's closed loop cannot be simulated with these parameters: joint joint1: "
+                                  "its articulated inertia is not positive (-0.1)")
+        return real(r, res, *a, **k)
+
+    monkeypatch.setattr(R, "simulate_robot", fails_on_val)
+    d = didim.doctor(rec, robot, val)
+    assert d.findings == [] and d.rounds == []
+    note = " ".join(d.notes)
+    assert "cannot be simulated on" in note and val.name in note and "frozen=" in note, d.notes
+    assert d.validate == val.name
+    assert all(m.error_train > 0 for m in d.joints)

@@ -830,8 +830,22 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
                     initial=initial, **({"frozen": frozen} if frozen else {}))
     sim_t = simulate_robot(recording, base)
     _, per_t = force_errors(recording, sim_t["force"])
+    notes: List[str] = []
+    valid_name = validate.name if validate is not None else "(none)"
     if validate is not None:
-        sim_v = simulate_robot(validate, base)
+        try:
+            sim_v = simulate_robot(validate, base)
+        except DidimError as e:
+            # a base that fits the training poses but is no physical arm at the held-out ones: nothing can be judged
+            # on held-out data; said, not raised (the mismatch is then located on the training record)
+            notes.append(f"the base model fitted on {recording.name or 'the training record'} cannot be simulated "
+                         f"on {validate.name or 'the validation record'} ({e}): its body parameters fit the training "
+                         "poses but are no physical arm at the held-out ones, and no effect can be judged on held-out "
+                         "data. Record a training trajectory that covers the validation's poses, or hold the bodies "
+                         "known (frozen=)")
+            say(notes[-1])
+            validate = None  # located and judged on the training record alone, as without one
+    if validate is not None:
         _, per_v = force_errors(validate, sim_v["force"])
         judged, sim_j = validate, sim_v
     else:
@@ -841,12 +855,12 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
     joints = [_mismatch(jn, "m" if kind == "prismatic" else "rad", judged, sim_j, per_t[jn], per_v[jn], float(vmax[i]))
               for i, (jn, kind) in enumerate(zip(robot.joint_names, robot.joint_kinds))]
     joints.sort(key=lambda m: -(m.error_valid if math.isfinite(m.error_valid) else m.error_train))
-    notes: List[str] = []
     findings, rejected, rounds, ambiguities, figures = [], [], [], [], []
     state = None
     if validate is None:
-        notes.append("no validation record: the mismatch is located on the training record, which the fit has seen, "
-                     "and no effect is named (each is judged on held-out data): give --validate")
+        if valid_name == "(none)":
+            notes.append("no validation record: the mismatch is located on the training record, which the fit has "
+                         "seen, and no effect is named (each is judged on held-out data): give --validate")
     else:
         # the tests' decimation keeps a tenth of the sample rate: a joint's mode up to there stays in the residual
         dec = Decimation.lowpass(0.1 / recording.dt, 1 / recording.dt)
@@ -930,8 +944,8 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
             say(f"accepted {c.effect} {_names(c, robot)[1]}: {f.evidence}")
             state = new
     return RobotDiagnosis(base=base, joints=joints, record=recording.name,
-                          validate=validate.name if validate is not None else "(none)",
-                          elapsed_s=time.perf_counter() - t0, notes=notes, findings=findings, rejected=rejected,
+                          validate=valid_name, elapsed_s=time.perf_counter() - t0, notes=notes, findings=findings,
+                          rejected=rejected,
                           ambiguities=ambiguities, rounds=rounds, final=state.res if state is not None else base,
                           _figures=figures)
 
