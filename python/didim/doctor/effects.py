@@ -449,35 +449,54 @@ def _delay_candidates(state: State, sim: SimResult, data: Data) -> List[Candidat
 LAG_PERIODS = (0.1, 0.2, 0.3, 0.45, 0.65, 0.9)
 
 
-def _delay_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
-    """The force reaches the plant late: a first-order force lag below a sample period (a current loop), else a
-    whole-sample delay, each searched upward until the training fit gets clearly worse; the better one is kept."""
-    dt = data.rec.dt
+#: Whole-sample delays tried when the longest force lag of LAG_PERIODS fits best.
+DELAY_SAMPLES = tuple(range(1, 9))
 
-    def search(states):
+
+def delay_search(fit_lag: Callable[[float], Tuple[float, bool, Any]], fit_delay: Callable[[int], Tuple[float, bool, Any]],
+                 dt: float) -> Tuple[str, float, Any]:
+    """The size of a force that reaches the plant late, for every plant: a first-order force lag of LAG_PERIODS of
+    the sample period (a current loop), else a whole-sample delay of DELAY_SAMPLES, each searched upward until the
+    training fit gets clearly worse (10 %) or stops converging; the better one kept. ``fit_lag(T)`` and
+    ``fit_delay(d)`` refit the model with that lag or delay and return (its training error, converged, what the
+    caller keeps); a DidimError ends that search (a longer delay destabilises the simulated loop even more).
+    Returns ("force_lag", T in s, kept) or ("delay", d in samples, kept)."""
+
+    def search(values, fit):
         best = None
-        for st in states:
+        for x in values:
             try:
-                st, r = refit(data, st, {}, progress)
+                err, converged, kept = fit(x)
             except DidimError:
-                break  # a longer delay destabilises the simulated loop even more
-            if best is None or r.output_error < best[1].output_error:
-                best = (st, r)
-            elif not r.converged or r.output_error > 1.1 * best[1].output_error:
+                break
+            if best is None or err < best[1]:
+                best = (x, err, kept)
+            elif not converged or err > 1.1 * best[1]:
                 break  # past the minimum: longer delays only make the simulated loop less stable
         return best
 
-    best = search(state.with_(force_lag=f * dt) for f in LAG_PERIODS)
-    if best is None or best[0].model.force_lag >= LAG_PERIODS[-1] * dt:
-        whole = search(state.with_(delay=d) for d in range(1, 9))
-        if whole is not None and (best is None or whole[1].output_error < best[1].output_error):
-            best = whole
-    if best is None:
+    lag = search([f * dt for f in LAG_PERIODS], fit_lag)
+    if lag is None or lag[0] >= LAG_PERIODS[-1] * dt:
+        whole = search(DELAY_SAMPLES, fit_delay)
+        if whole is not None and (lag is None or whole[1] < lag[1]):
+            return "delay", whole[0], whole[2]
+    if lag is None:
         raise SimulationError("the delay refit failed")
-    st, r = best
+    return "force_lag", lag[0], lag[2]
+
+
+def _delay_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
+    """The force reaches the plant late: :func:`delay_search` of a force lag, else a whole-sample delay."""
+
+    def fit(st):
+        st, r = refit(data, st, {}, progress)
+        return r.output_error, r.converged, (st, r)
+
+    _, _, (st, r) = delay_search(lambda lag: fit(state.with_(force_lag=lag)), lambda d: fit(state.with_(delay=d)),
+                                 data.rec.dt)
     if st.model.force_lag:
         return st, r, {"force_lag_s": st.model.force_lag, "bandwidth_hz": 1 / (2 * math.pi * st.model.force_lag)}, {}
-    return st, r, {"delay_samples": float(st.model.delay), "delay_s": st.model.delay * dt}, {}
+    return st, r, {"delay_samples": float(st.model.delay), "delay_s": st.model.delay * data.rec.dt}, {}
 
 
 def _delay_retune(state: State, data: Data, progress) -> Optional[Adopted]:

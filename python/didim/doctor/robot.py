@@ -520,24 +520,22 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
     model, robot = res.structure, res.robot
     jn, _ = _names(c, robot)
     if c.effect == "delay":
-        # the Wald coefficient of u̇ is the lag: a whole-sample delay and a first-order lag of that size tried, the one
-        # that fits the training record better kept (a current loop's lag and a computation delay look alike)
-        lag = max(float(c.test.beta[0]), 0.0)
-        dt, n = state.train.dt, state.train.ndof
-        tries = []
-        for kw in ({"delay": (max(1, int(round(lag / dt))),) * n}, {"force_lag": (max(lag, 0.1 * dt),) * n}):
+        # the size by one axis's search (a force lag of a fraction of a period, else whole-sample delays, upward until
+        # the training fit gets worse), on every joint alike: a current loop's lag and a computation delay look alike
+        from .effects import delay_search
+
+        n = state.train.ndof
+
+        def fit(kw):
             tr = replace(state.train, **kw)
-            try:
-                r = _refit(state, model, tr, progress)
-            except DidimError:
-                continue
-            tries.append((r.force_error, r, tr, replace(state.valid, **kw), kw))
-        if not tries:
-            raise DidimError("the delay's refits failed")
-        _, r, tr, va, kw = min(tries, key=lambda t: t[0])
-        params = ({"delay_samples": float(kw["delay"][0]), "delay_s": kw["delay"][0] * dt} if "delay" in kw
-                  else {"force_lag_s": float(kw["force_lag"][0])})
-        return _State(r, tr, va), params, {}
+            r = _refit(state, model, tr, progress)
+            return r.force_error, r.converged, (r, tr, kw)
+
+        kind, size, (r, tr, kw) = delay_search(lambda lag: fit({"force_lag": (lag,) * n}),
+                                               lambda d: fit({"delay": (d,) * n}), state.train.dt)
+        params = ({"delay_samples": float(size), "delay_s": size * state.train.dt} if kind == "delay"
+                  else {"force_lag_s": float(size)})
+        return _State(r, tr, replace(state.valid, **kw)), params, {}
     if c.effect == "flexibility":
         from ..methods.robot import didim_elastic, frozen_for
 
