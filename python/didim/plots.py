@@ -57,9 +57,10 @@ def plot_robot_forces(recording, force_sim, *, title: str = ""):
         y, ys = recording.force[:, j], force_sim[:, j]
         err = np.linalg.norm(y - ys) / np.linalg.norm(y)
         unit = "N·m" if recording.joint_kinds[j] == "revolute" else "N"
-        ax.plot(t, y, lw=0.6, label="measured")
-        ax.plot(t, ys, lw=0.6, label="simulated")
-        ax.plot(t, y - ys, lw=0.6, color="0.4", label="difference")
+        # one axis's colours; the simulated line thinner and under the measured one, so that both stay visible
+        ax.plot(t, ys, lw=1.2, color="tab:blue", alpha=0.7, label="simulated", zorder=2)
+        ax.plot(t, y, lw=0.5, color="tab:red", label="measured", zorder=3)
+        ax.plot(t, y - ys, lw=0.6, color="0.4", label="difference", zorder=1)
         ax.set_ylabel(f"{recording.joint_names[j]}\n({unit})", fontsize=8)
         ax.set_title(f"{recording.joint_names[j]}: {100 * err:.2f} %", fontsize=8, loc="right")
         ax.grid(alpha=0.3)
