@@ -145,5 +145,5 @@ def test_a_base_that_cannot_run_the_held_out_record_is_said_not_raised(robots_di
     assert d.findings == [] and d.rounds == []
     note = " ".join(d.notes)
     assert "cannot be simulated on" in note and val.name in note and "frozen=" in note, d.notes
-    assert d.validate == val.name
+    assert d.validate == val.name and "cannot be simulated on the validation record" in d.summary()
     assert all(m.error_train > 0 for m in d.joints)

@@ -89,7 +89,9 @@ class RobotDiagnosis:
                  "where simulation and record differ, per joint (worst on the held-out record first):"]
         lines += [f"  {m.sentence()}" for m in self.joints]
         if not self.findings:
-            lines.append("findings: none" + ("" if self.rounds else " looked for (no validation record)"))
+            why = ("no validation record" if self.validate == "(none)"
+                   else "the base model cannot be simulated on the validation record: see the note")
+            lines.append("findings: none" + ("" if self.rounds else f" looked for ({why})"))
         for f in self.findings:
             lines.append(f"finding: {f.effect} on {f.joint or 'every joint'}: {f.words}")
             lines.append(f"  {f.physics}")
