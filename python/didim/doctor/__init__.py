@@ -498,10 +498,9 @@ class _Search:
         if workers == 1:
             ranked = _holm_ranked([c for c in map(best, effects) if c is not None])
         else:
-            from concurrent.futures import ThreadPoolExecutor
+            from .._parallel import map_threads
 
-            with ThreadPoolExecutor(workers) as pool:
-                ranked = _holm_ranked([c for c in pool.map(best, effects) if c is not None])
+            ranked = _holm_ranked([c for c in map_threads(best, effects, workers) if c is not None])
         self.rounds.append({"round": len(self.rounds) + 1, "candidates": [
             {"effect": c.effect, "hyper": c.hyper, "wald": c.test.statistic, "dof": c.test.dof, "p_value": c.test.p_value,
              "p_adjusted": c.p_adj, "explained_pct": 100 * c.test.explained} for c in ranked]})

@@ -185,7 +185,7 @@ def refit(data: Data, state: State, init: Dict[str, float], progress,
 def refit_each(data: Data, jobs: Sequence[Tuple[State, Dict[str, float]]], progress) -> List[Any]:
     """:func:`refit` of independent (state, init) pairs on the cores of the machine (the core releases the interpreter
     while it simulates): ``(state, result)`` for each, or the :class:`DidimError` it raised, in the order given."""
-    from concurrent.futures import ThreadPoolExecutor
+    from .._parallel import map_threads
 
     from .._errors import DidimError
 
@@ -198,8 +198,7 @@ def refit_each(data: Data, jobs: Sequence[Tuple[State, Dict[str, float]]], progr
     workers = max(1, min(len(jobs), cores()))
     if workers == 1:
         return [one(j) for j in jobs]
-    with ThreadPoolExecutor(workers) as pool:
-        return list(pool.map(one, jobs))
+    return map_threads(one, jobs, workers)
 
 
 def motor_columns(state: State, sim: SimResult, extra: Sequence[Term]) -> np.ndarray:
@@ -252,7 +251,7 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
     ``around``, that smoothing speed in m/s or rad/s); then every plant's search (:func:`didim.methods.friction_law.
     closed_loop_law`) from it, for each shape (``shapes``, all by default), each law a DIDIM refit, a batch of them
     on the cores of the machine."""
-    from concurrent.futures import ThreadPoolExecutor
+    from .._parallel import map_threads
 
     from ..methods import friction_law
     from .._errors import DidimError
@@ -268,8 +267,7 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
     def evaluate(f, laws):
         if workers == 1 or len(laws) == 1:
             return [f(lw) for lw in laws]
-        with ThreadPoolExecutor(workers) as pool:
-            return list(pool.map(f, laws))
+        return map_threads(f, laws, workers)
 
     def errors(law) -> Optional[np.ndarray]:
         try:

@@ -1719,7 +1719,7 @@ def _output_least_squares(rec: Recording, simulate_u: Callable[[np.ndarray], Dic
     ``simulate_u(u)`` (simulated without encoder quantization: see :func:`_simulate`): scipy's trust-region
     reflective Levenberg-Marquardt within the bounds, its Jacobian by forward differences of relative step
     :data:`SPRING_FD_STEP`, simulated in parallel. Returns scipy's result (``x``, ``fun``, ``jac``, ``nfev``)."""
-    from concurrent.futures import ThreadPoolExecutor
+    from .._parallel import map_threads
     from scipy.optimize import least_squares
 
     cache: Dict[bytes, np.ndarray] = {}
@@ -1747,8 +1747,7 @@ def _output_least_squares(rec: Recording, simulate_u: Callable[[np.ndarray], Dic
             du[k] = steps[k]
             return (res(u + du) - r0) / steps[k]
 
-        with ThreadPoolExecutor(max_workers=max(1, _core_count())) as pool:
-            cols = list(pool.map(column, range(len(u))))
+        cols = map_threads(column, range(len(u)), _core_count())
         return np.column_stack(cols)
 
     return least_squares(res, u0, jac=jac, bounds=(lower, upper), method="trf", x_scale="jac", ftol=SPRING_TOL,
@@ -1778,7 +1777,7 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
     ``search=False``: the grid's best point alone (its criterion; no least squares): a screen for a mode. ``start``:
     the grid's best point when it is known (that screen's, one row (λ, f, ζ) per elastic joint): the search starts
     there and the grid is not run again."""
-    from concurrent.futures import ThreadPoolExecutor
+    from .._parallel import map_threads
 
     say = say or (lambda s: None)
     split = _ElasticSplit.of_rigid(rec, rigid, model)
@@ -1813,8 +1812,7 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
                             f"{x.shape}")
         return _step2_search(split, x, law, names, sims, say)
     points = [np.array([[lam, f, ELASTIC_ZETA0]] * ne) for lam, f in grid]
-    with ThreadPoolExecutor(max_workers=max(1, min(len(points), _core_count()))) as pool:
-        got = list(pool.map(errors, points))
+    got = map_threads(errors, points, min(len(points), _core_count()))
     if all(g is None for g in got):
         raise SimulationError(
             f"step 2: no point of eq. (28)'s grid (λ {ELASTIC_GRID_LAMBDA[0]}-{ELASTIC_GRID_LAMBDA[-1]}, locked-rotor "
@@ -1853,7 +1851,7 @@ def rigid_step_cutoff(rec: Recording) -> float:
 def _grid_each(x: np.ndarray, joints, grid: List[Tuple[float, float]], errors) -> float:
     """Eq. (28)'s ``grid`` of each elastic joint of ``joints`` in turn (rows of ``x``), the others at their rows:
     each row set in place to its best point by the joints' criterion (:func:`_joints_error`); the last criterion."""
-    from concurrent.futures import ThreadPoolExecutor
+    from .._parallel import map_threads
 
     best = math.inf
     for e in joints:
@@ -1862,8 +1860,7 @@ def _grid_each(x: np.ndarray, joints, grid: List[Tuple[float, float]], errors) -
             xx = x.copy()
             xx[e] = (lam, f, ELASTIC_ZETA0)
             pts.append(xx)
-        with ThreadPoolExecutor(max_workers=max(1, min(len(pts), _core_count()))) as pool:
-            vals = [_joints_error(g) for g in pool.map(errors, pts)]
+        vals = [_joints_error(g) for g in map_threads(errors, pts, min(len(pts), _core_count()))]
         i = int(np.argmin(vals))
         x[e], best = (grid[i][0], grid[i][1], ELASTIC_ZETA0), vals[i]
     return best
