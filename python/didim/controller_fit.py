@@ -104,7 +104,8 @@ class ControllerFit:
                  "integral action" if _has_integrator(self.controller) else "no integral action",
                  ("the reference and the position enter differently (C_r ≠ C_y: a feedforward other than the full "
                   "velocity one, or a derivative on the position only)") if _has_feedforward(self.controller)
-                 else "C_r = C_y (the law acts on the tracking error alone: in a cascade, full velocity feedforward)",
+                 else ("C_r ≈ C_y (the law acts on the tracking error alone, to the fit's precision: in a cascade, "
+                       "full velocity feedforward)"),
                  (f"saturation ±{self.saturation:.4g}" if math.isfinite(self.saturation) else "no saturation seen"),
                  f"its law gives the logged force within {100 * self.error:.3g} % ({100 * self.heldout_error:.3g} % "
                  "on the held-out samples)"]

@@ -665,7 +665,7 @@ class _Search:
         if self.data.rel(again[1], True) < (1 - RETUNE_GAIN) * self.data.rel(cur[1], True):
             self.force_now = self.data.force_errors(st)
             self.say(f"friction law fitted again once {f.effect} was modelled: {st.model.coulomb_law}, smoothing speed "
-                     f"{st.model.coulomb_eps:.4g}")
+                     f"{units.speed(st.model.coulomb_eps, st.axis)}")
             return again
         return cur
 
@@ -688,7 +688,7 @@ class _Search:
             return cur
         if self.data.rel(alt[1], True) < (1 - RETUNE_GAIN) * self.data.rel(cur[1], True):
             self.say(f"a second start from the default friction law ends lower: {st.model.coulomb_law}, smoothing speed "
-                     f"{st.model.coulomb_eps:.4g}")
+                     f"{units.speed(st.model.coulomb_eps, st.axis)}")
             for old in self.findings:  # the hyper-parameters chosen again; the final values are read from st
                 if id(old) in chosen:
                     old.params, old.std = dict(chosen[id(old)][0]), dict(chosen[id(old)][1])
@@ -711,7 +711,7 @@ class _Search:
             return cur
         old.accepted = False
         old.evidence += (f"; the friction law's shape, not a separate effect: without it, the law through zero speed "
-                         f"fitted again ({st_alt.model.coulomb_law}, smoothing speed {st_alt.model.coulomb_eps:.4g}) predicts the "
+                         f"fitted again ({st_alt.model.coulomb_law}, smoothing speed {units.speed(st_alt.model.coulomb_eps, st_alt.axis)}) predicts the "
                          f"held-out data as well ({100 * self.data.rel(alt[2], False):.2f} %, Diebold-Mariano p = "
                          f"{p_keep:.2g})")
         old.note = (f"the friction law's shape: the law refitted instead ({st_alt.model.coulomb_law}) explains it as well "
