@@ -500,16 +500,16 @@ def _names(c: _Candidate, robot) -> Tuple[Optional[str], str]:
     return jn, (f"on {jn}" if jn else "on every joint")
 
 
-def _refit(state: _State, model, train: Recording, progress) -> Any:
+def _refit(state: _State, model, train: Recording, progress, cutoff_hz: Optional[float] = None) -> Any:
     """The model refitted by DIDIM on the training record from the current model's estimate (its law fitted again:
-    the one fitted without the effect may have taken part of it)."""
+    the one fitted without the effect may have taken part of it); ``cutoff_hz`` as robot DIDIM's."""
     from dataclasses import replace
 
     from ..methods.robot import didim as robot_didim, frozen_for
 
     model = replace(model, coulomb_eps=None, coulomb_law="algebraic")
     return robot_didim(train, model, progress=progress, start=state.res,
-                       frozen=frozen_for(model, state.res.frozen) or None)
+                       frozen=frozen_for(model, state.res.frozen) or None, cutoff_hz=cutoff_hz)
 
 
 def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, float], Dict[str, float]]:
@@ -548,15 +548,12 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
         modes = None
         _mode_screen(state, c, progress)  # raises when the grid finds no mode
         if rigid is not None:
-            from ..methods.robot import didim as robot_didim, elastic_modes, rigid_step_cutoff
+            from ..methods.robot import elastic_modes, rigid_step_cutoff
 
             # step 1 of the three steps: the rigid model below the modes (the base was fitted through them), from
             # the base's estimate
-            plain = replace(model, coulomb_eps=None, coulomb_law="algebraic")
             try:
-                rigid = robot_didim(state.train, plain, progress=progress, start=res,
-                                    frozen=frozen_for(plain, res.frozen) or None,
-                                    cutoff_hz=rigid_step_cutoff(state.train))
+                rigid = _refit(state, model, state.train, progress, cutoff_hz=rigid_step_cutoff(state.train))
             except DidimError:
                 pass
             modes = elastic_modes(state.train, rigid, new, progress, start=c.hyper.get("x_grid"))

@@ -1972,6 +1972,14 @@ def no_mode(x: np.ndarray, names: Sequence[str], dt: float) -> Dict[str, str]:
     return out
 
 
+def _no_better_than_rigid(robot, elastic: Sequence[int], per: Dict[str, float], rigid_per: Dict[str, float]
+                          ) -> List[str]:
+    """The elastic joints whose force the elastic model explains no better than the rigid one (their errors ``per``
+    against ``rigid_per``, by joint name; :data:`RIGID_LIMIT_MARGIN`): the record shows no mode of them."""
+    names = [robot.joint_names[j] for j in elastic]
+    return [nm for nm in names if nm in per and nm in rigid_per and per[nm] >= RIGID_LIMIT_MARGIN * rigid_per[nm]]
+
+
 def _no_mode_result(rec: Recording, model: Model, split: "_ElasticSplit", theta0: np.ndarray, law: Law,
                     why: Dict[str, str], rigid: IdentificationResult, search: Dict[str, Any], t0: float,
                     sims0: int) -> IdentificationResult:
@@ -1988,9 +1996,8 @@ def _no_mode_result(rec: Recording, model: Model, split: "_ElasticSplit", theta0
         res.force_error, res.force_error_per_joint = math.nan, {}
     per, rigid_per = res.force_error_per_joint, rigid.force_error_per_joint
     why = dict(why)
-    for j in split.elastic:
-        nm = model.robot.joint_names[j]
-        if nm not in why and nm in per and nm in rigid_per and per[nm] >= RIGID_LIMIT_MARGIN * rigid_per[nm]:
+    for nm in _no_better_than_rigid(model.robot, split.elastic, per, rigid_per):
+        if nm not in why:
             why[nm] = (f"the elastic model explains its force no better than the rigid one ({100 * per[nm]:.2f} % "
                        f"against {100 * rigid_per[nm]:.2f} %)")
     message = ("step 2 finds no elastic mode of " + "; ".join(f"{j}: {w}" for j, w in why.items())
@@ -2060,8 +2067,7 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
     # an elastic joint whose force the elastic model explains no better than the rigid one: the record shows no mode
     # of it (one axis's step 2 says the same, RIGID_LIMIT_MARGIN); its K and D mean nothing
     per = sol["force_errors"][1]
-    flat = [robot.joint_names[j] for j in elastic
-            if per[robot.joint_names[j]] >= RIGID_LIMIT_MARGIN * rigid_per[robot.joint_names[j]]]
+    flat = _no_better_than_rigid(robot, elastic, per, rigid_per)
     message = "" if run.converged else run.message
     if flat:
         message = (f"the record shows no elastic mode of {', '.join(flat)}: the elastic model explains their force no "
