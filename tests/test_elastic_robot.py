@@ -142,6 +142,20 @@ def test_three_step_didim_identifies_an_elastic_arm_from_its_motor_encoders(arm2
         rec.force).max())
 
 
+def test_the_rigid_step_s_cutoff_is_refused_where_step_1_is_not_run(arm2):
+    """rigid_cutoff_hz is step 1's low-pass: given with step 1's result or an elastic start (step 1 then not run), it
+    would be ignored; it is refused, saying what to leave out."""
+    from didim.methods.robot import didim as robot_didim
+
+    _, rob, rec, _, res = arm2
+    model = didim.Model(robot=rob, elastic="all")
+    with pytest.raises(didim.DataError, match="rigid_cutoff_hz is step 1's low-pass"):
+        robot_didim(rec, model, start=res, rigid_cutoff_hz=1.0)
+    rigid = didim.identify(rec, rob, "idim-ls")
+    with pytest.raises(didim.DataError, match="leave rigid_cutoff_hz out"):
+        robot_didim(rec, model, start=rigid, rigid_cutoff_hz=1.0)
+
+
 def test_output_error_lm_from_three_step_didim_reaches_the_truth_floor(arm2):
     """OE-LM on the elastic arm (from the three-step DIDIM; forward-difference sensitivities of the loop without
     encoder quantization): every parameter within 1 % of the truth (measured 0.35 % at worst, the damping D within

@@ -98,3 +98,22 @@ def test_parallel_paths_give_the_same_bits_with_one_two_and_three_threads(emps_p
         differ = [k for k in one if one[k] != other.get(k)]
         assert not differ, f"results depend on the thread count ({n} vs 1): {differ}"
     assert {"decimate butter", "decimate matlab", "lstsq (parallel QR)", "didim", "oe-gn"} <= set(one)
+
+
+def test_the_loops_threads_follow_the_affinity_and_rayon_num_threads(monkeypatch):
+    """One count of processors for every thread pool of the loops (didim._parallel.cores): the process's affinity,
+    capped by RAYON_NUM_THREADS when set, so that "one core" means one for the core's pool and the Python pools alike."""
+    from didim._parallel import cores
+
+    try:
+        allowed = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        allowed = os.cpu_count() or 1
+    monkeypatch.delenv("RAYON_NUM_THREADS", raising=False)
+    assert cores() == allowed
+    monkeypatch.setenv("RAYON_NUM_THREADS", "1")
+    assert cores() == 1
+    monkeypatch.setenv("RAYON_NUM_THREADS", str(allowed + 5))
+    assert cores() == allowed
+    monkeypatch.setenv("RAYON_NUM_THREADS", "junk")
+    assert cores() == allowed

@@ -1,10 +1,25 @@
 """Thread pools for the identification loops (the core releases the interpreter while it simulates)."""
 
+import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterable, List, TypeVar
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+
+def cores() -> int:
+    """The processors the identification loops may use: those this process may run on (its affinity: ``taskset -c
+    0`` gives one), not the machine's count, and no more than ``RAYON_NUM_THREADS`` when it is set (the core's own
+    pool obeys it: one setting says "one core" to both). Threads beyond them only add switching."""
+    try:
+        n = max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # not every platform has affinities
+        n = max(1, os.cpu_count() or 1)
+    env = os.environ.get("RAYON_NUM_THREADS", "").strip()
+    if env.isdigit() and int(env) > 0:
+        n = min(n, int(env))
+    return n
 
 
 def map_threads(fn: Callable[[T], R], items: Iterable[T], workers: int) -> List[R]:

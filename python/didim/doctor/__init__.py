@@ -42,7 +42,8 @@ from ..simulation import SimResult, coulomb_eps_of, default_coulomb_eps, param_n
 from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect, final_values,
                       params_text, separating_experiment)
-from .fit import Data, State, base_columns, cores, fit_friction_law, refit
+from .._parallel import cores
+from .fit import Data, State, base_columns, fit_friction_law, refit
 from .finding import MIN_HELDOUT_GAIN, Finding
 from .words import lead_in_words, start_words
 

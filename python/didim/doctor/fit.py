@@ -4,7 +4,6 @@ refit every effect uses."""
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, replace
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
@@ -16,15 +15,6 @@ from ..recording import Recording
 from ..result import IdentificationResult
 from ..signal import Decimation
 from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, simulate
-
-
-def cores() -> int:
-    """The processors this process may run on (its affinity: ``taskset -c 0`` gives one), not the machine's count: the
-    doctor's thread pools run their jobs in turn when there is one (threads on one processor only add switching)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # not every platform has affinities
-        return max(1, os.cpu_count() or 1)
 
 
 @dataclass(frozen=True)
@@ -185,7 +175,7 @@ def refit(data: Data, state: State, init: Dict[str, float], progress,
 def refit_each(data: Data, jobs: Sequence[Tuple[State, Dict[str, float]]], progress) -> List[Any]:
     """:func:`refit` of independent (state, init) pairs on the cores of the machine (the core releases the interpreter
     while it simulates): ``(state, result)`` for each, or the :class:`DidimError` it raised, in the order given."""
-    from .._parallel import map_threads
+    from .._parallel import cores, map_threads
 
     from .._errors import DidimError
 
@@ -251,7 +241,7 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
     ``around``, that smoothing speed in m/s or rad/s); then every plant's search (:func:`didim.methods.friction_law.
     closed_loop_law`) from it, for each shape (``shapes``, all by default), each law a DIDIM refit, a batch of them
     on the cores of the machine."""
-    from .._parallel import map_threads
+    from .._parallel import cores, map_threads
 
     from ..methods import friction_law
     from .._errors import DidimError

@@ -1719,7 +1719,7 @@ def _output_least_squares(rec: Recording, simulate_u: Callable[[np.ndarray], Dic
     ``simulate_u(u)`` (simulated without encoder quantization: see :func:`_simulate`): scipy's trust-region
     reflective Levenberg-Marquardt within the bounds, its Jacobian by forward differences of relative step
     :data:`SPRING_FD_STEP`, simulated in parallel. Returns scipy's result (``x``, ``fun``, ``jac``, ``nfev``)."""
-    from .._parallel import map_threads
+    from .._parallel import cores, map_threads
     from scipy.optimize import least_squares
 
     cache: Dict[bytes, np.ndarray] = {}
@@ -1747,7 +1747,7 @@ def _output_least_squares(rec: Recording, simulate_u: Callable[[np.ndarray], Dic
             du[k] = steps[k]
             return (res(u + du) - r0) / steps[k]
 
-        cols = map_threads(column, range(len(u)), _core_count())
+        cols = map_threads(column, range(len(u)), cores())
         return np.column_stack(cols)
 
     return least_squares(res, u0, jac=jac, bounds=(lower, upper), method="trf", x_scale="jac", ftol=SPRING_TOL,
@@ -1777,7 +1777,7 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
     ``search=False``: the grid's best point alone (its criterion; no least squares): a screen for a mode. ``start``:
     the grid's best point when it is known (that screen's, one row (λ, f, ζ) per elastic joint): the search starts
     there and the grid is not run again."""
-    from .._parallel import map_threads
+    from .._parallel import cores, map_threads
 
     say = say or (lambda s: None)
     split = _ElasticSplit.of_rigid(rec, rigid, model)
@@ -1812,7 +1812,7 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
                             f"{x.shape}")
         return _step2_search(split, x, law, names, sims, say)
     points = [np.array([[lam, f, ELASTIC_ZETA0]] * ne) for lam, f in grid]
-    got = map_threads(errors, points, min(len(points), _core_count()))
+    got = map_threads(errors, points, min(len(points), cores()))
     if all(g is None for g in got):
         raise SimulationError(
             f"step 2: no point of eq. (28)'s grid (λ {ELASTIC_GRID_LAMBDA[0]}-{ELASTIC_GRID_LAMBDA[-1]}, locked-rotor "
@@ -1851,7 +1851,7 @@ def rigid_step_cutoff(rec: Recording) -> float:
 def _grid_each(x: np.ndarray, joints, grid: List[Tuple[float, float]], errors) -> float:
     """Eq. (28)'s ``grid`` of each elastic joint of ``joints`` in turn (rows of ``x``), the others at their rows:
     each row set in place to its best point by the joints' criterion (:func:`_joints_error`); the last criterion."""
-    from .._parallel import map_threads
+    from .._parallel import cores, map_threads
 
     best = math.inf
     for e in joints:
@@ -1860,7 +1860,7 @@ def _grid_each(x: np.ndarray, joints, grid: List[Tuple[float, float]], errors) -
             xx = x.copy()
             xx[e] = (lam, f, ELASTIC_ZETA0)
             pts.append(xx)
-        vals = [_joints_error(g) for g in map_threads(errors, pts, min(len(pts), _core_count()))]
+        vals = [_joints_error(g) for g in map_threads(errors, pts, min(len(pts), cores()))]
         i = int(np.argmin(vals))
         x[e], best = (grid[i][0], grid[i][1], ELASTIC_ZETA0), vals[i]
     return best
@@ -1894,12 +1894,6 @@ def _refine_springs(rec: Recording, plant: "_RobotPlant", theta: np.ndarray, law
     return th
 
 
-def _core_count() -> int:
-    import os
-
-    return int(os.environ.get("RAYON_NUM_THREADS") or os.cpu_count() or 1)
-
-
 def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
                   progress: Optional[Callable[[str], None]] = None, rigid: Optional[IdentificationResult] = None,
                   modes: Optional[Tuple[np.ndarray, "_ElasticSplit", Dict[str, Any]]] = None,
@@ -1924,6 +1918,9 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
     robot, offset = _check(rec, model)
     say = progress or (lambda s: None)
     held = _held(model, base_parameters(robot, elastic=elastic_of(model)), frozen)
+    if rigid_cutoff_hz is not None and (rigid is not None or start is not None):
+        raise DataError("rigid_cutoff_hz is step 1's low-pass, and step 1 is not run when its result (rigid=) or a "
+                        "start of the elastic model (start=) is given: leave rigid_cutoff_hz out, or the result")
     if start is not None and start.structure.robot is robot and start.structure.elastic == model.elastic \
             and start.offset == offset and "rigid_force_error_per_joint" in start.options:
         return _elastic_from(rec, model, start, max_iter, tol, say, t0, sims0, held)
