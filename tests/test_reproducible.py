@@ -117,3 +117,36 @@ def test_the_loops_threads_follow_the_affinity_and_rayon_num_threads(monkeypatch
     assert cores() == allowed
     monkeypatch.setenv("RAYON_NUM_THREADS", "junk")
     assert cores() == allowed
+
+
+def test_an_interrupt_stops_the_calls_already_running_on_a_pool(emps):
+    """An interrupt of the thread waiting for a pool (didim._parallel.map_threads) stops the core calls running on its
+    workers, not only the queued ones: a signal caught on the main thread does not reach a worker's computation, and a
+    whole refit ran on (a CI run's doctor did not exit within 120 s of its signal). Each worker simulates in a loop
+    until stopped or done; the interrupt must end every one of them with KeyboardInterrupt, and the core must run again
+    afterwards."""
+    import signal
+    import threading
+
+    from didim._parallel import map_threads
+
+    params = {"M": 95.0, "Fv": 210.0, "Fc": 20.0, "OF": -3.0}
+    outcome = {}
+
+    def work(k):
+        try:
+            for _ in range(2000):  # minutes if nothing stops it
+                didim.simulate(emps, params, substeps=1)
+        except KeyboardInterrupt:
+            outcome[k] = "stopped"
+            raise
+        outcome[k] = "ran to its end"
+
+    timer = threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT))
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        map_threads(work, [0, 1], 2)
+    timer.cancel()
+    assert outcome == {0: "stopped", 1: "stopped"}
+    sim = didim.simulate(emps, params, substeps=1)  # the stop is released
+    assert np.all(np.isfinite(sim.force))

@@ -1,6 +1,7 @@
 """Thread pools for the identification loops (the core releases the interpreter while it simulates)."""
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterable, List, TypeVar
 
@@ -30,5 +31,31 @@ def map_threads(fn: Callable[[T], R], items: Iterable[T], workers: int) -> List[
     pool = ThreadPoolExecutor(max(1, int(workers)))
     try:
         return list(pool.map(fn, items))
+    except BaseException:
+        # the calls already running are stopped too: a signal caught on this thread does not reach the core's
+        # computations on the workers (a whole refit would run on), so every core call stops at its next check and
+        # no new one starts until the pool is closed
+        pool.shutdown(wait=False, cancel_futures=True)
+        _hold(True)
+        try:
+            pool.shutdown(wait=True)
+        finally:
+            _hold(False)
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+_holds = 0
+_holds_lock = threading.Lock()
+
+
+def _hold(on: bool) -> None:
+    """Holds the core's stop while any pool of this process is being stopped (pools nest: a doctor's refits run step
+    2's grids on pools of their own)."""
+    global _holds
+    from . import _core
+
+    with _holds_lock:
+        _holds += 1 if on else -1
+        _core.hold_stop(_holds > 0)

@@ -28,6 +28,10 @@ pub(crate) use model::AnyModel;
 /// thread answers signals, turning panics into errors. For the computations that take a
 /// while (simulations, filters, least squares); [`quick`] runs the others.
 fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> Result<T, Error> + Send) -> PyResult<T> {
+    if HELD.load(std::sync::atomic::Ordering::Relaxed) {
+        // the program is stopping its thread pool's calls (`hold_stop`): this one does not start
+        return Err(pyo3::exceptions::PyKeyboardInterrupt::new_err("interrupted"));
+    }
     if !pending() {
         // a signal caught while another thread's call ran is still to be raised where it was caught: its stop
         // stays in force until then
@@ -98,6 +102,26 @@ fn finish<T>(py: Python<'_>, out: std::thread::Result<Result<T, Error>>) -> PyRe
 /// has stopped. Another thread's call that the same stop ends raises a plain KeyboardInterrupt, so that the
 /// handler's own exception (e.g. the CLI's SIGTERM class, which sets the exit code) reaches the main thread.
 static PENDING: std::sync::Mutex<Option<(std::thread::ThreadId, PyErr)>> = std::sync::Mutex::new(None);
+
+/// Set while the program stops every call of its thread pools (`hold_stop(True)`): running calls stop at their next
+/// check, new ones raise KeyboardInterrupt at once, until `hold_stop(False)`.
+static HELD: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// hold_stop(on)
+/// --
+///
+/// ``True``: every running core computation stops at its next check and every new one raises KeyboardInterrupt at
+/// once, on every thread (a thread pool's workers, whose calls a signal caught on the main thread does not reach);
+/// ``False``: computations run again. For ``didim._parallel.map_threads`` on an interrupt or an error.
+#[pyfunction]
+fn hold_stop(on: bool) {
+    HELD.store(on, std::sync::atomic::Ordering::Relaxed);
+    if on {
+        didim_core::interrupt::raise();
+    } else if !pending() {
+        didim_core::interrupt::reset();
+    }
+}
 
 /// Whether a signal's exception waits to be raised.
 fn pending() -> bool {
@@ -530,6 +554,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<model::PyModel>()?;
     m.add_class::<robot::PyRobot>()?;
     m.add_function(wrap_pyfunction!(robot::simulate_robot, m)?)?;
+    m.add_function(wrap_pyfunction!(hold_stop, m)?)?;
     m.add_function(wrap_pyfunction!(model::coulomb_sign, m)?)?;
     m.add_function(wrap_pyfunction!(lstsq, m)?)?;
     m.add_function(wrap_pyfunction!(butter, m)?)?;
