@@ -1,5 +1,6 @@
-"""Why the robot doctor misses a force lag of several sample periods (held-out Panda e8, 3 ms at 1 kHz): DIDIM's
-fixed point with the lag in the loop is exact but repels its iterations; output-error LM reaches the truth floor.
+"""Why the robot doctor misses a force lag of several sample periods (held-out Panda e8, 3 ms at 1 kHz): DIDIM with
+the lag is exact on a record of its own loop, but on e8's record its refit from the base model (the doctor's) stalls
+far above the truth floor, where output-error LM from the same start reaches it.
 
     python benches/lag_didim_diagnosis.py [--data /tmp/didim_rdoc_heldout]
 
