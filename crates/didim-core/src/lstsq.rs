@@ -43,9 +43,14 @@ use faer::linalg::svd::{svd, svd_scratch, ComputeSvdVectors};
 use faer::linalg::triangular_solve::solve_upper_triangular_in_place;
 use faer::{Conj, Mat, MatRef, Par};
 
-/// Number of entries of `W` from which the QR factorisation and the application
-/// of `Qᵀ` use rayon parallelism (below it they run sequentially).
-const PAR_MIN_ENTRIES: usize = 1 << 16;
+/// The QR factorisation and the application of `Qᵀ` run on one thread, whatever the size of
+/// `W`: faer's parallel blocks round differently with each thread count, and a robot's DIDIM,
+/// whose iterations wander within their tolerance, carried that to its results (a held-out
+/// Panda's base fit at 3.32 % on one thread, 3.44 % on two; its validation record simulable on
+/// one, not on the other). On a 7-joint arm's system (10,500 × 63) one thread took 13.6 ms,
+/// two 23 ms (criterion, `benches/lstsq.rs`); the batches of simulations are where the threads
+/// pay.
+const PAR: Par = Par::Seq;
 
 /// How the noise standard deviation `σ̂ρ` is estimated from the residual
 /// `e = Y − W χ̂`.
@@ -229,11 +234,7 @@ struct Factored {
 impl Factored {
     fn new(w: &[f64], y: &[f64], rows: usize, cols: usize, kw: i32, ky: i32) -> Result<Self> {
         let n = cols;
-        let par = if rows.saturating_mul(cols) >= PAR_MIN_ENTRIES {
-            Par::rayon(0)
-        } else {
-            Par::Seq
-        };
+        let par = PAR;
         let mut qr = Mat::<f64>::from_fn(rows, cols, |i, j| ldexp(w[j * rows + i], kw));
         let block_size = recommended_block_size::<f64>(rows, cols).max(1);
         let mut q_coeff = Mat::<f64>::zeros(block_size, n);
