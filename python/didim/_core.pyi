@@ -32,6 +32,7 @@ __all__ = [
     "Model",
     "Robot",
     "simulate_robot",
+    "hold_stop",
     "lfilter",
     "applied_force",
     "TERM_ALIASES",
