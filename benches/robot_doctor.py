@@ -90,9 +90,8 @@ def main() -> int:
         "record's one concealed effect and its joint). Each record pair is a training record (the doctor fits and "
         "tests on it) and a validation record (it confirms each adoption on it). The times are wall clock and process "
         f"CPU on this machine (2 cores, shared; load average {os.getloadavg()[0]:.1f} at the end; RAYON_NUM_THREADS="
-        f"{os.environ.get('RAYON_NUM_THREADS', 'unset')}: with another thread count the base fits differ in their last "
-        "digits and a round can rank another candidate, e.g. d2 then tries a flexibility its screen drops and that "
-        "candidate's look-alike, the delay).",
+        f"{os.environ.get('RAYON_NUM_THREADS', 'unset')}, one thread for the core and the doctor's pools; the results "
+        "are the same bits with any thread count, only the times change).",
         "",
         f"Named on the right joint (first finding): **{named} of {total}** effects; clean records with a finding: "
         f"**{clean_flagged} of {clean}**.",

@@ -77,7 +77,8 @@ def _robot_record(args, path: str, robot):
                                  ("--force-scale", getattr(args, "force_scale", 1.0), 1.0)):
         if value != default:
             raise DataError(f"{flag} applies to one axis's record; a robot's record has columns t, qr_1..qr_n, "
-                            "force_1..force_n, qm_1..qm_n (a drive unit's scale goes in --units, e.g. deg,A=2.5)")
+                            "force_1..force_n, qm_1..qm_n (or qr_<joint>, ...): rename the file's header to those "
+                            "(a drive unit's scale goes in --units, e.g. deg,A=2.5)")
     return load_record(path, robot=robot, controller=getattr(args, "controller", None) or None,
                        units=getattr(args, "units", None),
                        lead_in=None if getattr(args, "lead_in", "auto") == "none" else "auto")

@@ -405,7 +405,8 @@ def _robot_summary(res: IdentificationResult) -> str:
     lines = [f"{res.method} on a {res.robot.ndof}-joint robot ({res.robot.name}): "
              + ("converged" if res.converged else "NOT converged") + f" in {res.iterations} iteration(s), "
              f"{res.elapsed_s:.1f} s; "
-             + (f"closed-loop force error {100 * res.force_error:.2f} %" if math.isfinite(res.force_error) else
+             + (f"closed-loop force error {100 * res.force_error:.2f} % (all joints together; per joint below)"
+                if math.isfinite(res.force_error) else
                 "its closed loop could not be simulated (no closed-loop force error: see the notes)")
              + (f" ({100 * res.force_error_after_start:.2f} % after the first {1e3 * res.start_s:.0f} ms, where the "
                 "simulation joins a record that began in motion)" if res.start_s > 0 else "")]
@@ -414,8 +415,10 @@ def _robot_summary(res: IdentificationResult) -> str:
         eps = ", ".join(f"{j} {e:.4g} {'m/s' if k == 'prismatic' else 'rad/s'}"
                         for j, k, e in zip(res.robot.joint_names, res.robot.joint_kinds, res.law[1]))
         lines.append(f"  friction law through zero speed: {res.law[0]}, smoothing speed ε: {eps}")
+    units = res.units
     for k, v in res.params.items():
-        lines.append(f"  {k} = {v:.6g} (±{res.rel_std_pct.get(k, math.nan):.2g} %)")
+        unit = f" {units[k]}" if units.get(k) else ""
+        lines.append(f"  {k} = {v:.6g}{unit} (±{res.rel_std_pct.get(k, math.nan):.2g} %)")
     lines += [f"note: {x}" for x in res.notes]
     return "\n".join(lines)
 

@@ -392,7 +392,8 @@ def _columns(available: Sequence[str], names: Sequence[str], key: str, where: st
     lacking = [c for c in closest if c not in available]
     raise DataError(f"{where}: no columns {key}_1 … {key}_{len(names)} (or {key}_<joint name>) for the robot's "
                     f"{len(names)} joints ({', '.join(names)}): {', '.join(lacking)} missing; the file has "
-                    f"{', '.join(available)}")
+                    f"{', '.join(available)}. Rename the file's header to those names (a robot's record takes no "
+                    "column map)")
 
 
 #: A robot's positions are read to this many binary digits below its encoder step (or below its reference's span
