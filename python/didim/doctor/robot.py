@@ -544,7 +544,8 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
     jn, _ = _names(c, robot)
     if c.effect == "delay":
         # the size by one axis's search (force lags upward until the training fit gets worse, and whole-sample delays
-        # when the best lag is a period or longer), on every joint alike: a current loop's lag and a computation delay look alike
+        # when the best lag is a period or longer), on every joint alike: a current loop's lag and a computation
+        # delay look alike
         from .effects import LAG_OR_DELAY, delay_search
 
         n = state.train.ndof
