@@ -102,3 +102,42 @@ def test_force_lag_mean_is_the_mean_of_the_exact_lag_over_each_period(lag):
     delayed = problem(rec, didim.Model("rigid", force_lag=lag, delay=2)).applied_force(tau)
     np.testing.assert_allclose(delayed[2:], problem(rec, didim.Model("rigid", force_lag=lag)).applied_force(
         np.r_[0.0, 0.0, tau[:-2]])[2:], rtol=0, atol=1e-12)
+
+
+def test_the_late_force_search_goes_past_one_period_and_stops_where_the_fit_stops_moving():
+    """doctor.effects.delay_search, every plant's: force lags are searched upward past one sample period (a 3 ms
+    lag at 1 kHz: held-out Panda e8), whole-sample delays too when the best lag is a period or longer, the better
+    kept; a search ends where the fit rises by 10 % or has not improved over DELAY_PATIENCE sizes (a record with no
+    late force fits every size alike and used to refit them all)."""
+    import math
+
+    from didim.doctor.effects import DELAY_PATIENCE, LAG_PERIODS, delay_search
+
+    dt = 1e-3
+    seen = []
+
+    def bowl(best_periods, floor):
+        def fit(x):
+            periods = x / dt if isinstance(x, float) else x
+            seen.append(x)
+            return floor + math.log(periods / best_periods) ** 2, True, x
+        return fit
+
+    # a lag of 3 periods, and delays no better: the lag, found past one period
+    kind, size, _ = delay_search(bowl(3.0, 1.0), bowl(3.0, 1.5), dt)
+    assert kind == "force_lag" and size == pytest.approx(3 * dt)
+    assert max(x for x in seen if isinstance(x, float)) <= 6.75 * dt  # stopped past the minimum
+    assert any(isinstance(x, int) for x in seen)  # delays tried: the best lag is a period or longer
+    # a whole-sample delay that fits better than every lag is kept
+    seen.clear()
+    kind, size, _ = delay_search(bowl(2.0, 1.0), bowl(2.0, 0.5), dt)
+    assert (kind, size) == ("delay", 2)
+    # a short lag: no delays tried
+    seen.clear()
+    kind, size, _ = delay_search(bowl(0.3, 1.0), bowl(1.0, 0.0), dt)
+    assert kind == "force_lag" and size == pytest.approx(0.3 * dt)
+    assert not any(isinstance(x, int) for x in seen)
+    # no late force: every size fits alike, and the search stops after DELAY_PATIENCE sizes that do not improve it
+    seen.clear()
+    kind, size, _ = delay_search(lambda x: (seen.append(x), (1.0, True, x))[1], bowl(1.0, 0.5), dt)
+    assert (kind, size) == ("force_lag", LAG_PERIODS[0] * dt) and len(seen) == 1 + DELAY_PATIENCE
