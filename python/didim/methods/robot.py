@@ -317,6 +317,13 @@ def _decimation(rec: Recording, cutoff_hz: Optional[float] = None):
     return Decimation.lowpass(min(max(10 * band, 5 * f[1] if len(f) > 1 else 1.0), fs / 10), fs)
 
 
+def speed_unit(rec: Recording) -> str:
+    """The unit of a robot's smoothing speeds in words: rad/s, m/s, or both for an arm with both kinds of joint."""
+    kinds = set(rec.joint_kinds) or {"revolute"}
+    return {frozenset({"revolute"}): "rad/s", frozenset({"prismatic"}): "m/s"}.get(
+        frozenset(kinds), "rad/s (m/s for the prismatic joints)")
+
+
 def top_speeds(rec: Recording) -> np.ndarray:
     """Each joint's top reference speed: the scale of the speeds below which the fits leave rows out (the reference's,
     not the states': a simulated state that swings far off would move the threshold with it)."""
@@ -893,10 +900,11 @@ def closed_loop_law(rec: Recording, refit: Callable[[Law], Tuple[Robot, Dict[str
             now = math.inf
         if not found.error < now:
             say(f"friction law through zero speed: no law's refit fits the first half better than the estimate with "
-                f"its own law ({friction_law.describe(found.law)}: RMS {100 * found.error:.3f} % against "
-                f"{100 * now:.3f} %): {friction_law.describe(law)} kept")
+                f"its own law ({friction_law.describe(found.law, speed_unit(rec))}: RMS {100 * found.error:.3f} % "
+                f"against {100 * now:.3f} %): {friction_law.describe(law, speed_unit(rec))} kept")
             return law
-    say(f"friction law through zero speed, in closed loop: {friction_law.describe(found.law)} (joints' force errors "
+    say(f"friction law through zero speed, in closed loop: {friction_law.describe(found.law, speed_unit(rec))} "
+        "(joints' force errors "
         f"on the first half, RMS {100 * found.error:.3f} %)")
     return found.law
 
@@ -1331,7 +1339,7 @@ class _RobotPlant:
             if np.any(moved):
                 new = np.where(moved, np.clip(eps + step, eps / 2, 2 * eps), eps)
                 self.law = (self.law[0], tuple(float(e) for e in new))
-                self.say("smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new))
+                self.say("smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new) + f" {speed_unit(rec)}")
         est, cov, res = inverse.fit(self.law, held=self.held)
         return {"params": est, "covariance": cov, "std": np.sqrt(np.maximum(np.diag(cov), 0.0)), "law": sim["law"],
                 "force_errors": force_errors(rec, sim["force"]), **res}
@@ -1447,7 +1455,7 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     measured = _InverseModel(rec, model, base, *_measured_states(rec, dec), dec)
     per_shape: Dict[str, Tuple[float, ...]] = {}
     law = fit_law(rec, measured, per_shape)
-    say(f"friction law through zero speed, by the inverse model: {law[0]}, ε = " + ", ".join(f"{e:.4g}" for e in law[1]))
+    say("friction law through zero speed, by the inverse model: " + friction_law.describe(law, speed_unit(rec)))
     n = robot.ndof
     pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
     theta0 = np.concatenate([base.of(pi0), np.zeros(_Layout.for_model(model, base).size - len(base.names))])
