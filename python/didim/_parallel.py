@@ -2,7 +2,7 @@
 
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from typing import Callable, Iterable, List, TypeVar
 
 T = TypeVar("T")
@@ -23,6 +23,10 @@ def cores() -> int:
     return n
 
 
+#: How long the thread waiting for a pool waits at a time before it lets Python run a pending signal handler (s).
+WAIT_SLICE_S = 0.05
+
+
 def map_threads(fn: Callable[[T], R], items: Iterable[T], workers: int) -> List[R]:
     """``[fn(x) for x in items]`` on a pool of ``workers`` threads, in order. On an interrupt (Ctrl-C, SIGTERM raised
     as one) or an error, the calls not yet started are cancelled and only the running ones are waited for: a pool left
@@ -30,7 +34,16 @@ def map_threads(fn: Callable[[T], R], items: Iterable[T], workers: int) -> List[
     before it exited (a fault-injection test's 120 s)."""
     pool = ThreadPoolExecutor(max(1, int(workers)))
     try:
-        return list(pool.map(fn, items))
+        futures = [pool.submit(fn, x) for x in items]
+        out = []
+        for f in futures:
+            # waited for in short slices: a signal the kernel hands to another thread does not wake a wait without a
+            # timeout, and Python runs its handler on this thread only when it next runs (a SIGINT sent to the
+            # process was raised only once every call had ended, on a CI machine)
+            while not f.done():
+                wait([f], timeout=WAIT_SLICE_S)
+            out.append(f.result())
+        return out
     except BaseException:
         # the calls already running are stopped too: a signal caught on this thread does not reach the core's
         # computations on the workers (a whole refit would run on), so every core call stops at its next check and
