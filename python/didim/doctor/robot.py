@@ -502,15 +502,18 @@ def _names(c: _Candidate, robot) -> Tuple[Optional[str], str]:
     return jn, (f"on {jn}" if jn else "on every joint")
 
 
-def _refit(state: _State, model, train: Recording, progress, cutoff_hz: Optional[float] = None) -> Any:
+def _refit(state: _State, model, train: Recording, progress, cutoff_hz: Optional[float] = None,
+           from_origin: bool = False) -> Any:
     """The model refitted by DIDIM on the training record from the current model's estimate (its law fitted again:
-    the one fitted without the effect may have taken part of it); ``cutoff_hz`` as robot DIDIM's."""
+    the one fitted without the effect may have taken part of it), or with ``from_origin`` from the base fit's own
+    start (the doctor's ``initial``, else the URDF's values); its parameters held where the current model holds them;
+    ``cutoff_hz`` as robot DIDIM's."""
     from dataclasses import replace
 
     from ..methods.robot import didim as robot_didim, frozen_for
 
     model = replace(model, coulomb_eps=None, coulomb_law="algebraic")
-    return robot_didim(train, model, progress=progress, start=state.res,
+    return robot_didim(train, model, progress=progress, start=state.origin if from_origin else state.res,
                        frozen=frozen_for(model, state.res.frozen) or None, cutoff_hz=cutoff_hz)
 
 
@@ -519,18 +522,6 @@ def _late(kw: Dict[str, Any], dt: float) -> str:
     if kw.get("force_lag"):
         return f"lagged {1e3 * kw['force_lag'][0]:.3g} ms"
     return f"delayed {kw['delay'][0]} sample(s) ({1e3 * kw['delay'][0] * dt:.3g} ms)"
-
-
-def _refit_from_origin(state: _State, model, train: Recording, progress) -> Any:
-    """The model fitted by DIDIM on the training record from the base fit's start (the doctor's ``initial``, else the
-    URDF's values), its law fitted again, its parameters held where the current model holds them."""
-    from dataclasses import replace
-
-    from ..methods.robot import didim as robot_didim, frozen_for
-
-    model = replace(model, coulomb_eps=None, coulomb_law="algebraic")
-    return robot_didim(train, model, progress=progress, start=state.origin,
-                       frozen=frozen_for(model, state.res.frozen) or None)
 
 
 def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, float], Dict[str, float]]:
@@ -570,7 +561,7 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
                 # 1.92 % from the base's start; output-error LM from either 1.12 %, the truth floor 1.11 %); a
                 # shorter one moves the bodies too little for that
                 try:
-                    r2 = _refit_from_origin(state, model, tr, progress)
+                    r2 = _refit(state, model, tr, progress, from_origin=True)
                 except DidimError:
                     r2 = None
                 if r2 is not None and (r is None or r2.force_error < r.force_error):
