@@ -89,6 +89,12 @@ def test_the_dynamics_agree_with_pinocchio(robots_dir, case):
     cols = [3, 0, 10 * robot.ndof - 1, 3]
     assert np.array_equal(robot.regressor(q, v, a, columns=cols), robot.regressor(q, v, a)[..., cols])
     assert np.array_equal(robot.regressor(q[0], v[0], a[0], columns=cols), robot.regressor(q[0], v[0], a[0])[:, cols])
+    # series by series (joint, column, state): the same values
+    assert np.array_equal(robot.regressor(q, v, a, columns=cols, by_joint=True),
+                          robot.regressor(q, v, a)[..., cols].transpose(1, 2, 0))
+    assert np.array_equal(robot.regressor(q, v, a, by_joint=True), robot.regressor(q, v, a).transpose(1, 2, 0))
+    with pytest.raises(didim.DataError, match="N states"):
+        robot.regressor(q[0], v[0], a[0], by_joint=True)
     with pytest.raises(didim.DataError, match="standard parameters"):
         robot.regressor(q, v, a, columns=[10 * robot.ndof])
     # rotor inertia on the diagonal, as Pinocchio's armature

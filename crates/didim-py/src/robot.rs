@@ -4,8 +4,8 @@
 use didim_core::error::Error;
 use didim_core::model::{Basis, FrictionLaw, LawShape};
 use didim_core::robot::{
-    map_rows_into, regressor_rows, simulate_robot as simulate_robot_core, Drives, JointKind,
-    Robot as CoreRobot, RobotLoopOptions, BODY_PARAMS,
+    map_rows_into, regressor_rows, regressor_series, simulate_robot as simulate_robot_core, Drives,
+    JointKind, Robot as CoreRobot, RobotLoopOptions, BODY_PARAMS,
 };
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -192,8 +192,9 @@ impl PyRobot {
 
     /// The inverse-dynamics regressor of N states (N, n) -> (N, n, 10 n), linear in
     /// `inertial_params`; with `columns`, only those standard parameters' columns
-    /// (N, n, len(columns)), the others never stored.
-    #[pyo3(signature = (q, v, a, columns=None))]
+    /// (N, n, len(columns)), the others never stored. `by_joint`: laid out (n, m, N) instead,
+    /// each joint's columns a series over the states (its `[j].T` a column-major matrix).
+    #[pyo3(signature = (q, v, a, columns=None, by_joint=false))]
     fn regressor<'py>(
         &self,
         py: Python<'py>,
@@ -201,12 +202,18 @@ impl PyRobot {
         v: PyReadonlyArray2<'py, f64>,
         a: PyReadonlyArray2<'py, f64>,
         columns: Option<Vec<usize>>,
+        by_joint: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let robot = &self.inner;
         let (n, rows) = (robot.ndof(), q.as_array().nrows());
         let m = columns.as_ref().map_or(BODY_PARAMS * n, Vec::len);
         let (q, v, a) = (flat(&q), flat(&v), flat(&a));
-        let out = run(py, || regressor_rows(robot, &q, &v, &a, columns.as_deref()))?;
+        let cols = columns.as_deref();
+        if by_joint {
+            let out = run(py, || regressor_series(robot, &q, &v, &a, cols))?;
+            return Ok(PyArray1::from_vec(py, out).reshape(vec![n, m, rows])?.into_any());
+        }
+        let out = run(py, || regressor_rows(robot, &q, &v, &a, cols))?;
         Ok(PyArray1::from_vec(py, out).reshape(vec![rows, n, m])?.into_any())
     }
 }

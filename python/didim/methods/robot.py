@@ -434,7 +434,8 @@ def _model_columns(robot: Robot, base: BaseParameters, q, v, a, lay: "_Layout", 
                    ) -> Tuple[List[Tuple[np.ndarray, np.ndarray]], List[Tuple[np.ndarray, np.ndarray]]]:
     """:func:`_model_regressor` with a zero Coulomb column (a law's is put in later), as each joint's acting columns
     (:func:`_joint_columns`) built one joint at a time: no (N, n, p) array of mostly zeros (on a 4 kHz UR10 record,
-    111 MB written, then read again to find the columns that act).
+    111 MB written, then read again to find the columns that act), and the bodies' columns from the core series by
+    series (``by_joint``), so that a joint's are copied whole, not gathered a row's stride apart.
 
     With elastic joints (``motor``, their simulated motor sides; θ as :class:`_Layout`), an elastic joint's rows are
     its motor side's, ``u = Ia θ̈ + Fv θ̇ + Fc s(θ̇) + OF + K (θ − q) + D (θ̇ − q̇)``, and the link rows of the elastic
@@ -443,17 +444,17 @@ def _model_columns(robot: Robot, base: BaseParameters, q, v, a, lay: "_Layout", 
     n, offset = robot.ndof, lay.offset
     ind = np.asarray(base.independent)
     arm, body = ind[ind < n], ind[ind >= n]  # rotor inertias' columns, then the bodies'
-    yb = robot.regressor(q, v, a, columns=body - n)  # (N, n, len(body))
+    yb = robot.regressor(q, v, a, columns=body - n, by_joint=True)  # (n, len(body), N)
     out, links = [], []
     for j in range(n):
-        bodies = np.flatnonzero(np.any(yb[:, j, :] != 0, axis=0))
+        bodies = np.flatnonzero(np.any(yb[j] != 0, axis=1))
         rotor = np.flatnonzero(arm == j)
         e = lay.elastic.index(j) if j in lay.elastic else None
         if e is None:
             act = np.concatenate([rotor, len(arm) + bodies, [lay.fv(j)], [lay.of(j)] if offset else []]).astype(int)
             m = np.empty((len(q), len(act)), order="F")
             m[:, :len(rotor)] = a[:, [j] * len(rotor)]  # a rotor inertia acts on its own joint's row, times its acceleration
-            m[:, len(rotor):len(rotor) + len(bodies)] = yb[:, j, bodies]
+            m[:, len(rotor):len(rotor) + len(bodies)] = yb[j, bodies].T
             m[:, len(rotor) + len(bodies)] = v[:, j]
             if offset:
                 m[:, -1] = 1.0
@@ -465,7 +466,7 @@ def _model_columns(robot: Robot, base: BaseParameters, q, v, a, lay: "_Layout", 
         cols = [motor.thetadd[:, j], motor.thetad[:, j]] + ([np.ones(len(q))] if offset else []) + [stretch, rate]
         out.append((act, np.asfortranarray(np.column_stack(cols))))
         act = np.concatenate([rotor, len(arm) + bodies, [lay.k(e), lay.d(e)]]).astype(int)
-        cols = [a[:, [j] * len(rotor)], yb[:, j, bodies], -stretch[:, None], -rate[:, None]]
+        cols = [a[:, [j] * len(rotor)], yb[j, bodies].T, -stretch[:, None], -rate[:, None]]
         links.append((act, np.asfortranarray(np.concatenate(cols, axis=1))))
     return out, links
 

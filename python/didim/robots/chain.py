@@ -210,10 +210,12 @@ class Robot:
         out = self._core.mass_matrix(q)
         return out[0] if one else out
 
-    def regressor(self, q, v, a, columns=None) -> np.ndarray:
+    def regressor(self, q, v, a, columns=None, by_joint: bool = False) -> np.ndarray:
         """The inverse-dynamics regressor: (n, 10 n), or (N, n, 10 n), with
         ``rnea(q, v, a) = regressor(q, v, a) @ inertial_params``; with ``columns`` (indices of standard
-        parameters), only their columns, ``regressor(q, v, a)[..., columns]`` without storing the others."""
+        parameters), only their columns, ``regressor(q, v, a)[..., columns]`` without storing the others.
+        ``by_joint`` (N states only): laid out (n, m, N), ``regressor(q, v, a).transpose(1, 2, 0)``, each joint's
+        columns contiguous series over the states (``[j].T`` is a column-major N × m matrix)."""
         (q, v, a), one = self._states(q=q, v=v, a=a)
         cols = None
         if columns is not None:
@@ -222,6 +224,10 @@ class Robot:
             if c.size and (not np.issubdtype(c.dtype, np.integer) or np.any((c < 0) | (c >= p))):
                 raise DataError(f"regressor columns must be indices of the {p} standard parameters, got {columns!r}")
             cols = [int(x) for x in c]
+        if by_joint:
+            if one:
+                raise DataError("regressor(..., by_joint=True) takes N states (arrays of shape (N, n))")
+            return self._core.regressor(q, v, a, cols, True)
         out = self._core.regressor(q, v, a, cols)
         return out[0] if one else out
 

@@ -409,11 +409,7 @@ pub fn regressor_rows(
             robot.regressor_into(x[0], x[1], x[2], dst)
         });
     };
-    if let Some(&c) = cols.iter().find(|&&c| c >= p) {
-        return Err(invalid!(
-            "regressor column {c} is out of range: a {n}-joint robot has {p} standard parameters"
-        ));
-    }
+    check_columns(cols, n)?;
     let m = cols.len();
     map_rows_with(
         robot,
@@ -430,6 +426,91 @@ pub fn regressor_rows(
             Ok(())
         },
     )
+}
+
+fn check_columns(cols: &[usize], n: usize) -> Result<()> {
+    let p = BODY_PARAMS * n;
+    match cols.iter().find(|&&c| c >= p) {
+        Some(&c) => Err(invalid!(
+            "regressor column {c} is out of range: a {n}-joint robot has {p} standard parameters"
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Samples per task of [`regressor_series`]: a block's rows are computed together and then
+/// written to each series, whose cache lines they fill in turn.
+const SERIES_BLOCK: usize = 256;
+
+/// [`regressor_rows`] laid out series by series: `n × columns.len() × rows` values, joint `j`'s
+/// column `c` over the states at `[(j * m + c) * rows..][..rows]`. Each joint's columns are then
+/// a column-major matrix of its own (what a decimation filters and a least squares takes), with
+/// no gather through a `rows × n × m` array (on a 4 kHz record of a 6-joint arm, 65 MB read
+/// back with a stride of a row).
+pub fn regressor_series(
+    robot: &Robot,
+    q: &[f64],
+    v: &[f64],
+    a: &[f64],
+    columns: Option<&[usize]>,
+) -> Result<Vec<f64>> {
+    use rayon::prelude::*;
+    let n = robot.ndof();
+    let p = BODY_PARAMS * n;
+    let all: Vec<usize>;
+    let cols = match columns {
+        Some(c) => {
+            check_columns(c, n)?;
+            c
+        }
+        None => {
+            all = (0..p).collect();
+            &all
+        }
+    };
+    let rows = q.len() / n.max(1);
+    for x in [q, v, a] {
+        if x.len() != rows * n {
+            return Err(invalid!(
+                "every state array must have {n} columns (the robot's joints) and the same number of rows"
+            ));
+        }
+    }
+    let m = cols.len();
+    let mut out = crate::error::filled(n * m * rows, 0.0, "the robot's regressor")?;
+    if rows == 0 || m == 0 {
+        return Ok(out);
+    }
+    // each block of samples gets its piece of every series (disjoint slices of `out`)
+    let blocks = rows.div_ceil(SERIES_BLOCK);
+    let mut pieces: Vec<Vec<&mut [f64]>> = (0..blocks).map(|_| Vec::with_capacity(n * m)).collect();
+    for series in out.chunks_mut(rows) {
+        for (b, piece) in series.chunks_mut(SERIES_BLOCK).enumerate() {
+            pieces[b].push(piece);
+        }
+    }
+    pieces.into_par_iter().enumerate().try_for_each_init(
+        || vec![0.0; n * p],
+        |full, (b, mut dst)| {
+            for i in 0..dst[0].len() {
+                let r = b * SERIES_BLOCK + i;
+                let s = r * n..(r + 1) * n;
+                robot
+                    .regressor_into(&q[s.clone()], &v[s.clone()], &a[s], full)
+                    .map_err(|e| match e {
+                        crate::Error::InvalidInput(msg) => invalid!("row {r}: {msg}"),
+                        other => other,
+                    })?;
+                for j in 0..n {
+                    for (c, &col) in cols.iter().enumerate() {
+                        dst[j * m + c][i] = full[j * p + col];
+                    }
+                }
+            }
+            Ok(())
+        },
+    )?;
+    Ok(out)
 }
 
 /// [`map_rows_into`] with a scratch value per task (`init()`), passed to `f` with each row.

@@ -120,6 +120,23 @@ fn the_regressor_of_many_states_keeps_the_columns_asked_for() {
             }
         }
     }
+    // series by series: the same values, joint j's column c at (j m + c) rows + row
+    for (pick, m) in [(None, p), (Some(&cols[..]), cols.len())] {
+        let series = regressor_series(&r, &q, &v, &a, pick).unwrap();
+        let rowwise = regressor_rows(&r, &q, &v, &a, pick).unwrap();
+        assert_eq!(series.len(), rows * n * m);
+        for row in 0..rows {
+            for jc in 0..n * m {
+                assert_eq!(
+                    series[jc * rows + row].to_bits(),
+                    rowwise[row * n * m + jc].to_bits()
+                );
+            }
+        }
+    }
+    assert!(regressor_series(&r, &q, &v, &a, Some(&[])).unwrap().is_empty());
+    let e = regressor_series(&r, &q, &v, &a, Some(&[3, 30])).unwrap_err();
+    assert!(format!("{e}").contains("column 30 is out of range"), "{e}");
     assert!(regressor_rows(&r, &q, &v, &a, Some(&[])).unwrap().is_empty());
     let e = regressor_rows(&r, &q, &v, &a, Some(&[3, 30])).unwrap_err();
     assert!(format!("{e}").contains("column 30 is out of range"), "{e}");
