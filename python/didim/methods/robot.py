@@ -2082,11 +2082,6 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
         say(f"step 2 again (round {rnd + 2}): " + ", ".join(
             f"{robot.joint_names[j]} Ia = {theta_r[plant.lay.ia(e)]:.4g}, K = {theta_r[plant.lay.k(e)]:.4g}, "
             f"D = {theta_r[plant.lay.d(e)]:.4g}" for e, j in enumerate(elastic)))
-        # a round gains what step 2 again gains: DIDIM from there keeps its start as its best iterate or moves
-        # little below it (the flexrobots UR5's last round: 2.495 % at its start and at its best, 14 iterations).
-        # Where step 2 again does not lower the error by the round's gain, the rounds end without that DIDIM
-        if not _start_error(plant, theta_r) < (1 - ELASTIC_ROUND_GAIN) * run.best[0]:
-            break
         again = didim_loop(plant, theta_r, max_iter=max_iter, progress=say)
         if again.best[2] is None or again.best[0] >= (1 - ELASTIC_ROUND_GAIN) * run.best[0]:
             if again.best[2] is not None and again.best[0] < run.best[0]:
