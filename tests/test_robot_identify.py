@@ -169,8 +169,15 @@ def test_bad_robot_inputs_are_refused_by_name(data, robots_dir, tmp_path):
         didim.identify(rec, robot, "oe-nm")
     with pytest.raises(didim.DataError, match="apM"):
         didim.identify(rec, robot, "didim", apM=3.0)
-    with pytest.raises(didim.DataError, match="no columns qr_1"):
+    # a 2-joint record with a 6-joint robot: another robot's record, not a header to rename
+    with pytest.raises(didim.DataError, match=r"qr_1 … qr_2, a record of 2 joint\(s\), and the robot has 6"):
         didim.load_record(robots_dir / "pendulum_train.csv", robot=ur5, controller=robots_dir / "ur5_controller.json")
+    # the same joints' columns under other names: the header to rename
+    text = (robots_dir / "pendulum_train.csv").read_text().split("\n", 1)
+    renamed = tmp_path / "renamed.csv"
+    renamed.write_text(text[0].replace("qr_", "ref_") + "\n" + text[1])
+    with pytest.raises(didim.DataError, match="no columns qr_1 … qr_2.*Rename the file's header"):
+        didim.load_record(renamed, robot=robot, controller=robots_dir / "pendulum_controller.json")
     bad = tmp_path / "c.json"
     bad.write_text('{"type": "transfer_function"}')
     with pytest.raises(didim.DataError, match="joints"):

@@ -267,6 +267,9 @@ def _simulate_robot(args, result) -> int:
     for j, e in per.items():
         print(f"  {j}: {100 * e:.2f} %" + (f"; link-minus-motor deflection error {100 * deflection[j]:.1f} % RMS "
                                           "(against ql − qm)" if j in deflection else ""))
+    if result.structure.elastic and not deflection:
+        print("  (no link-minus-motor deflection error: the record holds no link-side positions of the elastic joints, "
+              "ql_1..ql_n or ql_<joint> columns)")
     if chk is not None:
         print(f"  ({chk.summary()})")
     for o in rec.controller_origin:

@@ -390,6 +390,14 @@ def _columns(available: Sequence[str], names: Sequence[str], key: str, where: st
     # the form the file comes closest to says which columns it lacks
     closest = max(forms, key=lambda f: sum(c in available for c in f))
     lacking = [c for c in closest if c not in available]
+    k = 0
+    while f"{key}_{k + 1}" in available:
+        k += 1
+    if k and k != len(names) and not any(f"{key}_{j}" in available for j in names):
+        # numbered columns of another number of joints: another robot's record, not a header to rename
+        raise DataError(f"{where}: the file has columns {key}_1 … {key}_{k}, a record of {k} joint(s), and the robot "
+                        f"has {len(names)} ({', '.join(names)}): is this the robot's record (or the result's robot "
+                        "this record's)? Give the record of the robot, or the robot (URDF, --joints) of the record")
     raise DataError(f"{where}: no columns {key}_1 … {key}_{len(names)} (or {key}_<joint name>) for the robot's "
                     f"{len(names)} joints ({', '.join(names)}): {', '.join(lacking)} missing; the file has "
                     f"{', '.join(available)}. Rename the file's header to those names (a robot's record takes no "

@@ -2089,6 +2089,10 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
             break
         run = again
     err, theta, sol, _ = run.best
+    if run.errors and err < run.errors[-1]:
+        say(f"step 3: the iterate with the lowest joints' force errors is kept, RMS {100 * err:.3f} % (the last "
+            f"{100 * run.errors[-1]:.3f} %: DIDIM's iterations settle where the least squares do, not at the lowest "
+            "force error)")
     x = _ElasticSplit.of_elastic(rec, plant, theta).x_of(theta)  # the final model's split, modes and damping
     modes = split.modes(x)
     notes = [f"step 1 (rigid DIDIM): closed-loop force error {100 * rigid_error:.2f} %"
