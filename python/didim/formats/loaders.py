@@ -390,14 +390,6 @@ def _columns(available: Sequence[str], names: Sequence[str], key: str, where: st
     # the form the file comes closest to says which columns it lacks
     closest = max(forms, key=lambda f: sum(c in available for c in f))
     lacking = [c for c in closest if c not in available]
-    k = 0
-    while f"{key}_{k + 1}" in available:
-        k += 1
-    if k and k != len(names) and not any(f"{key}_{j}" in available for j in names):
-        # numbered columns of another number of joints: another robot's record, not a header to rename
-        raise DataError(f"{where}: the file has columns {key}_1 … {key}_{k}, a record of {k} joint(s), and the robot "
-                        f"has {len(names)} ({', '.join(names)}): is this the robot's record (or the result's robot "
-                        "this record's)? Give the record of the robot, or the robot (URDF, --joints) of the record")
     raise DataError(f"{where}: no columns {key}_1 … {key}_{len(names)} (or {key}_<joint name>) for the robot's "
                     f"{len(names)} joints ({', '.join(names)}): {', '.join(lacking)} missing; the file has "
                     f"{', '.join(available)}. Rename the file's header to those names (a robot's record takes no "
@@ -745,13 +737,22 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
         raise DataError(f"{p}: the time column's unit [{t_unit}] is not one didim reads: give it in "
                         f"{', '.join(TIME_UNITS)} (t[ms], for instance)")
     dt = _time_step(np.asarray(get("t"), dtype=float) * TIME_UNITS[t_unit], f"{p}: ")
-    cols = {key: _columns(available, names, key, p) for key in ("qr", "force", "qm")}
     extra = [c for c in available if re.fullmatch(r"(qr|force|qm|u_ext)_\d+", c) and int(c.split("_")[-1]) > len(names)]
     if extra:
         m = max(int(c.split("_")[-1]) for c in extra)
         raise DataError(f"{p}: the record has columns for {m} joints (qr_1..qr_{m}) but the robot has {len(names)} "
                         f"({', '.join(names)}): the URDF (or the controller file) is another robot's, or --joints "
                         "picks fewer joints than were logged")
+    logged = {key: next(k for k in range(len(names) + 1) if f"{key}_{k + 1}" not in available)
+              for key in ("qr", "force", "qm")}
+    if len(set(logged.values())) == 1 and 0 < logged["qr"] < len(names) \
+            and not any(f"qr_{j}" in available for j in names):
+        # every main signal numbered for fewer joints alike: another robot's record, not a header to rename
+        k = logged["qr"]
+        raise DataError(f"{p}: the record has columns for {k} joint(s) (qr_1..qr_{k}, force_…, qm_…) but the robot "
+                        f"has {len(names)} ({', '.join(names)}): is this the robot's record (or the result's robot "
+                        "this record's)? Give the record of the robot, or the robot (URDF, --joints) of the record")
+    cols = {key: _columns(available, names, key, p) for key in ("qr", "force", "qm")}
     # a feedforward the drives add to the commands: u_ext_1..u_ext_n (or u_ext_<joint name>), every joint's or none
     if any(c.startswith("u_ext_") for c in available):
         cols["u_ext"] = _columns(available, names, "u_ext", p)
