@@ -170,7 +170,7 @@ def test_bad_robot_inputs_are_refused_by_name(data, robots_dir, tmp_path):
     with pytest.raises(didim.DataError, match="apM"):
         didim.identify(rec, robot, "didim", apM=3.0)
     # a 2-joint record with a 6-joint robot: another robot's record, not a header to rename
-    with pytest.raises(didim.DataError, match=r"columns for 2 joint\(s\) \(qr_1..qr_2, force_…, qm_…\) but the robot has 6"):
+    with pytest.raises(didim.DataError, match=r"columns for 2 joints \(qr_1..qr_2, force_…, qm_…\) but the robot has 6"):
         didim.load_record(robots_dir / "pendulum_train.csv", robot=ur5, controller=robots_dir / "ur5_controller.json")
     # the same joints' columns under other names: the header to rename
     text = (robots_dir / "pendulum_train.csv").read_text().split("\n", 1)

@@ -161,6 +161,16 @@ class Decimation:
         """Decimates one signal."""
         return self.apply(x)[0]
 
+    def columns(self, x) -> np.ndarray:
+        """Decimates every column of ``x`` (n, k) in one pass of the filter, four columns at a time: each column as
+        :meth:`__call__` gives it, bit for bit, at about a quarter of the cost of ``k`` calls (a robot's per-joint
+        Coulomb and friction-law columns)."""
+        x = _checks.real_array("x", x, (2,))
+        if x.shape[1] == 0:
+            return np.zeros((len(self(np.zeros(x.shape[0]))), 0))
+        yd, wd = self.apply(np.ascontiguousarray(x[:, 0]), x[:, 1:] if x.shape[1] > 1 else None)
+        return yd[:, None] if wd is None else np.column_stack([yd, wd])
+
     def describe(self) -> str:
         if self.kind == "matlab":
             return f"MATLAB decimate, factor {self.factor}"

@@ -4,8 +4,8 @@
 use didim_core::error::Error;
 use didim_core::model::{Basis, FrictionLaw, LawShape};
 use didim_core::robot::{
-    map_rows_into, regressor_rows, regressor_series, simulate_robot as simulate_robot_core, Drives,
-    JointKind, Robot as CoreRobot, RobotLoopOptions, BODY_PARAMS,
+    map_rows_into, regressor_many, simulate_robot as simulate_robot_core, Drives, JointKind, RegressorLayout,
+    Robot as CoreRobot, RobotLoopOptions, BODY_PARAMS,
 };
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -209,12 +209,13 @@ impl PyRobot {
         let m = columns.as_ref().map_or(BODY_PARAMS * n, Vec::len);
         let (q, v, a) = (flat(&q), flat(&v), flat(&a));
         let cols = columns.as_deref();
-        if by_joint {
-            let out = run(py, || regressor_series(robot, &q, &v, &a, cols))?;
-            return Ok(PyArray1::from_vec(py, out).reshape(vec![n, m, rows])?.into_any());
-        }
-        let out = run(py, || regressor_rows(robot, &q, &v, &a, cols))?;
-        Ok(PyArray1::from_vec(py, out).reshape(vec![rows, n, m])?.into_any())
+        let (layout, shape) = if by_joint {
+            (RegressorLayout::Series, vec![n, m, rows])
+        } else {
+            (RegressorLayout::Rows, vec![rows, n, m])
+        };
+        let out = run(py, || regressor_many(robot, &q, &v, &a, cols, layout))?;
+        Ok(PyArray1::from_vec(py, out).reshape(shape)?.into_any())
     }
 }
 

@@ -659,6 +659,23 @@ def _robot_file_units(path, kinds) -> Optional[list]:
     return out
 
 
+def _joints_logged(available: Sequence[str], names: Sequence[str]) -> Optional[int]:
+    """The number of joints a robot record's numbered columns were logged for, when it is not the robot's: more
+    (a qr_, force_, qm_ or u_ext_ column numbered beyond the robot's joints: the highest number), or fewer (qr_, force_
+    and qm_ all numbered 1..k alike for k below the joints, and no column named after a joint); None otherwise (a
+    header to rename is left to :func:`_columns`' message, which names the columns missing)."""
+    beyond = [int(c.split("_")[-1]) for c in available
+              if re.fullmatch(r"(qr|force|qm|u_ext)_\d+", c) and int(c.split("_")[-1]) > len(names)]
+    if beyond:
+        return max(beyond)
+    logged = {key: next(k for k in range(len(names) + 1) if f"{key}_{k + 1}" not in available)
+              for key in ("qr", "force", "qm")}
+    if len(set(logged.values())) == 1 and 0 < logged["qr"] < len(names) \
+            and not any(f"qr_{j}" in available for j in names):
+        return logged["qr"]
+    return None
+
+
 def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Optional[str] = None,
                       units: Any = None, beside_controller: bool = True, lead_in: Any = "auto",
                       table: Optional[Tuple[Callable[[str], np.ndarray], List[str]]] = None) -> Recording:
@@ -737,21 +754,17 @@ def load_robot_record(path, robot: "Robot", *, controller: Any = None, name: Opt
         raise DataError(f"{p}: the time column's unit [{t_unit}] is not one didim reads: give it in "
                         f"{', '.join(TIME_UNITS)} (t[ms], for instance)")
     dt = _time_step(np.asarray(get("t"), dtype=float) * TIME_UNITS[t_unit], f"{p}: ")
-    extra = [c for c in available if re.fullmatch(r"(qr|force|qm|u_ext)_\d+", c) and int(c.split("_")[-1]) > len(names)]
-    if extra:
-        m = max(int(c.split("_")[-1]) for c in extra)
-        raise DataError(f"{p}: the record has columns for {m} joints (qr_1..qr_{m}) but the robot has {len(names)} "
-                        f"({', '.join(names)}): the URDF (or the controller file) is another robot's, or --joints "
-                        "picks fewer joints than were logged")
-    logged = {key: next(k for k in range(len(names) + 1) if f"{key}_{k + 1}" not in available)
-              for key in ("qr", "force", "qm")}
-    if len(set(logged.values())) == 1 and 0 < logged["qr"] < len(names) \
-            and not any(f"qr_{j}" in available for j in names):
-        # every main signal numbered for fewer joints alike: another robot's record, not a header to rename
-        k = logged["qr"]
-        raise DataError(f"{p}: the record has columns for {k} joint(s) (qr_1..qr_{k}, force_…, qm_…) but the robot "
-                        f"has {len(names)} ({', '.join(names)}): is this the robot's record (or the result's robot "
-                        "this record's)? Give the record of the robot, or the robot (URDF, --joints) of the record")
+    k = _joints_logged(available, names)
+    if k is not None:
+        # another robot's record (or the robot another's), not a header to rename
+        fewer = k < len(names)
+        raise DataError(f"{p}: the record has columns for {k} joint{'s' if k != 1 else ''} (qr_1..qr_{k}, force_…, "
+                        f"qm_…) but the robot has {len(names)} "
+                        f"({', '.join(names)}): "
+                        + ("is this the robot's record (or the result's robot this record's)? Give the record of the "
+                           "robot, or the robot (URDF, --joints) of the record" if fewer else
+                           "the URDF (or the controller file) is another robot's, or --joints picks fewer joints "
+                           "than were logged"))
     cols = {key: _columns(available, names, key, p) for key in ("qr", "force", "qm")}
     # a feedforward the drives add to the commands: u_ext_1..u_ext_n (or u_ext_<joint name>), every joint's or none
     if any(c.startswith("u_ext_") for c in available):

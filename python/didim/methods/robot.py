@@ -480,6 +480,7 @@ def _rows(dec, y: np.ndarray, columns: List[Tuple[np.ndarray, np.ndarray]], p: i
     joining a record that began elsewhere: :func:`didim.methods.identification.settled_row`) left out: (force,
     regressor, the decimated rows kept) per joint."""
     out = []
+    speeds = np.abs(dec.columns(v))  # every joint's in one pass of the filter
     for j, (act, mat) in enumerate(columns):
         if len(act):
             # the core reads a C- or Fortran-ordered matrix's columns in place (numpy's gather w[:, j, act] is
@@ -487,7 +488,7 @@ def _rows(dec, y: np.ndarray, columns: List[Tuple[np.ndarray, np.ndarray]], p: i
             yd, wa = dec.apply(np.ascontiguousarray(y[:, j]), mat)
         else:
             yd, wa = dec(np.ascontiguousarray(y[:, j])), None
-        keep = np.abs(dec(np.ascontiguousarray(v[:, j]))) > SLOW_SHARE * vmax[j]
+        keep = speeds[:, j] > SLOW_SHARE * vmax[j]
         keep[:start_row] = False
         wd = np.zeros((int(keep.sum()), p))
         if wa is not None:
@@ -535,36 +536,59 @@ class _InverseModel:
                 self.parts[j] = (np.concatenate([self.parts[j][0], yd]), np.concatenate([self.parts[j][1], wd]))
                 self.link_rows[j] = len(yd)
 
+    def columns(self, columns: List[Tuple[int, np.ndarray]]) -> List[np.ndarray]:
+        """Full-rate columns, each on joint ``j``'s rows (``(j, values)``), decimated together in one pass of the
+        filter (four at a time: a robot's per-joint law columns one by one cost four times as much), each on its
+        joint's kept rows (zero on an elastic joint's link rows)."""
+        if not columns:
+            return []
+        dec = self.dec.columns(np.column_stack([c for _, c in columns]))
+        out = []
+        for i, (j, _) in enumerate(columns):
+            c = dec[self.keep[j], i]
+            out.append(np.concatenate([c, np.zeros(self.link_rows[j])]) if self.link_rows[j] else c)
+        return out
+
     def column(self, j: int, values: np.ndarray) -> np.ndarray:
         """A full-rate column on joint ``j``'s rows, decimated, on its kept rows (zero on an elastic joint's link
         rows)."""
-        c = self.dec(np.ascontiguousarray(values))[self.keep[j]]
-        return np.concatenate([c, np.zeros(self.link_rows[j])]) if self.link_rows[j] else c
+        return self.columns([(j, values)])[0]
 
     def rows(self, law: Law, coulomb: Optional[np.ndarray] = None) -> List[Tuple[np.ndarray, np.ndarray]]:
         """Each joint's kept rows with its Coulomb column under ``law``. With ``coulomb`` (each joint's Coulomb
         friction), one more column per joint: the law's derivative in its smoothing speed ε times it, whose
         coefficient is the step of ε that the force asks for (a Gauss–Newton step: ε trades with Fv where the law's
-        tail is long, and is estimated with it)."""
+        tail is long, and is estimated with it). Every joint's law columns are decimated together (:meth:`columns`)."""
         n, v = self.n, self.v
-        out = []
-        for j, (yd, wd) in enumerate(self.parts):
-            wl = wd.copy()
-            wl[:, self.lay.fc(j)] = self.column(j, _sign(v[:, j], law[0], law[1][j]))
+        full: List[Tuple[int, np.ndarray]] = []  # (joint, full-rate column)
+        where: List[Tuple[int, int]] = []  # (joint, its column in θ, or -1 for the step of ε)
+        for j in range(n):
+            sign = _sign(v[:, j], law[0], law[1][j])
+            full.append((j, sign))
+            where.append((j, self.lay.fc(j)))
             if j in self.lay.load:
-                wl[:, self.lay.fl(self.lay.load.index(j))] = self.column(
-                    j, _sign(v[:, j], law[0], law[1][j]) * np.abs(self.tau_load[:, j]))
+                full.append((j, sign * np.abs(self.tau_load[:, j])))
+                where.append((j, self.lay.fl(self.lay.load.index(j))))
             mine = [i for i, (jt, _) in enumerate(self.terms) if jt == j]
             if mine:
                 cols = term_columns([self.terms[i][1] for i in mine], self.x[:, j], v[:, j], law[0], law[1][j])
                 for i, c in zip(mine, cols.T):
-                    wl[:, self.lay.t(i)] = self.column(j, c)
+                    full.append((j, c))
+                    where.append((j, self.lay.t(i)))
             if coulomb is not None:
                 e = max(float(law[1][j]), 1e-300)
                 ds = (_sign(v[:, j], law[0], e * (1 + EPS_STEP)) - _sign(v[:, j], law[0], e * (1 - EPS_STEP)))
-                col = np.zeros((len(yd), n))
-                col[:, j] = self.column(j, ds / (2 * EPS_STEP * e) * float(coulomb[j]))
-                wl = np.concatenate([wl, col], axis=1)
+                full.append((j, ds / (2 * EPS_STEP * e) * float(coulomb[j])))
+                where.append((j, -1))
+        decimated = self.columns(full)
+        out = []
+        for j, (yd, wd) in enumerate(self.parts):
+            wl = wd.copy()
+            if coulomb is not None:
+                wl = np.concatenate([wl, np.zeros((len(yd), n))], axis=1)
+            for (jj, at), col in zip(where, decimated):
+                if jj == j:
+                    wl[:, at if at >= 0 else wd.shape[1] + j] = col
             out.append((yd, wl))
         return out
 
@@ -765,18 +789,23 @@ def fit_law(rec: Recording, inverse: "_InverseModel",
     cols: Dict[Tuple[str, int, float], np.ndarray] = {}
 
     def column(shape: str, j: int, eps: float) -> np.ndarray:
-        """Joint j's Coulomb column under the law, weighted, with the fixed columns' span projected out."""
-        key = (shape, j, eps)
-        if key not in cols:
-            c = inverse.column(j, _sign(v[:, j], shape, eps)) / sig[j]
+        """Joint j's Coulomb column under the law, weighted, with the fixed columns' span projected out (those of
+        one law not made yet are decimated together: :meth:`_InverseModel.columns`)."""
+        return columns_of([(shape, j, eps)])[0]
+
+    def columns_of(keys: List[Tuple[str, int, float]]) -> List[np.ndarray]:
+        missing = [k for k in dict.fromkeys(keys) if k not in cols]
+        for (shape, j, eps), c in zip(missing, inverse.columns([(j, _sign(v[:, j], shape, eps))
+                                                                 for shape, j, eps in missing])):
+            c = c / sig[j]
             rows = slice(bounds[j], bounds[j + 1])
             full = -(basis @ (basis[rows].T @ c))
             full[rows] += c
-            cols[key] = full
-        return cols[key]
+            cols[(shape, j, eps)] = full
+        return [cols[k] for k in keys]
 
     def cost(law: Law) -> Tuple[float, np.ndarray]:
-        cp = np.column_stack([column(law[0], j, law[1][j]) for j in range(n)])
+        cp = np.column_stack(columns_of([(law[0], j, law[1][j]) for j in range(n)]))
         r = y_perp - cp @ np.linalg.lstsq(cp, y_perp, rcond=None)[0]
         per = np.array([float(r[bounds[j]:bounds[j + 1]] @ r[bounds[j]:bounds[j + 1]]) for j in range(n)])
         return float(r @ r), per
@@ -2082,12 +2111,18 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
         say(f"step 2 again (round {rnd + 2}): " + ", ".join(
             f"{robot.joint_names[j]} Ia = {theta_r[plant.lay.ia(e)]:.4g}, K = {theta_r[plant.lay.k(e)]:.4g}, "
             f"D = {theta_r[plant.lay.d(e)]:.4g}" for e, j in enumerate(elastic)))
+        law_r = plant.law
         again = didim_loop(plant, theta_r, max_iter=max_iter, progress=say)
         if again.best[2] is None or again.best[0] >= (1 - ELASTIC_ROUND_GAIN) * run.best[0]:
             if again.best[2] is not None and again.best[0] < run.best[0]:
                 run = again
             break
         run = again
+        if again.best[3] == 0 and plant.law == law_r:
+            # the round's best is its start, step 2's optimum, under the same law: step 2 again would start from its
+            # own optimum and DIDIM from the same point (on the flexrobots UR5 round 4 repeated round 3 to 4 digits,
+            # 13 s of its 85)
+            break
     err, theta, sol, _ = run.best
     if run.errors and err < run.errors[-1]:
         say(f"step 3: the iterate with the lowest joints' force errors is kept, RMS {100 * err:.3f} % (the last "

@@ -389,70 +389,36 @@ pub fn map_rows_into(
     map_rows_with(robot, inputs, width, || (), |_, row, dst| f(row, dst))
 }
 
+/// How [`regressor_many`] lays out the regressor of many states.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RegressorLayout {
+    /// `rows × n × m` values, row-major: state `r`'s joint `j`, column `c` at `(r * n + j) * m + c`.
+    Rows,
+    /// `n × m × rows` values: joint `j`'s column `c` over the states at `[(j * m + c) * rows..][..rows]`.
+    /// Each joint's columns are then a column-major matrix of its own (what a decimation filters
+    /// and a least squares takes), with no gather through a `rows × n × m` array (on a 4 kHz
+    /// record of a 6-joint arm, 65 MB read back with a stride of a row).
+    Series,
+}
+
+/// Samples per task of [`regressor_many`]: a block's rows are computed together and then written
+/// to its piece of the output (one piece per series in [`RegressorLayout::Series`]), whose cache
+/// lines they fill in turn.
+const REGRESSOR_BLOCK: usize = 256;
+
 /// The regressor ([`Robot::regressor`]) of many states, `q`, `v`, `a` row-major (`rows × n`
-/// values each), keeping only the standard parameters `columns` (indices into the `10 n`,
-/// in any order; all of them for `None`): `rows × n × columns.len()` values, row-major. The
-/// columns left out are never stored: a fit on a robot's base parameters keeps about half
-/// of them, and the full array of a long record is tens of megabytes written afresh.
-pub fn regressor_rows(
+/// values each), keeping only the standard parameters `columns` (indices into the `10 n`, in any
+/// order; all of them for `None`), laid out as `layout` says: `rows × n × m` values in all (m the
+/// columns kept). The columns left out are never stored: a fit on a robot's base parameters
+/// keeps about half of them, and the full array of a long record is tens of megabytes written
+/// afresh. The blocks of states are computed in parallel.
+pub fn regressor_many(
     robot: &Robot,
     q: &[f64],
     v: &[f64],
     a: &[f64],
     columns: Option<&[usize]>,
-) -> Result<Vec<f64>> {
-    let n = robot.ndof();
-    let p = BODY_PARAMS * n;
-    let inputs = [q, v, a];
-    let Some(cols) = columns else {
-        return map_rows_into(robot, &inputs, n * p, |x, dst| {
-            robot.regressor_into(x[0], x[1], x[2], dst)
-        });
-    };
-    check_columns(cols, n)?;
-    let m = cols.len();
-    map_rows_with(
-        robot,
-        &inputs,
-        n * m,
-        || vec![0.0; n * p],
-        |full, x, dst| {
-            robot.regressor_into(x[0], x[1], x[2], full)?;
-            for (d, src) in dst.chunks_exact_mut(m.max(1)).zip(full.chunks_exact(p)) {
-                for (o, &c) in d.iter_mut().zip(cols) {
-                    *o = src[c];
-                }
-            }
-            Ok(())
-        },
-    )
-}
-
-fn check_columns(cols: &[usize], n: usize) -> Result<()> {
-    let p = BODY_PARAMS * n;
-    match cols.iter().find(|&&c| c >= p) {
-        Some(&c) => Err(invalid!(
-            "regressor column {c} is out of range: a {n}-joint robot has {p} standard parameters"
-        )),
-        None => Ok(()),
-    }
-}
-
-/// Samples per task of [`regressor_series`]: a block's rows are computed together and then
-/// written to each series, whose cache lines they fill in turn.
-const SERIES_BLOCK: usize = 256;
-
-/// [`regressor_rows`] laid out series by series: `n × columns.len() × rows` values, joint `j`'s
-/// column `c` over the states at `[(j * m + c) * rows..][..rows]`. Each joint's columns are then
-/// a column-major matrix of its own (what a decimation filters and a least squares takes), with
-/// no gather through a `rows × n × m` array (on a 4 kHz record of a 6-joint arm, 65 MB read
-/// back with a stride of a row).
-pub fn regressor_series(
-    robot: &Robot,
-    q: &[f64],
-    v: &[f64],
-    a: &[f64],
-    columns: Option<&[usize]>,
+    layout: RegressorLayout,
 ) -> Result<Vec<f64>> {
     use rayon::prelude::*;
     let n = robot.ndof();
@@ -481,19 +447,30 @@ pub fn regressor_series(
     if rows == 0 || m == 0 {
         return Ok(out);
     }
-    // each block of samples gets its piece of every series (disjoint slices of `out`)
-    let blocks = rows.div_ceil(SERIES_BLOCK);
-    let mut pieces: Vec<Vec<&mut [f64]>> = (0..blocks).map(|_| Vec::with_capacity(n * m)).collect();
-    for series in out.chunks_mut(rows) {
-        for (b, piece) in series.chunks_mut(SERIES_BLOCK).enumerate() {
-            pieces[b].push(piece);
+    // each block of states gets its disjoint pieces of `out`: one (its rows) or one per series
+    let blocks = rows.div_ceil(REGRESSOR_BLOCK);
+    let mut pieces: Vec<Vec<&mut [f64]>> = match layout {
+        RegressorLayout::Rows => out
+            .chunks_mut(REGRESSOR_BLOCK * n * m)
+            .map(|piece| vec![piece])
+            .collect(),
+        RegressorLayout::Series => {
+            let mut pieces: Vec<Vec<&mut [f64]>> = (0..blocks).map(|_| Vec::with_capacity(n * m)).collect();
+            for series in out.chunks_mut(rows) {
+                for (b, piece) in series.chunks_mut(REGRESSOR_BLOCK).enumerate() {
+                    pieces[b].push(piece);
+                }
+            }
+            pieces
         }
-    }
-    pieces.into_par_iter().enumerate().try_for_each_init(
+    };
+    debug_assert_eq!(pieces.len(), blocks);
+    pieces.par_iter_mut().enumerate().try_for_each_init(
         || vec![0.0; n * p],
-        |full, (b, mut dst)| {
-            for i in 0..dst[0].len() {
-                let r = b * SERIES_BLOCK + i;
+        |full, (b, dst)| {
+            let count = REGRESSOR_BLOCK.min(rows - b * REGRESSOR_BLOCK);
+            for i in 0..count {
+                let r = b * REGRESSOR_BLOCK + i;
                 let s = r * n..(r + 1) * n;
                 robot
                     .regressor_into(&q[s.clone()], &v[s.clone()], &a[s], full)
@@ -502,8 +479,19 @@ pub fn regressor_series(
                         other => other,
                     })?;
                 for j in 0..n {
-                    for (c, &col) in cols.iter().enumerate() {
-                        dst[j * m + c][i] = full[j * p + col];
+                    let src = &full[j * p..(j + 1) * p];
+                    match layout {
+                        RegressorLayout::Rows => {
+                            let row = &mut dst[0][(i * n + j) * m..(i * n + j + 1) * m];
+                            for (o, &col) in row.iter_mut().zip(cols) {
+                                *o = src[col];
+                            }
+                        }
+                        RegressorLayout::Series => {
+                            for (c, &col) in cols.iter().enumerate() {
+                                dst[j * m + c][i] = src[col];
+                            }
+                        }
                     }
                 }
             }
@@ -511,6 +499,16 @@ pub fn regressor_series(
         },
     )?;
     Ok(out)
+}
+
+fn check_columns(cols: &[usize], n: usize) -> Result<()> {
+    let p = BODY_PARAMS * n;
+    match cols.iter().find(|&&c| c >= p) {
+        Some(&c) => Err(invalid!(
+            "regressor column {c} is out of range: a {n}-joint robot has {p} standard parameters"
+        )),
+        None => Ok(()),
+    }
 }
 
 /// [`map_rows_into`] with a scratch value per task (`init()`), passed to `f` with each row.

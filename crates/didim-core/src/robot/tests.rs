@@ -98,50 +98,56 @@ fn the_regressor_times_the_parameters_is_newton_euler() {
 
 #[test]
 fn the_regressor_of_many_states_keeps_the_columns_asked_for() {
+    use RegressorLayout::{Rows, Series};
     let r = Robot::from_urdf(CHAIN, None).unwrap();
-    let (n, p, rows) = (3, 30, 7);
-    let (q, v, a) = (state(n * rows, 1), state(n * rows, 2), state(n * rows, 3));
-    let full = regressor_rows(&r, &q, &v, &a, None).unwrap();
-    assert_eq!(full.len(), rows * n * p);
+    let (n, p) = (3, 30);
     let cols = [29, 0, 7, 7, 12];
-    let some = regressor_rows(&r, &q, &v, &a, Some(&cols)).unwrap();
-    assert_eq!(some.len(), rows * n * cols.len());
-    for row in 0..rows {
-        let one = r
-            .regressor(&q[row * n..][..n], &v[row * n..][..n], &a[row * n..][..n])
-            .unwrap();
-        assert_eq!(&full[row * n * p..][..n * p], &one[..]);
-        for j in 0..n {
-            for (c, &col) in cols.iter().enumerate() {
-                assert_eq!(
-                    some[(row * n + j) * cols.len() + c].to_bits(),
-                    one[j * p + col].to_bits()
-                );
-            }
-        }
-    }
-    // series by series: the same values, joint j's column c at (j m + c) rows + row
-    for (pick, m) in [(None, p), (Some(&cols[..]), cols.len())] {
-        let series = regressor_series(&r, &q, &v, &a, pick).unwrap();
-        let rowwise = regressor_rows(&r, &q, &v, &a, pick).unwrap();
-        assert_eq!(series.len(), rows * n * m);
+    // fewer states than a block, and several blocks with a partial last one
+    for rows in [7, 2 * 256 + 41] {
+        let (q, v, a) = (state(n * rows, 1), state(n * rows, 2), state(n * rows, 3));
+        let full = regressor_many(&r, &q, &v, &a, None, Rows).unwrap();
+        assert_eq!(full.len(), rows * n * p);
+        let some = regressor_many(&r, &q, &v, &a, Some(&cols), Rows).unwrap();
+        assert_eq!(some.len(), rows * n * cols.len());
         for row in 0..rows {
-            for jc in 0..n * m {
-                assert_eq!(
-                    series[jc * rows + row].to_bits(),
-                    rowwise[row * n * m + jc].to_bits()
-                );
+            let one = r
+                .regressor(&q[row * n..][..n], &v[row * n..][..n], &a[row * n..][..n])
+                .unwrap();
+            assert_eq!(&full[row * n * p..][..n * p], &one[..]);
+            for j in 0..n {
+                for (c, &col) in cols.iter().enumerate() {
+                    assert_eq!(
+                        some[(row * n + j) * cols.len() + c].to_bits(),
+                        one[j * p + col].to_bits()
+                    );
+                }
+            }
+        }
+        // series by series: the same values, joint j's column c at (j m + c) rows + row
+        for (pick, m) in [(None, p), (Some(&cols[..]), cols.len())] {
+            let series = regressor_many(&r, &q, &v, &a, pick, Series).unwrap();
+            let rowwise = regressor_many(&r, &q, &v, &a, pick, Rows).unwrap();
+            assert_eq!(series.len(), rows * n * m);
+            for row in 0..rows {
+                for jc in 0..n * m {
+                    assert_eq!(
+                        series[jc * rows + row].to_bits(),
+                        rowwise[row * n * m + jc].to_bits()
+                    );
+                }
             }
         }
     }
-    assert!(regressor_series(&r, &q, &v, &a, Some(&[])).unwrap().is_empty());
-    let e = regressor_series(&r, &q, &v, &a, Some(&[3, 30])).unwrap_err();
-    assert!(format!("{e}").contains("column 30 is out of range"), "{e}");
-    assert!(regressor_rows(&r, &q, &v, &a, Some(&[])).unwrap().is_empty());
-    let e = regressor_rows(&r, &q, &v, &a, Some(&[3, 30])).unwrap_err();
-    assert!(format!("{e}").contains("column 30 is out of range"), "{e}");
-    let e = regressor_rows(&r, &q, &v, &a[1..], None).unwrap_err();
-    assert!(format!("{e}").contains("same number of rows"), "{e}");
+    let (q, v, a) = (state(n * 7, 1), state(n * 7, 2), state(n * 7, 3));
+    for layout in [Rows, Series] {
+        assert!(regressor_many(&r, &q, &v, &a, Some(&[]), layout)
+            .unwrap()
+            .is_empty());
+        let e = regressor_many(&r, &q, &v, &a, Some(&[3, 30]), layout).unwrap_err();
+        assert!(format!("{e}").contains("column 30 is out of range"), "{e}");
+        let e = regressor_many(&r, &q, &v, &a[1..], None, layout).unwrap_err();
+        assert!(format!("{e}").contains("same number of rows"), "{e}");
+    }
 }
 
 #[test]
