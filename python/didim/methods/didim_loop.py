@@ -82,12 +82,15 @@ def residual_settled(loop: "DidimLoop", tol: float) -> bool:
 @dataclass
 class DidimLoop:
     """The state and outcome of DIDIM's iterations: ``theta`` the last estimate, ``best`` the iterate with the lowest
-    output error (error, θ, its solution, its index in ``history``), ``errors`` every simulated output error,
+    output error (error, θ, its solution, its index in ``history``), ``errors`` every simulated output error (and
+    ``thetas`` the estimates simulated),
     ``history`` the solutions in order, the simulations run, and how it ended."""
 
     theta: np.ndarray
     best: tuple = (math.inf, None, None, None)
     errors: List[float] = field(default_factory=list)
+    #: The estimate each of ``errors`` was simulated with.
+    thetas: List[np.ndarray] = field(default_factory=list)
     history: List[Dict[str, Any]] = field(default_factory=list)
     simulations: int = 0
     converged: bool = False
@@ -150,6 +153,7 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
         err = plant.output_error(sim)
         loop.sim, loop.error = sim, err
         loop.errors.append(err)
+        loop.thetas.append(theta.copy())
         if not err <= divergence_factor * loop.best[0]:
             if pull_back(f"output error {100 * err:.2f} % against {100 * loop.best[0]:.2f} %"):
                 continue
