@@ -2138,9 +2138,8 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
                 run = again
             break
         run = again
-        kept_start = again.best[3] == 0
-        nxt = _round_handoff(again) if kept_start else None
-        if kept_start and nxt is None and plant.law == law_r:
+        nxt = _round_handoff(again)  # None unless the round kept its start
+        if again.best[3] == 0 and nxt is None and plant.law == law_r:
             # the round's best is its start, step 2's optimum, under the same law, and its DIDIM's first step is
             # worse by more than a round's gain: step 2 again would start from its own optimum and DIDIM from the same
             # point (on the flexrobots UR5 round 4 repeated round 3 to 4 digits, 13 s of its 85)
