@@ -86,6 +86,10 @@ def test_a_sample_of_delay_is_named(robots_dir, tmp_path):
     assert chk.failed() == ["joint1", "joint2"]
     for c in chk.joints.values():
         assert "1 sample late" in c.likely
+    # the joints with one cause are said once, on one line, each joint's figures beside
+    text = chk.summary()
+    assert "joints joint1, joint2:" in text and text.count("1 sample late") == 1
+    assert len(max(text.splitlines(), key=len)) < 1000
 
 
 def test_a_measured_current_is_refused_with_no_usual_mistake(robots_dir, tmp_path):

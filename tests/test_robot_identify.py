@@ -256,6 +256,10 @@ def test_the_robots_model_travels_whole_into_the_result_and_back(data, tmp_path)
         didim.Model("flexible", robot=robot)
     with pytest.raises(didim.DataError, match="is not a joint of the robot"):
         didim.Model(robot=robot, elastic=["elbow_joint"])
+    # a joint named twice (by its name and its number) is a slip for another joint, not one joint
+    j1 = robot.joint_names[0]
+    with pytest.raises(didim.DataError, match=f"names the joint {j1} twice"):
+        didim.Model(robot=robot, elastic=f"{j1},1")
     with pytest.raises(didim.DataError, match="the joint it acts on"):
         didim.Model(robot=robot, terms=[didim.Term("Fs", "stribeck", vs=0.01)])  # a term names its joint (dof)
     with pytest.raises(didim.DataError, match="one smoothing speed per joint"):

@@ -1,12 +1,34 @@
 """Thread pools for the identification loops (the core releases the interpreter while it simulates)."""
 
+import functools
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor, wait
-from typing import Callable, Iterable, List, TypeVar
+from typing import Any, Callable, Iterable, List, TypeVar
 
 T = TypeVar("T")
 R = TypeVar("R")
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def serial_blas(fn: F) -> F:
+    """``fn`` with the BLAS libraries (NumPy's and SciPy's OpenBLAS, MKL, BLIS) on one thread while it runs, through
+    threadpoolctl: a threaded BLAS splits a long dot product or a matrix product between its threads and rounds
+    differently with each count, and an identification carries such last digits into its results where a parameter
+    is weakly determined (the held-out UR10's rigid step at 1.25 Hz: wrist 1's base parameters two to five times apart
+    with the BLAS on one thread or two, and step 2 then found its 21 Hz mode or none). The same record gives the same
+    result on every machine; the loops' own threads (:func:`map_threads`, the core's) are kept."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        from threadpoolctl import threadpool_limits
+
+        import scipy.linalg  # noqa: F401  (SciPy's own BLAS loaded, so limited as well)
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
 
 
 def cores() -> int:

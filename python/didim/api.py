@@ -10,6 +10,7 @@ from typing import Dict, Optional, Union
 import numpy as np
 
 from . import _checks
+from ._parallel import serial_blas
 from ._errors import DataError, DidimWarning
 from .model import STRUCTURE_FIELDS, Model, as_model
 from .methods.identification import (Progress, a_priori_mass, didim_flexible, didim_iterate, didim_rigid, idim_ls,
@@ -68,6 +69,7 @@ def check_sampling(recording: Recording, model: str, method: str, options) -> No
                     f"{name} below {nyquist:g} Hz (Python: {name}=…, CLI: --set {name}=…)")
 
 
+@serial_blas
 def identify(
     recording: Recording,
     model: Union[str, Model] = "rigid",

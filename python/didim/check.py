@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -81,18 +81,22 @@ class ControllerCheck:
         if self.passed:
             return head
         where = ", ".join(f"{100 * v:.0f} % {k}" for k, v in self.where.items() if v >= 0.005)
-        out = head.replace("within", "only within") + f"; the mismatch lives {where}"
+        return head.replace("within", "only within") + f"; the mismatch lives {where}; " + self.cause()
+
+    def cause(self, joints: Sequence["ControllerCheck"] = ()) -> str:
+        """What likely went wrong, for this check and the ``joints`` whose checks name the same cause (their figures
+        beside this one's)."""
+        every = [self, *joints]
         if self.likely:
-            out += f"; likely: {self.likely}" + (f" (corrected, the law gives the log within "
-                                                 f"{100 * self.likely_mismatch:.3g} %)"
-                                                 if math.isfinite(self.likely_mismatch) else "")
-        else:
-            out += ("; none of the usual mistakes (feedforward missing or doubled, a time constant or gain in another "
-                    "unit, the force gain, the sign, a sample of delay) explains it: check that this is the controller "
-                    "that ran the axis and that the force is its command, not a measured current"
-                    + (f" (a linear law fitted from the log replays it within {100 * self.best_linear:.3g} %: "
-                       "didim controller fit)" if math.isfinite(self.best_linear) else ""))
-        return out
+            fixed = [c.likely_mismatch for c in every if math.isfinite(c.likely_mismatch)]
+            return f"likely: {self.likely}" + (" (corrected, the law gives the log within " + ", ".join(
+                f"{100 * m:.3g} %" for m in fixed) + ")" if fixed else "")
+        fitted = [c.best_linear for c in every if math.isfinite(c.best_linear)]
+        return ("none of the usual mistakes (feedforward missing or doubled, a time constant or gain in another unit, "
+                "the force gain, the sign, a sample of delay) explains it: check that this is the controller that ran "
+                "the axis and that the force is its command, not a measured current"
+                + (" (a linear law fitted from the log replays it within " + ", ".join(
+                    f"{100 * m:.3g} %" for m in fitted) + ": didim controller fit)" if fitted else ""))
 
     def to_dict(self) -> Dict[str, Any]:
         return {"mismatch": self.mismatch, "tolerance": self.tolerance, "passed": self.passed,
@@ -350,10 +354,22 @@ class RobotControllerCheck:
             parts.append(f"joints {a} and {b}: each one's controller gives the other's log: the two controllers are "
                          "swapped in the file (its entries are in the robot's joint order)")
         named = {j for pair in self.swapped for j in pair}
+        # the joints that fail for the same likely cause in one line each (six joints' sentences in a row made a
+        # line of thousands of characters)
+        groups: Dict[str, List[str]] = {}
         for j in self.failed():
             if j not in named:
-                parts.append(f"joint {j}: " + self.joints[j].summary())
-        return "; ".join(parts)
+                groups.setdefault(self.joints[j].likely, []).append(j)
+        for js in groups.values():
+            if len(js) == 1:
+                parts.append(f"joint {js[0]}: " + self.joints[js[0]].summary())
+                continue
+            checks = [self.joints[j] for j in js]
+            parts.append(f"joints {', '.join(js)}: each one's law on its logged qr and qm gives its logged force only "
+                         "within " + ", ".join(f"{100 * c.mismatch:.3g} %" for c in checks) + " (RMS; at most "
+                         + ", ".join(f"{100 * c.tolerance:.3g} %" for c in checks) + " accepted); "
+                         + checks[0].cause(checks[1:]))
+        return "\n  " + "\n  ".join(parts) if len(parts) > 1 else "".join(parts)
 
     def to_dict(self) -> Dict[str, Any]:
         return {"passed": self.passed, "mismatch": self.mismatch, "swapped": [list(p) for p in self.swapped],

@@ -286,15 +286,19 @@ class Model:
         if not isinstance(given, (tuple, list)):
             raise DataError(f"{what} is a list of the robot's joint names (or 'all'), got {type(given).__name__}")
         names = list(robot.joint_names)
-        out = set()
+        out: Dict[str, Any] = {}
         for g in given:
             if isinstance(g, str) and g in names:
-                out.add(g)
+                name = g
             elif isinstance(g, (int, str)) and str(g).isdigit() and 1 <= int(g) <= len(names):
-                out.add(names[int(g) - 1])
+                name = names[int(g) - 1]
             else:
                 raise DataError(f"{what}: {g!r} is not a joint of the robot {robot.name} ({', '.join(names)}; or "
                                 f"their numbers 1..{len(names)}, or 'all')")
+            if name in out:  # a joint named twice is a slip for another joint: which one only the user knows
+                raise DataError(f"{what} names the joint {name} twice ({out[name]!r} and {g!r}): name each joint once "
+                                f"(the robot {robot.name}'s joints: {', '.join(names)})")
+            out[name] = g
         return tuple(j for j in names if j in out)
 
     @property

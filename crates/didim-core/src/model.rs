@@ -876,6 +876,11 @@ impl Basis {
                 center, width, side, ..
             } => {
                 let (b, db) = cubic_bspline((x - center) / width);
+                if b == 0.0 && db == 0.0 {
+                    // outside the knot's support (most of the stroke for each of a profile's splines): no
+                    // friction law to evaluate, the products below would all be zero
+                    return (0.0, 0.0, 0.0);
+                }
                 let (s, ds) = law.sign_and_derivative(xd);
                 // the forward or backward part of the sign, s(1 ± s)/2: 1 or 0 (−1 or 0) away from rest, the two
                 // summing to s, and as smooth as s (max(s, 0) would kink the dynamics at every reversal); both: s

@@ -32,6 +32,7 @@ import numpy as np
 
 from .. import _checks, units
 from .._errors import DataError, DidimError
+from .._parallel import serial_blas
 from ..formats._io import jsonable as _clean
 from ..methods.identification import a_priori_mass
 from ..recording import Recording
@@ -798,6 +799,7 @@ class _Search:
         return cur
 
 
+@serial_blas
 def doctor(
     recording: Recording,
     model: str = "rigid",
