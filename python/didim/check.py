@@ -21,7 +21,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ._errors import DataError
-from .controller_fit import CHECK_TOLERANCE, fit_controller, mismatch
+from .controller_fit import CHECK_TOLERANCE, fit_controller, free_responses, mismatch
 from .controllers import TransferFunction
 
 #: A mismatch below this share is rounding (the logged force's digits, a command logged in drive units): no law is
@@ -288,9 +288,17 @@ def check_controller(rec) -> ControllerCheck:
     # the usual mistakes
     cands: List[Tuple[str, np.ndarray]] = [(what, _law(alt, rec)) for what, alt in _variants(tf)]
     tol = max(out.tolerance, ROUNDING_LEVEL)
+    # the factor by least squares beside the law's free responses (its state at the first sample, which the
+    # comparison takes out too): a joint that holds a weight starts its integrator at the logged force, not at the
+    # law's rest, and the plain ratio f·c/c·c was biased by that offset (a robot's gravity-loaded joints with their
+    # gains 10 times too large were refused without the factor named)
     cc = float(np.dot(c[keep], c[keep]))
     if cc > 0:
-        a = float(np.dot(f[keep], c[keep]) / cc)
+        free = free_responses(tf, rec.n)[keep]
+        cols = np.column_stack([c[keep], free]) if free.shape[1] and np.all(np.isfinite(free)) else c[keep][:, None]
+        with np.errstate(all="ignore"):
+            a = float(np.linalg.lstsq(cols, f[keep], rcond=None)[0][0]) if np.all(np.isfinite(cols)) else math.nan
+        a = a if math.isfinite(a) else float(np.dot(f[keep], c[keep]) / cc)
         if a < 0 and abs(abs(a) - 1) < 0.05:
             cands.append(("the force's sign is reversed against the command (a motor wired or logged the other way)",
                           a * c))
@@ -367,9 +375,9 @@ class RobotControllerCheck:
             checks = [self.joints[j] for j in js]
             parts.append(f"joints {', '.join(js)}: each one's law on its logged qr and qm gives its logged force only "
                          "within " + ", ".join(f"{100 * c.mismatch:.3g} %" for c in checks) + " (RMS; at most "
-                         + ", ".join(f"{100 * c.tolerance:.3g} %" for c in checks) + " accepted); "
+                         + ", ".join(dict.fromkeys(f"{100 * c.tolerance:.3g} %" for c in checks)) + " accepted); "
                          + checks[0].cause(checks[1:]))
-        return "\n  " + "\n  ".join(parts) if len(parts) > 1 else "".join(parts)
+        return "".join(f";\n  {p}" if i else p for i, p in enumerate(parts))
 
     def to_dict(self) -> Dict[str, Any]:
         return {"passed": self.passed, "mismatch": self.mismatch, "swapped": [list(p) for p in self.swapped],
