@@ -549,6 +549,33 @@ def _check_position_units(p, robot, rec: Recording) -> None:
                             "check that the URDF is this robot's")
 
 
+def units_hint(rec: Recording, robot) -> str:
+    """A sentence naming another unit of the revolute or the prismatic joints' positions in which the record fits the
+    URDF's dynamics better than in the one it was read in (:func:`didim.methods.robot.urdf_residual`), or "": for the
+    messages of a fit that failed where the units check (:data:`UNITS_RATIO`) did not refuse, as on an elastic
+    arm's record, which no rigid reading fits well (the flexrobots UR5 declared in degrees: 36 % of its force
+    unexplained against 23 % read in rad)."""
+    from ..methods.robot import urdf_residual
+
+    if not hasattr(robot, "rnea"):
+        return ""
+    out = []
+    for kind, si in (("revolute", "rad"), ("prismatic", "m")):
+        joints = [j for j, k in enumerate(rec.joint_kinds) if (k == "prismatic") == (kind == "prismatic")]
+        read_as = {rec.units[j].position if rec.units else si for j in joints}
+        if len(read_as) != 1 or not _other_readings(next(iter(read_as))):
+            continue
+        read = next(iter(read_as))
+        key = "length_factor" if kind == "prismatic" else "angle_factor"
+        here = urdf_residual(rec, robot)
+        there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in _other_readings(read))
+        if there < here:
+            out.append(f"read in {other}, the {kind} joints' positions fit the URDF's dynamics better than in {read} "
+                       f"({100 * there:.0f} % of the force unexplained against {100 * here:.0f} %): check the record's "
+                       f"units (--units, units=...)")
+    return "; ".join(out)
+
+
 def _check_urdf_scale(p, robot, rec: Recording) -> None:
     """Refuses a URDF whose inverse dynamics are not finite on the record's own motion (a mass of 1e300 kg): no fit
     or check can read them."""

@@ -1880,12 +1880,15 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
     points = [np.array([[lam, f, ELASTIC_ZETA0]] * ne) for lam, f in grid]
     got = map_threads(errors, points, min(len(points), cores()))
     if all(g is None for g in got):
+        from ..formats.loaders import units_hint
+
+        hint = units_hint(rec, model.robot)
         raise SimulationError(
             f"step 2: no point of eq. (28)'s grid (λ {ELASTIC_GRID_LAMBDA[0]}-{ELASTIC_GRID_LAMBDA[-1]}, locked-rotor "
             f"modes {ELASTIC_GRID_F_SHARE[0] * fs:.3g}-{ELASTIC_GRID_F_SHARE[-1] * fs:.3g} Hz) of "
             f"{', '.join(names)} gives a closed loop that can be simulated with the rigid step's estimate: the loop is "
             "unstable with any such spring (check the controller's gains and the rigid step's fit; its force error "
-            f"was {100 * rigid.force_error:.1f} %)")
+            f"was {100 * rigid.force_error:.1f} %)" + (f"; {hint}" if hint else ""))
     x = np.zeros((ne, 3))
     for e, j in enumerate(elastic):
         vals = [g[j] if g is not None else math.inf for g in got]
