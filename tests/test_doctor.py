@@ -156,6 +156,8 @@ def test_doctor_cli_on_the_real_emps_records(emps_path, emps_pulses_path, tmp_pa
     # instead of fitting a stiff loop to a mode the record does not show (56.9 % held-out error, 1.3 s per refit)
     flex = [x for x in d["rejected"] if x["effect"] == "flexibility"]
     assert flex and all("step 2 finds no mode" in x["evidence"] for x in flex), flex
+    # each try says its round, the ones not adopted too (a new user saw two "flexibility" lines, one without it)
+    assert all(isinstance(x["where"].get("round"), int) for x in d["rejected"]), [x["where"] for x in d["rejected"]]
     html = page.read_text()
     lead = html.index("<b>Lead-in.</b>")
     assert html.count("<b>Lead-in.</b>") == 2 and "data:image/png" in html[lead:lead + 2000]  # its figure follows

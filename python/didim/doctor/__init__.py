@@ -540,7 +540,8 @@ class _Search:
                     new, (st_new, params, std) = alt[0], alt[1]
         except DidimError as e:
             self.rejected.append(Finding(c.effect, {}, {}, {"p_adjusted": c.p_adj}, f"not adopted: {e}",
-                                         effect.physics, accepted=False))
+                                         effect.physics, where={"hyper": c.hyper, "round": len(self.rounds)},
+                                         accepted=False))
             return None, None
         rt_n, rv_n = new[1], new[2]
         dm, p_dm, gain = diebold_mariano(rv, rv_n, loss)
