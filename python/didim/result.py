@@ -460,7 +460,9 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
     model = Model("rigid", robot=robot, offset=bool(_field(d, "offset")), coulomb_law=law[0] if law else "algebraic",
                   coulomb_eps=law[1] if law else None, elastic=tuple(d.get("elastic") or ()), terms=_terms_from(d),
                   load_friction=tuple(d.get("load_friction") or ()))
-    return robot_result(_field(d, "method"), dict(_field(d, "params")), dict(_field(d, "std")), model, base,
+    # a standard deviation the fit could not give (a held parameter's, a singular covariance) is saved as null
+    std = {str(k): math.nan if v is None else v for k, v in dict(_field(d, "std")).items()}
+    return robot_result(_field(d, "method"), dict(_field(d, "params")), std, model, base,
                          force_error=d.get("force_error", math.nan),
                          force_error_per_joint=dict(d.get("force_error_per_joint", {})),
                          start_s=float(d.get("start_s") or 0.0),
