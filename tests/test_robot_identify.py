@@ -251,6 +251,15 @@ def test_the_robots_model_travels_whole_into_the_result_and_back(data, tmp_path)
     assert back.structure.law == res.law and back.offset is False
     assert back.robot.joint_names == robot.joint_names
     np.testing.assert_allclose(list(back.params.values()), list(res.params.values()), rtol=1e-15)
+    # standard deviations the fit could not give are saved as null (step 2's "no mode" result has none): read back
+    import json
+    import math
+
+    d = json.loads((tmp_path / "r.json").read_text())
+    d["std"] = {k: None for k in d["std"]}
+    (tmp_path / "nostd.json").write_text(json.dumps(d))
+    back = didim.load_result(tmp_path / "nostd.json")
+    assert back.std and all(math.isnan(v) for v in back.std.values())
     # what a robot's model cannot hold is refused by name
     with pytest.raises(didim.DataError, match="names its elastic joints"):
         didim.Model("flexible", robot=robot)
