@@ -364,7 +364,7 @@ def test_an_elastic_record_declared_in_the_wrong_unit_is_said_when_step_2_fails(
     """The UR5's record (rad) declared in degrees: the loader's units check does not refuse it (an elastic arm fits no
     rigid reading well: 36 % of its force unexplained as declared against 23 % in rad, under the check's factor 2), and
     step 2 finds no spring the loop survives. Its message now names the reading that fits better."""
-    from didim.formats.loaders import units_hint
+    from didim.methods.robot import units_hint
 
     d, _ = flex
     rob = didim.Robot.from_urdf(d / "ur5flex_cad.urdf")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Any, Dict, Mapping, Optional, Union
+from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
 from ._errors import DataError
 
@@ -26,6 +26,23 @@ FORCE_UNITS: Dict[str, tuple] = {"N": (1.0, False), "N*m": (1.0, True), "N·m": 
                                  "kN": (1e3, False)}
 #: A linear stroke beyond this many metres is no machine axis: the positions are in another unit (mm read as m).
 MAX_LINEAR_STROKE_M = 50.0
+
+#: The units of position the dynamics can tell apart, an angle in rad, degrees or revolutions, a length in m, mm or
+#: µm (:data:`POSITION_UNITS`): a robot's record read in one of them is tried in each other of its kind
+#: (the loader checks them, :mod:`didim.formats.loaders`; :func:`didim.methods.robot.units_hint` names one in a failed
+#: fit).
+READINGS = ("rad", "deg", "rev", "m", "mm", "um")
+
+
+def other_readings(read: str) -> List[Tuple[str, float]]:
+    """The other readings of positions read in ``read`` (one of :data:`READINGS`), each with the factor that takes
+    the positions read in ``read`` to them (both in SI): rad for deg is π/180, rev for rad 2π. Empty for a unit
+    without one (counts, whose count per turn only the user knows)."""
+    if read not in READINGS:
+        return []
+    si, rotary = POSITION_UNITS[read]
+    return [(x, POSITION_UNITS[x][0] / si) for x in READINGS if x != read and POSITION_UNITS[x][1] == rotary]
+
 
 #: The SI unit of a linear axis's quantity and its rotary counterpart (load side).
 ROTARY = {"kg": "kg·m²", "N/(m/s)": "N·m·s/rad", "N/m": "N·m/rad", "N": "N·m", "m": "rad", "m/s": "rad/s",

@@ -25,7 +25,7 @@ from ..controllers import (Controller, EmpsCascade, controller_file_units, in_un
                           load_joint_controllers, load_joint_drives)
 from ..robots.chain import Robot
 from ..recording import Recording, _check_expected_dt, _number, _signal, _time_step
-from ..units import SI, Units, check_stroke, from_header, parse as parse_units
+from ..units import SI, Units, check_stroke, from_header, other_readings, parse as parse_units
 
 #: The columns of a record: required, then optional.
 REQUIRED = ("t", "qr", "force", "qm")
@@ -487,23 +487,6 @@ def _check_limits(p, robot, qr: np.ndarray, declared: bool) -> None:
 #: times that; the held-out arm's quill in mm read as m, 360 % against 4 % (its position hardly enters the others'
 #: torques, so a quill in m declared in mm fits alike, 3.53 % against 3.52 %, and passes).
 UNITS_RATIO = 2.0
-#: The units of position the dynamics can tell apart, an angle in rad, degrees or revolutions, a length in m, mm or
-#: µm (:data:`didim.units.POSITION_UNITS`): a record read in one of them is tried in each other of its kind.
-READINGS = ("rad", "deg", "rev", "m", "mm", "um")
-
-
-def _other_readings(read: str) -> List[Tuple[str, float]]:
-    """The other readings of positions read in ``read`` (one of :data:`READINGS`), each with the factor that takes
-    the positions read in ``read`` to them (both in SI): rad for deg is π/180, rev for rad 2π. Empty for a unit
-    without one (counts, whose count per turn only the user knows)."""
-    from ..units import POSITION_UNITS
-
-    if read not in READINGS:
-        return []
-    si, rotary = POSITION_UNITS[read]
-    return [(u, POSITION_UNITS[u][0] / si) for u in READINGS if u != read and POSITION_UNITS[u][1] == rotary]
-
-
 def _refuse_if_no_unit_fits(p, rec, robot, read, here: float, there: float, other: str) -> None:
     """Refuses a record that fits the URDF's dynamics in no unit of position (the better reading ``other`` still leaves
     more than FIT_WELL unexplained): the URDF's or the record's fault, said by :func:`urdf_mismatch`."""
@@ -517,7 +500,7 @@ def _refuse_if_no_unit_fits(p, rec, robot, read, here: float, there: float, othe
 
 def _check_position_units(p, robot, rec: Recording) -> None:
     """Refuses a record whose positions fit the URDF's dynamics :data:`UNITS_RATIO` times better in another unit
-    (:data:`READINGS`) than in the one they were read in, for the revolute joints (rad, degrees or revolutions) and
+    (:data:`didim.units.READINGS`) than in the one they were read in, for the revolute joints (rad, degrees or revolutions) and
     the prismatic ones (m, mm or µm) each as a group (a record in rad declared in degrees, in degrees or revolutions
     declared in nothing, a quill in m declared in mm): :func:`didim.methods.robot.urdf_residual`. The unit is named
     only when it brings the URDF's share under :data:`didim.methods.robot.FIT_WELL`; otherwise no unit fits, and
@@ -533,12 +516,12 @@ def _check_position_units(p, robot, rec: Recording) -> None:
         if len(read_as) > 1:  # joints of one kind declared in several units: each declaration judged on its joint
             _check_joint_units(p, robot, rec, joints)
             continue
-        if len(read_as) != 1 or not _other_readings(next(iter(read_as))):
+        if len(read_as) != 1 or not other_readings(next(iter(read_as))):
             continue  # no joint of the kind; counts: no other reading
         read = next(iter(read_as))
         key = "length_factor" if kind == "prismatic" else "angle_factor"
         here = urdf_residual(rec, robot)
-        there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in _other_readings(read))
+        there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in other_readings(read))
         _refuse_if_no_unit_fits(p, rec, robot, read, here, there, other)
         if here > UNITS_RATIO * there:
             raise DataError(f"{p}: read in {read}, the {kind} joints' positions leave the URDF's dynamics "
@@ -547,33 +530,6 @@ def _check_position_units(p, robot, rec: Recording) -> None:
                             f"{other}, a header such as qr_{joints[0] + 1}[{other}], or \"units\" in the controllers' "
                             "file), or "
                             "check that the URDF is this robot's")
-
-
-def units_hint(rec: Recording, robot) -> str:
-    """A sentence naming another unit of the revolute or the prismatic joints' positions in which the record fits the
-    URDF's dynamics better than in the one it was read in (:func:`didim.methods.robot.urdf_residual`), or "": for the
-    messages of a fit that failed where the units check (:data:`UNITS_RATIO`) did not refuse, as on an elastic
-    arm's record, which no rigid reading fits well (the flexrobots UR5 declared in degrees: 36 % of its force
-    unexplained against 23 % read in rad)."""
-    from ..methods.robot import urdf_residual
-
-    if not hasattr(robot, "rnea"):
-        return ""
-    out = []
-    for kind, si in (("revolute", "rad"), ("prismatic", "m")):
-        joints = [j for j, k in enumerate(rec.joint_kinds) if (k == "prismatic") == (kind == "prismatic")]
-        read_as = {rec.units[j].position if rec.units else si for j in joints}
-        if len(read_as) != 1 or not _other_readings(next(iter(read_as))):
-            continue
-        read = next(iter(read_as))
-        key = "length_factor" if kind == "prismatic" else "angle_factor"
-        here = urdf_residual(rec, robot)
-        there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in _other_readings(read))
-        if there < here:
-            out.append(f"read in {other}, the {kind} joints' positions fit the URDF's dynamics better than in {read} "
-                       f"({100 * there:.0f} % of the force unexplained against {100 * here:.0f} %): check the record's "
-                       f"units (--units, units=...)")
-    return "; ".join(out)
 
 
 def _check_urdf_scale(p, robot, rec: Recording) -> None:
@@ -641,7 +597,7 @@ def _check_joint_units(p, robot, rec: Recording, joints: List[int]) -> None:
     here = urdf_residual(rec, robot)
     for j in joints:
         tried = []
-        for other, factor in _other_readings(rec.units[j].position):
+        for other, factor in other_readings(rec.units[j].position):
             factors = np.ones(rec.ndof)
             factors[j] = factor
             tried.append((urdf_residual(rec, robot, factors=factors), other))

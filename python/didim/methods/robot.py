@@ -676,6 +676,31 @@ def never_reversing(rec: Recording) -> List[str]:
     return out
 
 
+def units_hint(rec: Recording, robot: Robot) -> str:
+    """A sentence naming another unit of the revolute or the prismatic joints' positions in which the record fits the
+    URDF's dynamics better than in the one it was read in (:func:`urdf_residual`), or "": for the messages of a fit
+    that failed where the loader's units check (a factor :data:`didim.formats.loaders.UNITS_RATIO`) did not refuse,
+    as on an elastic arm's record, which no rigid reading fits well (the flexrobots UR5 declared in degrees: 36 % of
+    its force unexplained against 23 % read in rad)."""
+    from ..units import other_readings
+
+    out = []
+    for kind, si in (("revolute", "rad"), ("prismatic", "m")):
+        joints = [j for j, k in enumerate(rec.joint_kinds) if (k == "prismatic") == (kind == "prismatic")]
+        read_as = {rec.units[j].position if rec.units else si for j in joints}
+        if len(read_as) != 1 or not other_readings(next(iter(read_as))):
+            continue
+        read = next(iter(read_as))
+        key = "length_factor" if kind == "prismatic" else "angle_factor"
+        here = urdf_residual(rec, robot)
+        there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in other_readings(read))
+        if there < here:
+            out.append(f"read in {other}, the {kind} joints' positions fit the URDF's dynamics better than in {read} "
+                       f"({100 * there:.0f} % of the force unexplained against {100 * here:.0f} %): check the record's "
+                       f"units (--units, units=...)")
+    return "; ".join(out)
+
+
 def urdf_mismatch(rec: Recording, robot: Robot, verdict: str = "probably does not") -> str:
     """In words, why a record does not fit its URDF's dynamics: the URDF is another robot's (the worst joint named),
     or the record is too short or too still (the joints whose reference never reverses). ``verdict``: how sure the
@@ -1880,8 +1905,6 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
     points = [np.array([[lam, f, ELASTIC_ZETA0]] * ne) for lam, f in grid]
     got = map_threads(errors, points, min(len(points), cores()))
     if all(g is None for g in got):
-        from ..formats.loaders import units_hint
-
         hint = units_hint(rec, model.robot)
         raise SimulationError(
             f"step 2: no point of eq. (28)'s grid (λ {ELASTIC_GRID_LAMBDA[0]}-{ELASTIC_GRID_LAMBDA[-1]}, locked-rotor "
