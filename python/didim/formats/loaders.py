@@ -506,22 +506,17 @@ def _check_position_units(p, robot, rec: Recording) -> None:
     only when it brings the URDF's share under :data:`didim.methods.robot.FIT_WELL`; otherwise no unit fits, and
     the refusal says why it may be (:func:`didim.methods.robot.urdf_mismatch`). The limits catch a reference beyond
     the URDF's range; this catches the rest, in either direction."""
-    from ..methods.robot import urdf_residual
+    from ..methods.robot import unit_readings
 
     if not hasattr(robot, "rnea"):  # joints known by number only (no dynamics)
         return
-    for kind, si in (("revolute", "rad"), ("prismatic", "m")):
-        joints = [j for j, k in enumerate(rec.joint_kinds) if (k == "prismatic") == (kind == "prismatic")]
-        read_as = {rec.units[j].position if rec.units else si for j in joints}
+    for kind, joints, read_as, here, there, other in unit_readings(rec, robot):
         if len(read_as) > 1:  # joints of one kind declared in several units: each declaration judged on its joint
             _check_joint_units(p, robot, rec, joints)
             continue
-        if len(read_as) != 1 or not other_readings(next(iter(read_as))):
-            continue  # no joint of the kind; counts: no other reading
+        if not other:
+            continue  # counts: no other reading
         read = next(iter(read_as))
-        key = "length_factor" if kind == "prismatic" else "angle_factor"
-        here = urdf_residual(rec, robot)
-        there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in other_readings(read))
         _refuse_if_no_unit_fits(p, rec, robot, read, here, there, other)
         if here > UNITS_RATIO * there:
             raise DataError(f"{p}: read in {read}, the {kind} joints' positions leave the URDF's dynamics "

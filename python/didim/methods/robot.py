@@ -676,29 +676,42 @@ def never_reversing(rec: Recording) -> List[str]:
     return out
 
 
-def units_hint(rec: Recording, robot: Robot) -> str:
-    """A sentence naming another unit of the revolute or the prismatic joints' positions in which the record fits the
-    URDF's dynamics better than in the one it was read in (:func:`urdf_residual`), or "": for the messages of a fit
-    that failed where the loader's units check (a factor :data:`didim.formats.loaders.UNITS_RATIO`) did not refuse,
-    as on an elastic arm's record, which no rigid reading fits well (the flexrobots UR5 declared in degrees: 36 % of
-    its force unexplained against 23 % read in rad)."""
+def unit_readings(rec: Recording, robot: Robot) -> List[Tuple[str, List[int], set, float, float, str]]:
+    """For the revolute and the prismatic joints of ``rec``, each kind as a group: ``(kind, joints, read_as, here,
+    there, other)``, ``read_as`` the units its joints were read in; when that is one unit with other readings
+    (:func:`didim.units.other_readings`), the share of the force the URDF's dynamics leave unexplained as read
+    (``here``, :func:`urdf_residual`) and in the best other reading ``other`` (``there``); NaN and "" otherwise. The
+    loader's units check and :func:`units_hint` read it."""
     from ..units import other_readings
 
     out = []
+    here = math.nan
     for kind, si in (("revolute", "rad"), ("prismatic", "m")):
         joints = [j for j, k in enumerate(rec.joint_kinds) if (k == "prismatic") == (kind == "prismatic")]
-        read_as = {rec.units[j].position if rec.units else si for j in joints}
-        if len(read_as) != 1 or not other_readings(next(iter(read_as))):
+        if not joints:
             continue
-        read = next(iter(read_as))
-        key = "length_factor" if kind == "prismatic" else "angle_factor"
-        here = urdf_residual(rec, robot)
-        there, other = min((urdf_residual(rec, robot, **{key: factor}), u) for u, factor in other_readings(read))
-        if there < here:
-            out.append(f"read in {other}, the {kind} joints' positions fit the URDF's dynamics better than in {read} "
-                       f"({100 * there:.0f} % of the force unexplained against {100 * here:.0f} %): check the record's "
-                       f"units (--units, units=...)")
-    return "; ".join(out)
+        read_as = {rec.units[j].position if rec.units else si for j in joints}
+        there, other = math.nan, ""
+        if len(read_as) == 1 and other_readings(next(iter(read_as))):
+            key = "length_factor" if kind == "prismatic" else "angle_factor"
+            here = urdf_residual(rec, robot) if math.isnan(here) else here  # the same for both kinds: once
+            there, other = min((urdf_residual(rec, robot, **{key: factor}), u)
+                               for u, factor in other_readings(next(iter(read_as))))
+        out.append((kind, joints, read_as, here if other else math.nan, there, other))
+    return out
+
+
+def units_hint(rec: Recording, robot: Robot) -> str:
+    """A sentence naming another unit of the revolute or the prismatic joints' positions in which the record fits the
+    URDF's dynamics better than in the one it was read in (:func:`unit_readings`), or "": for the messages of a fit
+    that failed where the loader's units check (a factor :data:`didim.formats.loaders.UNITS_RATIO`) did not refuse,
+    as on an elastic arm's record, which no rigid reading fits well (the flexrobots UR5 declared in degrees: 36 % of
+    its force unexplained against 23 % read in rad)."""
+    return "; ".join(
+        f"read in {other}, the {kind} joints' positions fit the URDF's dynamics better than in {next(iter(read_as))} "
+        f"({100 * there:.0f} % of the force unexplained against {100 * here:.0f} %): check the record's units "
+        "(--units, units=...)"
+        for kind, _, read_as, here, there, other in unit_readings(rec, robot) if other and there < here)
 
 
 def urdf_mismatch(rec: Recording, robot: Robot, verdict: str = "probably does not") -> str:
