@@ -175,3 +175,42 @@ def test_an_interrupt_stops_the_calls_already_running_on_a_pool(emps):
     assert outcome == {0: "stopped", 1: "stopped"}
     sim = didim.simulate(emps, params, substeps=1)  # the stop is released
     assert np.all(np.isfinite(sim.force))
+
+
+
+@pytest.mark.parametrize("where, name", [("methods.robot", "didim"), ("methods.robot", "didim_elastic"),
+                                         ("methods.robot", "oe_lm"), ("methods.robot", "idim_ls"),
+                                         ("methods.robot", "payload"), ("methods.identification", "didim_rigid"),
+                                         ("methods.identification", "didim_flexible"), ("methods.identification", "idim_ls"),
+                                         ("methods.oe", "oe_lm"), ("methods.oe", "oe_nm"), ("api", "identify"),
+                                         ("doctor", "doctor")])
+def test_every_public_method_runs_the_blas_on_one_thread(where, name):
+    """Called directly (the README's example, the benches), not only through ``didim.identify``, each method is
+    :func:`didim._parallel.serial_blas`'s wrapper: its least squares run with the BLAS on one thread, so its result
+    does not depend on the machine's thread count."""
+    import importlib
+
+    import didim._parallel as par
+
+    fn = getattr(importlib.import_module(f"didim.{where}"), name)
+    assert fn.__code__ is par.serial_blas(lambda: None).__code__ and callable(fn.__wrapped__)
+
+
+def test_serial_blas_holds_one_thread_also_when_nested():
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    import scipy.linalg  # noqa: F401  (its BLAS loaded before the count is taken)
+
+    import didim._parallel as par
+
+    def blas_threads():
+        return [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
+
+    seen = []
+    inner = par.serial_blas(lambda: seen.append(blas_threads()))
+    outer = par.serial_blas(lambda: (seen.append(blas_threads()), inner(), seen.append(blas_threads())))
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        outer()
+        after = blas_threads()
+    assert [n for s in seen for n in s] == [1] * sum(len(s) for s in seen) and seen[0]
+    assert after == before  # the limit is lifted when the outermost call returns

@@ -21,14 +21,28 @@ def serial_blas(fn: F) -> F:
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        from threadpoolctl import threadpool_limits
+        global _serial_depth
+        with _serial_lock:
+            outer = _serial_depth == 0
+            _serial_depth += 1
+        try:
+            if not outer:  # already limited (the limit is the process's): the methods call one another
+                return fn(*args, **kwargs)
+            from threadpoolctl import threadpool_limits
 
-        import scipy.linalg  # noqa: F401  (SciPy's own BLAS loaded, so limited as well)
+            import scipy.linalg  # noqa: F401  (SciPy's own BLAS loaded, so limited as well)
 
-        with threadpool_limits(limits=1, user_api="blas"):
-            return fn(*args, **kwargs)
+            with threadpool_limits(limits=1, user_api="blas"):
+                return fn(*args, **kwargs)
+        finally:
+            with _serial_lock:
+                _serial_depth -= 1
 
     return wrapper  # type: ignore[return-value]
+
+
+_serial_depth = 0
+_serial_lock = threading.Lock()
 
 
 def cores() -> int:

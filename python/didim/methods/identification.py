@@ -26,6 +26,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
+from .._parallel import serial_blas
 from .. import _checks, _core
 from .._errors import DataError, DidimError, DidimWarning, IdentifiabilityError, SimulationError
 from ..recording import Recording
@@ -171,6 +172,7 @@ def idim_cross_test(rec: Recording, result: IdentificationResult) -> float:
     return float(np.linalg.norm(y - w @ chi) / np.linalg.norm(y))
 
 
+@serial_blas
 def idim_ls(
     rec: Recording,
     model: Union[str, Model] = "rigid",
@@ -730,6 +732,7 @@ def _check_apm(rec: Recording, apM: float) -> Optional[str]:
     return None
 
 
+@serial_blas
 def didim_rigid(rec: Recording, apM: Optional[float] = None, *, offset: Optional[bool] = None,
                 cutoff_hz: float = RIGID_CUTOFF_HZ, model: Union[str, Model] = "rigid", **kw) -> IdentificationResult:
     """Step 1: rigid DIDIM from χ⁰ = (apM, 0, 0[, 0]), eq. (22), decimation cutoff 5 Hz by default; extra ``terms``
@@ -1164,6 +1167,7 @@ def _cannot_support(why: str, rec: Recording) -> str:
     return f"this record cannot support a flexible identification: {why}. To fix the experiment: {fix}"
 
 
+@serial_blas
 def didim_flexible(
     rec: Recording,
     apM: Optional[float] = None,

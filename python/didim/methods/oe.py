@@ -10,6 +10,7 @@ from typing import Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
+from .._parallel import serial_blas
 from .. import _checks, _core
 from .._errors import DataError, DidimError, SimulationError
 from .identification import (FLEXIBLE_CUTOFF_HZ, OE_LM_SUPPORTS, SIMULATING_SUPPORTS, Progress, _say, nelder_mead_simplex, prefetch,
@@ -41,6 +42,7 @@ def _measured(rec: Recording, criterion: str) -> np.ndarray:
     return rec.force if criterion == "force" else rec.qm
 
 
+@serial_blas
 def oe_nm(
     rec: Recording,
     model: Union[str, Model],
@@ -138,6 +140,7 @@ def oe_nm(
     )
 
 
+@serial_blas
 def oe_lm(
     rec: Recording,
     model: Union[str, Model],

@@ -18,6 +18,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .._parallel import serial_blas
 from .. import _checks, _core
 from . import friction_law
 from .didim_loop import didim_loop, residual_settled
@@ -1195,6 +1196,7 @@ def plausibility(res: IdentificationResult, rec: Optional[Recording] = None) -> 
     return out
 
 
+@serial_blas
 def idim_ls(rec: Recording, model: Model) -> IdentificationResult:
     """IDIM-LS: the inverse dynamic model on the measured positions (zero-phase low-passed, differentiated twice),
     weighted least squares per joint, the rows where a joint moves slowly left out; the friction law's tail fitted
@@ -1481,6 +1483,7 @@ def _didim_run(rec, model, base, dec, theta, law, per_shape, max_iter, tol, say,
     return didim_loop(plant, theta, max_iter=max_iter, progress=say), plant
 
 
+@serial_blas
 def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
           progress: Optional[Callable[[str], None]] = None, start: Optional[IdentificationResult] = None,
           frozen: Optional[Dict[str, float]] = None, cutoff_hz: Optional[float] = None,
@@ -2031,6 +2034,7 @@ def _refine_springs(rec: Recording, plant: "_RobotPlant", theta: np.ndarray, law
     return th
 
 
+@serial_blas
 def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
                   progress: Optional[Callable[[str], None]] = None, rigid: Optional[IdentificationResult] = None,
                   modes: Optional[Tuple[np.ndarray, "_ElasticSplit", Dict[str, Any]]] = None,
@@ -2236,6 +2240,7 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
     return res
 
 
+@serial_blas
 def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
           progress: Optional[Callable[[str], None]] = None, start: Optional[IdentificationResult] = None
           ) -> IdentificationResult:
@@ -2376,6 +2381,7 @@ class _PayloadPlant:
         return f"payload iteration {len(loop.history) - 1}: closed-loop force error {100 * loop.error:.3f} %"
 
 
+@serial_blas
 def payload(rec: Recording, result: IdentificationResult, *, max_iter: int = 30, tol: float = 1e-3,
             progress: Optional[Callable[[str], None]] = None) -> PayloadResult:
     """The payload on the last link of the robot of ``result`` (identified without it) from ``rec`` (recorded with
