@@ -647,12 +647,7 @@ def settled_row(rec: Recording, q_sim: np.ndarray, dec: Decimation) -> int:
                 for j in range(rec.ndof))
     else:
         k = settling_samples(rec.qm, q_sim, rec.dt, rec.position_resolution)
-    if k == 0:
-        return 0
-    ind = np.zeros(rec.n)
-    ind[:k] = 1.0
-    heavy = np.flatnonzero(np.abs(dec(ind)) >= START_LEAK)
-    return int(heavy[-1]) + 1 if heavy.size else 0
+    return 0 if k == 0 else dec.leak_end(rec.n, k, START_LEAK)
 
 
 def start_notes(skip: int, dec: Decimation, rec: Recording, left_out_of: str, option: bool = True) -> List[str]:
