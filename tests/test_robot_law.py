@@ -23,7 +23,11 @@ if _rayon is None:
     os.environ.pop("RAYON_NUM_THREADS", None)
 
 
-def test_didim_estimates_the_smoothing_speed_of_a_long_tailed_law(robots_dir, tmp_path):
+@pytest.fixture(scope="module")
+def atan_record(robots_dir, tmp_path_factory):
+    """The data folder's pendulum (2 joints) with an atan law (vs = 0.02 rad/s), 20 s at 1 kHz: the record, the
+    robot and the truth (Fv, Fc, vs)."""
+    tmp_path = tmp_path_factory.mktemp("atan")
     urdf = robots_dir / "pendulum_cad.urdf"
     robot = didim.Robot.from_urdf(urdf)
     model = pin.buildModelFromUrdf(str(urdf))
@@ -46,6 +50,11 @@ def test_didim_estimates_the_smoothing_speed_of_a_long_tailed_law(robots_dir, tm
     path = tmp_path / "pendulum_atan.csv"
     np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="")
     rec = didim.load_record(path, robot=robot, controller=robots_dir / "pendulum_controller.json")
+    return rec, robot, Fv, Fc, vs
+
+
+def test_didim_estimates_the_smoothing_speed_of_a_long_tailed_law(atan_record):
+    rec, robot, Fv, Fc, vs = atan_record
     res = didim.identify(rec, robot, "didim", offset=False)
     # didim's atan law is (2/π)·atan(π/2 · v/ε): the plant's atan(v/vs) is ε = vs·π/2
     assert res.law[0] == "atan"
@@ -54,3 +63,23 @@ def test_didim_estimates_the_smoothing_speed_of_a_long_tailed_law(robots_dir, tm
     for j, name in enumerate(robot.joint_names):
         assert res.params[f"Fv_{name}"] == pytest.approx(Fv[j], rel=0.03), name
         assert res.params[f"Fc_{name}"] == pytest.approx(Fc[j], rel=0.02), name
+
+
+def test_a_law_the_model_gives_is_held(atan_record):
+    """methods.robot.didim holds the friction law of the model it is given (the doctor's searches over an effect's
+    size hold the grown model's law, as one axis's do): the result carries that law to the last digit, and with the
+    plant's own law the friction comes out as well as with the law fitted."""
+    from didim.methods.robot import didim as robot_didim
+
+    rec, robot, Fv, Fc, vs = atan_record
+    law = ("atan", (vs * math.pi / 2,) * robot.ndof)
+    said = []
+    res = robot_didim(rec, didim.Model(robot=robot).with_law(law), progress=said.append)
+    assert res.law == law
+    assert any("friction law through zero speed, held" in s for s in said)
+    assert not any("law through zero speed, in closed loop" in s or "by the inverse model" in s for s in said)
+    for j, name in enumerate(robot.joint_names):
+        assert res.params[f"Fv_{name}"] == pytest.approx(Fv[j], rel=0.03), name
+        assert res.params[f"Fc_{name}"] == pytest.approx(Fc[j], rel=0.02), name
+    with pytest.raises(didim.DataError, match="one smoothing speed per joint"):
+        robot_didim(rec, didim.Model(robot=robot).with_law(("atan", (0.03,))))

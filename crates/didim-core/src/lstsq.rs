@@ -218,8 +218,54 @@ pub fn lstsq(w: &[f64], rows: usize, cols: usize, y: &[f64], opts: &LstsqOptions
     })
 }
 
+/// A system with at least this many rows per column is first compressed to its `n × n`
+/// triangular factor by an unpivoted blocked QR ([`compress`]): the column-pivoted QR
+/// chooses each pivot from the norms of every remaining column and updates them at every
+/// step, a matrix-vector product per column of a tall `W`, where the unpivoted QR works in
+/// blocks of matrix products.
+const COMPRESS_ROWS: usize = 4;
+
+/// `(R₀, (Q₀ᵀ b)[..n])` of the unpivoted Householder QR `a = Q₀ R₀` (`rows × n`): the least
+/// squares of `R₀ χ ≈ (Q₀ᵀ b)[..n]` are those of `a χ ≈ b` (`‖aχ − b‖² = ‖R₀χ − (Q₀ᵀb)[..n]‖²
+/// + ‖(Q₀ᵀb)[n..]‖²`), and `R₀` has the singular values and column geometry of `a` (`aᵀa =
+/// R₀ᵀR₀`), so the pivoted QR of `R₀` makes the same rank and base-column decisions.
+fn compress(mut a: Mat<f64>, b: Mat<f64>) -> (Mat<f64>, Mat<f64>) {
+    use faer::linalg::qr::no_pivoting::factor as plain;
+    let (rows, n) = (a.nrows(), a.ncols());
+    let block_size = recommended_block_size::<f64>(rows, n).max(1);
+    let mut q_coeff = Mat::<f64>::zeros(block_size, n);
+    {
+        let mut mem = MemBuffer::new(plain::qr_in_place_scratch::<f64>(rows, n, block_size, PAR, Default::default()));
+        plain::qr_in_place(a.as_mut(), q_coeff.as_mut(), PAR, MemStack::new(&mut mem), Default::default());
+    }
+    let r0 = Mat::<f64>::from_fn(n, n, |i, j| if i <= j { a[(i, j)] } else { 0.0 });
+    // the Householder basis: the unit lower trapezoidal part of the factored matrix
+    for j in 0..n {
+        for i in 0..j {
+            a[(i, j)] = 0.0;
+        }
+        a[(j, j)] = 1.0;
+    }
+    let mut qtb = b;
+    {
+        let mut mem = MemBuffer::new(apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+            rows, block_size, 1,
+        ));
+        apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+            a.as_ref(),
+            q_coeff.as_ref(),
+            Conj::No,
+            qtb.as_mut(),
+            PAR,
+            MemStack::new(&mut mem),
+        );
+    }
+    let b0 = Mat::<f64>::from_fn(n, 1, |i, _| qtb[(i, 0)]);
+    (r0, b0)
+}
+
 /// Phase 1: the column-pivoted Householder QR of the scaled `W` (faer), `W P = Q R`,
-/// and `Qᵀ Y`.
+/// and `Qᵀ Y` (a tall `W` compressed first: [`COMPRESS_ROWS`]).
 struct Factored {
     /// `R` (n × n, upper triangular, pivoted column order), column-major.
     r_fac: Vec<f64>,
@@ -233,9 +279,21 @@ struct Factored {
 
 impl Factored {
     fn new(w: &[f64], y: &[f64], rows: usize, cols: usize, kw: i32, ky: i32) -> Result<Self> {
+        let a = Mat::<f64>::from_fn(rows, cols, |i, j| ldexp(w[j * rows + i], kw));
+        let b = Mat::<f64>::from_fn(rows, 1, |i, _| ldexp(y[i], ky));
+        if rows >= COMPRESS_ROWS * cols {
+            let (a, b) = compress(a, b);
+            Self::pivoted(a, b)
+        } else {
+            Self::pivoted(a, b)
+        }
+    }
+
+    /// The column-pivoted QR of `qr` (`rows × n`, scaled) and `Qᵀ y` of the scaled `y`.
+    fn pivoted(mut qr: Mat<f64>, y: Mat<f64>) -> Result<Self> {
+        let (rows, cols) = (qr.nrows(), qr.ncols());
         let n = cols;
         let par = PAR;
-        let mut qr = Mat::<f64>::from_fn(rows, cols, |i, j| ldexp(w[j * rows + i], kw));
         let block_size = recommended_block_size::<f64>(rows, cols).max(1);
         let mut q_coeff = Mat::<f64>::zeros(block_size, n);
         let mut perm = vec![0usize; n];
@@ -274,7 +332,7 @@ impl Factored {
             }
             qr[(j, j)] = 1.0;
         }
-        let mut qty = Mat::<f64>::from_fn(rows, 1, |i, _| ldexp(y[i], ky));
+        let mut qty = y;
         {
             let mut mem = MemBuffer::new(
                 apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(

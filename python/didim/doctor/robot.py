@@ -503,16 +503,19 @@ def _names(c: _Candidate, robot) -> Tuple[Optional[str], str]:
 
 
 def _refit(state: _State, model, train: Recording, progress, cutoff_hz: Optional[float] = None,
-           from_origin: bool = False) -> Any:
+           from_origin: bool = False, hold_law: bool = False) -> Any:
     """The model refitted by DIDIM on the training record from the current model's estimate (its law fitted again:
     the one fitted without the effect may have taken part of it), or with ``from_origin`` from the base fit's own
     start (the doctor's ``initial``, else the URDF's values); its parameters held where the current model holds them;
-    ``cutoff_hz`` as robot DIDIM's."""
+    ``cutoff_hz`` as robot DIDIM's. ``hold_law``: the current model's friction law held instead (a search comparing
+    sizes of one effect: each refit's law search took two thirds of its time, and the law is fitted again once the
+    size is chosen)."""
     from dataclasses import replace
 
     from ..methods.robot import didim as robot_didim, frozen_for
 
-    model = replace(model, coulomb_eps=None, coulomb_law="algebraic")
+    law = state.res.structure.law if hold_law else None
+    model = model.with_law(law) if law is not None else replace(model, coulomb_eps=None, coulomb_law="algebraic")
     return robot_didim(train, model, progress=progress, start=state.origin if from_origin else state.res,
                        frozen=frozen_for(model, state.res.frozen) or None, cutoff_hz=cutoff_hz)
 
@@ -547,7 +550,7 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
             periods = kw["force_lag"][0] / state.train.dt if "force_lag" in kw else kw["delay"][0]
             both = not model.elastic and periods >= LAG_OR_DELAY * (1 - 1e-9)
             try:
-                r = _refit(state, model, tr, progress)
+                r = _refit(state, model, tr, progress, hold_law=True)
             except DidimError:
                 if not both:
                     raise
@@ -561,7 +564,7 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
                 # 1.92 % from the base's start; output-error LM from either 1.12 %, the truth floor 1.11 %); a
                 # shorter one moves the bodies too little for that
                 try:
-                    r2 = _refit(state, model, tr, progress, from_origin=True)
+                    r2 = _refit(state, model, tr, progress, from_origin=True, hold_law=True)
                 except DidimError:
                     r2 = None
                 if r2 is not None and (r is None or r2.force_error < r.force_error):
@@ -577,6 +580,14 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
 
         kind, size, (r, tr, kw) = delay_search(lambda lag: fit({"force_lag": (lag,) * n}),
                                                lambda d: fit({"delay": (d,) * n}), state.train.dt)
+        # the size chosen with the grown model's law held; the law fitted again for it (the law fitted without the
+        # late force may have taken part of it), from the chosen refit, kept when it fits the training record better
+        try:
+            again = _refit(_State(r, tr, state.valid, origin=state.origin), r.structure, tr, progress)
+            if again.force_error < r.force_error:
+                r = again
+        except DidimError:
+            pass
         params = ({"delay_samples": float(size), "delay_s": size * state.train.dt} if kind == "delay"
                   else {"force_lag_s": float(size)})
         return _State(r, tr, replace(state.valid, **kw), origin=state.origin), params, {}

@@ -1331,7 +1331,10 @@ class _RobotPlant:
         self.elastic = elastic_of(model)
         self.lay = _Layout.for_model(model, base)
         self.tail_shape = law[0]  # the shape the inverse model chose on the rows the fits keep (the law's tail)
-        self.law_chosen = False
+        # a law the model gives is held: neither chosen in closed loop nor its ε refined (the doctor's searches hold
+        # the grown model's law while they compare sizes of an effect, as one axis's do)
+        self.hold_law = model.law is not None
+        self.law_chosen = self.hold_law
         self.inverses: List[Tuple[np.ndarray, _InverseModel]] = []
         self.last: Optional[Tuple[np.ndarray, Law, Any]] = None  # the last simulation (θ, law, its outputs)
         self.free = list(range(self.lay.size))
@@ -1395,7 +1398,8 @@ class _RobotPlant:
     def solve(self, theta: np.ndarray, sim) -> Dict[str, Any]:
         n, nb, rec = self.n, self.nb, self.rec
         inverse = self.inverse(theta, sim)
-        if self.law_chosen and min(self.law[1]) > 0 and self.law[0] == self.tail_shape and not self.elastic:
+        if self.law_chosen and not self.hold_law and min(self.law[1]) > 0 and self.law[0] == self.tail_shape \
+                and not self.elastic:
             # each joint's ε with the parameters, once the closed loop has confirmed the shape that the tail chose:
             # the fits keep the tail's rows, and a shape the closed loop chose against it has its ε set near zero speed
             theta_e, cov_e, _ = inverse.fit(self.law, coulomb=theta[nb + n:nb + 2 * n], held=self.held)
@@ -1511,6 +1515,9 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     ``cutoff_hz``: the parallel decimation's low-pass (Hz), below the default (ten times the reference's band): the
     rigid step of the three-step DIDIM fits the rigid model below the elastic joints' modes
     (:data:`RIGID_STEP_BELOW_MODES`; ``rigid_cutoff_hz`` sets it, as for one axis's three steps).
+
+    A friction law in ``model`` (:meth:`didim.Model.with_law`: its shape and each joint's ε) is held, as one axis's
+    ``coulomb_eps``; without one, the law is chosen by the inverse model and then in closed loop.
     """
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
@@ -1530,8 +1537,12 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     dec = _decimation(rec, cutoff_hz)
     measured = _InverseModel(rec, model, base, *_measured_states(rec, dec), dec)
     per_shape: Dict[str, Tuple[float, ...]] = {}
-    law = fit_law(rec, measured, per_shape)
-    say("friction law through zero speed, by the inverse model: " + friction_law.describe(law, speed_unit(rec)))
+    if model.law is not None:  # held (see _RobotPlant.hold_law)
+        law = model.law  # one ε per joint (_check)
+        say("friction law through zero speed, held: " + friction_law.describe(law, speed_unit(rec)))
+    else:
+        law = fit_law(rec, measured, per_shape)
+        say("friction law through zero speed, by the inverse model: " + friction_law.describe(law, speed_unit(rec)))
     n = robot.ndof
     pi0 = np.concatenate([np.zeros(n), robot.inertial_params])
     theta0 = np.concatenate([base.of(pi0), np.zeros(_Layout.for_model(model, base).size - len(base.names))])
