@@ -226,17 +226,30 @@ pub fn lstsq(w: &[f64], rows: usize, cols: usize, y: &[f64], opts: &LstsqOptions
 const COMPRESS_ROWS: usize = 4;
 
 /// `(R₀, (Q₀ᵀ b)[..n])` of the unpivoted Householder QR `a = Q₀ R₀` (`rows × n`): the least
-/// squares of `R₀ χ ≈ (Q₀ᵀ b)[..n]` are those of `a χ ≈ b` (`‖aχ − b‖² = ‖R₀χ − (Q₀ᵀb)[..n]‖²
-/// + ‖(Q₀ᵀb)[n..]‖²`), and `R₀` has the singular values and column geometry of `a` (`aᵀa =
-/// R₀ᵀR₀`), so the pivoted QR of `R₀` makes the same rank and base-column decisions.
+/// squares of `R₀ χ ≈ (Q₀ᵀ b)[..n]` are those of `a χ ≈ b`, since `‖aχ − b‖²` is
+/// `‖R₀χ − (Q₀ᵀb)[..n]‖²` plus `‖(Q₀ᵀb)[n..]‖²`; and `R₀` has the singular values and the
+/// column geometry of `a` (`aᵀa = R₀ᵀR₀`), so the pivoted QR of `R₀` makes the same rank and
+/// base-column decisions.
 fn compress(mut a: Mat<f64>, b: Mat<f64>) -> (Mat<f64>, Mat<f64>) {
     use faer::linalg::qr::no_pivoting::factor as plain;
     let (rows, n) = (a.nrows(), a.ncols());
     let block_size = recommended_block_size::<f64>(rows, n).max(1);
     let mut q_coeff = Mat::<f64>::zeros(block_size, n);
     {
-        let mut mem = MemBuffer::new(plain::qr_in_place_scratch::<f64>(rows, n, block_size, PAR, Default::default()));
-        plain::qr_in_place(a.as_mut(), q_coeff.as_mut(), PAR, MemStack::new(&mut mem), Default::default());
+        let mut mem = MemBuffer::new(plain::qr_in_place_scratch::<f64>(
+            rows,
+            n,
+            block_size,
+            PAR,
+            Default::default(),
+        ));
+        plain::qr_in_place(
+            a.as_mut(),
+            q_coeff.as_mut(),
+            PAR,
+            MemStack::new(&mut mem),
+            Default::default(),
+        );
     }
     let r0 = Mat::<f64>::from_fn(n, n, |i, j| if i <= j { a[(i, j)] } else { 0.0 });
     // the Householder basis: the unit lower trapezoidal part of the factored matrix
@@ -248,9 +261,11 @@ fn compress(mut a: Mat<f64>, b: Mat<f64>) -> (Mat<f64>, Mat<f64>) {
     }
     let mut qtb = b;
     {
-        let mut mem = MemBuffer::new(apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
-            rows, block_size, 1,
-        ));
+        let mut mem = MemBuffer::new(
+            apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+                rows, block_size, 1,
+            ),
+        );
         apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
             a.as_ref(),
             q_coeff.as_ref(),
@@ -281,12 +296,12 @@ impl Factored {
     fn new(w: &[f64], y: &[f64], rows: usize, cols: usize, kw: i32, ky: i32) -> Result<Self> {
         let a = Mat::<f64>::from_fn(rows, cols, |i, j| ldexp(w[j * rows + i], kw));
         let b = Mat::<f64>::from_fn(rows, 1, |i, _| ldexp(y[i], ky));
-        if rows >= COMPRESS_ROWS * cols {
-            let (a, b) = compress(a, b);
-            Self::pivoted(a, b)
+        let (a, b) = if rows >= COMPRESS_ROWS * cols {
+            compress(a, b)
         } else {
-            Self::pivoted(a, b)
-        }
+            (a, b)
+        };
+        Self::pivoted(a, b)
     }
 
     /// The column-pivoted QR of `qr` (`rows × n`, scaled) and `Qᵀ y` of the scaled `y`.
