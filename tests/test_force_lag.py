@@ -141,3 +141,19 @@ def test_the_late_force_search_goes_past_one_period_and_stops_where_the_fit_stop
     seen.clear()
     kind, size, _ = delay_search(lambda x: (seen.append(x), (1.0, True, x))[1], bowl(1.0, 0.5), dt)
     assert (kind, size) == ("force_lag", LAG_PERIODS[0] * dt) and len(seen) == 1 + DELAY_PATIENCE
+    # each kind's best is polished before the two are compared (a robot refits it from the base's own start): a lag
+    # whose search fit (1.0) loses to a delay's (0.5) wins once polished to 0.4; the polish sees each best once
+    seen.clear()
+    polished = []
+
+    def polish(kind, size, err, kept):
+        polished.append((kind, size, err))
+        return (0.4, ("polished", kept)) if kind == "force_lag" else (err, kept)
+
+    kind, size, kept = delay_search(bowl(3.0, 1.0), bowl(3.0, 0.5), dt, polish=polish)
+    assert (kind, kept) == ("force_lag", ("polished", size)) and size == pytest.approx(3 * dt)
+    assert [(k, e) for k, _, e in polished] == [("force_lag", 1.0), ("delay", 0.5)]
+    assert delay_search(bowl(3.0, 1.0), bowl(3.0, 0.5), dt)[0] == "delay"  # without it, the delay
+    # a short lag: no delays tried, nothing to compare, nothing polished
+    polished.clear()
+    assert delay_search(bowl(0.3, 1.0), bowl(1.0, 0.0), dt, polish=polish)[0] == "force_lag" and not polished

@@ -463,14 +463,23 @@ DELAY_PATIENCE = 2
 
 
 def delay_search(fit_lag: Callable[[float], Tuple[float, bool, Any]], fit_delay: Callable[[int], Tuple[float, bool, Any]],
-                 dt: float) -> Tuple[str, float, Any]:
+                 dt: float, polish: Optional[Callable[[str, float, float, Any], Tuple[float, Any]]] = None
+                 ) -> Tuple[str, float, Any]:
     """The size of a force that reaches the plant late, for every plant: a first-order force lag of LAG_PERIODS of
     the sample period (a current loop), and when the best is a period or longer (LAG_OR_DELAY) a whole-sample delay
     of DELAY_SAMPLES too, each searched upward until the training fit gets clearly worse (10 %), stops converging or
     has not improved over DELAY_PATIENCE sizes in a row; the better one kept. ``fit_lag(T)`` and
     ``fit_delay(d)`` refit the model with that lag or delay and return (its training error, converged, what the
     caller keeps); a DidimError ends that search (a longer delay destabilises the simulated loop even more).
-    Returns ("force_lag", T in s, kept) or ("delay", d in samples, kept)."""
+    ``polish(kind, size, error, kept)``: each search's best fitted again as the plant sees fit before the lag and
+    the delay are compared (its training error and what the caller keeps; a robot refits it from the base's own
+    start too). Returns ("force_lag", T in s, kept) or ("delay", d in samples, kept)."""
+
+    def polished(kind, best):
+        if best is None or polish is None:
+            return best
+        err, kept = polish(kind, best[0], best[1], best[2])
+        return best[0], err, kept
 
     def search(values, fit):
         best, stale = None, 0
@@ -492,6 +501,7 @@ def delay_search(fit_lag: Callable[[float], Tuple[float, bool, Any]], fit_delay:
     lag = search([f * dt for f in LAG_PERIODS], fit_lag)
     if lag is None or lag[0] >= LAG_OR_DELAY * dt * (1 - 1e-9):
         whole = search(DELAY_SAMPLES, fit_delay)
+        lag, whole = polished("force_lag", lag), polished("delay", whole)
         if whole is not None and (lag is None or whole[1] < lag[1]):
             return "delay", whole[0], whole[2]
     if lag is None:
