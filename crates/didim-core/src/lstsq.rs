@@ -252,31 +252,38 @@ fn compress(mut a: Mat<f64>, b: Mat<f64>) -> (Mat<f64>, Mat<f64>) {
         );
     }
     let r0 = Mat::<f64>::from_fn(n, n, |i, j| if i <= j { a[(i, j)] } else { 0.0 });
-    // the Householder basis: the unit lower trapezoidal part of the factored matrix
-    for j in 0..n {
-        for i in 0..j {
-            a[(i, j)] = 0.0;
-        }
-        a[(j, j)] = 1.0;
-    }
-    let mut qtb = b;
-    {
-        let mut mem = MemBuffer::new(
-            apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
-                rows, block_size, 1,
-            ),
-        );
-        apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-            a.as_ref(),
-            q_coeff.as_ref(),
-            Conj::No,
-            qtb.as_mut(),
-            PAR,
-            MemStack::new(&mut mem),
-        );
-    }
+    let qtb = householder_qt(a, &q_coeff, b);
     let b0 = Mat::<f64>::from_fn(n, 1, |i, _| qtb[(i, 0)]);
     (r0, b0)
+}
+
+/// `Qᵀ b` for the Householder QR held in `factored` (faer's in-place factorisation, its `R`
+/// already read out) and its block coefficients `q_coeff`: the basis is the unit lower
+/// trapezoidal part of the factored matrix.
+fn householder_qt(mut factored: Mat<f64>, q_coeff: &Mat<f64>, mut b: Mat<f64>) -> Mat<f64> {
+    let (rows, n) = (factored.nrows(), factored.ncols());
+    for j in 0..n {
+        for i in 0..j {
+            factored[(i, j)] = 0.0;
+        }
+        factored[(j, j)] = 1.0;
+    }
+    let mut mem = MemBuffer::new(
+        apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+            rows,
+            q_coeff.nrows(),
+            b.ncols(),
+        ),
+    );
+    apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+        factored.as_ref(),
+        q_coeff.as_ref(),
+        Conj::No,
+        b.as_mut(),
+        PAR,
+        MemStack::new(&mut mem),
+    );
+    b
 }
 
 /// Phase 1: the column-pivoted Householder QR of the scaled `W` (faer), `W P = Q R`,
@@ -340,29 +347,7 @@ impl Factored {
         if r_fac.iter().any(|v| !v.is_finite()) {
             return Err(overflow_error());
         }
-        // Householder basis: unit lower trapezoidal part of the factored matrix.
-        for j in 0..n {
-            for i in 0..j {
-                qr[(i, j)] = 0.0;
-            }
-            qr[(j, j)] = 1.0;
-        }
-        let mut qty = y;
-        {
-            let mut mem = MemBuffer::new(
-                apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
-                    rows, block_size, 1,
-                ),
-            );
-            apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-                qr.as_ref(),
-                q_coeff.as_ref(),
-                Conj::No,
-                qty.as_mut(),
-                par,
-                MemStack::new(&mut mem),
-            );
-        }
+        let qty = householder_qt(qr, &q_coeff, y);
         Ok(Self {
             r_fac,
             perm,
