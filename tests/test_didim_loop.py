@@ -89,3 +89,22 @@ def test_give_up_is_not_asked_once_the_iteration_has_converged():
     asked = []
     loop = didim_loop(Toy([1.95, 1.99]), np.array([1.5]), give_up=lambda lp: asked.append(len(lp.history)))
     assert loop.converged and asked == [1, 2, 3, 4]  # after each iteration before the one that converged
+
+
+def test_a_robot_didim_that_cycles_above_its_best_ends_after_its_patience():
+    """methods.robot's patience (every robot DIDIM's): iterations that cycle above the best end DIDIM_PATIENCE
+    iterations after it, the best kept, with a message that robot DIDIM reads as "no convergence" (not a failure that
+    sends it again from IDIM-LS's estimate); a cycle whose best still creeps down goes on."""
+    from didim.methods.robot import DIDIM_PATIENCE, _stalled
+
+    cycle = [1.2, 1.4, 1.25, 1.35] * 10  # from its start at 1.9 (error 0.1) every step lands farther from 2
+    plant = Toy(cycle, tol=0.0)
+    loop = didim_loop(plant, np.array([1.9]), max_iter=30, give_up=_stalled(DIDIM_PATIENCE))
+    assert not loop.converged and loop.message.startswith("no convergence")
+    assert len(loop.history) == DIDIM_PATIENCE + 1 and loop.best[1][0] == pytest.approx(1.9)
+    # creeping toward 2 every few iterations, below each earlier best: never stalled for the patience
+    creep = []
+    for k in range(7):
+        creep += [1.0 + 0.1 * k, 0.8, 0.9]
+    loop = didim_loop(Toy(creep, tol=0.0), np.array([0.9]), max_iter=20, give_up=_stalled(DIDIM_PATIENCE))
+    assert loop.message == "no convergence in 20 iterations" and loop.best[1][0] == pytest.approx(1.6)
