@@ -233,19 +233,27 @@ impl Signals {
         if k == 0 || self.data.is_empty() {
             return;
         }
-        self.data = drop_front_rows(&self.data, self.n, k);
+        drop_front_rows(&mut self.data, self.n, k);
         self.n -= k.min(self.n);
     }
 }
 
-/// The rows of `n` samples of `data` without their first `k` samples.
-fn drop_front_rows(data: &[f64], n: usize, k: usize) -> Vec<f64> {
+/// The rows of `n` samples of `data`, each without its first `k` samples, in place: each row's
+/// kept samples moved to its new place in order (a row's new place never lies after its old one)
+/// and the vector shortened. A collect of the kept samples into a new vector, whose length its
+/// iterator did not know, cost a lead-in of 16 samples 0.4 ms per flexible EMPS simulation (1.1 ms).
+fn drop_front_rows(data: &mut Vec<f64>, n: usize, k: usize) {
     if n == 0 {
-        return Vec::new();
+        data.clear();
+        return;
     }
-    data.chunks_exact(n)
-        .flat_map(|row| row[k.min(n)..].iter().copied())
-        .collect()
+    let k = k.min(n);
+    let rows = data.len() / n;
+    let m = n - k;
+    for r in 0..rows {
+        data.copy_within(r * n + k..(r + 1) * n, r * m);
+    }
+    data.truncate(rows * m);
 }
 
 impl SimOutput {
@@ -518,11 +526,10 @@ pub fn simulate_sensitivity<const N: usize>(
         let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
         (sim, t.cmd.dforce, t.dq)
     };
-    let (sim, dforce, dq) = (
-        sim.drop_front(opts.lead),
-        drop_front_rows(&dforce, qr.len(), opts.lead),
-        drop_front_rows(&dq, qr.len(), opts.lead),
-    );
+    let (mut dforce, mut dq) = (dforce, dq);
+    drop_front_rows(&mut dforce, qr.len(), opts.lead);
+    drop_front_rows(&mut dq, qr.len(), opts.lead);
+    let sim = sim.drop_front(opts.lead);
     let sim = finite_outputs(sim, model, chi, opts)?;
     // finite states can still have non-finite sensitivities (e.g. a Coulomb force of 1e308 N at rest, whose
     // derivative is 1e308/eps): an error, not NaN in the Jacobian
