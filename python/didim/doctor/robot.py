@@ -548,13 +548,9 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
             """The refit from the base's own start (the URDF's values or the doctor's initial: the same optimiser
             from the same start as the base), or None."""
             try:
-                r = _refit(state, model, tr, progress, from_origin=True, hold_law=True)
+                return _refit(state, model, tr, progress, from_origin=True, hold_law=True)
             except DidimError:
                 return None
-            origins.add(id(r))
-            return r
-
-        origins: set = set()  # the refits from the base's own start (by identity)
 
         best = [math.inf]  # the best training fit of the search so far
 
@@ -562,6 +558,7 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
             tr = replace(state.train, **kw)
             periods = kw["force_lag"][0] / state.train.dt if "force_lag" in kw else kw["delay"][0]
             both = not model.elastic and periods >= LAG_OR_DELAY * (1 - 1e-9)
+            from_start = False  # whether r is the refit from the base's own start
             try:
                 r = _refit(state, model, tr, progress, hold_law=True)
             except DidimError:
@@ -573,7 +570,7 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
                 # refitted from the base's own start too, the better fit of the training record kept (see polish)
                 r2 = origin(tr)
                 if r2 is not None and (r is None or r2.force_error < r.force_error):
-                    r = r2
+                    r, from_start = r2, True
             if r is None:
                 raise SimulationError(f"the model's loop cannot be simulated with the force {_late(kw, tr.dt)}")
             best[0] = min(best[0], r.force_error)
@@ -581,29 +578,29 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
                 progress(f"force {_late(kw, state.train.dt)}: training force error {100 * r.force_error:.2f} %")
             # a robot's DIDIM often ends cycling within its tolerance, not converged, at any delay: not the sign of a
             # destabilised loop that ends one axis's search (a failed simulation is, and raises)
-            return r.force_error, True, (r, tr, kw)
+            return r.force_error, True, (r, tr, kw, from_start)
 
         def polish(kind, size, err, kept):
             # each kind's best size (a force a period late or later) refitted from the base's own start too (where
             # the search did not), the better fit of the training record kept, before the lag and the delay are
-            # compared. The grown model's
-            # bodies took up part of the late force, and DIDIM from them can stall far from the fit the late force
-            # allows (held-out e8, a 3 ms lag at 1 kHz: 2.6 % of the training force from there, 1.9 % from the
-            # base's start, the truth floor 1.1 %), where a whole-sample delay of 3 reached 2.1 % from there and
-            # simulated the held-out record at 10 %; a shorter lag moves the bodies too little for that
-            r, tr, kw = kept
-            if model.elastic or id(r) in origins:
+            # compared. The grown model's bodies took up part of the late force, and DIDIM from them can stall far
+            # from the fit the late force allows (held-out e8, a 3 ms lag at 1 kHz: 2.6 % of the training force from
+            # there, 1.9 % from the base's start, the truth floor 1.1 %), where a whole-sample delay of 3 reached
+            # 2.1 % from there and simulated the held-out record at 10 %; a shorter lag moves the bodies too little
+            # for that
+            r, tr, kw, from_start = kept
+            if model.elastic or from_start:
                 return err, kept
             r2 = origin(tr)
             if r2 is not None and r2.force_error < err:
                 if progress:
                     progress(f"force {_late(kw, tr.dt)}: training force error {100 * r2.force_error:.2f} % from the "
                              "base's own start")
-                return r2.force_error, (r2, tr, kw)
+                return r2.force_error, (r2, tr, kw, True)
             return err, kept
 
-        kind, size, (r, tr, kw) = delay_search(lambda lag: fit({"force_lag": (lag,) * n}),
-                                               lambda d: fit({"delay": (d,) * n}), state.train.dt, polish=polish)
+        kind, size, (r, tr, kw, _) = delay_search(lambda lag: fit({"force_lag": (lag,) * n}),
+                                                  lambda d: fit({"delay": (d,) * n}), state.train.dt, polish=polish)
         # the size chosen with the grown model's law held; the law fitted again for it (the law fitted without the
         # late force may have taken part of it), from the chosen refit, kept when it fits the training record better
         try:
