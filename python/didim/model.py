@@ -170,7 +170,8 @@ class Model:
     """A model structure. ``kind``: "rigid" (eq. (6), M, Fv, Fc) or "flexible" (eq. (2), M1, Fv1, Fc1, M2, Fv2, Fc2,
     K12); ``offset``: a constant force OF (N); ``terms``: extra :class:`didim.Term` s (each on the motor or the load);
     ``force_lag``: time constant (s) of a first-order lag from the command to the applied force; ``delay``: actuation delay in
-    samples; ``backlash_gap``: total width (m) of a dead zone in K12 (flexible only); ``coulomb_eps``: velocity scale
+    samples; ``backlash_gap``: total width (m) of a dead zone in K12 (flexible only; a robot's: one per joint, rad or
+    m, on elastic joints only, 0 for none, or ``{joint: width}``); ``coulomb_eps``: velocity scale
     (m/s or rad/s) of the smoothed Coulomb sign, 0 for the hard sign, None for the record's
     (:func:`didim.simulation.default_coulomb_eps`; an identified model carries the number it was fitted with).
 
@@ -186,7 +187,7 @@ class Model:
     offset: bool = False
     terms: Tuple[Term, ...] = field(default_factory=tuple)
     delay: int = 0
-    backlash_gap: Optional[float] = None
+    backlash_gap: Union[None, float, Tuple[float, ...]] = None
     force_lag: float = 0.0
     coulomb_eps: Union[None, float, Tuple[float, ...]] = None
     coulomb_law: str = "algebraic"
@@ -201,7 +202,7 @@ class Model:
             raise DataError(f"a model needs a kind (text) and a list of terms, got {self.kind!r}, {self.terms!r}")
         object.__setattr__(self, "terms", tuple(Term.from_saved(t) for t in self.terms))
         object.__setattr__(self, "offset", _checks.flag("offset", self.offset))
-        if self.backlash_gap is not None:
+        if self.backlash_gap is not None and self.robot is None:
             object.__setattr__(self, "backlash_gap", _checks.real("backlash_gap", self.backlash_gap, "m", lo=0.0))
         object.__setattr__(self, "delay", _checks.whole("delay", self.delay, hint=" (samples)"))
         object.__setattr__(self, "force_lag", _checks.real("force_lag", self.force_lag, "s", lo=0.0, lo_open=False))
@@ -240,11 +241,11 @@ class Model:
         if self.kind not in ("rigid", "flexible"):
             raise DataError(f"a robot's model is rigid, or flexible with elastic joints, got {self.kind!r}")
         object.__setattr__(self, "kind", "flexible" if self.elastic else "rigid")
-        given = [name for name, v in (("delay", self.delay), ("force_lag", self.force_lag),
-                                      ("backlash_gap", self.backlash_gap)) if v]
+        given = [name for name, v in (("delay", self.delay), ("force_lag", self.force_lag)) if v]
         if given:
             raise DataError(f"a robot's model takes no {', '.join(given)}: each joint's delay and force lag go in its "
                             "entry of the controller file (\"delay\", \"force_lag\")")
+        self._check_backlash(robot)
         self._check_joint_terms(robot)
         if self.coulomb_eps is not None:
             eps = self.coulomb_eps
@@ -254,6 +255,45 @@ class Model:
             object.__setattr__(self, "coulomb_eps", tuple(
                 _checks.real(f"joint {j}'s coulomb_eps", e, "rad/s or m/s", lo=0.0, lo_open=False)
                 for j, e in zip(robot.joint_names, eps)))
+
+    def _check_backlash(self, robot) -> None:
+        """A robot's ``backlash_gap``: each elastic joint's dead zone between rotor and link (total width, rad or m),
+        given as one value per joint (0 on a joint without) or as ``{joint: gap}``; kept as one per joint, or None
+        when no joint has one."""
+        gaps = self.backlash_gap
+        if gaps is None:
+            return
+        names = list(robot.joint_names)
+        if isinstance(gaps, dict):
+            unknown = [k for k in gaps if k not in names]
+            if unknown:
+                raise DataError(f"backlash_gap names {unknown[0]!r}, not a joint of the robot {robot.name} "
+                                f"({', '.join(names)})")
+            gaps = [gaps.get(j, 0.0) for j in names]
+        if not isinstance(gaps, (tuple, list)) or len(gaps) != robot.ndof:
+            raise DataError(f"a robot's backlash_gap is one total width per joint ({robot.ndof}: {', '.join(names)}; "
+                            f"0 for none) or {{joint: width}}, got {gaps!r}")
+        out = tuple(_checks.real(f"joint {j}'s backlash_gap", g, "rad or m", lo=0.0, lo_open=False)
+                    for j, g in zip(names, gaps))
+        rigid = [j for j, g in zip(names, out) if g > 0 and j not in self.elastic]
+        if rigid:
+            raise DataError(f"backlash_gap on {', '.join(rigid)}, which {'is' if len(rigid) == 1 else 'are'} rigid: "
+                            "backlash is a dead zone between an elastic joint's rotor and its link (elastic=[...])")
+        object.__setattr__(self, "backlash_gap", out if any(g > 0 for g in out) else None)
+
+    @property
+    def gaps(self) -> Tuple[float, ...]:
+        """A robot's backlash per joint (total width, rad or m; 0 for none)."""
+        if self.robot is None:
+            raise DataError("gaps is a robot's backlash per joint; one axis's is backlash_gap")
+        return tuple(self.backlash_gap) if self.backlash_gap is not None else (0.0,) * self.robot.ndof
+
+    def with_backlash(self, joint: str, gap: Optional[float]) -> "Model":
+        """This robot's model with elastic joint ``joint``'s backlash set to the total width ``gap`` (rad or m; None
+        or 0: none)."""
+        gaps = dict(zip(self.robot.joint_names, self.gaps))
+        gaps[joint] = float(gap or 0.0)
+        return replace(self, backlash_gap=gaps)
 
     #: The term kinds a robot's joint takes: those of one dof (a spring or damper couples two).
     JOINT_TERM_KINDS = ("offset", "viscous", "coulomb", "abs_viscous", "abs_coulomb", "stribeck", "ripple",
@@ -318,6 +358,8 @@ class Model:
             return (f"{self.kind} model of the {self.robot.ndof}-joint robot {self.robot.name}"
                     + (f" with elastic joints {', '.join(self.elastic)}" if self.elastic else "")
                     + (f", load-dependent friction on {', '.join(self.load_friction)}" if self.load_friction else "")
+                    + (", backlash " + ", ".join(f"{g:.3g} on {j}" for j, g in zip(self.robot.joint_names, self.gaps)
+                                                 if g > 0) if self.backlash_gap is not None else "")
                     + (" with an offset per joint" if self.offset else "")
                     + (f", terms {', '.join(f'{t.name} ({t.kind} on {t.dof})' for t in self.terms)}" if self.terms
                        else "")
@@ -397,7 +439,8 @@ class Model:
 
     def to_dict(self) -> Dict[str, Any]:
         out = {"kind": self.kind, "offset": self.offset, "terms": [t.to_dict() for t in self.terms],
-               "delay": self.delay, "force_lag": self.force_lag, "backlash_gap": self.backlash_gap,
+               "delay": self.delay, "force_lag": self.force_lag,
+               "backlash_gap": list(self.backlash_gap) if isinstance(self.backlash_gap, tuple) else self.backlash_gap,
                "coulomb_eps": list(self.coulomb_eps) if isinstance(self.coulomb_eps, tuple) else self.coulomb_eps,
                "coulomb_law": self.coulomb_law}
         if self.robot is not None:
@@ -432,6 +475,8 @@ class Model:
                 raise DataError("a saved robot model's robot is {name, joints, urdf} (the URDF's text)")
             robot = Robot.from_urdf_string(r["urdf"], r["joints"])
             eps = tuple(eps) if isinstance(eps, list) else eps
+            gaps = d.get("backlash_gap")
+            d = {**d, "backlash_gap": tuple(gaps) if isinstance(gaps, list) else gaps}
         return cls(kind=d.get("kind", "rigid"), offset=offset, terms=terms, delay=d.get("delay", 0),
                    force_lag=d.get("force_lag", 0.0),
                    backlash_gap=d.get("backlash_gap"), coulomb_eps=eps,

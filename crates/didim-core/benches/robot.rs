@@ -47,6 +47,7 @@ fn setup() -> (Robot, Drives, Vec<TransferFunction>, Vec<f64>) {
         laws: vec![FrictionLaw::algebraic(0.015); n],
         stiffness: Vec::new(),
         damping: Vec::new(),
+        backlash: Vec::new(),
         terms: Vec::new(),
         load_friction: Vec::new(),
     };

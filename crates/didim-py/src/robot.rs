@@ -231,9 +231,11 @@ impl PyRobot {
 /// joint, theta, thetad, thetadd (the motor side; the link side's on rigid joints). `terms`: each
 /// joint's extra terms, a list per joint of `(kind, [(hyper-parameter, value), ...], value)` of
 /// the one-axis model's kinds (`TERM_TABLE`), acting where the joint's friction acts;
-/// `load_friction` each joint's friction growing with the torque it carries (μ, 0 for none).
+/// `load_friction` each joint's friction growing with the torque it carries (μ, 0 for none);
+/// `backlash` each elastic joint's dead zone between rotor and link (total width, rad or m; 0 for
+/// none; None: none on any joint).
 #[pyfunction]
-#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law, u_ext=None, delay=None, force_lag=None, stiffness=None, damping=None, terms=None, load_friction=None))]
+#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law, u_ext=None, delay=None, force_lag=None, stiffness=None, damping=None, terms=None, load_friction=None, backlash=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate_robot<'py>(
     py: Python<'py>,
@@ -257,6 +259,7 @@ pub fn simulate_robot<'py>(
     damping: Option<Vec<f64>>,
     terms: Option<Vec<Vec<JointTerm>>>,
     load_friction: Option<Vec<f64>>,
+    backlash: Option<Vec<f64>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let (rows, n) = (qr.as_array().nrows(), robot.inner.ndof());
     let qr = flat(&qr);
@@ -308,6 +311,7 @@ pub fn simulate_robot<'py>(
             laws,
             stiffness: stiffness.unwrap_or_default(),
             damping: damping.unwrap_or_default(),
+            backlash: backlash.unwrap_or_default(),
             terms,
             load_friction: load_friction.unwrap_or_default(),
         };

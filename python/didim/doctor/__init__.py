@@ -833,10 +833,10 @@ def doctor(
     from ..robots import Robot
 
     if _robot_plant(model, recording):
-        offset = None  # a bare robot: its model's default (an offset per joint)
-        if isinstance(model, Model) and model.robot is not None:  # a robot's model: its robot and offset
-            model, offset = model.robot, model.offset
-        if not isinstance(model, Robot) or not _has_joint_columns(recording):
+        # a bare robot: its rigid model with an offset per joint; a robot's model whole (its elastic joints, backlash,
+        # terms, offset: the base the doctor grows)
+        robot = model.robot if isinstance(model, Model) else model
+        if not isinstance(robot, Robot) or not _has_joint_columns(recording):
             raise DataError("a robot's record is diagnosed with its didim.Robot: didim.doctor(rec, robot, "
                             "validate=...) with rec = didim.load_record(path, robot=robot)")
         if apM is not None:
@@ -844,7 +844,7 @@ def doctor(
         from .robot import doctor_robot
 
         return doctor_robot(recording, model, validate, progress=progress,  # type: ignore[return-value]
-                            controller_check=controller_check, offset=offset, alpha=alpha, max_findings=max_findings,
+                            controller_check=controller_check, alpha=alpha, max_findings=max_findings,
                             initial=initial, frozen=frozen)
     if initial is not None:
         raise DataError("initial is a robot's result its doctor starts from; one axis's doctor starts from apM")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -153,7 +153,7 @@ def joint_regressors(res: IdentificationResult, sim: Dict[str, np.ndarray]) -> L
     terms' under the result's law: what the force the model explains is a combination of, joint by joint."""
     model, base = res.structure, res.base
     law = res.law if res.law is not None else ("algebraic", (0.0,) * model.robot.ndof)
-    motor = _Motor.of(sim, elastic_of(model))
+    motor = _Motor.of(sim, elastic_of(model), model.gaps)
     cols, _ = _model_columns(model.robot, base, sim["q"], sim["qd"], sim["qdd"], _Layout.for_model(model, base), motor)
     v = sim["qd"] if motor is None else motor.friction_speeds(sim["qd"])
     x = sim["q"] if motor is None else motor.friction_positions(sim["q"])
@@ -413,10 +413,25 @@ class _Motor:
     theta: np.ndarray
     thetad: np.ndarray
     thetadd: np.ndarray
+    #: each joint's backlash (total width of the dead zone between rotor and link; 0 for none)
+    gaps: Tuple[float, ...] = ()
 
     @classmethod
-    def of(cls, sim: Dict[str, np.ndarray], elastic: Tuple[int, ...]) -> Optional["_Motor"]:
-        return cls(elastic, sim["theta"], sim["thetad"], sim["thetadd"]) if elastic else None
+    def of(cls, sim: Dict[str, np.ndarray], elastic: Tuple[int, ...], gaps: Sequence[float] = ()
+           ) -> Optional["_Motor"]:
+        return cls(elastic, sim["theta"], sim["thetad"], sim["thetadd"], tuple(gaps)) if elastic else None
+
+    def coupling(self, q: np.ndarray, v: np.ndarray, j: int) -> Tuple[np.ndarray, np.ndarray]:
+        """Elastic joint ``j``'s spring stretch and its rate as the spring and its damping feel them (the columns of
+        K and D): ``θ − q`` and ``θ̇ − q̇``; with backlash b, ``dz(θ − q)`` (``sign(x)·max(|x| − b/2, 0)``) and the
+        rate in contact only (the core's coupling)."""
+        stretch, rate = self.theta[:, j] - q[:, j], self.thetad[:, j] - v[:, j]
+        gap = self.gaps[j] if self.gaps else 0.0
+        if gap > 0:
+            half = 0.5 * gap
+            stretch = np.sign(stretch) * np.maximum(np.abs(stretch) - half, 0.0)
+            rate = np.where(stretch != 0, rate, 0.0)
+        return stretch, rate
 
     def friction_speeds(self, v: np.ndarray) -> np.ndarray:
         """Each joint's speed under its friction: the rotor's on an elastic joint, the link's on a rigid one."""
@@ -462,7 +477,7 @@ def _model_columns(robot: Robot, base: BaseParameters, q, v, a, lay: "_Layout", 
             out.append((act, m))
             continue
         assert motor is not None
-        stretch, rate = motor.theta[:, j] - q[:, j], motor.thetad[:, j] - v[:, j]
+        stretch, rate = motor.coupling(q, v, j)
         act = np.array([lay.ia(e), lay.fv(j)] + ([lay.of(j)] if offset else []) + [lay.k(e), lay.d(e)])
         cols = [motor.thetadd[:, j], motor.thetad[:, j]] + ([np.ones(len(q))] if offset else []) + [stretch, rate]
         out.append((act, np.asfortranarray(np.column_stack(cols))))
@@ -529,13 +544,16 @@ class _InverseModel:
         # an elastic joint's link rows (against zero) follow its motor rows: every row, at any speed (no friction
         # acts there)
         self.link_rows = [0] * n
+        self.link_keep: Dict[int, np.ndarray] = {}
+        self.motor, self.q, self.qd = motor, q, v
         if links:
             ends = list(self.lay.elastic)
             lk = _rows(dec, np.zeros((len(q), len(ends))), links, self.lay.size, v[:, ends], np.zeros(len(ends)),
                        start_row)
-            for j, (yd, wd, _) in zip(ends, lk):
+            for j, (yd, wd, keep) in zip(ends, lk):
                 self.parts[j] = (np.concatenate([self.parts[j][0], yd]), np.concatenate([self.parts[j][1], wd]))
                 self.link_rows[j] = len(yd)
+                self.link_keep[j] = keep
 
     def columns(self, columns: List[Tuple[int, np.ndarray]]) -> List[np.ndarray]:
         """Full-rate columns, each on joint ``j``'s rows (``(j, values)``), decimated together in one pass of the
@@ -593,6 +611,33 @@ class _InverseModel:
         """Weighted least squares (:func:`_weighted_fit`) under ``law``: the estimate, its covariance and the
         regression's residual; ``held``: parameters (by index in θ) held at given values."""
         return _weighted_fit(self.rows(law, coulomb), held)
+
+    def gap_fit(self, law: Law, stiffness: Dict[int, float], held: Optional[Dict[int, float]] = None
+                ) -> Tuple[np.ndarray, np.ndarray]:
+        """The least squares with one more column per elastic joint with backlash (``stiffness``: joint → its
+        spring's K): the spring's torque's derivative in the dead zone's width b, ``−(K/2)·sign(x)`` where the rotor
+        and the link are in contact (``x = θ − q`` beyond ``b/2``) on its motor rows and its negative on its link rows,
+        whose coefficient is the step of b that the force asks for (a Gauss–Newton step, as ε's). Returns each
+        joint's step and its standard deviation (in ``stiffness``'s order)."""
+        js = list(stiffness)
+        full = []
+        for j in js:
+            x = self.motor.theta[:, j] - self.q[:, j]
+            half = 0.5 * self.motor.gaps[j]
+            full.append(-0.5 * stiffness[j] * np.sign(x) * (np.abs(x) > half))
+        dec = self.dec.columns(np.column_stack(full))
+        parts = []
+        for j, (yd, wd) in enumerate(self.rows(law)):
+            extra = np.zeros((len(yd), len(js)))
+            if j in js:
+                i = js.index(j)
+                m = int(np.count_nonzero(self.keep[j]))
+                extra[:m, i] = dec[self.keep[j], i]
+                extra[m:, i] = -dec[self.link_keep[j], i]
+            parts.append((yd, np.concatenate([wd, extra], axis=1)))
+        est, cov, _ = _weighted_fit(parts, held)
+        k = len(js)
+        return est[-k:], np.sqrt(np.maximum(np.diag(cov)[-k:], 0.0))
 
 
 #: Relative step of ε in the law's central difference.
@@ -1041,7 +1086,7 @@ def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law,
                                    coulomb_law=[law[0]] * len(law[1]), u_ext=u_ext,
                                    delay=list(rec.delay) or None, force_lag=list(rec.force_lag) or None,
                                    stiffness=d.get("stiffness"), damping=d.get("damping"), terms=d.get("terms"),
-                                   load_friction=d.get("load_friction"))
+                                   load_friction=d.get("load_friction"), backlash=d.get("backlash"))
     except DataError as e:
         raise SimulationError(f"the robot's closed loop cannot be simulated with these parameters: {e}") from None
     return {k: v[lead:] for k, v in sim.items()} if lead else sim
@@ -1269,6 +1314,8 @@ def _model_of(model: Model, base: BaseParameters, theta: np.ndarray):
         for i, (j, t) in enumerate(joint_terms(model)):
             d["terms"][j].append((t.kind, list(t.hyper_values), float(theta[lay.t(i)])))
         d["term_values"] = [float(theta[lay.t(i)]) for i in range(len(lay.terms))]
+    if model.backlash_gap is not None:
+        d["backlash"] = list(model.gaps)
     if lay.load:
         d["load_friction"] = [0.0] * n
         for i, j in enumerate(lay.load):
@@ -1335,7 +1382,7 @@ class _RobotPlant:
         # the grown model's law while they compare sizes of an effect, as one axis's do)
         self.hold_law = model.law is not None
         self.law_chosen = self.hold_law
-        self.inverses: List[Tuple[np.ndarray, _InverseModel]] = []
+        self.inverses: List[Tuple[np.ndarray, Any, _InverseModel]] = []
         self.last: Optional[Tuple[np.ndarray, Law, Any]] = None  # the last simulation (θ, law, its outputs)
         self.free = list(range(self.lay.size))
         self.start_row = 0  # the decimated rows before the simulation joins the record, left out (set_start)
@@ -1364,12 +1411,14 @@ class _RobotPlant:
         return _model_of(self.structure, self.base, theta)
 
     def simulate(self, theta: np.ndarray):
-        if self.last is not None and self.last[1] == self.law and np.array_equal(self.last[0], theta):
+        key = (self.law, self.structure.backlash_gap)
+        if self.last is not None and self.last[1] == key and np.array_equal(self.last[0], theta):
             return self.last[2]
         robot, d = self.model(theta)
         sim = _simulate(self.rec, robot, d, self.law)
         sim["law"] = self.law
-        self.last = (theta.copy(), self.law, sim)
+        sim["backlash_gap"] = self.structure.backlash_gap
+        self.last = (theta.copy(), key, sim)
         return sim
 
     def output_error(self, sim) -> float:
@@ -1386,13 +1435,15 @@ class _RobotPlant:
     def inverse(self, theta: np.ndarray, sim) -> _InverseModel:
         """The inverse model on the simulated states of θ (the last few kept: the law's search refits on the best
         iterate's)."""
-        for th, im in self.inverses:
-            if np.array_equal(th, theta):
+        gaps = sim.get("backlash_gap")
+        for th, g, im in self.inverses:
+            if g == gaps and np.array_equal(th, theta):
                 return im
-        im = _InverseModel(self.rec, self.structure, self.base, sim["q"], sim["qd"], sim["qdd"], self.dec,
-                           start_row=self.start_row, motor=_Motor.of(sim, self.elastic),
+        structure = replace(self.structure, backlash_gap=gaps)
+        im = _InverseModel(self.rec, structure, self.base, sim["q"], sim["qd"], sim["qdd"], self.dec,
+                           start_row=self.start_row, motor=_Motor.of(sim, self.elastic, structure.gaps),
                            chain=self.model(theta)[0] if self.lay.load else None)
-        self.inverses = [(theta.copy(), im)] + self.inverses[:3]
+        self.inverses = [(theta.copy(), gaps, im)] + self.inverses[:3]
         return im
 
     def solve(self, theta: np.ndarray, sim) -> Dict[str, Any]:
@@ -1411,6 +1462,21 @@ class _RobotPlant:
                 new = np.where(moved, np.clip(eps + step, eps / 2, 2 * eps), eps)
                 self.law = (self.law[0], tuple(float(e) for e in new))
                 self.say("smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new) + f" {speed_unit(rec)}")
+        gapped = {j: float(theta[self.lay.k(self.elastic.index(j))]) for j in self.elastic
+                  if sim.get("backlash_gap") and sim["backlash_gap"][j] > 0}
+        if gapped:
+            # each dead zone's width with the parameters (as ε's: moved where the force determines it, by at most a
+            # factor of 2 per iteration), for the next simulation
+            step, sd = inverse.gap_fit(self.law, gapped, held=self.held)
+            gaps = list(sim["backlash_gap"])
+            for (j, _), dg, sg in zip(gapped.items(), step, sd):
+                b = gaps[j]
+                if sg <= EPS_SIGMA_MAX * b:
+                    gaps[j] = float(np.clip(b + dg, b / 2, 2 * b))
+            if tuple(gaps) != tuple(self.structure.gaps):
+                self.structure = replace(self.structure, backlash_gap=tuple(gaps))
+                self.say("backlash " + ", ".join(f"{self.robot.joint_names[j]} {gaps[j]:.4g}" for j in gapped)
+                         + " (rad or m)")
         est, cov, res = inverse.fit(self.law, held=self.held)
         # a spring's damping is not negative: where the least squares ask for less than none, it is held at none and
         # the rest fitted again (the bound active for this iteration only). Shortening the step cannot keep it
@@ -1421,7 +1487,7 @@ class _RobotPlant:
         if below:
             est, cov, res = inverse.fit(self.law, held={**self.held, **below})
         return {"params": est, "covariance": cov, "std": np.sqrt(np.maximum(np.diag(cov), 0.0)), "law": sim["law"],
-                "force_errors": force_errors(rec, sim["force"]), **res}
+                "backlash_gap": sim.get("backlash_gap"), "force_errors": force_errors(rec, sim["force"]), **res}
 
     def physical(self, new: np.ndarray, old) -> bool:
         """Finite, and each elastic joint's rotor inertia and stiffness positive, its damping not negative (the
@@ -1449,7 +1515,7 @@ class _RobotPlant:
             self.say(f"the simulation joins the record after {1e3 * self.skip * self.rec.dt:.0f} ms: the samples "
                      "before are left out of the fits")
         # each shape with the parameters one least squares gives with it on the best iterate's simulated states
-        inverse = next((im for th, im in self.inverses if np.array_equal(th, best)), None)
+        inverse = next((im for th, _, im in self.inverses if np.array_equal(th, best)), None)
         if inverse is None:
             inverse = self.inverse(best, self.simulate(best))
 
@@ -2081,7 +2147,7 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
     if rigid is None:
         cut = rigid_step_cutoff(rec) if rigid_cutoff_hz is None else rigid_cutoff_hz
         say(f"step 1: DIDIM on the rigid model, below the modes (decimation's low-pass at {cut:.3g} Hz)")
-        rigid_model = replace(model, elastic=(), kind="rigid")
+        rigid_model = replace(model, elastic=(), kind="rigid", backlash_gap=None)
         names_r = set(_theta_names(rigid_model, base_parameters(robot)))
         rigid = didim(rec, rigid_model, max_iter=max_iter, tol=tol, progress=progress,
                       frozen={k: v for k, v in (frozen or {}).items() if k in names_r} or None, cutoff_hz=cut)
@@ -2239,7 +2305,8 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
                    "better than the rigid one (" + "; ".join(
                        f"{j} {100 * per[j]:.2f} % against {100 * rigid_per[j]:.2f} %" for j in flat)
                    + "); their K and D mean nothing: model them rigid")
-    res = _result("didim", rec, model.with_law(sol["law"]), split.base, theta, sol["covariance"],
+    res = _result("didim", rec, replace(model.with_law(sol["law"]), backlash_gap=sol.get("backlash_gap")), split.base,
+                  theta, sol["covariance"],
                   converged=run.converged and not flat,
                   iterations=len(run.history), message=message,
                   history=iterations_of(run.errors), notes=notes + run.notes)

@@ -14,13 +14,18 @@
 //!   M(q) q̈ + c(q, q̇) + g(q) = τ,  τ_j = K (θ − q) + D (θ̇ − q̇)      (link side)
 //! ```
 //!
+//! An elastic joint may have backlash: a dead zone of total width b between rotor and link, across
+//! which they move apart; the spring and its damping act only in contact,
+//! `τ_j = K dz(θ − q) + D (θ̇ − q̇)·[|θ − q| > b/2]`, `dz(x) = sign(x)·max(|x| − b/2, 0)` (one axis's
+//! backlash, [`crate::model::dead_zone`]).
+//!
 //! A rigid joint has θ = q, its rotor inertia added to the chain's (armature) and its friction
 //! at the link speed, as the one-axis rigid model. The one-axis two-mass model (eqs. (1)–(3)) is
 //! this plant's elastic joint on a chain of one body.
 
 use crate::controller::TransferFunction;
 use crate::error::{invalid, Error, Result};
-use crate::model::{Basis, FrictionLaw};
+use crate::model::{dead_zone, Basis, FrictionLaw};
 use crate::sim::closed_loop::{self, Plant};
 use crate::sim::drive::{JointDrive, Start};
 
@@ -42,6 +47,9 @@ pub struct Drives {
     pub stiffness: Vec<f64>,
     /// The springs' damping (N·m·s/rad or N·s/m; ignored on rigid joints); empty: none.
     pub damping: Vec<f64>,
+    /// Each elastic joint's backlash: the total width (rad or m) of a dead zone between its rotor
+    /// and its link, 0 for none (and on every rigid joint); empty: none on any joint.
+    pub backlash: Vec<f64>,
     /// Each joint's extra terms beside its viscous and Coulomb friction and offset: one axis's basis
     /// functions ([`Basis`], of dof 0: a Stribeck hump, direction-dependent friction, a torque
     /// along the stroke such as a counterbalance's `A sin(q + φ)`) and their values, acting where
@@ -122,6 +130,27 @@ impl Drives {
                 ));
             }
         }
+        if !self.backlash.is_empty() && self.backlash.len() != n {
+            return Err(invalid!(
+                "backlash has {} values; the robot has {n} joints (give none for no backlash)",
+                self.backlash.len()
+            ));
+        }
+        let elastic = self.elastic();
+        for (j, &b) in self.backlash.iter().enumerate() {
+            if !(b.is_finite() && b >= 0.0) {
+                return Err(invalid!(
+                    "joint {}'s backlash is {b}: it must be finite and >= 0 (rad or m)",
+                    j + 1
+                ));
+            }
+            if b > 0.0 && !elastic.contains(&j) {
+                return Err(invalid!(
+                    "joint {} has backlash ({b}) but is rigid: backlash is a dead zone between an elastic joint's rotor and link (make the joint elastic)",
+                    j + 1
+                ));
+            }
+        }
         if !self.load_friction.is_empty() && self.load_friction.len() != n {
             return Err(invalid!(
                 "load-dependent friction has {} values; the robot has {n} joints (give none for no such friction)",
@@ -175,6 +204,29 @@ impl Drives {
             out[j] = 0.0;
         }
         out
+    }
+
+    /// Joint `j`'s backlash (total width of its dead zone; 0 for none).
+    #[inline(always)]
+    fn gap(&self, j: usize) -> f64 {
+        self.backlash.get(j).copied().unwrap_or(0.0)
+    }
+
+    /// The torque elastic joint `j`'s spring and damping carry at the rotor-minus-link stretch `x`
+    /// and its rate `r`: in contact only, with backlash.
+    #[inline(always)]
+    pub fn spring(&self, j: usize, x: f64, r: f64) -> f64 {
+        let d = self.damping.get(j).copied().unwrap_or(0.0);
+        let b = self.gap(j);
+        if b == 0.0 {
+            return self.stiffness[j] * x + d * r;
+        }
+        let s = dead_zone(x, b);
+        if s == 0.0 {
+            0.0
+        } else {
+            self.stiffness[j] * s + d * r
+        }
     }
 
     /// The friction, offset and extra terms' torque of joint `j` at position `x` and speed `v`.
@@ -344,8 +396,7 @@ impl Dynamics<'_> {
         for (e, &j) in self.elastic.iter().enumerate() {
             // the spring's torque drives the link; the drive's force, less the motor side's friction and
             // the spring's reaction, the rotor
-            let spring =
-                d.stiffness[j] * (theta[e] - q[j]) + d.damping.get(j).map_or(0.0, |c| c * (omega[e] - v[j]));
+            let spring = d.spring(j, theta[e] - q[j], omega[e] - v[j]);
             let w = omega[e];
             let friction = d.resist_one(j, theta[e], w) + d.load_part(j, w, spring);
             dtheta[e] = w;
@@ -741,7 +792,19 @@ pub fn simulate_robot(
 /// Each elastic joint's link position at rest with its rotor at `x`'s: where the spring holds the
 /// link side's static torque, `K (θ − q) = g(q)`, by fixed-point steps `q ← θ − g(q)/K` (a
 /// contraction while the springs are stiffer than gravity's slope, as a transmission's are by
-/// orders of magnitude), to rounding.
+/// orders of magnitude), to rounding; with backlash, the link hangs on the far side of its gap,
+/// `q ← θ − g(q)/K − sign(g)·b/2`.
+/// The sign of `x`, 0 at 0 (a link that no torque holds sits in the middle of its gap).
+fn sign(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
 fn settle_links(robot: &Robot, drives: &Drives, elastic: &[usize], x: &mut [f64]) -> Result<()> {
     if elastic.is_empty() {
         return Ok(());
@@ -752,7 +815,7 @@ fn settle_links(robot: &Robot, drives: &Drives, elastic: &[usize], x: &mut [f64]
         let g = robot.rnea(&x[..n], &rest, &rest)?;
         let mut moved: f64 = 0.0;
         for (e, &j) in elastic.iter().enumerate() {
-            let q = x[2 * n + e] - g[j] / drives.stiffness[j];
+            let q = x[2 * n + e] - g[j] / drives.stiffness[j] - 0.5 * drives.gap(j) * sign(g[j]);
             moved = moved.max((q - x[j]).abs());
             x[j] = q;
         }

@@ -362,6 +362,7 @@ fn cart_drives() -> Drives {
         laws: vec![crate::model::FrictionLaw::algebraic(1e-4)],
         stiffness: Vec::new(),
         damping: Vec::new(),
+        backlash: Vec::new(),
         terms: Vec::new(),
         load_friction: Vec::new(),
     }
@@ -591,6 +592,7 @@ fn an_elastic_one_joint_robot_is_the_one_axis_two_mass_model() {
         laws: vec![crate::model::FrictionLaw::algebraic(1e-4)],
         stiffness: vec![k12],
         damping: vec![0.0],
+        backlash: Vec::new(),
         terms: Vec::new(),
         load_friction: Vec::new(),
     };
@@ -608,6 +610,85 @@ fn an_elastic_one_joint_robot_is_the_one_axis_two_mass_model() {
         &[(&axis.q[0], &arm.theta), (&axis.q[1], &arm.q)],
         scale,
     );
+}
+
+#[test]
+fn an_elastic_joint_with_backlash_is_the_one_axis_two_mass_model_with_backlash() {
+    use crate::model::{flexible, Basis};
+    use crate::sim::{simulate, Integrator, SimOptions};
+    use crate::Controller;
+    // as above, K12 replaced by one axis's spring with a dead zone of 0.4 mm (the stretch of the
+    // move's force is about 0.05 mm: the load crosses the gap at each reversal)
+    let (m1, fv1, fc1, m2, k12, gap) = (30.0, 150.0, 20.0, 65.0, 4.0e5, 4e-4);
+    let (dt, n) = (1e-3, 3000);
+    let qr: Vec<f64> = (0..n)
+        .map(|k| {
+            let t = k as f64 * dt;
+            0.1 * (1.0 - (4.0 * std::f64::consts::PI * t / (n as f64 * dt)).cos())
+        })
+        .collect();
+    let axis_opts = SimOptions {
+        integrator: Integrator::Rk4,
+        substeps: 10,
+        ..SimOptions::new(dt)
+    };
+    let model = flexible(1e-4)
+        .unwrap()
+        .with_basis("K12", Basis::Backlash { a: 0, b: 1, gap })
+        .unwrap();
+    let axis = simulate(
+        &model,
+        &[m1, fv1, fc1, m2, 0.0, 0.0, k12],
+        &Controller::EMPS,
+        &qr,
+        None,
+        &axis_opts,
+    )
+    .unwrap();
+    let drives = Drives {
+        armature: vec![m1],
+        viscous: vec![fv1],
+        coulomb: vec![fc1],
+        offset: vec![0.0],
+        laws: vec![crate::model::FrictionLaw::algebraic(1e-4)],
+        stiffness: vec![k12],
+        damping: vec![0.0],
+        backlash: vec![gap],
+        terms: Vec::new(),
+        load_friction: Vec::new(),
+    };
+    let law = Controller::EMPS.law(dt).unwrap();
+    let opts = RobotLoopOptions::new(dt, 10, vec![0.0], vec![0.0]);
+    let arm = simulate_robot(&cart(m2), &drives, &[law], &qr, &opts).unwrap();
+    let scale = axis.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    // the load crosses the gap: the stretch exceeds half of it both ways
+    let (lo, hi) = (0..n).fold((0.0f64, 0.0f64), |(l, h), k| {
+        let x = arm.theta[k] - arm.q[k];
+        (l.min(x), h.max(x))
+    });
+    assert!(hi > 0.5 * gap && lo < -0.5 * gap, "the load should cross the gap: {lo} .. {hi}");
+    assert_same_loop(
+        &axis.force,
+        &arm.force,
+        &[(&axis.q[0], &arm.theta), (&axis.q[1], &arm.q)],
+        scale,
+    );
+    // and the gap matters: without it, another loop
+    let rigid_gap = Drives {
+        backlash: Vec::new(),
+        ..drives.clone()
+    };
+    let other = simulate_robot(&cart(m2), &rigid_gap, &[law], &qr, &opts).unwrap();
+    let moved = (0..n).fold(0.0f64, |m, k| m.max((other.q[k] - arm.q[k]).abs()));
+    assert!(moved > 0.25 * gap, "backlash should move the load: {moved}");
+}
+
+#[test]
+fn backlash_on_a_rigid_joint_is_refused() {
+    let mut drives = cart_drives();
+    drives.backlash = vec![1e-3];
+    let err = drives.validate(1).unwrap_err().to_string();
+    assert!(err.contains("rigid") && err.contains("elastic"), "{err}");
 }
 
 #[test]
@@ -631,6 +712,7 @@ fn an_elastic_arm_at_rest_stays_at_rest_with_its_springs_holding_gravity() {
         laws: vec![crate::model::FrictionLaw::algebraic(1e-3)],
         stiffness: vec![k],
         damping: vec![0.5],
+        backlash: Vec::new(),
         terms: Vec::new(),
         load_friction: Vec::new(),
     };
@@ -672,6 +754,7 @@ fn a_joints_load_dependent_friction_grows_with_the_torque_its_link_asks() {
         laws: vec![crate::model::FrictionLaw::algebraic(1e-3)],
         stiffness: Vec::new(),
         damping: Vec::new(),
+        backlash: Vec::new(),
         terms: Vec::new(),
         load_friction: vec![mu],
     };
