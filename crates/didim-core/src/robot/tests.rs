@@ -666,7 +666,10 @@ fn an_elastic_joint_with_backlash_is_the_one_axis_two_mass_model_with_backlash()
         let x = arm.theta[k] - arm.q[k];
         (l.min(x), h.max(x))
     });
-    assert!(hi > 0.5 * gap && lo < -0.5 * gap, "the load should cross the gap: {lo} .. {hi}");
+    assert!(
+        hi > 0.5 * gap && lo < -0.5 * gap,
+        "the load should cross the gap: {lo} .. {hi}"
+    );
     assert_same_loop(
         &axis.force,
         &arm.force,
