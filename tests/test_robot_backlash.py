@@ -5,6 +5,8 @@ dead zone in its elastic SCARA shoulder: didim's loop with the truth replays the
 estimates the width with the parameters from a third of it; the robot doctor, given the elastic model without it,
 names it on the shoulder and the held-out error falls."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -21,14 +23,14 @@ def lift(tmp_path_factory):
     bench = bench_module("elastic_robots")
     tmp = tmp_path_factory.mktemp("lift_backlash")
     cad, truth, records, _ = bench.held_out_robot("lift_backlash", tmp, seconds=(8.0, 4.0))
-    return bench, cad, truth, records
+    return bench, cad, truth, records, tmp
 
 
 def test_the_truth_with_its_dead_zone_in_didims_loop_replays_the_record_to_its_floor(lift):
     """The independent loop and didim's core agree on the dead zone: the truth replays the training record within 3 %
     of its truth floor (the noise inside the loop, which didim's loop does not have); without the dead zone, the
     shoulder's force ten times its floor and more."""
-    bench, cad, truth, records = lift
+    bench, cad, truth, records, _ = lift
     rec, floor, floor_j = records["train"]
     sim = bench.replay_truth(rec, cad, truth)
     assert force_errors(rec, sim["force"])[0] == pytest.approx(floor, rel=0.03)
@@ -41,7 +43,7 @@ def test_didim_estimates_the_dead_zone_with_the_parameters(lift):
     step with the parameters moves it to within 10 % (measured 0.967 mrad from 0.3 on the 12 s record), the
     shoulder's spring within 10 % (-4.7 %) and the validation record within 1.2 times its floor (1.02); without the
     dead zone the same model misses the shoulder's force by 20 % and more and its spring by half."""
-    _, cad, truth, records = lift
+    _, cad, truth, records, _ = lift
     rec, val = records["train"][0], records["valid"][0]
     vfloor = records["valid"][1]
     model = didim.Model(robot=cad, elastic=["lift", "shoulder"], backlash_gap={"shoulder": 1e-3 / 3})
@@ -60,7 +62,7 @@ def test_the_robot_doctor_names_the_dead_zone_on_its_joint(lift):
     """The doctor given the elastic model without the dead zone: the first finding is backlash on the shoulder, its
     width within 15 % of the truth (0.984 mrad measured on the 12 s records), the held-out force error of the shoulder
     down by half at least (22.3 % -> 2.7 % on the 12 s records)."""
-    _, cad, truth, records = lift
+    _, cad, truth, records, _ = lift
     rec, val = records["train"][0], records["valid"][0]
     d = didim.doctor(rec, didim.Model(robot=cad, elastic=["lift", "shoulder"], offset=True), val, max_findings=1)
     assert d.findings, d.summary()
@@ -72,8 +74,6 @@ def test_the_robot_doctor_names_the_dead_zone_on_its_joint(lift):
 
 def test_a_robots_backlash_is_checked_where_it_enters():
     """One width per joint or {joint: width}; on an elastic joint only; kept per joint, None when no joint has one."""
-    from pathlib import Path
-
     cad = didim.Robot.from_urdf(Path(__file__).resolve().parents[1] / "examples" / "kr300" / "kr300.urdf")
     names = cad.joint_names
     m = didim.Model(robot=cad, elastic=[names[1]], backlash_gap={names[1]: 2e-3})
@@ -91,3 +91,33 @@ def test_a_robots_backlash_is_checked_where_it_enters():
         didim.Model(robot=cad, elastic=[names[1]], backlash_gap={names[1]: -1e-3})
     assert m.with_backlash(names[1], None).backlash_gap is None
     assert np.isclose(m.with_backlash(names[1], 5e-3).gaps[1], 5e-3)
+
+
+def test_the_command_line_carries_the_dead_zone_to_the_fit(lift, tmp_path):
+    """``didim identify REC --urdf U --elastic J1,J2 --backlash J=WIDTH --json OUT``: the model the fit receives has the
+    dead zone (the result's model saves its width, which DIDIM moved from the start); a width without --elastic, or
+    not JOINT=WIDTH, is refused naming what to give."""
+    import json
+    import subprocess
+    import sys
+
+    tmp = lift[4]
+    csv = tmp / "lift_backlash_train.csv"
+    urdf, ctl = tmp / "lift_backlash_cad.urdf", tmp / "lift_backlash_controller.json"
+    out = tmp_path / "r.json"
+
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "didim", *args], capture_output=True, text=True, timeout=600)
+
+    p = run("identify", str(csv), "--urdf", str(urdf), "--controller", str(ctl), "--elastic", "lift,shoulder",
+            "--backlash", "shoulder=0.0005", "--json", str(out), "--quiet")
+    assert out.exists(), p.stderr
+    gaps = json.loads(out.read_text())["backlash_gap"]
+    assert didim.load_result(out).structure.gaps == tuple(gaps)
+    assert gaps[0] == 0 and gaps[2] == 0 and gaps[1] == pytest.approx(1e-3, rel=0.10), gaps
+    p = run("identify", str(csv), "--urdf", str(urdf), "--controller", str(ctl), "--backlash", "shoulder=0.0005",
+            "--quiet")
+    assert p.returncode != 0 and "--elastic" in p.stderr, p.stderr
+    p = run("identify", str(csv), "--urdf", str(urdf), "--controller", str(ctl), "--elastic", "shoulder",
+            "--backlash", "shoulder", "--quiet")
+    assert p.returncode != 0 and "JOINT=WIDTH" in p.stderr, p.stderr

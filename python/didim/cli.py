@@ -110,12 +110,7 @@ def cmd_identify_robot(args) -> int:
     opts = {k: v for k, v in (("max_iter", args.max_iter), ("tol", args.tol)) if v is not None}
     if opts and args.method not in ("didim", "oe-lm"):
         raise DataError("--max-iter and --tol apply to didim and oe-lm")
-    from .model import as_model
-
-    elastic = [x.strip() for x in args.elastic.split(",")] if args.elastic else None
-    if elastic == ["all"]:
-        elastic = list(robot.joint_names)
-    model = as_model(robot, offset=args.offset, elastic=elastic)  # the robot's model, carried whole to the fit
+    model = _robot_model(args, robot)  # the robot's model, carried whole to the fit
     if args.start:
         opts["initial"] = _start_result(args.start)
     res = identify(rec, model, args.method, progress=_progress(args.quiet), controller_check=args.controller_check,
@@ -146,11 +141,12 @@ def cmd_identify(args) -> int:
 
     if args.urdf:
         return cmd_identify_robot(args)
-    if args.joints or args.elastic:
+    given = [f for f, v in (("--joints", args.joints), ("--elastic", args.elastic), ("--backlash", args.backlash)) if v]
+    if given:
         from ._errors import DataError
 
-        raise DataError(f"{'--joints' if args.joints else '--elastic'} names a robot's joints: give the robot with "
-                        "--urdf (one axis's two masses are --model flexible)")
+        raise DataError(f"{given[0]} names a robot's joints: give the robot with --urdf (one axis's two masses are "
+                        "--model flexible)")
     if args.start:
         from ._errors import DataError
 
@@ -479,10 +475,13 @@ def cmd_doctor(args) -> int:
     if args.urdf:
         d = _robot_diagnosis(args)
     else:
-        if args.joints:
+        given = [f for f, v in (("--joints", args.joints), ("--elastic", args.elastic), ("--backlash", args.backlash))
+                 if v]
+        if given:
             from ._errors import DataError
 
-            raise DataError("--joints picks a URDF's joints: give --urdf too")
+            raise DataError(f"{given[0]} names a URDF's joints: give --urdf too (one axis's two masses are --model "
+                            "flexible)")
         rec = _load(args, args.file)
         val = _load(args, args.validate) if args.validate else None
         from .doctor import BaseFitError
@@ -533,9 +532,36 @@ def _robot_diagnosis(args):
     robot = Robot.from_urdf(args.urdf, _joints(args))
     rec = _robot_record(args, args.file, robot)
     val = _robot_record(args, args.validate, robot) if args.validate else None
-    return doctor(rec, robot, val, alpha=args.alpha, progress=_progress(args.quiet),
+    return doctor(rec, _robot_model(args, robot), val, alpha=args.alpha, progress=_progress(args.quiet),
                   controller_check=args.controller_check,
                   initial=_start_result(args.start) if args.start else None)
+
+
+def _robot_model(args, robot):
+    """The robot's model of the command line: its offset (--offset), elastic joints (--elastic) and their backlash
+    (--backlash J=WIDTH,...: each dead zone's total width in the joint's units, rad or m, from which DIDIM estimates it)."""
+    from ._errors import DataError
+    from .model import as_model
+
+    elastic = [x.strip() for x in args.elastic.split(",")] if getattr(args, "elastic", None) else None
+    if elastic == ["all"]:
+        elastic = list(robot.joint_names)
+    gaps = None
+    if getattr(args, "backlash", None):
+        gaps = {}
+        for item in args.backlash.split(","):
+            name, eq, value = item.partition("=")
+            try:
+                gaps[name.strip()] = float(value)
+            except ValueError:
+                eq = ""
+            if not eq:
+                raise DataError(f"--backlash takes JOINT=WIDTH pairs (the dead zone's total width, rad or m), got "
+                                f"{item!r}")
+        if not elastic:
+            raise DataError("--backlash is a dead zone between an elastic joint's rotor and its link: name the joints "
+                            "with --elastic too")
+    return as_model(robot, offset=getattr(args, "offset", None), elastic=elastic, backlash_gap=gaps)
 
 
 def _joints(args):
@@ -672,6 +698,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--elastic", metavar="J1,J2|all", help="with --urdf: the joints whose transmission is elastic (a "
                    "spring K and damping D between rotor and link), by name or number, or all; --method didim runs "
                    "the three-step DIDIM, --method oe-lm output error from there")
+    i.add_argument("--backlash", metavar="J=WIDTH,..", help="with --elastic: a dead zone between an elastic joint's "
+                   "rotor and its link, its total width (rad or m) to start from; DIDIM estimates it")
     i.add_argument("--start", metavar="RESULT.json", help="with --urdf: a result of the same robot (a saved "
                    "identification, or published values) that didim and oe-lm start from instead of the URDF's values")
     i.add_argument("--json", metavar="OUT", help="write the result as JSON")
@@ -693,6 +721,9 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--urdf", metavar="URDF", help="a robot's record: its URDF; the base model is fitted by DIDIM and "
                    "each joint's mismatch located")
     o.add_argument("--joints", metavar="J1,J2,..", help="with --urdf: the actuated joints, as for identify")
+    o.add_argument("--elastic", metavar="J1,J2|all", help="with --urdf: the base model's elastic joints, as for "
+                   "identify (the doctor then looks for backlash on them too)")
+    o.add_argument("--backlash", metavar="J=WIDTH,..", help="with --elastic: the base model's dead zones, as for identify")
     o.add_argument("--start", metavar="RESULT.json", help="with --urdf: a result of the same robot (didim identify "
                    "--json, or published values) the base fit starts from instead of the URDF's values")
     o.set_defaults(func=cmd_doctor)

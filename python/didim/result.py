@@ -395,6 +395,9 @@ def _robot_dict(res: IdentificationResult) -> Dict[str, Any]:
                      "elastic": list(res.structure.elastic),
                      "terms": [t.to_dict() for t in res.structure.terms],
                      "load_friction": list(res.structure.load_friction),
+                     # each elastic joint's dead zone between rotor and link (total width, rad or m; 0 for none)
+                     "backlash_gap": (list(res.structure.backlash_gap) if res.structure.backlash_gap is not None
+                                      else None),
                      "base": {"names": list(res.base.names), "standard_names": list(res.base.standard_names),
                               "K": res.base.K.tolist(), "independent": list(res.base.independent)}})
 
@@ -415,6 +418,10 @@ def _robot_summary(res: IdentificationResult) -> str:
         eps = ", ".join(f"{j} {e:.4g} {'m/s' if k == 'prismatic' else 'rad/s'}"
                         for j, k, e in zip(res.robot.joint_names, res.robot.joint_kinds, res.law[1]))
         lines.append(f"  friction law through zero speed: {res.law[0]}, smoothing speed ε: {eps}")
+    if res.structure is not None and res.structure.backlash_gap is not None:
+        lines.append("  backlash (dead zone between rotor and link, total width): " + ", ".join(
+            f"{j} {g:.4g} {'m' if k == 'prismatic' else 'rad'}"
+            for j, k, g in zip(res.robot.joint_names, res.robot.joint_kinds, res.structure.gaps) if g > 0))
     units = res.units
     for k, v in res.params.items():
         unit = f" {units[k]}" if units.get(k) else ""
@@ -459,7 +466,8 @@ def _robot_from_dict(d: Dict[str, Any]) -> IdentificationResult:
     law = None if not d.get("friction_law") else _law_from(d["friction_law"], robot.ndof)
     model = Model("rigid", robot=robot, offset=bool(_field(d, "offset")), coulomb_law=law[0] if law else "algebraic",
                   coulomb_eps=law[1] if law else None, elastic=tuple(d.get("elastic") or ()), terms=_terms_from(d),
-                  load_friction=tuple(d.get("load_friction") or ()))
+                  load_friction=tuple(d.get("load_friction") or ()),
+                  backlash_gap=tuple(d["backlash_gap"]) if d.get("backlash_gap") else None)
     # a standard deviation the fit could not give (a held parameter's, a singular covariance) is saved as null
     std = {str(k): math.nan if v is None else v for k, v in dict(_field(d, "std")).items()}
     return robot_result(_field(d, "method"), dict(_field(d, "params")), std, model, base,

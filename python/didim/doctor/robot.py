@@ -634,7 +634,7 @@ def _adopt(c: _Candidate, state: _State, progress) -> Tuple[_State, Dict[str, fl
     if c.effect == "flexibility":
         from ..methods.robot import didim_elastic, frozen_for
 
-        new = replace(model, kind="flexible", elastic=(*model.elastic, jn), coulomb_eps=None, coulomb_law="algebraic")
+        new = _made_elastic(res, c)
         rigid = res if not model.elastic else None
         modes = None
         _mode_screen(state, c, progress)  # raises when the grid finds no mode
@@ -725,17 +725,23 @@ def _mode_screen(state: _State, c: _Candidate, progress) -> float:
     return c.hyper["screen_gain"]
 
 
-def _grid_screen(state: _State, c: _Candidate, progress) -> None:
-    """:func:`_mode_screen`'s grid, its gain kept on the candidate."""
+def _made_elastic(res, c: _Candidate):
+    """The model of ``res`` with candidate ``c``'s joint made elastic (its friction law fitted again)."""
     from dataclasses import replace
 
+    jn = res.robot.joint_names[c.joint]
+    return replace(res.structure, kind="flexible", elastic=(*res.structure.elastic, jn), coulomb_eps=None,
+                   coulomb_law="algebraic")
+
+
+def _grid_screen(state: _State, c: _Candidate, progress) -> None:
+    """:func:`_mode_screen`'s grid, its gain kept on the candidate."""
     from ..methods.robot import elastic_modes, elastic_of, simulate_robot
 
     res = state.res
     jn = res.robot.joint_names[c.joint]
     # the joints already elastic keep their split and mode; the grid is the added joint's
-    new = replace(res.structure, kind="flexible", elastic=(*res.structure.elastic, jn), coulomb_eps=None,
-                  coulomb_law="algebraic")
+    new = _made_elastic(res, c)
     x, _, search = elastic_modes(state.train, res, new, progress, search=False)
     e = list(elastic_of(new)).index(c.joint)  # its row of step 2's split (the split's order of the joints)
     smooth = simulate_robot(state.train, res, quantize=False)["force"]
@@ -1024,7 +1030,7 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
             significant = _order_modes(state, significant, progress)
             for c in _with_look_alikes(significant[:TRIES_PER_ROUND], ranked, done):
                 done.add((c.effect, c.joint))
-                if c.joint is not None and c.effect not in ("flexibility",):
+                if c.joint is not None and c.effect != "flexibility":
                     try:
                         carries, gain = _carries_over(c, state, dec, alpha)
                     except DidimError:  # the current model's loop on the held-out record: the refit will say
