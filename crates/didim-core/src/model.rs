@@ -1244,6 +1244,61 @@ impl<const N: usize> Model<N> {
         }
     }
 
+    /// The regressor's columns `cols` (indices among the parameters) on the rows of dof `dof` over a
+    /// whole trajectory, as [`Model::regressor`] gives them there (its other values not computed):
+    /// layout `[column][sample]`.
+    pub fn regressor_columns<R: AsRef<[f64]>>(
+        &self,
+        q: &[R],
+        qd: &[R],
+        qdd: &[R],
+        cols: &[usize],
+        dof: usize,
+    ) -> Result<Vec<f64>> {
+        let n = check_series::<N, R>(q, qd, qdd)?;
+        let p = self.n_params();
+        if dof >= N {
+            return Err(invalid!("dof {dof} of a model of {N} dof(s)"));
+        }
+        if let Some(&j) = cols.iter().find(|&&j| j >= p) {
+            return Err(invalid!("column {j} of a model of {p} parameters"));
+        }
+        let mut w = vec![0.0; cols.len() * n];
+        for (i, &j) in cols.iter().enumerate() {
+            let b = self.basis[j];
+            let (a, other) = b.dofs();
+            let sign = if a == dof {
+                1.0
+            } else if other == Some(dof) {
+                -1.0
+            } else {
+                continue; // zero on this dof's rows
+            };
+            let col = &mut w[i * n..(i + 1) * n];
+            match (b, other) {
+                (Basis::Inertia { dof }, _) => col.copy_from_slice(qdd[dof].as_ref()),
+                (_, None) => {
+                    let (x, v) = (q[a].as_ref(), qd[a].as_ref());
+                    for ((c, &x), &v) in col.iter_mut().zip(x).zip(v) {
+                        *c = b.local(x, v, self.law).0;
+                    }
+                }
+                (_, Some(o)) => {
+                    let (xa, va, xo, vo) = (q[a].as_ref(), qd[a].as_ref(), q[o].as_ref(), qd[o].as_ref());
+                    for (k, c) in col.iter_mut().enumerate() {
+                        *c = b.local(xa[k] - xo[k], va[k] - vo[k], self.law).0;
+                    }
+                }
+            }
+            if sign < 0.0 {
+                col.iter_mut().for_each(|c| *c = 0.0 - *c);
+            } else {
+                col.iter_mut().for_each(|c| *c += 0.0);
+            }
+        }
+        Ok(w)
+    }
+
     /// The regressor of a whole trajectory, from per-dof sample series
     /// (`q[d][k]`, likewise `qd`, `qdd`).
     ///
@@ -1379,6 +1434,56 @@ mod tests {
         assert_eq!(law.sign(f64::INFINITY), 1.0);
         assert_eq!(law.sign(f64::NEG_INFINITY), -1.0);
         assert!(law.sign(f64::NAN).is_nan());
+    }
+
+    /// A model's chosen columns on one dof are the whole regressor's there, value for value: every
+    /// basis of the flexible model with a Stribeck term on each dof and a backlash spring.
+    #[test]
+    fn regressor_columns_are_the_regressors() {
+        let m = flexible_with(true, 1e-3)
+            .unwrap()
+            .with_terms(vec![
+                ("S1".into(), Basis::Stribeck { dof: 0, vs: 0.02 }),
+                ("S2".into(), Basis::Stribeck { dof: 1, vs: 0.05 }),
+            ])
+            .unwrap()
+            .with_basis(
+                "K12",
+                Basis::Backlash {
+                    a: 0,
+                    b: 1,
+                    gap: 1e-3,
+                },
+            )
+            .unwrap();
+        let n = 500;
+        let series = |f: &dyn Fn(f64) -> f64| -> Vec<Vec<f64>> {
+            (0..2)
+                .map(|d| (0..n).map(|k| f(k as f64 * 0.01 + d as f64)).collect())
+                .collect()
+        };
+        let (q, qd, qdd) = (
+            series(&|t| 0.01 * t.sin()),
+            series(&|t| 0.03 * (1.7 * t).cos()),
+            series(&|t| (0.3 * t).sin()),
+        );
+        let p = m.n_params();
+        let w = m.regressor(&q, &qd, &qdd).unwrap();
+        for dof in 0..2 {
+            let cols: Vec<usize> = (0..p).rev().collect();
+            let c = m.regressor_columns(&q, &qd, &qdd, &cols, dof).unwrap();
+            for (i, &j) in cols.iter().enumerate() {
+                for k in 0..n {
+                    assert_eq!(
+                        c[i * n + k].to_bits(),
+                        w[(dof * p + j) * n + k].to_bits(),
+                        "dof {dof}, column {j}, sample {k}"
+                    );
+                }
+            }
+        }
+        assert!(m.regressor_columns(&q, &qd, &qdd, &[p], 0).is_err());
+        assert!(m.regressor_columns(&q, &qd, &qdd, &[0], 2).is_err());
     }
 
     /// Values for every hyper-parameter of a kind: its default, or a value valid for its unit.

@@ -135,6 +135,20 @@ impl AnyModel {
             AnyModel::Flexible(m) => m.regressor(q, qd, qdd),
         }
     }
+
+    fn regressor_columns(
+        &self,
+        q: &[Vec<f64>],
+        qd: &[Vec<f64>],
+        qdd: &[Vec<f64>],
+        cols: &[usize],
+        dof: usize,
+    ) -> Result<Vec<f64>, Error> {
+        match self {
+            AnyModel::Rigid(m) => m.regressor_columns(q, qd, qdd, cols, dof),
+            AnyModel::Flexible(m) => m.regressor_columns(q, qd, qdd, cols, dof),
+        }
+    }
 }
 
 /// A model structure, built once and frozen: its kind, offset, extra terms (each with its named
@@ -242,6 +256,26 @@ impl PyModel {
         // core layout [dof][param][sample] -> numpy (ndof, p, n) -> view (ndof, n, p)
         let a = PyArray1::from_vec(py, w).reshape([ndof, p, n])?;
         a.call_method1("transpose", ((0, 2, 1),))
+    }
+
+    /// The regressor's columns `cols` (indices among the parameters) on dof `dof`'s rows (0: the
+    /// motor's): q, qd, qdd of shape (ndof, n) -> (n, len(cols)), the values `regressor` gives there.
+    fn regressor_columns<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+        qd: PyReadonlyArray2<'py, f64>,
+        qdd: PyReadonlyArray2<'py, f64>,
+        cols: Vec<usize>,
+        dof: usize,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (q, qd, qdd) = (rows2(&q), rows2(&qd), rows2(&qdd));
+        let n = q.first().map_or(0, |r| r.len());
+        let k = cols.len();
+        let w = run(py, || self.inner.regressor_columns(&q, &qd, &qdd, &cols, dof))?;
+        // core layout [column][sample] -> numpy (k, n) -> view (n, k)
+        let a = PyArray1::from_vec(py, w).reshape([k, n])?;
+        a.call_method1("transpose", ((1, 0),))
     }
 }
 

@@ -200,8 +200,10 @@ def motor_columns_many(state: State, sim: SimResult, groups: Sequence[Sequence[T
     """:func:`motor_columns` of each group of extra terms (the variants of a grid), from one core call: the columns
     of every group are computed together, each exactly as alone (a term's column depends on that term only)."""
     extra = [Term(f"{t.name}_{i}", t.kind, dof=t.dof, **t.hypers) for i, g in enumerate(groups) for t in g]
-    w = state.model.with_terms(*extra).core(DEFAULT_COULOMB_EPS).regressor(sim.q, sim.qd, sim.qdd)
-    cols = w[0][:, w.shape[2] - len(extra):]
+    core = state.model.with_terms(*extra).core(DEFAULT_COULOMB_EPS)
+    p = len(core.names)
+    # the extra terms' columns on the motor's rows only (the whole regressor of both dofs is 2 × p columns)
+    cols = np.asarray(core.regressor_columns(sim.q, sim.qd, sim.qdd, list(range(p - len(extra), p)), 0))
     ends = np.cumsum([len(g) for g in groups])
     return [cols[:, e - len(g):e] for g, e in zip(groups, ends)]
 
@@ -209,10 +211,9 @@ def motor_columns_many(state: State, sim: SimResult, groups: Sequence[Sequence[T
 def base_columns(state: State, sim: SimResult) -> np.ndarray:
     """Columns of the motor-row regressor of the state's free parameters."""
     core = state.model.core(DEFAULT_COULOMB_EPS)
-    w = core.regressor(sim.q, sim.qd, sim.qdd)
     names = list(core.names)
     keep = [i for i, n in enumerate(names) if n not in state.frozen]
-    return w[0][:, keep]
+    return np.asarray(core.regressor_columns(sim.q, sim.qd, sim.qdd, keep, 0))
 
 
 #: The Coulomb smoothing speeds the base fit tries, as fractions of the record's speed scale
