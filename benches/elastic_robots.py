@@ -658,7 +658,8 @@ def main():
     ap.add_argument("--out", default=str(ROOT / "docs" / "elastic_robots.md"))
     ap.add_argument("--quick", action="store_true", help="the speed comparison only")
     ap.add_argument("--own-only", action="store_true", help="the robot of this script's own making only")
-    ap.add_argument("--held-out", nargs="?", const=",".join(HELD_OUT), default=None, metavar="NAME[,NAME]",
+    ap.add_argument("--held-out", nargs="?", const=",".join(k for k in HELD_OUT if not HELD_OUT[k].get("backlash")),
+                    default=None, metavar="NAME[,NAME]",
                     help="the held-out elastic robots only (default all of them): their section replaced in --out")
     args = ap.parse_args()
     if args.held_out is not None:
