@@ -2382,31 +2382,42 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
             or start.structure.terms != model.terms:
         raise DataError(f"oe-lm's start is a result of another model ({start.structure.describe()}) than the one to "
                         f"fit ({model.describe()}): give a start of the same robot, offset, elastic joints and terms")
+    if (start.structure.backlash_gap is None) != (model.backlash_gap is None):
+        raise DataError(f"oe-lm's start ({start.structure.describe()}) and the model to fit ({model.describe()}) differ "
+                        "in their backlash: give a start with a dead zone on the same joints")
     elastic = elastic_of(start.structure)
     theta0 = theta_of(start)
     law0 = start.law if start.law is not None else _default_law(rec)
     scale = np.where(np.abs(theta0) > 0, np.abs(theta0), 1.0)
-    p = len(theta0)
+    p, n = len(theta0), robot.ndof
+    # each dead zone's width is fitted too, in its log (as each joint's ε), from the start's
+    gaps0 = np.asarray(start.structure.gaps if start.structure.backlash_gap is not None else (0.0,) * n)
+    gapped = np.flatnonzero(gaps0 > 0)
 
-    def split(u: np.ndarray) -> Tuple[np.ndarray, Law]:
-        return u[:p] * scale, (law0[0], tuple(float(e) for e in np.exp(u[p:])))
+    def split(u: np.ndarray) -> Tuple[np.ndarray, Law, Any]:
+        gaps = gaps0.copy()
+        gaps[gapped] = np.exp(u[p + n:])
+        return (u[:p] * scale, (law0[0], tuple(float(e) for e in np.exp(u[p:p + n]))),
+                tuple(float(g) for g in gaps) if len(gapped) else None)
 
     def simulate_u(u: np.ndarray) -> Dict[str, np.ndarray]:
-        th, lw = split(u)
-        robot_u, d = _model_of(start.structure, start.base, th)
+        th, lw, gaps = split(u)
+        robot_u, d = _model_of(replace(start.structure, backlash_gap=gaps), start.base, th)
         return _simulate(rec, robot_u, d, lw, quantize=False)
 
-    u0 = np.concatenate([theta0 / scale, np.log(np.maximum(law0[1], 1e-300))])
+    u0 = np.concatenate([theta0 / scale, np.log(np.maximum(law0[1], 1e-300)), np.log(gaps0[gapped])])
     sims = [0]
-    say(f"oe-lm: Levenberg-Marquardt on {p} parameters and {robot.ndof} smoothing speeds")
+    say(f"oe-lm: Levenberg-Marquardt on {p} parameters and {n} smoothing speeds"
+        + (f" and {len(gapped)} backlash width(s)" if len(gapped) else ""))
     out = _output_least_squares(rec, simulate_u, u0, np.full(len(u0), -np.inf), np.full(len(u0), np.inf), sims,
                                 max_nfev=max_iter)
-    theta, law = split(out.x)
+    theta, law, gaps = split(out.x)
     r, jac = out.fun, out.jac
     cov_u = float(r @ r) / max(len(r) - len(u0), 1) * np.linalg.pinv(jac.T @ jac)
     cov = cov_u[:p, :p] * np.outer(scale, scale)
     flat = "no elastic mode" in (start.message or "")
-    res = _result("oe-lm", rec, model.with_law(law), start.base, theta, cov, converged=bool(out.status > 0) and not flat,
+    res = _result("oe-lm", rec, replace(model.with_law(law), backlash_gap=gaps), start.base, theta, cov,
+                  converged=bool(out.status > 0) and not flat,
                   iterations=int(out.nfev), message=start.message if flat else
                   ("" if out.status > 0 else str(out.message)),
                   notes=[f"started from {start.method}'s estimate (closed-loop force error "
