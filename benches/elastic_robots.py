@@ -430,6 +430,7 @@ def held_out_robot(name, tmp, seconds=None):
     c = HELD_OUT[name]
     c = dict(c, seconds=seconds or c["seconds"])
     rng = np.random.default_rng(c["seed"])
+    pathlib.Path(tmp).mkdir(parents=True, exist_ok=True)
     urdf = pathlib.Path(tmp) / f"{name}_cad.urdf"
     urdf.write_text(c["urdf"]())
     cad = didim.Robot.from_urdf(urdf)

@@ -110,6 +110,9 @@ def test_a_robots_backlash_is_checked_where_it_enters():
         didim.Model(robot=cad, elastic=[names[1]], backlash_gap=[1e-3] * (len(names) - 1))
     with pytest.raises(didim.DataError, match=">= 0"):
         didim.Model(robot=cad, elastic=[names[1]], backlash_gap={names[1]: -1e-3})
+    assert didim.Model(robot=cad, elastic=[names[1]], backlash_gap={"2": 2e-3}).gaps == m.gaps  # by number too
+    with pytest.raises(didim.DataError, match="twice"):
+        didim.Model(robot=cad, elastic=[names[1]], backlash_gap={names[1]: 2e-3, "2": 1e-3})
     assert m.with_backlash(names[1], None).backlash_gap is None
     assert np.isclose(m.with_backlash(names[1], 5e-3).gaps[1], 5e-3)
 

@@ -551,6 +551,8 @@ def _robot_model(args, robot):
         gaps = {}
         for item in args.backlash.split(","):
             name, eq, value = item.partition("=")
+            if name.strip() in gaps:
+                raise DataError(f"--backlash names {name.strip()} twice: give each joint's width once")
             try:
                 gaps[name.strip()] = float(value)
             except ValueError:
@@ -710,7 +712,9 @@ def build_parser() -> argparse.ArgumentParser:
     o = sub.add_parser("doctor", help="find what physics the model misses, model it and show the fit improve")
     o.add_argument("file", help="the record (CSV, Parquet, HDF5 or EMPS MAT file)")
     _record_options(o)
-    o.add_argument("--validate", metavar="FILE", help="a recording the fit does not see (default: the last 30 %% of FILE)")
+    o.add_argument("--validate", metavar="FILE", help="a recording the fit does not see (default for one axis: the "
+                   "last 30 %% of FILE; a robot's record (--urdf) needs one: without it the mismatch is located, and "
+                   "no effect named)")
     o.add_argument("--model", choices=["rigid", "flexible"], default="rigid", help="the base model (default: rigid)")
     o.add_argument("--apm", type=float, default=None, help="a priori total mass (kg)")
     o.add_argument("--alpha", type=float, default=0.01, help="family-wise test level (default 0.01)")

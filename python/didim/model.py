@@ -265,11 +265,14 @@ class Model:
             return
         names = list(robot.joint_names)
         if isinstance(gaps, dict):
-            unknown = [k for k in gaps if k not in names]
-            if unknown:
-                raise DataError(f"backlash_gap names {unknown[0]!r}, not a joint of the robot {robot.name} "
-                                f"({', '.join(names)})")
-            gaps = [gaps.get(j, 0.0) for j in names]
+            # joints by name or 1-based number, as elastic takes them; one joint named twice is refused
+            by_name: Dict[str, Any] = {}
+            for key, value in gaps.items():
+                name = self._joint_names(robot, [key], "backlash_gap (--backlash)")[0]
+                if name in by_name:
+                    raise DataError(f"backlash_gap (--backlash) names the joint {name} twice: give each joint's width once")
+                by_name[name] = value
+            gaps = [by_name.get(j, 0.0) for j in names]
         if not isinstance(gaps, (tuple, list)) or len(gaps) != robot.ndof:
             raise DataError(f"a robot's backlash_gap is one total width per joint ({robot.ndof}: {', '.join(names)}; "
                             f"0 for none) or {{joint: width}}, got {gaps!r}")
@@ -277,8 +280,9 @@ class Model:
                     for j, g in zip(names, gaps))
         rigid = [j for j, g in zip(names, out) if g > 0 and j not in self.elastic]
         if rigid:
-            raise DataError(f"backlash_gap on {', '.join(rigid)}, which {'is' if len(rigid) == 1 else 'are'} rigid: "
-                            "backlash is a dead zone between an elastic joint's rotor and its link (elastic=[...])")
+            raise DataError(f"backlash_gap (--backlash) on {', '.join(rigid)}, which "
+                            f"{'is' if len(rigid) == 1 else 'are'} rigid: backlash is a dead zone between an elastic "
+                            "joint's rotor and its link (name it elastic: elastic=[...], --elastic)")
         object.__setattr__(self, "backlash_gap", out if any(g > 0 for g in out) else None)
 
     @property

@@ -782,7 +782,8 @@ def _words(effect: str, params: Dict[str, float], unit: str) -> str:
     g = lambda x: f"{x:.4g}"  # noqa: E731
     if effect == "stribeck":
         fs = next(v for k, v in params.items() if k.startswith("Fs_"))
-        return f"friction {g(fs)} {unit} higher near rest, decaying over {g(params['vs'])} {speed}"
+        return (f"friction {g(abs(fs))} {unit} {'higher' if fs >= 0 else 'lower'} near rest, decaying over "
+                f"{g(params['vs'])} {speed}")
     if effect == "asymmetric_friction":
         dfc = next(v for k, v in params.items() if k.startswith("dFc_"))
         return f"Coulomb friction {g(2 * abs(dfc))} {unit} higher moving {'forward' if dfc > 0 else 'backward'}"

@@ -1475,8 +1475,9 @@ class _RobotPlant:
                     gaps[j] = float(np.clip(b + dg, b / 2, 2 * b))
             if tuple(gaps) != tuple(self.structure.gaps):
                 self.structure = replace(self.structure, backlash_gap=tuple(gaps))
-                self.say("backlash " + ", ".join(f"{self.robot.joint_names[j]} {gaps[j]:.4g}" for j in gapped)
-                         + " (rad or m)")
+                self.say("backlash " + ", ".join(
+                    f"{self.robot.joint_names[j]} {gaps[j]:.4g} "
+                    f"{'m' if self.robot.joint_kinds[j] == 'prismatic' else 'rad'}" for j in gapped))
         est, cov, res = inverse.fit(self.law, held=self.held)
         # a spring's damping is not negative: where the least squares ask for less than none, it is held at none and
         # the rest fitted again (the bound active for this iteration only). Shortening the step cannot keep it
