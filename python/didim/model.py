@@ -502,6 +502,15 @@ class Model:
         return m if set(m.param_names()) >= set(params) else None
 
 
+def dead_zone(x, gap: float):
+    """``sign(x)·max(|x| − gap/2, 0)``: the elongation of a coupling with backlash of total width ``gap``, elementwise
+    (the core's ``dead_zone``, which one axis's K12 with backlash and a robot's elastic joint simulate)."""
+    import numpy as np
+
+    x = np.asarray(x, dtype=float)
+    return np.sign(x) * np.maximum(np.abs(x) - 0.5 * gap, 0.0)
+
+
 def knot_weights(terms, q):
     """``B((q − center)/width)`` of each ``coulomb_spline`` term at the positions ``q`` (n,): its weight along the
     stroke, whatever its side, from the core's basis function (the term moving forward at full speed, hard sign).

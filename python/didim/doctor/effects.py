@@ -16,7 +16,7 @@ from ..methods.didim_loop import DIVERGENCE_FACTOR
 from ..methods.identification import fit_flexible_mode, flexible_from_mode
 from ..result import IdentificationResult
 from ..signal import diffcent, welch
-from ..model import knot_weights
+from ..model import dead_zone, knot_weights
 from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign
 from .. import units
 from ..stats import orthogonalize
@@ -651,7 +651,7 @@ def _backlash_candidates(state: State, sim: SimResult, data: Data) -> List[Candi
     amp = float(np.percentile(np.abs(q2), 90))
     grid = np.geomspace(max(amp / 100, 1e-8), max(amp, 2e-8), 8)
     k12 = state.all_params()["K12"]
-    return [Candidate("backlash", (k12 * (np.sign(q2) * np.maximum(np.abs(q2) - g / 2, 0) - q2))[:, None],
+    return [Candidate("backlash", (k12 * (dead_zone(q2, g) - q2))[:, None],
                       {"gap": float(g)}, len(grid)) for g in grid]
 
 

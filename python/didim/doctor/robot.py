@@ -362,10 +362,11 @@ class _Columns:
         if effect == "backlash":
             # the spring's torque on the rotor with a dead zone of the gap, less the spring's without: K (dz(x) − x),
             # x the simulated stretch θ − q (one axis's candidate, eq. (2)'s K12 on an elastic joint)
+            from ..model import dead_zone
+
             x = self.th[:, j] - self.sim["q"][:, j]
-            half = 0.5 * hyper["gap"]
             k = self.res.params[f"K_{self.res.robot.joint_names[j]}"]
-            return (k * (np.sign(x) * np.maximum(np.abs(x) - half, 0.0) - x))[:, None]
+            return (k * (dead_zone(x, hyper["gap"]) - x))[:, None]
         raise ValueError(effect)
 
 

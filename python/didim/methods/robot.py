@@ -425,11 +425,12 @@ class _Motor:
         """Elastic joint ``j``'s spring stretch and its rate as the spring and its damping feel them (the columns of
         K and D): ``θ − q`` and ``θ̇ − q̇``; with backlash b, ``dz(θ − q)`` (``sign(x)·max(|x| − b/2, 0)``) and the
         rate in contact only (the core's coupling)."""
+        from ..model import dead_zone
+
         stretch, rate = self.theta[:, j] - q[:, j], self.thetad[:, j] - v[:, j]
         gap = self.gaps[j] if self.gaps else 0.0
         if gap > 0:
-            half = 0.5 * gap
-            stretch = np.sign(stretch) * np.maximum(np.abs(stretch) - half, 0.0)
+            stretch = dead_zone(stretch, gap)
             rate = np.where(stretch != 0, rate, 0.0)
         return stretch, rate
 
@@ -545,7 +546,7 @@ class _InverseModel:
         # acts there)
         self.link_rows = [0] * n
         self.link_keep: Dict[int, np.ndarray] = {}
-        self.motor, self.q, self.qd = motor, q, v
+        self.motor, self.q = motor, q  # the backlash widths' columns (gap_fit)
         if links:
             ends = list(self.lay.elastic)
             lk = _rows(dec, np.zeros((len(q), len(ends))), links, self.lay.size, v[:, ends], np.zeros(len(ends)),
@@ -612,22 +613,22 @@ class _InverseModel:
         regression's residual; ``held``: parameters (by index in θ) held at given values."""
         return _weighted_fit(self.rows(law, coulomb), held)
 
-    def gap_fit(self, law: Law, stiffness: Dict[int, float], held: Optional[Dict[int, float]] = None
-                ) -> Tuple[np.ndarray, np.ndarray]:
-        """The least squares with one more column per elastic joint with backlash (``stiffness``: joint → its
-        spring's K): the spring's torque's derivative in the dead zone's width b, ``−(K/2)·sign(x)`` where the rotor
-        and the link are in contact (``x = θ − q`` beyond ``b/2``) on its motor rows and its negative on its link rows,
-        whose coefficient is the step of b that the force asks for (a Gauss–Newton step, as ε's). Returns each
-        joint's step and its standard deviation (in ``stiffness``'s order)."""
+    def gap_fit(self, rows: List[Tuple[np.ndarray, np.ndarray]], stiffness: Dict[int, float],
+                held: Optional[Dict[int, float]] = None) -> Tuple[np.ndarray, np.ndarray]:
+        """The least squares of ``rows`` (:meth:`rows`) with one more column per elastic joint with backlash
+        (``stiffness``: joint → its spring's K): the spring's torque's derivative in the dead zone's width b,
+        ``−(K/2)·sign(x)`` where the rotor and the link are in contact (``x = θ − q`` beyond ``b/2``) on its motor
+        rows and its negative on its link rows, whose coefficient is the step of b that the force asks for (a
+        Gauss–Newton step, as ε's). Returns each joint's step and its standard deviation (in ``stiffness``'s order)."""
+        from ..model import dead_zone
+
         js = list(stiffness)
-        full = []
-        for j in js:
-            x = self.motor.theta[:, j] - self.q[:, j]
-            half = 0.5 * self.motor.gaps[j]
-            full.append(-0.5 * stiffness[j] * np.sign(x) * (np.abs(x) > half))
+        # in contact, the stretch beyond the dead zone has the stretch's sign (and is 0 inside it)
+        full = [-0.5 * stiffness[j] * np.sign(dead_zone(self.motor.theta[:, j] - self.q[:, j], self.motor.gaps[j]))
+                for j in js]
         dec = self.dec.columns(np.column_stack(full))
         parts = []
-        for j, (yd, wd) in enumerate(self.rows(law)):
+        for j, (yd, wd) in enumerate(rows):
             extra = np.zeros((len(yd), len(js)))
             if j in js:
                 i = js.index(j)
@@ -1464,10 +1465,11 @@ class _RobotPlant:
                 self.say("smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new) + f" {speed_unit(rec)}")
         gapped = {j: float(theta[self.lay.k(self.elastic.index(j))]) for j in self.elastic
                   if sim.get("backlash_gap") and sim["backlash_gap"][j] > 0}
+        rows = inverse.rows(self.law)  # the law's columns, decimated once for both fits below
         if gapped:
             # each dead zone's width with the parameters (as ε's: moved where the force determines it, by at most a
             # factor of 2 per iteration), for the next simulation
-            step, sd = inverse.gap_fit(self.law, gapped, held=self.held)
+            step, sd = inverse.gap_fit(rows, gapped, held=self.held)
             gaps = list(sim["backlash_gap"])
             for (j, _), dg, sg in zip(gapped.items(), step, sd):
                 b = gaps[j]
@@ -1478,7 +1480,7 @@ class _RobotPlant:
                 self.say("backlash " + ", ".join(
                     f"{self.robot.joint_names[j]} {gaps[j]:.4g} "
                     f"{'m' if self.robot.joint_kinds[j] == 'prismatic' else 'rad'}" for j in gapped))
-        est, cov, res = inverse.fit(self.law, held=self.held)
+        est, cov, res = _weighted_fit(rows, self.held)
         # a spring's damping is not negative: where the least squares ask for less than none, it is held at none and
         # the rest fitted again (the bound active for this iteration only). Shortening the step cannot keep it
         # there from an iterate at or near zero, and stopped step 3 on the flexrobots UR5 (the elbow's D, 4 % of
@@ -2185,8 +2187,6 @@ def _second_split(rec: Recording, model: Model, rigid: IdentificationResult, why
     share (12 % of it) twice the truth's, and step 2 from there found the rigid wrist better than any mode; from the
     model with the shoulder lift elastic, the wrist's total is 4.8 % high and step 2 finds its mode within 0.4 %.
     Returns (x, split, search) for all the elastic joints, or None when the model of the others cannot be fitted."""
-    from dataclasses import replace
-
     names = [model.robot.joint_names[j] for j in elastic_of(model)]
     others = tuple(nm for nm in names if nm not in why)
     say(f"step 2 finds no mode of {', '.join(why)} from the rigid step's split: the three steps with "
