@@ -546,7 +546,6 @@ class _InverseModel:
         # acts there)
         self.link_rows = [0] * n
         self.link_keep: Dict[int, np.ndarray] = {}
-        self.motor, self.q = motor, q  # the backlash widths' columns (gap_fit)
         if links:
             ends = list(self.lay.elastic)
             lk = _rows(dec, np.zeros((len(q), len(ends))), links, self.lay.size, v[:, ends], np.zeros(len(ends)),
@@ -612,33 +611,6 @@ class _InverseModel:
         """Weighted least squares (:func:`_weighted_fit`) under ``law``: the estimate, its covariance and the
         regression's residual; ``held``: parameters (by index in θ) held at given values."""
         return _weighted_fit(self.rows(law, coulomb), held)
-
-    def gap_fit(self, rows: List[Tuple[np.ndarray, np.ndarray]], stiffness: Dict[int, float],
-                held: Optional[Dict[int, float]] = None) -> Tuple[np.ndarray, np.ndarray]:
-        """The least squares of ``rows`` (:meth:`rows`) with one more column per elastic joint with backlash
-        (``stiffness``: joint → its spring's K): the spring's torque's derivative in the dead zone's width b,
-        ``−(K/2)·sign(x)`` where the rotor and the link are in contact (``x = θ − q`` beyond ``b/2``) on its motor
-        rows and its negative on its link rows, whose coefficient is the step of b that the force asks for (a
-        Gauss–Newton step, as ε's). Returns each joint's step and its standard deviation (in ``stiffness``'s order)."""
-        from ..model import dead_zone
-
-        js = list(stiffness)
-        # in contact, the stretch beyond the dead zone has the stretch's sign (and is 0 inside it)
-        full = [-0.5 * stiffness[j] * np.sign(dead_zone(self.motor.theta[:, j] - self.q[:, j], self.motor.gaps[j]))
-                for j in js]
-        dec = self.dec.columns(np.column_stack(full))
-        parts = []
-        for j, (yd, wd) in enumerate(rows):
-            extra = np.zeros((len(yd), len(js)))
-            if j in js:
-                i = js.index(j)
-                m = int(np.count_nonzero(self.keep[j]))
-                extra[:m, i] = dec[self.keep[j], i]
-                extra[m:, i] = -dec[self.link_keep[j], i]
-            parts.append((yd, np.concatenate([wd, extra], axis=1)))
-        est, cov, _ = _weighted_fit(parts, held)
-        k = len(js)
-        return est[-k:], np.sqrt(np.maximum(np.diag(cov)[-k:], 0.0))
 
 
 #: Relative step of ε in the law's central difference.
@@ -1463,23 +1435,7 @@ class _RobotPlant:
                 new = np.where(moved, np.clip(eps + step, eps / 2, 2 * eps), eps)
                 self.law = (self.law[0], tuple(float(e) for e in new))
                 self.say("smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new) + f" {speed_unit(rec)}")
-        gapped = {j: float(theta[self.lay.k(self.elastic.index(j))]) for j in self.elastic
-                  if sim.get("backlash_gap") and sim["backlash_gap"][j] > 0}
         rows = inverse.rows(self.law)  # the law's columns, decimated once for both fits below
-        if gapped:
-            # each dead zone's width with the parameters (as ε's: moved where the force determines it, by at most a
-            # factor of 2 per iteration), for the next simulation
-            step, sd = inverse.gap_fit(rows, gapped, held=self.held)
-            gaps = list(sim["backlash_gap"])
-            for (j, _), dg, sg in zip(gapped.items(), step, sd):
-                b = gaps[j]
-                if sg <= EPS_SIGMA_MAX * b:
-                    gaps[j] = float(np.clip(b + dg, b / 2, 2 * b))
-            if tuple(gaps) != tuple(self.structure.gaps):
-                self.structure = replace(self.structure, backlash_gap=tuple(gaps))
-                self.say("backlash " + ", ".join(
-                    f"{self.robot.joint_names[j]} {gaps[j]:.4g} "
-                    f"{'m' if self.robot.joint_kinds[j] == 'prismatic' else 'rad'}" for j in gapped))
         est, cov, res = _weighted_fit(rows, self.held)
         # a spring's damping is not negative: where the least squares ask for less than none, it is held at none and
         # the rest fitted again (the bound active for this iteration only). Shortening the step cannot keep it
@@ -1847,23 +1803,39 @@ class _ElasticSplit:
 
     def search(self, x0: np.ndarray, law: Law, sims: List[int]) -> Tuple[np.ndarray, float]:
         """Least squares of the elastic joints' relative force residuals over every elastic joint's (λ, ln f, ζ) from
-        ``x0`` (:func:`_spring_search`, :func:`_joints_error`)."""
+        ``x0``, and each dead zone's ln b from the model's width (:func:`_spring_search`, :func:`_joints_error`): the
+        best rows, and the widths found in the split's ``model``. A width acts on the force through the states it
+        shapes, as the mode does: it is step 2's, by the closed loop, and step 3's DIDIM holds it (the inverse
+        model's derivative in b at the simulated states, a Gauss–Newton column as ε's, held a width started at 2
+        mrad on the held-out Panda with 3 mrad: its force at those states hardly depends on it)."""
         ne, fs = len(self.elastic), 1 / self.rec.dt
+        gapped = [j for j in self.elastic if self.model.gaps[j] > 0] if self.model.backlash_gap is not None else []
 
-        def unpack(u: np.ndarray) -> np.ndarray:
-            return np.column_stack([u[0::3], np.exp(u[1::3]), u[2::3]])
+        def unpack(u: np.ndarray) -> Tuple[np.ndarray, Model]:
+            x = np.column_stack([u[0:3 * ne:3], np.exp(u[1:3 * ne:3]), u[2:3 * ne:3]])
+            if not gapped:
+                return x, self.model
+            gaps = list(self.model.gaps)
+            for i, j in enumerate(gapped):
+                gaps[j] = float(np.exp(u[3 * ne + i]))
+            return x, replace(self.model, backlash_gap=tuple(gaps))
 
-        u0 = np.column_stack([x0[:, 0], np.log(x0[:, 1]), x0[:, 2]]).ravel()
-        lower = np.tile([SPLIT_LAMBDA_BOUND, -np.inf, 0.0], ne)
-        upper = np.tile([1 - SPLIT_LAMBDA_BOUND, math.log(0.5 * fs), np.inf], ne)
+        def model_of(u: np.ndarray):
+            x, model = unpack(u)
+            return _model_of(model, self.base, self.theta(x))
+
+        u0 = np.concatenate([np.column_stack([x0[:, 0], np.log(x0[:, 1]), x0[:, 2]]).ravel(),
+                             np.log([self.model.gaps[j] for j in gapped])])
+        lower = np.concatenate([np.tile([SPLIT_LAMBDA_BOUND, -np.inf, 0.0], ne), np.full(len(gapped), -np.inf)])
+        upper = np.concatenate([np.tile([1 - SPLIT_LAMBDA_BOUND, math.log(0.5 * fs), np.inf], ne),
+                                np.full(len(gapped), np.inf)])
         # a start at a bound (a mode at the Nyquist frequency: a joint the record shows rigid) inside it, as the
         # least squares need (a step 3 that ran to 499.99 Hz at 1 kHz stopped the held-out Panda's doctor)
         span = np.where(np.isfinite(upper - lower), upper - lower, 1.0)
         u0 = np.clip(u0, lower + 1e-6 * span, upper - 1e-6 * span)
-        u, best = _spring_search(self.rec, lambda u: self.theta(unpack(u)),
-                                 lambda th: _model_of(self.model, self.base, th), u0, lower,
-                                 upper, law, sims, self.elastic)
-        return unpack(u), best
+        u, best = _spring_search(self.rec, model_of, u0, lower, upper, law, sims, self.elastic)
+        x, self.model = unpack(u)
+        return x, best
 
 
 def _joints_error(per: Optional[np.ndarray], joints: Optional[Sequence[int]] = None) -> float:
@@ -1940,14 +1912,13 @@ def _output_least_squares(rec: Recording, simulate_u: Callable[[np.ndarray], Dic
                          xtol=SPRING_TOL, gtol=None, max_nfev=max_nfev or SPRING_MAX_ITER)
 
 
-def _spring_search(rec: Recording, theta_of_u: Callable[[np.ndarray], np.ndarray], model_of, u0: np.ndarray,
-                   lower: np.ndarray, upper: np.ndarray, law: Law, sims: List[int], joints: Sequence[int]
-                   ) -> Tuple[np.ndarray, float]:
-    """:func:`_output_least_squares` of the residuals of ``joints`` over ``u``, the model ``model_of(theta_of_u(u))``
-    under ``law``: the best ``u`` and its criterion."""
+def _spring_search(rec: Recording, model_of_u, u0: np.ndarray, lower: np.ndarray, upper: np.ndarray, law: Law,
+                   sims: List[int], joints: Sequence[int]) -> Tuple[np.ndarray, float]:
+    """:func:`_output_least_squares` of the residuals of ``joints`` over ``u``, the robot and drives
+    ``model_of_u(u)`` under ``law``: the best ``u`` and its criterion."""
 
     def simulate_u(u: np.ndarray) -> Dict[str, np.ndarray]:
-        robot, d = model_of(theta_of_u(u))
+        robot, d = model_of_u(u)
         return _simulate(rec, robot, d, law, quantize=False)
 
     out = _output_least_squares(rec, simulate_u, u0, lower, upper, sims, joints=joints)
@@ -2060,7 +2031,9 @@ def _step2_search(split: _ElasticSplit, x: np.ndarray, law: Law, names: List[str
     """:func:`elastic_modes`' least squares from ``x``."""
     x, best = split.search(x, law, sims)
     say("step 2: " + "; ".join(f"{nm} λ = {x[e, 0]:.3f}, f = {x[e, 1]:.2f} Hz, ζ = {x[e, 2]:.3f}"
-                               for e, nm in enumerate(names)) + f"; joints' force errors RMS {100 * best:.3f} %")
+                               + _width_words(split.model, j)
+                               for (e, nm), j in zip(enumerate(names), split.elastic))
+        + f"; joints' force errors RMS {100 * best:.3f} %")
     return x, split, {"criterion": best, "simulations": sims[0]}
 
 
@@ -2103,6 +2076,13 @@ def _round_handoff(run) -> Optional[np.ndarray]:
     return th[1]
 
 
+def _width_words(model: Model, j: int) -> str:
+    """", backlash 0.001 rad" for a joint of ``model`` with a dead zone, else ""."""
+    if model.backlash_gap is None or not model.gaps[j] > 0:
+        return ""
+    return f", backlash {model.gaps[j]:.4g} {'m' if model.robot.joint_kinds[j] == 'prismatic' else 'rad'}"
+
+
 def _refine_springs(rec: Recording, plant: "_RobotPlant", theta: np.ndarray, law: Law, search: Dict[str, Any]
                     ) -> np.ndarray:
     """Step 2's search again from step 3's estimate ``theta``: each elastic joint's split, mode and damping ratio
@@ -2111,6 +2091,7 @@ def _refine_springs(rec: Recording, plant: "_RobotPlant", theta: np.ndarray, law
     sims = [0]
     x, _ = split.search(split.x_of(theta), law, sims)
     search["simulations"] += sims[0]
+    plant.structure = replace(plant.structure, backlash_gap=split.model.backlash_gap)  # the widths step 2 found
     th = split.theta(x)
     th[list(plant.held)] = list(plant.held.values())  # exactly (the split's round trip through π rounds them)
     return th
@@ -2172,7 +2153,8 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
             why = no_mode(x, [robot.joint_names[j] for j in split.elastic], rec.dt)
     if why:
         return _no_mode_result(rec, model, split, theta0, law, why, rigid, search, t0, sims0)
-    plant = _RobotPlant(rec, model, split.base, _decimation(rec), law, {}, tol, say, held)
+    # the widths of the dead zones step 2 found (split.model's)
+    plant = _RobotPlant(rec, split.model, split.base, _decimation(rec), law, {}, tol, say, held)
     return _elastic_steps(rec, model, plant, theta0, split, search, rigid.force_error, rigid.force_error_per_joint,
                           max_iter, say, t0, sims0)
 
@@ -2308,7 +2290,7 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
         theta_r = _refine_springs(rec, plant, run.best[1] if handoff is None else handoff, plant.law, search)
         say(f"step 2 again (round {rnd + 2}): " + ", ".join(
             f"{robot.joint_names[j]} Ia = {theta_r[plant.lay.ia(e)]:.4g}, K = {theta_r[plant.lay.k(e)]:.4g}, "
-            f"D = {theta_r[plant.lay.d(e)]:.4g}" for e, j in enumerate(elastic)))
+            f"D = {theta_r[plant.lay.d(e)]:.4g}" + _width_words(plant.structure, j) for e, j in enumerate(elastic)))
         law_r = plant.law
         again = didim_loop(plant, theta_r, max_iter=max_iter, progress=say)
         if again.best[2] is None or again.best[0] >= (1 - ELASTIC_ROUND_GAIN) * run.best[0]:
