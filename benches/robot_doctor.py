@@ -26,7 +26,7 @@ NAMES = {"stribeck": "stribeck", "flexible_joint": "flexibility", "delay": "dela
 def _truth_words(rec: dict, joint: str, f) -> str:
     """The fitted effect's numbers beside the truth's, where both say the same thing."""
     p = rec.get("parameters", {})
-    if f is None:
+    if f is None or (f.joint is not None and f.joint != joint):  # a finding on another joint: nothing to compare
         return ""
     if rec["effect"] == "stribeck" and f.effect == "stribeck":
         fs = f.params.get(f"Fs_{joint}")

@@ -96,13 +96,6 @@ DIAGNOSIS = {
           "the hump itself is 1.41 % of the elbow's validation force against the rigid plant: the base friction law "
           "absorbed the hump (effect/floor 2.05 on training, 1.84 on validation, the weakest effect of the set). A "
           "miss of size, not of naming.",
-    "e7": "backlash on a joint the base model has rigid. The robot's closed loop has backlash on elastic joints (a "
-          "dead zone between rotor and link; DIDIM estimates its width) and the doctor looks for it on the joints the "
-          "model has elastic; on a rigid joint no column of the test carries it (the quasi-static one, the link half "
-          "a width behind its rotor, took 0.1 % of panda_joint1's residual), and the flexibility candidate of "
-          "panda_joint1 is not significant (p = 0.13). With the truth's 3 mrad given, the three steps fit "
-          "panda_joint1 held out at 5.1 % (34 % rigid); from 2.2 mrad or 0.56 mrad DIDIM's width does not move (its "
-          "closed-loop error never improves on its start), and the joint stays at 11-21 %.",
 }
 
 
