@@ -33,3 +33,16 @@ def test_user_errors_exit_2_with_one_line_and_no_traceback(tmp_path):
     assert p.returncode == 2
     assert p.stderr.strip().count("\n") == 0
     assert "no such file" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_a_misspelled_flag_names_the_flag_meant_and_an_abbreviation_is_refused(emps_path):
+    """A subcommand's unknown flag is reported with that subcommand's help and the flag it most resembles; a prefix of
+    a flag is not taken for it (``--valid`` ran the doctor as ``--validate``; a flag added later could change its
+    meaning)."""
+    p = run("doctor", str(emps_path), "--elastc", "3")
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert "did you mean --elastic?" in p.stderr and "didim doctor --help" in p.stderr, p.stderr
+    p = run("doctor", str(emps_path), "--valid", str(emps_path))
+    assert p.returncode == 2 and "did you mean --validate?" in p.stderr, p.stderr
+    p = run("identify", str(emps_path), "--foo")
+    assert p.returncode == 2 and "did you mean" not in p.stderr and "didim identify --help" in p.stderr, p.stderr

@@ -659,11 +659,32 @@ def cmd_sweep(args) -> int:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the CLI's one-line user errors: ``didim: error: …`` and exit 2, the usage left to --help."""
+    """argparse with the CLI's one-line user errors: ``didim: error: …`` and exit 2, the usage left to --help. Flags
+    are taken whole (no abbreviations: ``--valid`` is not ``--validate``, and stays an error if a flag is added)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):  # type: ignore[override]
-        where = self.prog.partition(" ")[2]  # the subcommand, if any
-        print(f"didim: error: {where + ': ' if where else ''}{message} (see {self.prog} --help)", file=sys.stderr)
+        prog, hint = self.prog, ""
+        if message.startswith("unrecognized arguments") and self._subparsers is not None:
+            # the top parser reports a subcommand's unknown flags: name that subcommand's help, and the flags meant
+            import difflib
+
+            for action in self._subparsers._group_actions:
+                cmd = next((a for a in sys.argv[1:] if a in getattr(action, "choices", {}) or {}), None)
+                if cmd is None:
+                    continue
+                sub = action.choices[cmd]
+                prog = sub.prog
+                known = [o for a in sub._actions for o in a.option_strings]
+                meant = [m for t in message.split(":", 1)[1].split() if t.startswith("--")
+                         for m in difflib.get_close_matches(t.split("=")[0], known, n=1, cutoff=0.75)]
+                if meant:
+                    hint = f"; did you mean {', '.join(meant)}?"
+        where = prog.partition(" ")[2]  # the subcommand, if any
+        print(f"didim: error: {where + ': ' if where else ''}{message}{hint} (see {prog} --help)", file=sys.stderr)
         sys.exit(2)
 
 
@@ -701,7 +722,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "spring K and damping D between rotor and link), by name or number, or all; --method didim runs "
                    "the three-step DIDIM, --method oe-lm output error from there")
     i.add_argument("--backlash", metavar="J=WIDTH,..", help="with --elastic: a dead zone between an elastic joint's "
-                   "rotor and its link, its total width (rad or m) to start from; DIDIM estimates it")
+                   "rotor and its link, its total width (rad or m) to start from; the three steps fit it (start below it)")
     i.add_argument("--start", metavar="RESULT.json", help="with --urdf: a result of the same robot (a saved "
                    "identification, or published values) that didim and oe-lm start from instead of the URDF's values")
     i.add_argument("--json", metavar="OUT", help="write the result as JSON")
@@ -727,7 +748,8 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--joints", metavar="J1,J2,..", help="with --urdf: the actuated joints, as for identify")
     o.add_argument("--elastic", metavar="J1,J2|all", help="with --urdf: the base model's elastic joints, as for "
                    "identify (the doctor then looks for backlash on them too)")
-    o.add_argument("--backlash", metavar="J=WIDTH,..", help="with --elastic: the base model's dead zones, as for identify")
+    o.add_argument("--backlash", metavar="J=WIDTH,..", help="with --elastic: the base model's dead zones (each joint's "
+                   "total width, rad or m), as for identify")
     o.add_argument("--start", metavar="RESULT.json", help="with --urdf: a result of the same robot (didim identify "
                    "--json, or published values) the base fit starts from instead of the URDF's values")
     o.set_defaults(func=cmd_doctor)

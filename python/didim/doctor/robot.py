@@ -85,8 +85,10 @@ class RobotDiagnosis:
         lines = [f"doctor on {self.record} ({b.robot.ndof}-joint robot {b.robot.name}), held out: {self.validate}",
                  f"base model: {b.method}, closed-loop force error {100 * b.force_error:.2f} % on the training record "
                  f"({'converged' if b.converged else 'NOT converged'}, {b.iterations} iterations); friction law "
-                 f"{b.law[0] if b.law else 'default'}",
-                 "where simulation and record differ, per joint (worst on the held-out record first):"]
+                 f"{b.law[0] if b.law else 'default'}"
+                 + (f"; {b.structure.describe()}" if b.structure is not None and b.structure.elastic else ""),
+                 "where simulation and record differ, per joint (worst on the "
+                 + ("training" if self.validate == "(none)" else "held-out") + " record first):"]
         lines += [f"  {m.sentence()}" for m in self.joints]
         if not self.findings:
             why = ("no validation record" if self.validate == "(none)"
