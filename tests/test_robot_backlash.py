@@ -193,3 +193,40 @@ def test_the_robot_doctor_names_backlash_on_a_joint_its_model_has_rigid(rigid_ba
     assert f.params[f"K_{truth['joint']}"] == pytest.approx(truth["parameters"]["K"], rel=0.15), f.params
     assert f.fit["valid_after"] < 0.5 * f.fit["valid_before"], f.fit
 
+
+
+def test_the_backlash_screen_comes_where_the_rounds_have_nothing_for_its_joint():
+    """``_screened``: the candidates on the lost-motion joint (or on every joint) first, then the screen, before a
+    candidate on another joint once one on that joint failed (``ready``) or before a mode of that joint itself; once per
+    diagnosis; never without a lost-motion joint."""
+    from didim.doctor.robot import _Candidate, _screened
+
+    def c(effect, joint):
+        return _Candidate(effect, joint, {}, {})
+
+    screened = c("backlash", 0)
+    calls = []
+
+    def screen(j):
+        calls.append(j)
+        return screened
+
+    def order(tries, worst, ready):
+        done = set()
+        return [(x.effect, x.joint) for x in _screened(tries, worst, screen, done, lambda j: ready)], done
+
+    tries = [c("stribeck", 0), c("delay", None), c("stribeck", 2), c("load_dependent_friction", 3)]
+    got, done = order(tries, 0, True)
+    assert got == [("stribeck", 0), ("delay", None), ("backlash", 0), ("stribeck", 2), ("load_dependent_friction", 3)]
+    assert (0, "screen") in done and calls == [0]
+    got, _ = order(tries, 0, False)  # nothing on joint 0 failed: no screen before joint 2's candidate
+    assert ("backlash", 0) not in got and len(got) == 4
+    got, _ = order([c("flexibility", 0), c("stribeck", 2)], 0, False)  # the screen tries the spring alone too
+    assert got[:2] == [("backlash", 0), ("flexibility", 0)]
+    got, _ = order([], 0, True)  # nothing significant: the screen alone
+    assert got == [("backlash", 0)]
+    assert order(tries, None, True)[0] == [(x.effect, x.joint) for x in tries]
+    calls.clear()
+    done = {(0, "screen")}
+    assert ("backlash", 0) not in [(x.effect, x.joint) for x in _screened(tries, 0, screen, done, lambda j: True)]
+    assert calls == []
