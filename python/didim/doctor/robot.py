@@ -758,11 +758,11 @@ def _grid_criterion(rec: Recording, res) -> float:
     grows by this: with the rounding a model within a count of the record replays its chatter too (the held-out RPR
     arm's base: 3.1 % of its force with it, 6.0 % without, and a "mode" at 315 Hz, simulated with it, looked 47 %
     better than the rigid model simulated without)."""
-    from ..methods.robot import simulate_robot
+    from ..methods.robot import _joints_error, simulate_robot
 
     sim = simulate_robot(rec, res)["force"]
-    per = np.linalg.norm(rec.force - sim, axis=0) / np.maximum(np.linalg.norm(rec.force, axis=0), 1e-300)
-    return float(np.sqrt(np.mean(per ** 2)))
+    return _joints_error(np.linalg.norm(rec.force - sim, axis=0)
+                         / np.maximum(np.linalg.norm(rec.force, axis=0), 1e-300))
 
 
 def _grid_screen(state: _State, c: _Candidate, progress) -> None:
@@ -1177,10 +1177,10 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
                                                       f"({100 * c.test.explained:.1f} %)" for c in ranked[:4]))
             significant = [c for c in ranked if c.p_adj < alpha]
             # what no column carries: backlash on the rigid joint whose motion the model misses (lost motion),
-            # screened by simulation once, before the first candidate on another joint is tried once one on that joint
-            # failed (a dead zone on the
-            # held-out RPR arm's base, at 65 % of its held-out force, moved the wrist's enough for a spring there to be
-            # confirmed first, 4.5 -> 2.3 %, once the base's own candidates had failed), or when none is significant
+            # screened by simulation once (_screened): before the first candidate on another joint once one on that
+            # joint failed (a dead zone on the held-out RPR arm's base, at 65 % of its held-out force, moved the
+            # wrist's enough for a spring there to be confirmed first, 4.5 -> 2.3 %), before a mode of that joint, or
+            # when none is significant
             worst = _lost_motion(state, done, refits)
             if not significant and worst is None:
                 break

@@ -545,7 +545,6 @@ class _InverseModel:
         # an elastic joint's link rows (against zero) follow its motor rows: every row, at any speed (no friction
         # acts there)
         self.link_rows = [0] * n
-        self.link_keep: Dict[int, np.ndarray] = {}
         if links:
             ends = list(self.lay.elastic)
             lk = _rows(dec, np.zeros((len(q), len(ends))), links, self.lay.size, v[:, ends], np.zeros(len(ends)),
@@ -553,7 +552,6 @@ class _InverseModel:
             for j, (yd, wd, keep) in zip(ends, lk):
                 self.parts[j] = (np.concatenate([self.parts[j][0], yd]), np.concatenate([self.parts[j][1], wd]))
                 self.link_rows[j] = len(yd)
-                self.link_keep[j] = keep
 
     def columns(self, columns: List[Tuple[int, np.ndarray]]) -> List[np.ndarray]:
         """Full-rate columns, each on joint ``j``'s rows (``(j, values)``), decimated together in one pass of the
@@ -1435,8 +1433,7 @@ class _RobotPlant:
                 new = np.where(moved, np.clip(eps + step, eps / 2, 2 * eps), eps)
                 self.law = (self.law[0], tuple(float(e) for e in new))
                 self.say("smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new) + f" {speed_unit(rec)}")
-        rows = inverse.rows(self.law)  # the law's columns, decimated once for both fits below
-        est, cov, res = _weighted_fit(rows, self.held)
+        est, cov, res = inverse.fit(self.law, held=self.held)
         # a spring's damping is not negative: where the least squares ask for less than none, it is held at none and
         # the rest fitted again (the bound active for this iteration only). Shortening the step cannot keep it
         # there from an iterate at or near zero, and stopped step 3 on the flexrobots UR5 (the elbow's D, 4 % of
