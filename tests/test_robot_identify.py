@@ -82,6 +82,34 @@ def test_friction_within_5_percent_and_validation_near_the_floor(data, fits, nam
     assert set(per) == set(t["joint_names"])
 
 
+@pytest.mark.parametrize("name", ROBOTS)
+def test_didim_simulate_takes_a_robots_record_and_result_as_one_axis(data, fits, name):
+    """One entry point for every plant: ``didim.simulate(record, result)`` of a robot runs the robot's closed loop
+    (the identification's), its force (samples × joints) and errors per joint against the record, each joint within
+    1.1 times its own truth floor (truth.json's, the independent simulator's; measured 0.98-1.01), the link sides
+    (joints × samples) on the record's encoders within 3 counts RMS (measured 0.3-0.9); a one-axis option or a
+    one-axis parameter set is refused by name."""
+    load, truth = data
+    t = truth[name]
+    res = fits[name]["didim"]
+    _, val = load(name, "valid")
+    sim = didim.simulate(val, res)
+    assert sim.force.shape == val.force.shape and sim.q.shape == sim.motor.shape == (val.ndof, val.n)
+    np.testing.assert_allclose(sim.force, simulate_robot(val, res)["force"], rtol=0, atol=0)  # the same loop
+    per = sim.relative_error_per_joint(val)
+    assert list(per) == t["joint_names"]
+    for j, floor in zip(t["joint_names"], t["records"]["valid"]["truth_floor_per_joint"]):
+        assert per[j] < 1.1 * floor, (j, per[j], floor)
+    assert sim.relative_error(val) < 1.2 * t["records"]["valid"]["truth_floor_total"]
+    # the simulated link follows the encoders to within a few counts
+    counts = np.sqrt(np.mean((sim.q - val.qm.T) ** 2, axis=1)) / np.asarray(val.encoder_step)
+    assert np.max(counts) < 3, counts
+    with pytest.raises(didim.DataError, match="leave coulomb_law out"):
+        didim.simulate(val, res, coulomb_law="tanh")
+    with pytest.raises(didim.DataError, match="robot's identification result"):
+        didim.simulate(val, {"M": 1.0})
+
+
 def test_didim_starts_from_the_urdfs_values_and_converges(fits):
     for name in ROBOTS:
         r = fits[name]["didim"]

@@ -251,13 +251,14 @@ def _simulate_robot(args, result) -> int:
 
     from .formats._io import save_figure, write_text
     from .check import enforce
-    from .methods.robot import deflection_errors, force_errors, simulate_robot
+    from .methods.robot import deflection_errors
+    from .simulation import simulate
 
     rec = _robot_record(args, args.file, result.robot)
     chk = enforce(rec, args.controller_check)
-    sim = simulate_robot(rec, result)
-    err, per = force_errors(rec, sim["force"])
-    deflection = deflection_errors(rec, sim, result.structure)
+    sim = simulate(rec, result)
+    err, per = sim.relative_error(rec), sim.relative_error_per_joint(rec)
+    deflection = deflection_errors(rec, {"q": sim.q.T, "theta": sim.motor.T}, result.structure)
     print(f"{args.file}: closed-loop force error of {args.result} ({result.method}, {rec.ndof}-joint robot "
           f"{result.robot.name}): {100 * err:.2f} %")
     for j, e in per.items():
@@ -281,7 +282,7 @@ def _simulate_robot(args, result) -> int:
     if args.plot:
         from .plots import plot_robot_forces
 
-        save_figure(plot_robot_forces(rec, sim["force"], title=f"{args.result} on {rec.name}"), args.plot, dpi=110)
+        save_figure(plot_robot_forces(rec, sim.force, title=f"{args.result} on {rec.name}"), args.plot, dpi=110)
         print(f"wrote {args.plot}")
     return 0
 

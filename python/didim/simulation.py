@@ -150,6 +150,10 @@ class SimResult:
 
     ``force`` is the commanded motor force (N); ``q``, ``qd``, ``qdd`` have shape (ndof, n): row 0 is the motor
     (q1, m, m/s, m/s²), row 1 the load (q12) for the flexible model. States are noise-free.
+
+    A robot's (``joints``: its joint names): ``force`` (n, joints) as the record's, ``q``, ``qd``, ``qdd`` the link
+    sides (joints, n), and ``motor`` the motor sides' positions (joints, n; an elastic joint's rotor, a rigid joint's
+    link), SI units per joint (m or rad).
     """
 
     model: str
@@ -159,6 +163,8 @@ class SimResult:
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
+    joints: Tuple[str, ...] = ()
+    motor: Optional[np.ndarray] = None
 
     @property
     def q1(self) -> np.ndarray:
@@ -185,16 +191,29 @@ class SimResult:
         return self.qdd[1] if self.qdd.shape[0] > 1 else None
 
     def relative_error(self, recording: Recording) -> float:
-        """``‖τ − τ_sim‖ / ‖τ‖`` against the recording's measured force (NaN when the measured force is zero)."""
+        """``‖τ − τ_sim‖ / ‖τ‖`` against the recording's measured force (NaN when the measured force is zero); a
+        robot's over all its joints."""
         ref = float(np.linalg.norm(recording.force))
         if ref == 0 or not np.isfinite(ref):
             return float("nan")
         return float(np.linalg.norm(recording.force - self.force) / ref)
 
+    def relative_error_per_joint(self, recording: Recording) -> Dict[str, float]:
+        """A robot's :meth:`relative_error` joint by joint (NaN for a joint whose measured force is zero); one
+        axis's under the name "axis"."""
+        if not self.joints:
+            return {"axis": self.relative_error(recording)}
+        ref = np.linalg.norm(recording.force, axis=0)
+        err = np.linalg.norm(recording.force - self.force, axis=0)
+        return {j: float(e / r) if r > 0 and np.isfinite(r) else float("nan") for j, e, r in zip(self.joints, err, ref)}
+
     def settled(self, recording: Recording) -> Tuple[int, float]:
         """For a record that began away from this simulation's start (:func:`settling_samples`): how many first samples
         the simulation takes to join it, and the relative force error after them; (0, NaN) for a record that starts
         where the simulation does."""
+        if self.joints:
+            raise DataError("settled() compares one axis's motor position; a robot's record starts at rest where its "
+                            "simulation does")
         k = settling_samples(recording.qm, self.q[0], recording.dt, recording.position_resolution)
         if k == 0:
             return 0, float("nan")
@@ -207,6 +226,12 @@ class SimResult:
         """Measured (when a recording is given) and simulated force with their difference, like Fig. 6 of the paper."""
         import matplotlib.pyplot as plt
 
+        if self.joints:  # a robot's: one panel per joint
+            from .plots import plot_robot_forces
+
+            if recording is None:
+                raise DataError("a robot's simulation is plotted against its record: sim.plot(record)")
+            return plot_robot_forces(recording, self.force, title=f"{self.model} model on {recording.name}")
         if ax is None:
             fig, ax = plt.subplots(figsize=(10, 4))
         else:
@@ -302,12 +327,13 @@ def simulate(
         _checks.known_options([simulate], unknown, "simulate")
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
-    if recording.has_joint_columns:
-        raise DataError(f"{recording.name or 'the record'} is a robot's ({len(recording.joint_names)} joints: "
-                        f"{', '.join(recording.joint_names)}); didim.simulate simulates one axis: simulate a robot's "
-                        "identification result on it with didim.robots.simulate_robot(rec, result)")
     structure = dict(offset=offset, terms=tuple(terms), delay=delay, force_lag=force_lag, backlash_gap=backlash_gap,
                      coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
+    if recording.has_joint_columns or (_is_result(params) and params.robot is not None):
+        numerics = dict(substeps=substeps, quantization=quantization, integrator=integrator, tol=tol)
+        given = [k for k, v in {**structure, "model": model}.items() if v not in ((), None, 0, "algebraic", "rigid")]
+        given += [k for k, v in numerics.items() if v != ROBOT_SIM_DEFAULTS[k]]
+        return _simulate_robot(recording, params, given)
     if _is_result(params):  # a result carries its model structure and its simulator's numerics
         given = [k for k, v in structure.items() if v not in ((), None, 0, "algebraic")]
         if given:
@@ -327,6 +353,33 @@ def simulate(
                      q=out["q"], qd=out["qd"], qdd=out["qdd"])
 
 
+#: :func:`simulate`'s numerical options as they are when not given (a robot's result carries its own).
+ROBOT_SIM_DEFAULTS = {"substeps": 10, "quantization": None, "integrator": "exponential", "tol": DEFAULT_TOL}
+
+
+def _simulate_robot(recording: Recording, result, given: Sequence[str]) -> SimResult:
+    """:func:`simulate` of a robot's record with a robot's identification result (its model, friction law and
+    parameters): the same closed loop as ``didim simulate`` and the identification's; ``given``: the one-axis
+    options the call set (a robot's result carries its model and numerics)."""
+    name = recording.name or "the record"
+    if not _is_result(result) or result.robot is None:
+        raise DataError(f"{name} is a robot's ({len(recording.joint_names)} joints: {', '.join(recording.joint_names)}): "
+                        "simulate it with a robot's identification result (didim.identify(rec, robot, ...) or "
+                        "didim.load_result(RESULT.json)), which carries the robot, its model and parameters")
+    if not recording.has_joint_columns:
+        raise DataError(f"this is a robot's result ({result.robot.ndof} joints of {result.robot.name}) and {name} is one "
+                        "axis's: simulate it on a record of that robot (its joints' columns and controllers)")
+    if given:
+        raise DataError(f"a robot's result carries its model and its simulator: leave {', '.join(given)} out")
+    from .methods.robot import simulate_robot
+
+    sim = simulate_robot(recording, result)
+    elastic = "theta" in sim
+    return SimResult(model=result.structure.kind, params=dict(result.params), t=recording.t, force=sim["force"],
+                     q=sim["q"].T, qd=sim["qd"].T, qdd=sim["qdd"].T, joints=tuple(recording.joint_names),
+                     motor=(sim["theta"] if elastic else sim["q"]).T)
+
+
 def _is_result(x) -> bool:
     from .result import IdentificationResult
 
@@ -336,8 +389,8 @@ def _is_result(x) -> bool:
 def _structure(result):
     if result.robot is not None:
         raise DataError(f"this is a robot's result ({result.robot.ndof} joints of {result.robot.name}): simulate it on "
-                        "a robot's record with didim.robots.simulate_robot(record, result) (command line: didim "
-                        "simulate REC.csv RESULT.json --controller C)")
+                        "a record of that robot with didim.simulate(record, result) (command line: didim simulate "
+                        "REC.csv RESULT.json --controller C)")
     if result.structure is None:
         raise DataError(f"this {result.method} result holds no parameter set of a model ({', '.join(result.params)}); "
                         "simulate the final result of the identification (or one of its steps that has one)")
