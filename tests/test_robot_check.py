@@ -171,3 +171,22 @@ def test_a_record_with_more_joints_than_the_robot_is_refused(robots_dir):
     robot = didim.Robot.from_urdf(robots_dir / "pendulum_cad.urdf")
     with pytest.raises(didim.DataError, match=r"columns for 6 joints .* the robot has 2"):
         didim.load_record(robots_dir / "ur5_train.csv", robot=robot, controller=robots_dir / "pendulum_controller.json")
+
+
+def test_the_public_check_and_fit_take_a_robots_record_as_one_axis_s(robots_dir, tmp_path):
+    """``didim.check_controller`` and ``didim.fit_controller`` serve every plant: on a robot's record each joint's
+    controller is checked (or fitted) on its own log. The fitted laws replay each joint's logged force to 1e-6 (the
+    files' true laws to 1e-9), and a joint with a gain ten times off is the one refused."""
+    _, rec = _record(robots_dir, _controllers(robots_dir, "ur5"), "ur5", tmp_path=tmp_path)
+    chk = didim.check_controller(rec)
+    assert chk.passed and set(chk.joints) == set(rec.joint_names) and chk.mismatch < 1e-6
+    fits = didim.fit_controller(rec)
+    assert list(fits) == list(rec.joint_names)
+    for name, f in fits.items():
+        assert f.error < 1e-6, (name, f.summary())  # measured 5e-9 to 8e-8 (the written coefficients' rounding)
+    spec = _controllers(robots_dir, "ur5")
+    spec["joints"][2] = _scaled(spec["joints"][2], 10.0)
+    _, bad = _record(robots_dir, spec, "ur5", tmp_path=tmp_path)
+    assert didim.check_controller(bad).failed() == [bad.joint_names[2]]
+    with pytest.raises(didim.DataError, match="one axis's"):
+        check_robot_controllers(bad.joint(0))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -236,11 +236,14 @@ def _saturated_cause(tf: TransferFunction, rec, f: np.ndarray) -> str:
     return "check the saturation and gain"
 
 
-def check_controller(rec) -> ControllerCheck:
+def check_controller(rec) -> Union[ControllerCheck, "RobotControllerCheck"]:
     """The recording's controller against its log (see the module's text). Tries the usual mistakes only when the
     description fails: the cascade's settings (feedforward, ti, f_lp, kv, kp in another unit) when the controller was
     built by :meth:`TransferFunction.cascade` or from a ``"cascade"`` file, and for any controller the force gain (a
-    least-squares factor), the sign and one or two samples of delay between the command and the log."""
+    least-squares factor), the sign and one or two samples of delay between the command and the log. A robot's
+    record: each joint's controller against its own log (:func:`check_robot_controllers`)."""
+    if rec.has_joint_columns:
+        return check_robot_controllers(rec)
     tf = rec.controller.transfer_function(rec.dt)
     f = np.asarray(rec.force, dtype=float)
     if not np.any(f) and np.ptp(rec.qr) > 0:  # a loop that moves commands a force: this column holds none
@@ -388,6 +391,8 @@ def check_robot_controllers(rec) -> RobotControllerCheck:
     """:func:`check_controller` on each joint of a robot's record (:meth:`didim.Recording.joint`); a joint whose
     controller fails is tried with the other joints' controllers, and two joints that replay each other's logs are
     named as swapped."""
+    if not rec.has_joint_columns:
+        raise DataError(f"{rec.name or 'record'} is one axis's: check its controller with check_controller(rec)")
     n = len(rec.joint_names)
     out = RobotControllerCheck({rec.joint_names[j]: check_controller(rec.joint(j)) for j in range(n)})
     bad = [j for j in range(n) if not out.joints[rec.joint_names[j]].passed]
@@ -423,7 +428,7 @@ def enforce(rec, mode: str = "error"):
     if mode == "off":
         return None
     robot = rec.has_joint_columns
-    chk = check_robot_controllers(rec) if robot else check_controller(rec)
+    chk = check_controller(rec)
     if not chk.passed:
         what = (f"the described controller of joint{'s' if len(chk.failed()) > 1 else ''} {', '.join(chk.failed())} "
                 "does not give the logged force" if robot else "the described controller does not give the logged force")

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -286,11 +286,21 @@ class _Design:
 
 
 def fit_controller(rec_or_signals, *, holdout: float = 0.3, max_order: int = MAX_ORDER,
-                   tolerance: float = CHECK_TOLERANCE) -> ControllerFit:
+                   tolerance: float = CHECK_TOLERANCE) -> Union[ControllerFit, Dict[str, ControllerFit]]:
     """The controller of a log (a :class:`didim.Recording`, or a dict with ``dt``, ``qr``, ``qm``, ``force`` and
     optionally ``u_ext``), see the module's text. Raises :class:`DataError` when no linear law of order up to
     ``max_order`` (with a delay up to 2 samples) replays the held-out force within ``tolerance`` (``CHECK_TOLERANCE``
-    by default; ``math.inf`` returns the best law whatever it misses)."""
+    by default; ``math.inf`` returns the best law whatever it misses). A robot's record: each joint's law from its
+    own log, by joint name (the error names the joint)."""
+    if getattr(rec_or_signals, "has_joint_columns", False):
+        out = {}
+        for j, name in enumerate(rec_or_signals.joint_names):
+            try:
+                out[name] = fit_controller(rec_or_signals.joint(j), holdout=holdout, max_order=max_order,
+                                           tolerance=tolerance)
+            except DataError as e:
+                raise DataError(f"joint {name}: {e}") from None
+        return out
     get = rec_or_signals.get if isinstance(rec_or_signals, dict) else (lambda k: getattr(rec_or_signals, k, None))
     dt = float(get("dt"))
     qr, qm, f = (np.asarray(get(k), dtype=float) for k in ("qr", "qm", "force"))

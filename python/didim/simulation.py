@@ -462,6 +462,10 @@ def simulate_batch(
     """
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_record), got {type(recording).__name__}")
+    if recording.has_joint_columns:
+        raise DataError(f"{recording.name or 'the record'} is a robot's: simulate_batch sweeps one axis's parameter "
+                        "sets through the core's threads; simulate each of a robot's results with didim.simulate(rec, "
+                        "result)")
     if isinstance(params, Mapping) or _is_result(params):
         raise DataError("simulate_batch takes a sequence of parameter sets; use simulate for one")
     if isinstance(params, (str, bytes)) or not isinstance(params, (Sequence, np.ndarray)):
