@@ -344,7 +344,7 @@ def test_a_controller_that_saturates_everywhere_is_explained(pendulum, tmp_path)
 
 def test_joints_files_options_and_outputs_name_what_to_change(pendulum, tmp_path):
     """A bad field in a joints file's entry names the file and the joint; a joints file's content given as a mapping
-    is read as the file; didim.simulate on a robot's record points to simulate_robot; two angle units say how to
+    is read as the file; didim.simulate on a robot's record asks for a robot's result; two angle units say how to
     declare them per joint; a mimic joint is refused (the Panda's mimicking fingers, locked, still load); a full
     device is named."""
     import pathlib
@@ -355,7 +355,7 @@ def test_joints_files_options_and_outputs_name_what_to_change(pendulum, tmp_path
         didim.load_record(robots_record(frame, tmp_path), robot=robot, controller=bad)
     got = didim.load_record(robots_record(frame, tmp_path), robot=robot, controller=json.loads(ctl.read_text()))
     assert got.controllers == rec.controllers
-    with pytest.raises(didim.DataError, match=r"didim.simulate simulates one axis: .*didim.robots.simulate_robot"):
+    with pytest.raises(didim.DataError, match=r"is a robot's .*simulate it with a robot's identification result"):
         didim.simulate(rec, {"M": 1.0, "Fv": 1.0, "Fc": 1.0})
     with pytest.raises(didim.DataError, match="declare them per joint: \"units\" in each joint's entry of the "
                                               "controllers' file"):

@@ -1,0 +1,41 @@
+"""Where robot DIDIM starts. DIDIM is a fixed-point iteration: from the URDF's values (no rotor inertia, no friction)
+it can settle where the closed loop fits the record worse than IDIM-LS's estimate as it is. On a held-out Panda (the
+independent Pinocchio loop of benches/robot_doctor_heldout.py, seed 35, no concealed effect) it settled at 6.5 % of
+the joints' force (RMS) with bodies that could not be simulated on the validation record's poses, and the robot doctor
+then looked for nothing; IDIM-LS's estimate alone was at 1.9 %. DIDIM now runs again from there and keeps the better
+run, and says so."""
+
+import numpy as np
+import pytest
+
+import didim
+
+from conftest import bench_module
+
+
+@pytest.fixture(scope="module")
+def panda(tmp_path_factory):
+    pytest.importorskip("pinocchio")
+    bench = bench_module("robot_doctor_heldout")
+    key = "test_panda_start"
+    tmp = tmp_path_factory.mktemp(key)
+    bench.CASES[key] = dict(robot="panda", seed=35, effect=None, want=None)
+    truth = bench.make_case(key, tmp)
+    cad = didim.Robot.from_urdf(tmp / truth["urdf"])
+    ctl = tmp / truth["controller"]
+    return cad, truth, *(didim.load_record(tmp / f"{key}_{p}.csv", robot=cad, controller=ctl)
+                         for p in ("train", "valid"))
+
+
+def test_didim_that_settles_worse_than_idim_ls_runs_again_from_it(panda):
+    """Every joint's training and validation force error within 1.15 times its truth floor (the independent plant's
+    noise; measured 0.99-1.08; the run from the URDF's values alone: training 1.5-11.7 times, and its estimate could
+    not be simulated on the validation record), the restart in the notes."""
+    cad, truth, rec, val = panda
+    res = didim.identify(rec, cad, "didim")
+    assert any("it started from IDIM-LS's estimate" in n for n in res.notes), res.notes
+    for r, part in ((rec, "train"), (val, "valid")):
+        per = didim.simulate(r, res).relative_error_per_joint(r)
+        floors = truth["records"][part]["floor_per_joint"]
+        ratio = np.array([per[j] / f for j, f in zip(r.joint_names, floors)])
+        assert np.all(ratio < 1.15), (part, dict(zip(r.joint_names, ratio.round(3))))
