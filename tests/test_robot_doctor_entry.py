@@ -34,3 +34,20 @@ def test_the_robot_doctor_locates_each_joints_mismatch_on_held_out_data(robots_d
     got = json.loads(out.read_text())
     assert got["findings"] == [] and {j["joint"] for j in got["joints"]} == set(robot.joint_names)
     assert "where simulation and record differ, per joint" in capsys.readouterr().out
+
+
+def test_a_robot_joints_stribeck_term_is_worded_as_one_axis_s():
+    """One rule for every plant (``didim.doctor.effects.stribeck_physics``): a term against the joint's Coulomb
+    friction is a low-speed deficit, else a Stribeck effect, read with the joint's own Fc (a deficit was worded
+    "friction is higher at low speed"); a robot's wide law (ε near the Stribeck speeds) is not called its shape."""
+    import types
+
+    from didim.doctor.effects import REGISTRY, STRIBECK_DEFICIT
+    from didim.doctor.robot import _physics
+
+    res = types.SimpleNamespace(robot=types.SimpleNamespace(joint_names=["j1", "j2"]),
+                                params={"Fc_j1": 2.0, "Fc_j2": -1.5}, law=("atan", (0.03, 0.02)))
+    assert _physics("stribeck", {"Fs_j1": -0.1, "vs": 0.08}, res, 0) == STRIBECK_DEFICIT
+    assert _physics("stribeck", {"Fs_j2": 0.1, "vs": 0.08}, res, 1) == STRIBECK_DEFICIT  # against a negative Fc
+    assert _physics("stribeck", {"Fs_j1": 0.4, "vs": 0.05}, res, 0) == REGISTRY["stribeck"].physics
+    assert _physics("stribeck") == REGISTRY["stribeck"].physics  # no fit given: the effect's sentence

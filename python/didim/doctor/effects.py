@@ -231,14 +231,20 @@ def _stribeck_retune(state: State, data: Data, progress) -> Optional[Adopted]:
     return _stribeck_adopted(*best)
 
 
-def _stribeck_physics(params: Dict[str, float], state: State) -> str:
-    # free sign: Fs opposite to the Coulomb friction is a low-speed deficit, named as such
-    if params["Fs"] * state.coulomb() < 0:
+def stribeck_physics(fs: float, fc: float, vs: float, eps: float) -> str:
+    """The physics of a fitted Stribeck term of every plant (one axis's, a robot joint's): ``fs`` opposite to the
+    Coulomb friction ``fc`` is a low-speed deficit, named as such (its sign is free); a Stribeck speed ``vs`` within
+    FRICTION_SHAPE_FACTOR of the Coulomb law's smoothing speed ``eps`` is the law's shape; else a Stribeck effect."""
+    if fs * fc < 0:
         return STRIBECK_DEFICIT
-    eps = state.model.coulomb_eps if state.model.coulomb_eps is not None else DEFAULT_COULOMB_EPS
-    if params["vs"] < FRICTION_SHAPE_FACTOR * eps:
+    if vs < FRICTION_SHAPE_FACTOR * eps:
         return FRICTION_SHAPE
     return REGISTRY["stribeck"].physics
+
+
+def _stribeck_physics(params: Dict[str, float], state: State) -> str:
+    eps = state.model.coulomb_eps if state.model.coulomb_eps is not None else DEFAULT_COULOMB_EPS
+    return stribeck_physics(params["Fs"], state.coulomb(), params["vs"], eps)
 
 
 # ---------------------------------------------------------------------------------------------------- periodic

@@ -238,10 +238,19 @@ ROBOT_PHYSICS = {
 }
 
 
-def _physics(effect: str) -> str:
-    """The sentence of physics of an effect: a robot joint's own, or one axis's (the doctor's registry)."""
-    from .effects import REGISTRY
+def _physics(effect: str, params: Optional[Dict[str, float]] = None, res=None, joint: Optional[int] = None) -> str:
+    """The sentence of physics of an effect: a robot joint's own, or one axis's (the doctor's registry); a fitted
+    Stribeck term (``params`` on ``joint`` of the model ``res``) as one axis's says it: a term against the joint's
+    Coulomb friction is a low-speed deficit (:func:`didim.doctor.effects.stribeck_physics`). Not its rule of the
+    law's shape (a Stribeck speed within ten smoothing speeds): a robot's fitted laws are wide, ε of 0.03 rad/s
+    beside Stribeck speeds of 0.04-0.08 (the held-out humps), where an axis's is a hundredth of them."""
+    from .effects import REGISTRY, stribeck_physics
 
+    if effect == "stribeck" and params and res is not None and joint is not None:
+        jn = res.robot.joint_names[joint]
+        fs = params.get(f"Fs_{jn}")
+        if fs is not None and "vs" in params:
+            return stribeck_physics(fs, res.params.get(f"Fc_{jn}", 0.0), params["vs"], 0.0)
     return ROBOT_PHYSICS[effect] if effect in ROBOT_PHYSICS else REGISTRY[effect].physics if effect in REGISTRY else ""
 
 
@@ -1032,7 +1041,7 @@ def _attempt(c: _Candidate, state: _State, alpha: float, dec, progress):
                      f"{100 * MIN_HELDOUT_GAIN:.0f} % of itself")
     evidence += evidence_own
     unit = "N" if c.joint is not None and robot.joint_kinds[c.joint] == "prismatic" else "N·m"
-    f = Finding(c.effect, params, std, stat, evidence, _physics(c.effect), fit,
+    f = Finding(c.effect, params, std, stat, evidence, _physics(c.effect, params, new.res, c.joint), fit,
                 where={"hyper": c.hyper}, accepted=bool(p_dm < alpha and practical),
                 words=_words(c.effect, params, unit), joint=jn)
     return f, (new if f.accepted else None), (joints, before, after)
