@@ -20,6 +20,24 @@ def bench_module(name: str):
     return _bench_modules[name]
 
 
+def robot_doctor_case(key: str, case: dict, tmp: pathlib.Path, robot: dict = None):
+    """One record pair of benches/robot_doctor_heldout.py's independent loop (``case`` as its ``CASES`` entries, with
+    ``robot`` a ``ROBOTS`` entry of its own under the key when given), made into ``tmp``: the CAD robot, the truth and
+    the training and validation records."""
+    import didim
+
+    pytest.importorskip("pinocchio")
+    bench = bench_module("robot_doctor_heldout")
+    if robot is not None:
+        bench.ROBOTS[key] = robot
+    bench.CASES[key] = case
+    truth = bench.make_case(key, tmp)
+    cad = didim.Robot.from_urdf(tmp / truth["urdf"])
+    ctl = tmp / truth["controller"]
+    return cad, truth, *(didim.load_record(tmp / f"{key}_{p}.csv", robot=cad, controller=ctl)
+                         for p in ("train", "valid"))
+
+
 #: The EMPS records live outside the package, in the shared data folder next to the checkout.
 EMPS_DIR = pathlib.Path(os.environ.get("DIDIM_EMPS_DIR", pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "emps"))
 

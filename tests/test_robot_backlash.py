@@ -14,7 +14,7 @@ import didim
 from didim.methods.robot import force_errors
 from didim.robots import simulate_robot
 
-from conftest import bench_module
+from conftest import bench_module, robot_doctor_case
 
 
 @pytest.fixture(scope="module")
@@ -165,18 +165,12 @@ def rigid_backlash(request, tmp_path_factory):
     """A held-out arm with backlash on a joint its base model has rigid (Spong's motor and link with the robotdoctor
     README's dead zone, benches/elastic_robots.py's ``pin_elastic_loop``, independent of didim's loop)."""
     pytest.importorskip("pinocchio")
-    bench = bench_module("robot_doctor_heldout")
     robot, joint, b, f_hz, seed, seconds = RIGID_BACKLASH[request.param]
     key = f"test_{request.param}"
-    tmp = tmp_path_factory.mktemp(key)
-    bench.ROBOTS[key] = {**bench.ROBOTS[robot], "seconds": seconds}
-    bench.CASES[key] = dict(robot=key, seed=seed, want="backlash",
-                            effect=dict(kind="backlash", joint=joint, b=b, f_hz=f_hz, zeta=0.05))
-    truth = bench.make_case(key, tmp)
-    cad = didim.Robot.from_urdf(tmp / truth["urdf"])
-    ctl = tmp / truth["controller"]
-    return cad, truth, *(didim.load_record(tmp / f"{key}_{p}.csv", robot=cad, controller=ctl)
-                         for p in ("train", "valid"))
+    return robot_doctor_case(key, dict(robot=key, seed=seed, want="backlash",
+                                       effect=dict(kind="backlash", joint=joint, b=b, f_hz=f_hz, zeta=0.05)),
+                             tmp_path_factory.mktemp(key),
+                             robot={**bench_module("robot_doctor_heldout").ROBOTS[robot], "seconds": seconds})
 
 
 def test_the_robot_doctor_names_backlash_on_a_joint_its_model_has_rigid(rigid_backlash):

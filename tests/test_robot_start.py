@@ -10,21 +10,13 @@ import pytest
 
 import didim
 
-from conftest import bench_module
+from conftest import robot_doctor_case
 
 
 @pytest.fixture(scope="module")
 def panda(tmp_path_factory):
-    pytest.importorskip("pinocchio")
-    bench = bench_module("robot_doctor_heldout")
-    key = "test_panda_start"
-    tmp = tmp_path_factory.mktemp(key)
-    bench.CASES[key] = dict(robot="panda", seed=35, effect=None, want=None)
-    truth = bench.make_case(key, tmp)
-    cad = didim.Robot.from_urdf(tmp / truth["urdf"])
-    ctl = tmp / truth["controller"]
-    return cad, truth, *(didim.load_record(tmp / f"{key}_{p}.csv", robot=cad, controller=ctl)
-                         for p in ("train", "valid"))
+    return robot_doctor_case("test_panda_start", dict(robot="panda", seed=35, effect=None, want=None),
+                             tmp_path_factory.mktemp("test_panda_start"))
 
 
 def test_didim_that_settles_worse_than_idim_ls_runs_again_from_it(panda):
