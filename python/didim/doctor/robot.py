@@ -745,10 +745,12 @@ def _mode_screen(state: _State, c: _Candidate, progress) -> float:
     if "screen_gain" not in c.hyper:
         _grid_screen(state, c, progress)
     if not c.hyper["screen_gain"] >= MIN_HELDOUT_GAIN:
+        gain = c.hyper["screen_gain"]
+        moved = (f"lower the joints' force errors on the training record by {100 * gain:.1f} %" if gain >= 0 else
+                 f"raise the joints' force errors on the training record by {-100 * gain:.1f} %")
         raise DidimError(f"step 2's grid finds no mode of {state.res.robot.joint_names[c.joint]}: its best split and "
-                         f"mode ({c.hyper['f_grid_hz']:.4g} Hz) lower the joints' force errors on the training record "
-                         f"by {100 * c.hyper['screen_gain']:+.1f} % of the model's with it rigid, not by "
-                         f"{100 * MIN_HELDOUT_GAIN:.0f} % at least")
+                         f"mode ({c.hyper['f_grid_hz']:.4g} Hz) {moved} against the model's with it rigid, where a "
+                         f"mode must lower them by {100 * MIN_HELDOUT_GAIN:.0f} % at least")
     return c.hyper["screen_gain"]
 
 
