@@ -190,3 +190,21 @@ def test_the_public_check_and_fit_take_a_robots_record_as_one_axis_s(robots_dir,
     assert didim.check_controller(bad).failed() == [bad.joint_names[2]]
     with pytest.raises(didim.DataError, match="one axis's"):
         check_robot_controllers(bad.joint(0))
+
+
+def test_a_controller_file_named_for_the_robot_serves_each_of_its_records(robots_dir, tmp_path):
+    """``NAME_controller.json`` beside a record, else the name cut at its last underscores (``ur5_valid.csv`` reads
+    ``ur5_controller.json``, as the data folders keep one controller per robot): the same controllers as given by
+    hand, none fitted from the log; a record whose prefixes name no file still has its laws fitted."""
+    import shutil
+
+    robot = didim.Robot.from_urdf(robots_dir / "pendulum_cad.urdf")
+    shutil.copy(robots_dir / "pendulum_controller.json", tmp_path / "pendulum_controller.json")
+    for name in ("pendulum_valid.csv", "pendulum_valid_2.csv"):
+        shutil.copy(robots_dir / "pendulum_valid.csv", tmp_path / name)
+        rec = didim.load_record(tmp_path / name, robot=robot)
+        assert not rec.controller_origin, rec.controller_origin
+        assert rec.controllers == didim.load_record(robots_dir / "pendulum_valid.csv", robot=robot,
+                                                    controller=robots_dir / "pendulum_controller.json").controllers
+    shutil.copy(robots_dir / "pendulum_valid.csv", tmp_path / "arm_valid.csv")
+    assert len(didim.load_record(tmp_path / "arm_valid.csv", robot=robot).controller_origin) == 2

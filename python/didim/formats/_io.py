@@ -298,11 +298,17 @@ def save_figure(fig, path, **kw) -> None:
 
 
 def beside(path) -> "str | None":
-    """The controller file beside a record, ``NAME_controller.json`` (or ``.toml``), if there is one."""
-    stem = os.path.splitext(os.fspath(path))[0]
-    for ext in (".json", ".toml"):
-        if os.path.isfile(stem + "_controller" + ext):
-            return stem + "_controller" + ext
+    """The controller file beside a record, ``NAME_controller.json`` (or ``.toml``), if there is one; else the name
+    cut at its last underscores, longest first: ``ur5_valid.csv`` and ``ur5_d4_train.csv`` read ``ur5_controller.json``
+    (one controller for a robot's records, as the data folders have it; the controller check still compares it with
+    each log)."""
+    folder, name = os.path.split(os.path.splitext(os.fspath(path))[0])
+    parts = name.split("_")
+    for k in range(len(parts), 0, -1):
+        stem = os.path.join(folder, "_".join(parts[:k]))
+        for ext in (".json", ".toml"):
+            if os.path.isfile(stem + "_controller" + ext):
+                return stem + "_controller" + ext
     return None
 
 
