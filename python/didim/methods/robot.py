@@ -10,6 +10,7 @@ those combinations, β = K·π; their names say what each combines."""
 
 from __future__ import annotations
 
+import copy
 import math
 import threading
 import time
@@ -1959,7 +1960,7 @@ def _spring_search(rec: Recording, model_of_u, u0: np.ndarray, lower: np.ndarray
 
 
 def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say=None, search: bool = True,
-                  start=None) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
+                  start=None, width_starts: Sequence[float] = (1.0,)) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
     """Step 2 for a robot's elastic joints: from eq. (28)'s grid (every joint at once, each taking the point where its
     own force error is least), the least squares of the joints' relative closed-loop force residuals over every
     elastic joint's (λ, ln f, ζ) at once (:func:`_spring_search`: Levenberg-Marquardt, where the paper's Nelder-Mead
@@ -1967,7 +1968,8 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
     Returns each joint's (λ, f in Hz, ζ), the split model, and the search's record (criterion, simulations).
     ``search=False``: the grid's best point alone (its criterion; no least squares): a screen for a mode. ``start``:
     the grid's best point when it is known (that screen's, one row (λ, f, ζ) per elastic joint): the search starts
-    there and the grid is not run again."""
+    there and the grid is not run again. ``width_starts``: with dead zones in ``model``, the least squares run from
+    each of their widths times these factors, the best kept (:data:`WIDTH_STARTS`)."""
     from .._parallel import cores, map_threads
 
     say = say or (lambda s: None)
@@ -2023,7 +2025,7 @@ def elastic_modes(rec: Recording, rigid: IdentificationResult, model: Model, say
         f"{nm} λ = {x[e, 0]:.2f}, f = {x[e, 1]:.1f} Hz" for e, nm in enumerate(names)))
     if not search:
         return x, split, {"criterion": _joints_error(errors(x)), "simulations": sims[0]}
-    return _step2_search(split, x, law, names, sims, say)
+    return _step2_search(split, x, law, names, sims, say, width_starts)
 
 
 #: The rigid step of the three-step DIDIM fits the rigid model below the elastic joints' modes, where the rigid and the
@@ -2059,16 +2061,38 @@ def _grid_each(x: np.ndarray, joints, grid: List[Tuple[float, float]], errors, e
     return best
 
 
-def _step2_search(split: _ElasticSplit, x: np.ndarray, law: Law, names: List[str], sims: List[int], say
-                  ) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
-    """:func:`elastic_modes`' least squares from ``x``."""
-    x, best = split.search(x, law, sims)
+def _step2_search(split: _ElasticSplit, x: np.ndarray, law: Law, names: List[str], sims: List[int], say,
+                  width_starts: Sequence[float] = (1.0,)) -> Tuple[np.ndarray, _ElasticSplit, Dict[str, Any]]:
+    """:func:`elastic_modes`' least squares from ``x``; with dead zones in the model, from each of their widths times
+    ``width_starts`` in turn, the best kept, until a start ends with every width at or above its own (a start from
+    below: a lower one would reach the same)."""
+    gapped = [j for j in split.elastic if split.model.backlash_gap is not None and split.model.gaps[j] > 0]
+    starts = width_starts if gapped else (1.0,)
+    tried = []
+    for k in starts:
+        one = copy.copy(split)
+        if k != 1.0:
+            one.model = replace(split.model, backlash_gap=tuple(g * k for g in split.model.gaps))
+        got = one.search(x, law, sims)
+        if len(starts) > 1:
+            say(f"step 2 from the dead zones' widths times {k:g}: joints' force errors RMS {100 * got[1]:.3f} %"
+                + "".join(_width_words(one.model, j) for j in one.elastic))
+        tried.append((got[1], got, one))
+        if all(one.model.gaps[j] >= k * split.model.gaps[j] for j in gapped):
+            break
+    _, (x, best), split = min(tried, key=lambda t: t[0])
     say("step 2: " + "; ".join(f"{nm} λ = {x[e, 0]:.3f}, f = {x[e, 1]:.2f} Hz, ζ = {x[e, 2]:.3f}"
                                + _width_words(split.model, j)
                                for (e, nm), j in zip(enumerate(names), split.elastic))
         + f"; joints' force errors RMS {100 * best:.3f} %")
     return x, split, {"criterion": best, "simulations": sims[0]}
 
+
+#: The three steps' step 2 with dead zones in the model runs from their given widths times each of these (the best
+#: fit kept): a width started above the truth's leaves the model's rotor and link apart where the record's are in
+#: contact, and the least squares stay there (the held-out lift with 1 mrad, from 2 mrad: 2.0 mrad, K 8 times the
+#: truth's); from below they reach it (from 0.3 mrad: 0.9998 mrad).
+WIDTH_STARTS = (1.0, 0.5, 0.25, 0.125)
 
 #: Step 2 in the rounds (:func:`_refine_springs`) fits each elastic joint's total inertia at mid-stroke too, within a
 #: factor e^TOTAL_LOG_BOUND of the model's (dimensionless; see :meth:`_ElasticSplit.search`).
@@ -2176,7 +2200,7 @@ def didim_elastic(rec: Recording, model: Model, *, max_iter: int = 30, tol: floa
         raise DataError("step 1's result is the rigid DIDIM of the same model (its terms and offset, no elastic "
                         f"joint), got {rigid.structure.describe()}")
     say(f"step 1: closed-loop force error {100 * rigid.force_error:.3f} %")
-    x, split, search = modes if modes is not None else elastic_modes(rec, rigid, model, say)
+    x, split, search = modes if modes is not None else elastic_modes(rec, rigid, model, say, width_starts=WIDTH_STARTS)
     theta0 = split.theta(x)
     theta0[list(held)] = list(held.values())
     law = rigid.law if rigid.law is not None else _default_law(rec)
