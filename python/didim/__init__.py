@@ -9,10 +9,10 @@ from .controllers import PD, EmpsCascade, TransferFunction, load_controller, loa
 from .recording import Recording
 from .formats.loaders import from_dataframe, load_mat, load_record
 from .simulation import (DEFAULT_COULOMB_EPS, DEFAULT_TOL, INTEGRATORS, BatchResult, SimResult, coulomb_sign, param_names,
-                         simulate, simulate_batch)
+                         simulate_batch)
 from .signal import Decimation
 from .result import IdentificationResult, compare
-from .api import METHODS, identify
+from .api import METHODS, identify, simulate
 from . import scenarios
 from .doctor import Diagnosis, Finding, doctor
 from .model import Model, Term

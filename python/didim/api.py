@@ -265,7 +265,41 @@ ABSURD_FORCE_ERROR = 1.0
 POOR_FORCE_ERROR = 0.5
 
 
-__all__ = ["identify", "METHODS"]
+
+def simulate(recording: Recording, params, model: Union[str, Model] = "rigid", **options):
+    """Simulates the recording's closed loop with ``params``, for every plant: one axis's record with a parameter
+    mapping, sequence or result (:func:`didim.simulation.simulate`, whose options it takes), a robot's record with a
+    robot's identification result (its robot, model, friction law and parameters; the same closed loop as the
+    identification's and ``didim simulate``'s). A robot's :class:`didim.SimResult` holds ``force`` (samples × joints,
+    as the record's), ``q``, ``qd``, ``qdd`` the link sides and ``motor`` the motor sides (joints × samples), and
+    ``relative_error_per_joint(record)``."""
+    from .simulation import simulate as simulate_axis
+
+    from .result import IdentificationResult
+
+    robot_result = isinstance(params, IdentificationResult) and params.robot is not None
+    if not (isinstance(recording, Recording) and (recording.has_joint_columns or robot_result)):
+        return simulate_axis(recording, params, model, **options)
+    name = recording.name or "the record"
+    if not robot_result:
+        raise DataError(f"{name} is a robot's ({len(recording.joint_names)} joints: {', '.join(recording.joint_names)}): "
+                        "simulate it with a robot's identification result (didim.identify(rec, robot, ...) or "
+                        "didim.load_result(RESULT.json)), which carries the robot, its model and parameters")
+    if not recording.has_joint_columns:
+        raise DataError(f"this is a robot's result ({params.robot.ndof} joints of {params.robot.name}) and {name} is one "
+                        "axis's: simulate it on a record of that robot (its joints' columns and controllers)")
+    given = ([] if isinstance(model, str) and model == "rigid" else ["model"]) + sorted(options)
+    if given:
+        raise DataError(f"a robot's result carries its model and its simulator: leave {', '.join(given)} out")
+    from .methods.robot import simulate_robot
+    from .simulation import SimResult
+
+    sim = simulate_robot(recording, params)
+    return SimResult(model=params.structure.kind, params=dict(params.params), t=recording.t, force=sim["force"],
+                     q=sim["q"].T, qd=sim["qd"].T, qdd=sim["qdd"].T, joints=tuple(recording.joint_names),
+                     motor=sim.get("theta", sim["q"]).T)
+
+__all__ = ["identify", "simulate", "METHODS"]
 
 
 def _warn_findings(recording: Recording) -> None:

@@ -122,7 +122,7 @@ def cmd_identify_robot(args) -> int:
         write_text(args.json, json.dumps(res.to_dict(), indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.plot:
-        from .plots import plot_robot_forces
+        from .simulation import plot_robot_forces
         from .methods.robot import simulate_robot
 
         save_figure(plot_robot_forces(rec, simulate_robot(rec, res)["force"], title=f"{res.method}: {rec.name}"),
@@ -251,8 +251,8 @@ def _simulate_robot(args, result) -> int:
 
     from .formats._io import save_figure, write_text
     from .check import enforce
+    from .api import simulate
     from .methods.robot import deflection_errors
-    from .simulation import simulate
 
     rec = _robot_record(args, args.file, result.robot)
     chk = enforce(rec, args.controller_check)
@@ -280,7 +280,7 @@ def _simulate_robot(args, result) -> int:
                                          indent=2) + "\n")
         print(f"wrote {args.json}")
     if args.plot:
-        from .plots import plot_robot_forces
+        from .simulation import plot_robot_forces
 
         save_figure(plot_robot_forces(rec, sim.force, title=f"{args.result} on {rec.name}"), args.plot, dpi=110)
         print(f"wrote {args.plot}")

@@ -41,32 +41,3 @@ def plot_fit(recording: Recording, result: IdentificationResult, *, title: str =
 __all__ = ["plot_fit", "full_params"]
 
 
-def plot_robot_forces(recording, force_sim, *, title: str = ""):
-    """One panel per joint: the measured and the simulated force (torque) of a robot's record and their difference,
-    with each joint's relative error in its title."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    n = recording.ndof
-    fig, axes = plt.subplots(n, 1, figsize=(9, 1.9 * n + 0.6), sharex=True, squeeze=False)
-    t = recording.t
-    for j, ax in enumerate(axes[:, 0]):
-        y, ys = recording.force[:, j], force_sim[:, j]
-        err = np.linalg.norm(y - ys) / np.linalg.norm(y)
-        unit = "N·m" if recording.joint_kinds[j] == "revolute" else "N"
-        # one axis's colours; the simulated line thinner and under the measured one, so that both stay visible
-        ax.plot(t, ys, lw=1.2, color="tab:blue", alpha=0.7, label="simulated", zorder=2)
-        ax.plot(t, y, lw=0.5, color="tab:red", label="measured", zorder=3)
-        ax.plot(t, y - ys, lw=0.6, color="0.4", label="difference", zorder=1)
-        ax.set_ylabel(f"{recording.joint_names[j]}\n({unit})", fontsize=8)
-        ax.set_title(f"{recording.joint_names[j]}: {100 * err:.2f} %", fontsize=8, loc="right")
-        ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=7, ncol=3, loc="upper left")
-    axes[-1, 0].set_xlabel("time (s)")
-    if title:
-        fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    return fig

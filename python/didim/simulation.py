@@ -227,8 +227,6 @@ class SimResult:
         import matplotlib.pyplot as plt
 
         if self.joints:  # a robot's: one panel per joint
-            from .plots import plot_robot_forces
-
             if recording is None:
                 raise DataError("a robot's simulation is plotted against its record: sim.plot(record)")
             return plot_robot_forces(recording, self.force, title=f"{self.model} model on {recording.name}")
@@ -247,6 +245,37 @@ class SimResult:
         ax.legend(loc="upper right")
         ax.grid(True, alpha=0.3)
         return fig
+
+
+def plot_robot_forces(recording, force_sim, *, title: str = ""):
+    """One panel per joint: the measured and the simulated force (torque) of a robot's record and their difference,
+    with each joint's relative error in its title."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    n = recording.ndof
+    fig, axes = plt.subplots(n, 1, figsize=(9, 1.9 * n + 0.6), sharex=True, squeeze=False)
+    t = recording.t
+    for j, ax in enumerate(axes[:, 0]):
+        y, ys = recording.force[:, j], force_sim[:, j]
+        err = np.linalg.norm(y - ys) / np.linalg.norm(y)
+        unit = "N·m" if recording.joint_kinds[j] == "revolute" else "N"
+        # one axis's colours; the simulated line thinner and under the measured one, so that both stay visible
+        ax.plot(t, ys, lw=1.2, color="tab:blue", alpha=0.7, label="simulated", zorder=2)
+        ax.plot(t, y, lw=0.5, color="tab:red", label="measured", zorder=3)
+        ax.plot(t, y - ys, lw=0.6, color="0.4", label="difference", zorder=1)
+        ax.set_ylabel(f"{recording.joint_names[j]}\n({unit})", fontsize=8)
+        ax.set_title(f"{recording.joint_names[j]}: {100 * err:.2f} %", fontsize=8, loc="right")
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7, ncol=3, loc="upper left")
+    axes[-1, 0].set_xlabel("time (s)")
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return fig
 
 
 #: The simulator's numerical options (not the model's): see :func:`simulate`.
@@ -327,13 +356,11 @@ def simulate(
         _checks.known_options([simulate], unknown, "simulate")
     if not isinstance(recording, Recording):
         raise DataError(f"recording must be a didim.Recording (see didim.load_mat), got {type(recording).__name__}")
+    if recording.has_joint_columns or (_is_result(params) and params.robot is not None):
+        raise DataError("a robot's record or result: didim.simulate(record, result) simulates it (this is one axis's "
+                        "simulator)")
     structure = dict(offset=offset, terms=tuple(terms), delay=delay, force_lag=force_lag, backlash_gap=backlash_gap,
                      coulomb_eps=coulomb_eps, coulomb_law=coulomb_law)
-    if recording.has_joint_columns or (_is_result(params) and params.robot is not None):
-        numerics = dict(substeps=substeps, quantization=quantization, integrator=integrator, tol=tol)
-        given = [k for k, v in {**structure, "model": model}.items() if v not in ((), None, 0, "algebraic", "rigid")]
-        given += [k for k, v in numerics.items() if v != ROBOT_SIM_DEFAULTS[k]]
-        return _simulate_robot(recording, params, given)
     if _is_result(params):  # a result carries its model structure and its simulator's numerics
         given = [k for k, v in structure.items() if v not in ((), None, 0, "algebraic")]
         if given:
@@ -351,33 +378,6 @@ def simulate(
                   tol=tol).simulate(vec)
     return SimResult(model=model.kind, params=dict(zip(names, map(float, vec))), t=recording.t, force=out["force"],
                      q=out["q"], qd=out["qd"], qdd=out["qdd"])
-
-
-#: :func:`simulate`'s numerical options as they are when not given (a robot's result carries its own).
-ROBOT_SIM_DEFAULTS = {"substeps": 10, "quantization": None, "integrator": "exponential", "tol": DEFAULT_TOL}
-
-
-def _simulate_robot(recording: Recording, result, given: Sequence[str]) -> SimResult:
-    """:func:`simulate` of a robot's record with a robot's identification result (its model, friction law and
-    parameters): the same closed loop as ``didim simulate`` and the identification's; ``given``: the one-axis
-    options the call set (a robot's result carries its model and numerics)."""
-    name = recording.name or "the record"
-    if not _is_result(result) or result.robot is None:
-        raise DataError(f"{name} is a robot's ({len(recording.joint_names)} joints: {', '.join(recording.joint_names)}): "
-                        "simulate it with a robot's identification result (didim.identify(rec, robot, ...) or "
-                        "didim.load_result(RESULT.json)), which carries the robot, its model and parameters")
-    if not recording.has_joint_columns:
-        raise DataError(f"this is a robot's result ({result.robot.ndof} joints of {result.robot.name}) and {name} is one "
-                        "axis's: simulate it on a record of that robot (its joints' columns and controllers)")
-    if given:
-        raise DataError(f"a robot's result carries its model and its simulator: leave {', '.join(given)} out")
-    from .methods.robot import simulate_robot
-
-    sim = simulate_robot(recording, result)
-    elastic = "theta" in sim
-    return SimResult(model=result.structure.kind, params=dict(result.params), t=recording.t, force=sim["force"],
-                     q=sim["q"].T, qd=sim["qd"].T, qdd=sim["qdd"].T, joints=tuple(recording.joint_names),
-                     motor=(sim["theta"] if elastic else sim["q"]).T)
 
 
 def _is_result(x) -> bool:
@@ -496,6 +496,6 @@ def simulate_batch(
                        qd=out.get("qd"), qdd=out.get("qdd"), errors=list(out["errors"]))
 
 
-__all__ = ["simulate", "settling_samples", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
+__all__ = ["simulate", "plot_robot_forces", "settling_samples", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
            "params_vector", "entry_model", "coulomb_sign", "MODELS", "NUMERICS", "INTEGRATORS", "DEFAULT_COULOMB_EPS", "DEFAULT_TOL",
            "COULOMB_EPS_REL", "COULOMB_LAWS", "default_coulomb_eps", "coulomb_eps_of"]
