@@ -184,6 +184,11 @@ def test_the_public_check_and_fit_take_a_robots_record_as_one_axis_s(robots_dir,
     assert list(fits) == list(rec.joint_names)
     for name, f in fits.items():
         assert f.error < 1e-6, (name, f.summary())  # measured 5e-9 to 8e-8 (the written coefficients' rounding)
+    assert len(fits.summary().splitlines()) == 6
+    # the fitted laws as a joints file: read back, they pass the check on the same log
+    again = didim.load_record(robots_dir / "ur5_train.csv", robot=didim.Robot.from_urdf(robots_dir / "ur5_cad.urdf"),
+                              controller=fits.to_dict())
+    assert didim.check_controller(again).mismatch < 1e-6
     spec = _controllers(robots_dir, "ur5")
     spec["joints"][2] = _scaled(spec["joints"][2], 10.0)
     _, bad = _record(robots_dir, spec, "ur5", tmp_path=tmp_path)

@@ -122,6 +122,18 @@ class ControllerFit:
         return {**self.controller.to_dict(), "note": self.summary()}
 
 
+class RobotControllerFit(Dict[str, ControllerFit]):
+    """:func:`fit_controller` of a robot's record: each joint's :class:`ControllerFit` by joint name, in the URDF's
+    order; ``summary()`` one line per joint, ``to_dict()`` the joints file (``{"type": "joints", "joints": [...]}``,
+    SI units) that ``load_record(..., controller=...)`` and ``--controller`` read back."""
+
+    def summary(self) -> str:
+        return "\n".join(f"{j}: {f.summary()}" for j, f in self.items())
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"type": "joints", "joints": [f.to_dict() for f in self.values()]}
+
+
 #: A fitted law's coefficient below this share of its largest is zero when it is read as a cascade (the least
 #: squares leave some 1e-5 of it where the cascade has none).
 READING_RTOL = 1e-4
@@ -286,14 +298,14 @@ class _Design:
 
 
 def fit_controller(rec_or_signals, *, holdout: float = 0.3, max_order: int = MAX_ORDER,
-                   tolerance: float = CHECK_TOLERANCE) -> Union[ControllerFit, Dict[str, ControllerFit]]:
+                   tolerance: float = CHECK_TOLERANCE) -> Union[ControllerFit, RobotControllerFit]:
     """The controller of a log (a :class:`didim.Recording`, or a dict with ``dt``, ``qr``, ``qm``, ``force`` and
     optionally ``u_ext``), see the module's text. Raises :class:`DataError` when no linear law of order up to
     ``max_order`` (with a delay up to 2 samples) replays the held-out force within ``tolerance`` (``CHECK_TOLERANCE``
     by default; ``math.inf`` returns the best law whatever it misses). A robot's record: each joint's law from its
-    own log, by joint name (the error names the joint)."""
+    own log, by joint name (a :class:`RobotControllerFit`; the error names the joint)."""
     if getattr(rec_or_signals, "has_joint_columns", False):
-        out = {}
+        out = RobotControllerFit()
         for j, name in enumerate(rec_or_signals.joint_names):
             try:
                 out[name] = fit_controller(rec_or_signals.joint(j), holdout=holdout, max_order=max_order,
@@ -375,4 +387,4 @@ def fit_controller(rec_or_signals, *, holdout: float = 0.3, max_order: int = MAX
     return ControllerFit(tf, n, d, err, whole, sat, tried, cascade_reading(tf) if d == 0 else None)
 
 
-__all__ = ["ControllerFit", "fit_controller"]
+__all__ = ["ControllerFit", "RobotControllerFit", "fit_controller"]
