@@ -2505,7 +2505,10 @@ class PayloadResult:
         return jsonable(dict(self.__dict__))
 
     def summary(self) -> str:
-        com = ", ".join(f"{1e3 * c:.1f} ± {1e3 * s:.1f}" for c, s in zip(self.com, self.com_sigma))
+        # each coordinate to its σ's first two digits (a σ of 0.02 mm printed "0.0" carried nothing)
+        com = ", ".join(f"{1e3 * c:.{max(1, 1 - int(math.floor(math.log10(1e3 * s))))}f} ± {1e3 * s:.2g}"
+                        if s > 0 and math.isfinite(s) else f"{1e3 * c:.1f} ± {1e3 * s:.2g}"
+                        for c, s in zip(self.com, self.com_sigma))
         lines = [f"payload: mass {self.mass:.5f} ± {self.mass_sigma:.2g} kg, centre of mass ({com}) mm in the last "
                  f"joint's frame; closed-loop force error {100 * self.force_error_without:.2f} % without it -> "
                  f"{100 * self.force_error:.2f} % with it ({'converged' if self.converged else 'NOT converged'} in "
