@@ -203,9 +203,7 @@ class SimResult:
         axis's under the name "axis"."""
         if not self.joints:
             return {"axis": self.relative_error(recording)}
-        ref = np.linalg.norm(recording.force, axis=0)
-        err = np.linalg.norm(recording.force - self.force, axis=0)
-        return {j: float(e / r) if r > 0 and np.isfinite(r) else float("nan") for j, e, r in zip(self.joints, err, ref)}
+        return dict(zip(self.joints, map(float, column_errors(recording.force, self.force))))
 
     def settled(self, recording: Recording) -> Tuple[int, float]:
         """For a record that began away from this simulation's start (:func:`settling_samples`): how many first samples
@@ -247,6 +245,14 @@ class SimResult:
         return fig
 
 
+def column_errors(force: np.ndarray, force_sim: np.ndarray) -> np.ndarray:
+    """Each column's (a robot joint's) relative error ``‖τ − τ_sim‖ / ‖τ‖`` (NaN where its measured force is zero)."""
+    ref = np.linalg.norm(force, axis=0)
+    err = np.linalg.norm(force - force_sim, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((ref > 0) & np.isfinite(ref), err / ref, np.nan)
+
+
 def plot_robot_forces(recording, force_sim, *, title: str = ""):
     """One panel per joint: the measured and the simulated force (torque) of a robot's record and their difference,
     with each joint's relative error in its title."""
@@ -254,7 +260,6 @@ def plot_robot_forces(recording, force_sim, *, title: str = ""):
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
-    import numpy as np
 
     n = recording.ndof
     fig, axes = plt.subplots(n, 1, figsize=(9, 1.9 * n + 0.6), sharex=True, squeeze=False)
@@ -496,6 +501,6 @@ def simulate_batch(
                        qd=out.get("qd"), qdd=out.get("qdd"), errors=list(out["errors"]))
 
 
-__all__ = ["simulate", "plot_robot_forces", "settling_samples", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
+__all__ = ["simulate", "plot_robot_forces", "column_errors", "settling_samples", "simulate_batch", "problem", "sim_options", "SimResult", "BatchResult", "Term", "TERM_KINDS", "param_names",
            "params_vector", "entry_model", "coulomb_sign", "MODELS", "NUMERICS", "INTEGRATORS", "DEFAULT_COULOMB_EPS", "DEFAULT_TOL",
            "COULOMB_EPS_REL", "COULOMB_LAWS", "default_coulomb_eps", "coulomb_eps_of"]

@@ -1105,11 +1105,11 @@ def actuation_notes(rec: Recording, res: IdentificationResult) -> List[str]:
 
 
 def force_errors(rec: Recording, force_sim: np.ndarray) -> Tuple[float, Dict[str, float]]:
-    """‖τ − τ_sim‖/‖τ‖ over all joints, and per joint."""
+    """‖τ − τ_sim‖/‖τ‖ over all joints, and per joint (:func:`didim.simulation.column_errors`)."""
+    from ..simulation import column_errors
+
     total = float(np.linalg.norm(rec.force - force_sim) / np.linalg.norm(rec.force))
-    per = {j: float(np.linalg.norm(rec.force[:, i] - force_sim[:, i]) / np.linalg.norm(rec.force[:, i]))
-           for i, j in enumerate(rec.joint_names)}
-    return total, per
+    return total, dict(zip(rec.joint_names, map(float, column_errors(rec.force, force_sim))))
 
 
 def _result(method: str, rec: Recording, model: Model, base: BaseParameters, theta, cov,
@@ -1597,23 +1597,22 @@ def didim(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
         run, plant = _didim_run(rec, model, base, dec, theta0, law, per_shape, max_iter, tol, say, plant=first)
         failed = run.best[2] is None or (not run.converged and not run.message.startswith("no convergence"))
         why = f"failed ({run.message})" if failed else ""
+        ls = None
+        theta_ls = measured.fit(law, held=held)[0] if failed or start is None else None
         if not failed and start is None:
             # DIDIM is a fixed-point iteration: from the URDF's values it can settle where the closed loop fits worse
             # than IDIM-LS's estimate as it is (held-out Panda records: 6.1-6.5 % against about 2 %, its bodies not
             # physical at the validation record's poses); such an end is no result while the other start is better
             ls = _RobotPlant(rec, model, base, dec, law, per_shape, tol, say, held)
-            theta_ls = measured.fit(law, held=held)[0]
             ls.set_start(theta_ls)
-            e_ls = _start_error(ls, theta_ls)
+            e_ls = _start_error(ls, theta_ls)  # the plant keeps this simulation for its first iteration
             if e_ls < run.best[0]:
                 why = (f"ended at joints' force errors RMS {100 * run.best[0]:.3g} %, above IDIM-LS's estimate's "
                        f"{100 * e_ls:.3g} % in closed loop")
         if why:
             say(f"DIDIM from {origin} {why}: again from IDIM-LS's estimate")
-            again, plant_again = (_didim_run(rec, model, base, dec, theta_ls, law, per_shape, max_iter, tol, say,
-                                             plant=ls) if not failed else
-                                  _didim_run(rec, model, base, dec, measured.fit(law, held=held)[0], law, per_shape,
-                                             max_iter, tol, say, held=held))
+            again, plant_again = _didim_run(rec, model, base, dec, theta_ls, law, per_shape, max_iter, tol, say,
+                                            plant=ls, held=held)
             if again.best[2] is not None and (run.best[2] is None or again.best[0] < run.best[0]):
                 notes.append(f"DIDIM from {origin} {why}; it started from IDIM-LS's estimate")
                 run, plant = again, plant_again
