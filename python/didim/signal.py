@@ -174,10 +174,9 @@ class Decimation:
     def leak_end(self, n: int, k: int, leak: float) -> int:
         """The first decimated row of a record of ``n`` samples from which on the decimated indicator of its first
         ``k`` samples stays below ``leak`` (0 when it never reaches it): how far a disturbance of the first ``k``
-        samples reaches through the filter. Kept per ``(n, k, leak)``: the filter's response to the long run of
-        zeros after the indicator decays through subnormal numbers, at some forty times a signal's cost (on the EMPS
-        doctor, 106 such decimations took 1.2 s of its 6.8 s), and a doctor asks for the same few ``k`` with each
-        refit."""
+        samples reaches through the filter. Kept per ``(n, k, leak)``: a doctor asks for the same few ``k`` with each
+        refit (on the EMPS doctor 106 such decimations took 1.2 s of its 6.8 s, when the filter still computed the
+        subnormal numbers its state passes through after the indicator; the core flushes them now)."""
         cache = self.__dict__.setdefault("_leak_ends", {})
         key = (int(n), int(k), float(leak))
         if key not in cache:

@@ -797,3 +797,61 @@ fn row_major_parallel_decimation_equals_column_major() {
     let m = msg(d.apply_parallel_rows(y, &[0.0; 999], 2).unwrap_err());
     assert!(m.contains("row-major") && m.contains("999"), "{m}");
 }
+
+#[test]
+fn columns_of_local_support_equal_the_reference_above_the_subnormals() {
+    // a pulse, then zeros: the filter's state decays through subnormal numbers, which the
+    // passes flush to zero (x86-64) instead of computing at their cost; the outputs change by
+    // a few smallest normal numbers at most, so every output above 1e-250 is the same, bit
+    // for bit
+    let n = 12_000;
+    let cols: Vec<Vec<f64>> = (0..5)
+        .map(|j| {
+            (0..n)
+                .map(|i| {
+                    if (300 * j..300 * j + 200).contains(&i) {
+                        1.0 + 0.1 * j as f64
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let d = Decimation::butterworth(4, 40.0, 1000.0, 10, FilterForm::Sos).unwrap();
+    let Prepared::Sos { sos, zi } = &d.prepared else {
+        panic!("an sos decimation")
+    };
+    let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+    let got = d.apply_columns(&refs, |j| format!("c{j}")).unwrap();
+    let mut subnormal = 0;
+    for (j, g) in got.iter().enumerate() {
+        let full = sosfiltfilt_core(sos, zi, &cols[j], d.padlen());
+        subnormal += full
+            .iter()
+            .filter(|v| **v != 0.0 && v.abs() < f64::MIN_POSITIVE)
+            .count();
+        let want: Vec<f64> = full
+            .iter()
+            .skip(d.start_index(n))
+            .step_by(d.factor())
+            .copied()
+            .collect();
+        assert_eq!(g.len(), want.len());
+        for (i, (a, b)) in g.iter().zip(&want).enumerate() {
+            if b.abs() >= 1e-250 {
+                assert_eq!(a.to_bits(), b.to_bits(), "column {j}, row {i}: {a} against {b}");
+            } else {
+                assert!((a - b).abs() < 1e-300, "column {j}, row {i}: {a} against {b}");
+            }
+        }
+    }
+    // the case is one: the reference passes through subnormal numbers
+    assert!(subnormal > 0);
+    #[cfg(target_arch = "x86_64")]
+    {
+        // the thread's floating-point mode is back: a subnormal product is not flushed
+        let tiny = std::hint::black_box(f64::MIN_POSITIVE);
+        assert!(std::hint::black_box(tiny * 0.5) > 0.0);
+    }
+}
