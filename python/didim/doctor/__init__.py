@@ -209,7 +209,10 @@ def _test_all(cands: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Data,
     time: the same tests as one by one, at a fraction of the cost for the grids of hyper-parameters."""
     if not cands:
         return
-    x = orthogonalize(data.train_columns(np.column_stack([c.columns for c in cands])), wb)
+    # stacked column by column (Fortran order): the core's columns come as transposed views, and the core decimates
+    # a Fortran-ordered matrix in place; np.column_stack copied them into rows, a strided copy as long as the filter
+    x = np.concatenate([np.asarray(c.columns, dtype=float).T for c in cands], axis=0).T
+    x = orthogonalize(data.train_columns(x), wb)
     rw, xw = prewhiten(a, r, x)
     ends = np.cumsum([c.columns.shape[1] for c in cands])
     for c, e in zip(cands, ends):

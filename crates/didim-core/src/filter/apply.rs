@@ -310,6 +310,15 @@ pub(super) fn check_record(x: &[f64], edge: usize, name: &str, filter: &str) -> 
             x.len()
         ));
     }
+    // an infinite or NaN value has every exponent bit set: an OR over the samples, which the compiler vectorizes
+    // (`position`'s early exit is a branch per sample, 2 % of the EMPS doctor's time); the index only on failure
+    const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
+    if x.iter()
+        .fold(0u64, |acc, v| acc | u64::from(v.to_bits() & EXPONENT == EXPONENT))
+        == 0
+    {
+        return Ok(());
+    }
     if let Some(i) = x.iter().position(|v| !v.is_finite()) {
         return Err(invalid!(
             "{name} has a non-finite value at index {i} ({}); remove or interpolate non-finite samples before filtering",
