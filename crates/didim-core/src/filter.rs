@@ -73,9 +73,13 @@ mod numeric;
 #[cfg(test)]
 mod tests;
 
+mod flush;
+
 pub use apply::*;
 pub use decimate::*;
 pub use design::*;
+#[cfg(target_arch = "x86_64")]
+use flush::FlushSubnormals;
 use numeric::*;
 
 /// Highest filter order accepted by the design functions.
