@@ -79,7 +79,7 @@ pub use apply::*;
 pub use decimate::*;
 pub use design::*;
 #[cfg(target_arch = "x86_64")]
-use flush::FlushSubnormals;
+pub(crate) use flush::FlushSubnormals;
 use numeric::*;
 
 /// Highest filter order accepted by the design functions.

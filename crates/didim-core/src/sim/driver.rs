@@ -328,6 +328,8 @@ pub(crate) fn simd<R>(f: impl FnOnce() -> R) -> R {
         f()
     }
     #[cfg(target_arch = "x86_64")]
+    let _flush = crate::filter::FlushSubnormals::on();
+    #[cfg(target_arch = "x86_64")]
     if wide_simd() {
         // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
         return unsafe { wide(f) };
