@@ -1052,8 +1052,8 @@ def _attempt(c: _Candidate, state: _State, alpha: float, dec, progress):
     if accepted and c.effect in FRICTION_EFFECTS and c.joint is not None:
         try:
             kept, note, numbers = _friction_instead(c, state, new, dec, alpha)
-        except DidimError:  # a polished loop that cannot be simulated: the finding stands as judged
-            kept, note, numbers = True, "", {}
+        except (DidimError, np.linalg.LinAlgError, ValueError) as e:  # the fits could not be made: it stands as judged
+            kept, note, numbers = True, f"; not compared with the joint's friction fitted otherwise ({e})", {}
         fit.update(numbers)
         evidence += note
         accepted = kept
