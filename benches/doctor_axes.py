@@ -64,6 +64,9 @@ def main() -> None:
     truth = json.load(open(os.path.join(AXES, "truth.json")))
     res = {}
     only = sys.argv[1:]
+    if any(a.startswith("-") for a in only) or any(a not in truth for a in only):
+        sys.exit("usage: python benches/doctor_axes.py [RECORD ...] (writes docs/doctor_axes.md and .json); records: "
+                 + ", ".join(sorted(truth)))
     for name in sorted(n for n in truth if not only or n in only):
         res[name] = r = run_one(name, truth[name])
         dd = r.get("didim")
