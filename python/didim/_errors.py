@@ -23,4 +23,9 @@ class DidimWarning(UserWarning):
     them with ``warnings.simplefilter("ignore", didim.DidimWarning)`` or turn them into errors with "error"."""
 
 
+# shown as didim.DataError (their public name) in tracebacks and reprs, not as the private module's
+for _cls in (DidimError, DataError, SimulationError, IdentifiabilityError, DidimWarning):
+    _cls.__module__ = "didim"
+del _cls
+
 __all__ = ["DidimError", "DataError", "SimulationError", "IdentifiabilityError", "DidimWarning"]

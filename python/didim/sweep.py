@@ -204,6 +204,8 @@ class _Bar:
         self.total, self.done, self.ok, self.t0, self.label = total, 0, 0, time.perf_counter(), label
         self.say = enabled if callable(enabled) else ((lambda s: print(s, end="", file=sys.stderr, flush=True))
                                                       if enabled else None)
+        # a bar redrawn in place on a terminal; one line per update in a log (a captured \r runs the bars together)
+        self.tty = callable(enabled) or (bool(enabled) and sys.stderr.isatty())
 
     def update(self, converged: bool) -> None:
         self.done += 1
@@ -214,9 +216,12 @@ class _Bar:
         eta = el / self.done * (self.total - self.done)
         width = 30
         fill = int(width * self.done / self.total)
-        line = (f"\r{self.label} [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total}, "
+        line = (f"{self.label} [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total}, "
                 f"{self.ok} converged, {el:.1f} s, ETA {eta:.1f} s")
-        self.say(line + ("\n" if self.done == self.total else ""))
+        if self.tty:
+            self.say("\r" + line + ("\n" if self.done == self.total else ""))
+        else:
+            self.say(line + "\n")
 
 
 def _executor(executor, workers: int):

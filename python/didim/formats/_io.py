@@ -95,7 +95,11 @@ def check_input(path, what: str = "input file") -> str:
     except FileNotFoundError:
         if os.path.islink(shown):
             raise DataError(f"{shown}: a symbolic link to a missing file") from None
-        raise DataError(f"{shown}: no such file") from None
+        hint = ""
+        if "shared/data" in shown.replace(os.sep, "/"):
+            hint = (" (the examples read the data folder shared/data beside the checkout: clone next to it, or link "
+                    "it there as the README's set-up says)")
+        raise DataError(f"{shown}: no such file{hint}") from None
     except OSError as e:
         if e.errno == errno.ELOOP:
             raise DataError(f"{shown}: a loop of symbolic links") from None
