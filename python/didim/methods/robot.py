@@ -1955,15 +1955,17 @@ def polish_joint(rec: Recording, res: IdentificationResult, joint: int, extra: S
     friction, offset and rotor inertia where they are parameters of ``res`` (a regrouped rotor inertia is not: it
     lives in a base parameter of the bodies), its friction smoothing speed, and the parameters named in ``extra``
     (a term's on that joint), by Levenberg-Marquardt on that joint's relative force residual in closed loop (forward
-    differences of the loop without encoder quantization, as :func:`oe_lm`); every other parameter held. DIDIM's fixed
+    differences of the loop without encoder quantization, as :func:`oe_lm`); every other parameter held, and those
+    ``res`` holds (its ``frozen``). DIDIM's fixed
     point is not the output-error optimum when the loop is noisy (a 7-joint arm under cascades with torque noise inside
     the loop: 1.1-1.6 times each joint's floor where OE-LM reaches 0.98-1.03), and a term compared with it gains from
     that difference; compared at this optimum, on the same joint, only what the term itself adds counts."""
     jn = res.robot.joint_names[joint]
     names = _theta_names(res.structure, res.base)
     theta0 = theta_of(res)
+    held = set(getattr(res, "frozen", None) or {})  # what the caller holds stays held
     own = [i for i, nm in enumerate(names)
-           if nm in (f"Fv_{jn}", f"Fc_{jn}", f"OF_{jn}", f"Ia_{jn}") or nm in set(extra)]
+           if (nm in (f"Fv_{jn}", f"Fc_{jn}", f"OF_{jn}", f"Ia_{jn}") or nm in set(extra)) and nm not in held]
     law0 = res.law if res.law is not None else _default_law(rec)
     scale = np.where(np.abs(theta0) > 0, np.abs(theta0), 1.0)
 
