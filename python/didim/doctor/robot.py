@@ -1081,6 +1081,7 @@ def _friction_instead(c: _Candidate, state: _State, new: _State, dec, alpha: flo
     Returns whether it stands, the words for the evidence, and the numbers."""
     from .finding import MIN_HELDOUT_GAIN
     from ..methods.robot import _theta_names, polish_joint, simulate_robot
+    from ..simulation import column_errors
     from ..stats import diebold_mariano
 
     j = c.joint
@@ -1092,9 +1093,7 @@ def _friction_instead(c: _Candidate, state: _State, new: _State, dec, alpha: flo
     fn = simulate_robot(new.valid, with_)["force"]
     r0, r1 = (_joint_residuals(state.valid, f, [j], dec) for f in (fw, fn))
     _, p_keep, _ = diebold_mariano(r0, r1)
-    v = state.valid.force[:, j]
-    e0 = float(np.linalg.norm(v - fw[:, j]) / np.linalg.norm(v))
-    e1 = float(np.linalg.norm(v - fn[:, j]) / np.linalg.norm(v))
+    e0, e1 = (float(column_errors(state.valid.force[:, [j]], f[:, [j]])[0]) for f in (fw, fn))
     numbers = {"valid_polished_without": e0, "valid_polished_with": e1, "polished_dm_p_value": p_keep}
     jn = state.res.robot.joint_names[j]
     said = (f"; with {jn}'s own friction fitted to its output error (Levenberg-Marquardt on the closed loop), the "
