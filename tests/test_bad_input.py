@@ -629,3 +629,19 @@ def test_a_sparse_variable_is_called_sparse(tmp_path, emps_path):
     d["t"] = scipy.sparse.csc_matrix(d["t"])
     with pytest.raises(didim.DataError, match="variable 't' must be real numbers, got a sparse matrix"):
         didim.load_mat(save(tmp_path, "sparse.mat", d))
+
+
+def test_errors_carry_their_public_name():
+    """didim.DataError in tracebacks and reprs (a new user saw didim._errors.DataError), and a pickled error comes
+    back as the same class (a process pool's worker raises it in another process)."""
+    import pickle
+
+    for cls in (didim.DidimError, didim.DataError, didim.SimulationError, didim.DidimWarning):
+        assert f"{cls.__module__}.{cls.__qualname__}" == f"didim.{cls.__name__}"
+    e = pickle.loads(pickle.dumps(didim.DataError("a message")))
+    assert type(e) is didim.DataError and str(e) == "a message"
+
+
+def test_a_missing_file_under_the_shared_data_folder_says_where_it_is_expected(tmp_path):
+    with pytest.raises(didim.DataError, match=r"no such file \(the examples read the data folder shared/data"):
+        didim.load_record(str(tmp_path / "shared" / "data" / "emps" / "DATA_EMPS.mat"))

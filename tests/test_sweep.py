@@ -77,3 +77,17 @@ def test_sweep_cli_writes_the_report_and_the_plot(tmp_path, capsys):
     assert json.loads(js.read_text())["convergence_rate"] == 1.0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(["sweep", "--scenario", "rigid-emps", "--quiet"]) == 2  # nothing to sweep: a user error
+
+
+def test_progress_is_one_line_per_point_in_a_log(capsys):
+    """Redrawn in place (\\r) only on a terminal: captured in a log, each point is a line of its own (a helper's log
+    showed the bars run together on one line)."""
+    from didim.sweep import _Bar
+
+    bar = _Bar(3, True, "sweep")
+    for ok in (True, False, True):
+        bar.update(ok)
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    lines = err.splitlines()
+    assert len(lines) == 3 and lines[-1].startswith("sweep [") and "3/3, 2 converged" in lines[-1], lines
