@@ -1085,8 +1085,8 @@ def _friction_instead(c: _Candidate, state: _State, new: _State, dec, alpha: flo
     from ..stats import diebold_mariano
 
     j = c.joint
-    added = [k for k in _theta_names(new.res.structure, new.res.base)
-             if k not in set(_theta_names(state.res.structure, state.res.base))]
+    before = set(_theta_names(state.res.structure, state.res.base))
+    added = [k for k in _theta_names(new.res.structure, new.res.base) if k not in before]
     without = polish_joint(state.train, state.res, j)
     with_ = polish_joint(new.train, new.res, j, extra=added)
     fw = simulate_robot(state.valid, without)["force"]

@@ -1954,46 +1954,16 @@ def polish_joint(rec: Recording, res: IdentificationResult, joint: int, extra: S
     """``res`` with one joint's own parameters fitted to the output error of that joint: its viscous and Coulomb
     friction, offset and rotor inertia where they are parameters of ``res`` (a regrouped rotor inertia is not: it
     lives in a base parameter of the bodies), its friction smoothing speed, and the parameters named in ``extra``
-    (a term's on that joint), by Levenberg-Marquardt on that joint's relative force residual in closed loop (forward
-    differences of the loop without encoder quantization, as :func:`oe_lm`); every other parameter held, and those
-    ``res`` holds (its ``frozen``). DIDIM's fixed
+    (a term's on that joint): :func:`oe_lm` from ``res`` on those parameters and that joint's residual alone; every
+    other parameter held, and those ``res`` holds (its ``frozen``). DIDIM's fixed
     point is not the output-error optimum when the loop is noisy (a 7-joint arm under cascades with torque noise inside
     the loop: 1.1-1.6 times each joint's floor where OE-LM reaches 0.98-1.03), and a term compared with it gains from
     that difference; compared at this optimum, on the same joint, only what the term itself adds counts."""
     jn = res.robot.joint_names[joint]
-    names = _theta_names(res.structure, res.base)
-    theta0 = theta_of(res)
     held = set(getattr(res, "frozen", None) or {})  # what the caller holds stays held
-    own = [i for i, nm in enumerate(names)
+    own = [nm for nm in _theta_names(res.structure, res.base)
            if (nm in (f"Fv_{jn}", f"Fc_{jn}", f"OF_{jn}", f"Ia_{jn}") or nm in set(extra)) and nm not in held]
-    law0 = res.law if res.law is not None else _default_law(rec)
-    scale = np.where(np.abs(theta0) > 0, np.abs(theta0), 1.0)
-
-    def split(u: np.ndarray) -> Tuple[np.ndarray, Law]:
-        th = theta0.copy()
-        th[own] = u[:len(own)] * scale[own]
-        eps = list(law0[1])
-        eps[joint] = float(np.exp(u[-1]))
-        return th, (law0[0], tuple(eps))
-
-    def simulate_u(u: np.ndarray) -> Dict[str, np.ndarray]:
-        th, lw = split(u)
-        robot_u, d = _model_of(res.structure, res.base, th)
-        return _simulate(rec, robot_u, d, lw, quantize=False)
-
-    t0, sims0 = time.perf_counter(), _simulations()
-    u0 = np.concatenate([theta0[own] / scale[own], [math.log(max(law0[1][joint], 1e-300))]])
-    sims = [0]
-    out = _output_least_squares(rec, simulate_u, u0, np.full(len(u0), -np.inf), np.full(len(u0), np.inf), sims,
-                                max_nfev=POLISH_MAX_ITER, joints=[joint])
-    theta, law = split(out.x)
-    polished = _result("oe-lm", rec, res.structure.with_law(law), res.base, theta, np.zeros((len(theta),) * 2),
-                       converged=bool(out.status > 0), iterations=int(out.nfev),
-                       notes=[f"{jn}'s own parameters ({', '.join(names[i] for i in own)} and its smoothing speed) "
-                              f"fitted to its output error from {res.method}'s estimate; the others held"])
-    polished.force_error, polished.force_error_per_joint = force_errors(rec, simulate_robot(rec, polished)["force"])
-    polished.elapsed_s, polished.simulations = time.perf_counter() - t0, _simulations() - sims0
-    return polished
+    return oe_lm(rec, res.structure, start=res, free=own, joints=[joint], max_iter=POLISH_MAX_ITER)
 
 
 def _spring_search(rec: Recording, model_of_u, u0: np.ndarray, lower: np.ndarray, upper: np.ndarray, law: Law,
@@ -2455,15 +2425,17 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
 
 @serial_blas
 def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
-          progress: Optional[Callable[[str], None]] = None, start: Optional[IdentificationResult] = None
-          ) -> IdentificationResult:
+          progress: Optional[Callable[[str], None]] = None, start: Optional[IdentificationResult] = None,
+          free: Optional[Sequence[str]] = None, joints: Optional[Sequence[int]] = None) -> IdentificationResult:
     """Output-error Levenberg-Marquardt on a robot (rigid or with elastic joints): the least squares of the joints'
     relative force residuals in closed loop over every parameter of the model (θ of :class:`_Layout`) and each joint's
     friction smoothing speed ε, from DIDIM's estimate (``start``, by default :func:`didim`: the three-step DIDIM for
     elastic joints); at most ``max_iter`` evaluations of the Jacobian. The sensitivities are forward differences of
     the loop simulated without encoder quantization (:func:`_simulate`; not the exact sensitivity equations), the
     Jacobian's columns simulated in parallel. The covariance is σ² (JᵀJ)⁻¹ at the solution, σ² from the residual
-    (correlated in time: the standard deviations are optimistic)."""
+    (correlated in time: the standard deviations are optimistic). ``free``: only the parameters of θ so named are
+    fitted, with the smoothing speeds of ``joints`` (the dead zones' widths held), the others held at ``start``'s;
+    ``joints``: only these joints' residuals count (:func:`polish_joint`)."""
     t0, sims0 = time.perf_counter(), _simulations()
     robot, offset = _check(rec, model)
     _checks.options(max_iter=max_iter, tol=tol)
@@ -2489,8 +2461,10 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
 
     def split(u: np.ndarray) -> Tuple[np.ndarray, Law, Any]:
         gaps = gaps0.copy()
-        gaps[gapped] = np.exp(u[p + n:])
-        return (u[:p] * scale, (law0[0], tuple(float(e) for e in np.exp(u[p:p + n]))),
+        gaps[gapped] = np.where(mask[p + n:], np.exp(u[p + n:]), gaps0[gapped])
+        # a held value is the start's itself (u's round trip through the scale and the log would move its last bit)
+        eps = np.where(mask[p:p + n], np.exp(u[p:p + n]), law0[1])
+        return (np.where(mask[:p], u[:p] * scale, theta0), (law0[0], tuple(float(e) for e in eps)),
                 tuple(float(g) for g in gaps) if len(gapped) else None)
 
     def simulate_u(u: np.ndarray) -> Dict[str, np.ndarray]:
@@ -2499,14 +2473,31 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
         return _simulate(rec, robot_u, d, lw, quantize=False)
 
     u0 = np.concatenate([theta0 / scale, np.log(np.maximum(law0[1], 1e-300)), np.log(gaps0[gapped])])
+    # the components of u fitted (all by default), the others held at the start's
+    names = _theta_names(start.structure, start.base)
+    mask = np.ones(len(u0), bool)
+    if free is not None:
+        unknown = set(free) - set(names)
+        if unknown:
+            raise DataError(f"oe-lm: no parameter {', '.join(sorted(unknown))} in {model.describe()}")
+        mask[:p] = np.isin(names, list(free))
+        mask[p:p + n] = np.isin(np.arange(n), list(joints if joints is not None else range(n)))
+        mask[p + n:] = False
+
+    def full(v: np.ndarray) -> np.ndarray:
+        u = u0.copy()
+        u[mask] = v
+        return u
+
     sims = [0]
-    say(f"oe-lm: Levenberg-Marquardt on {p} parameters and {n} smoothing speeds"
-        + (f" and {len(gapped)} backlash width(s)" if len(gapped) else ""))
-    out = _output_least_squares(rec, simulate_u, u0, np.full(len(u0), -np.inf), np.full(len(u0), np.inf), sims,
-                                max_nfev=max_iter)
-    theta, law, gaps = split(out.x)
+    say(f"oe-lm: Levenberg-Marquardt on {int(mask[:p].sum())} parameters and {int(mask[p:p + n].sum())} smoothing "
+        "speeds" + (f" and {len(gapped)} backlash width(s)" if mask[p + n:].any() else ""))
+    out = _output_least_squares(rec, lambda v: simulate_u(full(v)), u0[mask], np.full(int(mask.sum()), -np.inf),
+                                np.full(int(mask.sum()), np.inf), sims, max_nfev=max_iter, joints=joints)
+    theta, law, gaps = split(full(out.x))
     r, jac = out.fun, out.jac
-    cov_u = float(r @ r) / max(len(r) - len(u0), 1) * np.linalg.pinv(jac.T @ jac)
+    cov_u = np.zeros((len(u0), len(u0)))
+    cov_u[np.ix_(mask, mask)] = float(r @ r) / max(len(r) - int(mask.sum()), 1) * np.linalg.pinv(jac.T @ jac)
     cov = cov_u[:p, :p] * np.outer(scale, scale)
     flat = "no elastic mode" in (start.message or "")
     res = _result("oe-lm", rec, replace(model.with_law(law), backlash_gap=gaps), start.base, theta, cov,
@@ -2515,7 +2506,12 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
                   ("" if out.status > 0 else str(out.message)),
                   notes=[f"started from {start.method}'s estimate (closed-loop force error "
                          f"{100 * start.force_error:.2f} %)",
-                         "sensitivities by forward differences of the loop without encoder quantization"])
+                         "sensitivities by forward differences of the loop without encoder quantization"]
+                  + ([] if free is None else [
+                      f"fitted: {', '.join(k for k, m in zip(names, mask) if m) or 'no parameter'} and the smoothing "
+                      f"speed of {', '.join(robot.joint_names[j] for j in np.flatnonzero(mask[p:p + n]))}, on the "
+                      f"residual of {', '.join(robot.joint_names[j] for j in (joints or range(n)))}; the others "
+                      "held at the start's"]))
     if elastic:
         chain, d = _model_of(start.structure, start.base, theta)
         split_final = _ElasticSplit(rec, start.structure, np.concatenate([d["armature"], chain.inertial_params]), d)
