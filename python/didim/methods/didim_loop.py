@@ -33,6 +33,10 @@ MAX_BACKTRACKS = 6
 DIVERGENCE_FACTOR = 1.5
 #: The smallest step fraction tried before a non-physical LS estimate stops the iterations.
 MIN_ALPHA = 1 / 64
+#: The step fraction once the iterates alternate between two points (:func:`_alternating`).
+RELAXED_STEP = 0.5
+#: The steps (the next one included) that must each reverse the one before to call the iterates alternating.
+ALTERNATION_STEPS = 4
 
 
 class DidimPlant(Protocol):
@@ -109,6 +113,30 @@ class DidimLoop:
     since_step: int = 0
     #: The best iterate before the plant changed its model (kept when none after it can be simulated).
     before_restart: tuple = (math.inf, None, None, None)
+    #: Each iterate the least squares ran on and its output error (``history``'s, one for one).
+    solved: List[tuple] = field(default_factory=list)
+    #: The steps are taken halfway (:data:`RELAXED_STEP`) since the iterates alternated (:func:`_alternating`).
+    relaxed: bool = False
+
+
+def _alternating(loop: DidimLoop, params: np.ndarray, fi: Sequence[int]) -> bool:
+    """Whether DIDIM's iterates alternate between two points: a fixed-point map that overshoots its fixed point
+    (a direction of slope below −1: on the flexrobots UR5's step 3, products of inertia of the wrists that the
+    elastic joints' motor rows see through the link's simulated mode). The last :data:`ALTERNATION_STEPS` steps,
+    the next one included, each reverse the one before (their relative changes point against each other), and the
+    output errors of the iterates go up and down in turn without settling (each swing at least half the one before)."""
+    k = ALTERNATION_STEPS
+    solved = loop.solved[loop.since_step:]  # the iterates the least squares ran on, since the model last changed
+    if len(solved) < k:
+        return False
+    thetas, errs = [t for t, _ in solved], [e for _, e in solved]
+    pts = [t[fi] for t in thetas[-k:]] + [np.asarray(params, dtype=float)]
+    scale = np.maximum(np.max(np.abs(pts), axis=0), 1e-300)
+    steps = [(b - a) / scale for a, b in zip(pts[:-1], pts[1:])]
+    if not all(float(a @ b) < 0 for a, b in zip(steps[:-1], steps[1:])):
+        return False
+    swings = np.diff(errs[-k:])
+    return bool(np.all(swings[:-1] * swings[1:] < 0) and np.all(np.abs(swings[1:]) >= 0.5 * np.abs(swings[:-1])))
 
 
 def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
@@ -174,9 +202,17 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
             break
         if err < loop.best[0]:
             loop.best = (err, theta.copy(), sol, len(loop.history))
+        loop.solved.append((theta.copy(), err))
+        if not loop.relaxed and _alternating(loop, sol["params"], fi):
+            loop.relaxed = True
+            loop.notes.append(f"iteration {len(loop.history) + 1}: the iterates alternate between two points (output "
+                              "errors " + ", ".join(f"{100 * e:.3f} %" for _, e in loop.solved[-ALTERNATION_STEPS:]) + "): each step "
+                              "is taken halfway from here on (the same fixed point, reached where the full steps "
+                              "overshoot it)")
+        top = RELAXED_STEP if loop.relaxed else 1.0
+        alpha = top
         new = theta.copy()
-        new[fi] = sol["params"]
-        alpha = 1.0
+        new[fi] = theta[fi] + alpha * (np.asarray(sol["params"]) - theta[fi]) if loop.relaxed else sol["params"]
         while not plant.physical(new, theta) and alpha > MIN_ALPHA:
             alpha /= 2
             new = theta.copy()
@@ -185,10 +221,10 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
             loop.message = (f"iteration {len(loop.history) + 1}: the least-squares step gives a non-physical estimate "
                             f"even when shortened {1 / MIN_ALPHA:g}×; stopped")
             break
-        if alpha < 1:
+        if alpha < top:
             why = getattr(plant, "short_step_reason", "the full step gives a non-physical estimate")
             loop.notes.append(f"iteration {len(loop.history) + 1}: step shortened to {alpha:g} ({why})")
-        loop.alpha = alpha
+        loop.alpha = alpha / top
         loop.theta = new
         loop.history.append(sol)
         say(plant.describe(loop))

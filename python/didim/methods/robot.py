@@ -448,7 +448,8 @@ class _Motor:
         return out
 
 
-def _model_columns(robot: Robot, base: BaseParameters, q, v, a, lay: "_Layout", motor: Optional[_Motor] = None
+def _model_columns(robot: Robot, base: BaseParameters, q, v, a, lay: "_Layout", motor: Optional[_Motor] = None,
+                   substitute: bool = False
                    ) -> Tuple[List[Tuple[np.ndarray, np.ndarray]], List[Tuple[np.ndarray, np.ndarray]]]:
     """:func:`_model_regressor` with a zero Coulomb column (a law's is put in later), as each joint's acting columns
     (:func:`_joint_columns`) built one joint at a time: no (N, n, p) array of mostly zeros (on a 4 kHz UR10 record,
@@ -480,9 +481,16 @@ def _model_columns(robot: Robot, base: BaseParameters, q, v, a, lay: "_Layout", 
             continue
         assert motor is not None
         stretch, rate = motor.coupling(q, v, j)
-        act = np.array([lay.ia(e), lay.fv(j)] + ([lay.of(j)] if offset else []) + [lay.k(e), lay.d(e)])
-        cols = [motor.thetadd[:, j], motor.thetad[:, j]] + ([np.ones(len(q))] if offset else []) + [stretch, rate]
-        out.append((act, np.asfortranarray(np.column_stack(cols))))
+        if substitute:
+            act = np.concatenate([[lay.ia(e), lay.fv(j)] + ([lay.of(j)] if offset else []), rotor,
+                                  len(arm) + bodies]).astype(int)
+            cols = [motor.thetadd[:, j, None], motor.thetad[:, j, None]] + ([np.ones((len(q), 1))] if offset else []) \
+                + [a[:, [j] * len(rotor)], yb[j, bodies].T]
+            out.append((act, np.asfortranarray(np.concatenate(cols, axis=1))))
+        else:
+            act = np.array([lay.ia(e), lay.fv(j)] + ([lay.of(j)] if offset else []) + [lay.k(e), lay.d(e)])
+            cols = [motor.thetadd[:, j], motor.thetad[:, j]] + ([np.ones(len(q))] if offset else []) + [stretch, rate]
+            out.append((act, np.asfortranarray(np.column_stack(cols))))
         act = np.concatenate([rotor, len(arm) + bodies, [lay.k(e), lay.d(e)]]).astype(int)
         cols = [a[:, [j] * len(rotor)], yb[j, bodies].T, -stretch[:, None], -rate[:, None]]
         links.append((act, np.asfortranarray(np.concatenate(cols, axis=1))))
@@ -523,7 +531,7 @@ class _InverseModel:
 
     def __init__(self, rec: Recording, model: Model, base: BaseParameters, q, v, a, dec,
                  y: Optional[np.ndarray] = None, start_row: int = 0, motor: Optional[_Motor] = None,
-                 chain: Optional[Robot] = None):
+                 chain: Optional[Robot] = None, substitute: bool = False):
         robot = model.robot
         n, nb = robot.ndof, len(base.names)
         self.lay = _Layout.for_model(model, base)
@@ -538,7 +546,7 @@ class _InverseModel:
         # by default), which a load-dependent friction grows with
         self.tau_load = (chain or robot).rnea(q, v, a) if self.lay.load else None
         # each joint's Coulomb and extra terms' columns are left out here: they are the law's (see rows)
-        columns, links = _model_columns(robot, base, q, v, a, self.lay, motor)
+        columns, links = _model_columns(robot, base, q, v, a, self.lay, motor, substitute)
         got = _rows(dec, rec.applied_force() if y is None else y, columns, self.lay.size, self.v, top_speeds(rec),
                     start_row)
         self.parts = [(yd, wd) for yd, wd, _ in got]
@@ -546,11 +554,15 @@ class _InverseModel:
         # an elastic joint's link rows (against zero) follow its motor rows: every row, at any speed (no friction
         # acts there)
         self.link_rows = [0] * n
+        self.links: List[Tuple[int, np.ndarray]] = []
         if links:
             ends = list(self.lay.elastic)
             lk = _rows(dec, np.zeros((len(q), len(ends))), links, self.lay.size, v[:, ends], np.zeros(len(ends)),
                        start_row)
-            for j, (yd, wd, keep) in zip(ends, lk):
+            for e, (j, (yd, wd, keep)) in enumerate(zip(ends, lk)):
+                if substitute:
+                    self.links.append((e, wd))
+                    continue
                 self.parts[j] = (np.concatenate([self.parts[j][0], yd]), np.concatenate([self.parts[j][1], wd]))
                 self.link_rows[j] = len(yd)
 
@@ -609,7 +621,23 @@ class _InverseModel:
             ) -> Tuple[np.ndarray, np.ndarray, Dict[str, float]]:
         """Weighted least squares (:func:`_weighted_fit`) under ``law``: the estimate, its covariance and the
         regression's residual; ``held``: parameters (by index in θ) held at given values."""
-        return _weighted_fit(self.rows(law, coulomb), held)
+        if not self.links:
+            return _weighted_fit(self.rows(law, coulomb), held)
+        lay, held = self.lay, dict(held or {})
+        springs = {i: held.get(i, 0.0) for e in range(lay.ne) for i in (lay.k(e), lay.d(e))}
+        est, cov, res = _weighted_fit(self.rows(law, coulomb), {**held, **springs})
+        p = lay.size
+        for e, wd in self.links:
+            ks = [i for i in (lay.k(e), lay.d(e)) if i not in held]
+            if not ks:
+                continue
+            other = np.setdiff1d(np.arange(p), ks)
+            y = -(wd[:, other] @ est[other])
+            th, c, r = _solve(y, wd[:, ks])
+            est[ks] = th
+            cov[np.ix_(ks, ks)] = c
+        return est, cov, res
+
 
 
 #: Relative step of ε in the law's central difference.
@@ -1357,6 +1385,9 @@ class _RobotPlant:
         self.inverses: List[Tuple[np.ndarray, Any, _InverseModel]] = []
         self.last: Optional[Tuple[np.ndarray, Law, Any]] = None  # the last simulation (θ, law, its outputs)
         self.free = list(range(self.lay.size))
+        # the elastic joints' motor rows carry their link's equation, K and D fitted on the link rows after
+        # (_model_columns)
+        self.substitute = bool(self.elastic)
         self.start_row = 0  # the decimated rows before the simulation joins the record, left out (set_start)
         self.skip = 0  # the same, in samples, left out of the output error
         self.norm = float(np.linalg.norm(rec.force))
@@ -1414,7 +1445,7 @@ class _RobotPlant:
         structure = replace(self.structure, backlash_gap=gaps)
         im = _InverseModel(self.rec, structure, self.base, sim["q"], sim["qd"], sim["qdd"], self.dec,
                            start_row=self.start_row, motor=_Motor.of(sim, self.elastic, structure.gaps),
-                           chain=self.model(theta)[0] if self.lay.load else None)
+                           chain=self.model(theta)[0] if self.lay.load else None, substitute=self.substitute)
         self.inverses = [(theta.copy(), gaps, im)] + self.inverses[:3]
         return im
 
