@@ -11,6 +11,10 @@ simulation, their least squares, what a physical estimate is and when they have 
 - an iterate whose simulation fails (it diverges, or the arm's articulated inertia is not positive), or whose
   output error exceeds ``divergence_factor`` times the best so far, is pulled back halfway to the best iterate, at
   most :data:`MAX_BACKTRACKS` times in a row, before the iteration is declared divergent;
+- on a plant that asks for it (``relax_alternation``: a robot's elastic model, whose step-3 rows can overshoot),
+  once the iterates alternate between two points (:func:`_alternating`) every step is taken halfway, the same fixed
+  point reached where full steps circle it (one axis handles its own alternation, between two sets of rows left out
+  around reversals, by freezing both);
 - the plant's criterion says when it has converged (eq. (21) for one axis; the output error settled or stalled at
   the encoder's noise for a robot), and the plant may then change its model (a robot's friction law chosen in closed
   loop) and go on.
@@ -203,7 +207,7 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
         if err < loop.best[0]:
             loop.best = (err, theta.copy(), sol, len(loop.history))
         loop.solved.append((theta.copy(), err))
-        if not loop.relaxed and _alternating(loop, sol["params"], fi):
+        if not loop.relaxed and getattr(plant, "relax_alternation", False) and _alternating(loop, sol["params"], fi):
             loop.relaxed = True
             loop.notes.append(f"iteration {len(loop.history) + 1}: the iterates alternate between two points (output "
                               "errors " + ", ".join(f"{100 * e:.3f} %" for _, e in loop.solved[-ALTERNATION_STEPS:]) + "): each step "
