@@ -115,15 +115,14 @@ def arm2(flex, tmp_path_factory):
 
 
 def test_three_step_didim_identifies_an_elastic_arm_from_its_motor_encoders(arm2, tmp_path):
-    """The three-step DIDIM on the 2-joint vertical arm (both joints elastic) from its motor encoders alone: each
-    spring's K within 5 % of the truth (measured -0.3 % and +0.9 %), each joint's locked-rotor mode at the search's
-    mid-stroke within 3 % of the truth's there, the friction within 5 % (worst Fv -2.0 %), the shoulder's rotor within
-    5 % (+0.8 %) and the elbow's within 8 %: measured -6.2 %, issue 39's 5 % missed. It was -1.7 % while step 3 kept
-    step 1's friction law (smoothing speeds 2.4 and 1.5 times the truth's) and searched step 2 again under it; under
-    the law step 3 chooses now (within 7 % of the truth's) the training error and the validation are lower (1.055 ->
-    1.03 times the floor) and the split of the elbow's light rotor (0.063 kg·m², a third of its inertia) moves. The
-    validation record simulated within 1.2 times its truth floor, the training force error 10x below the rigid
-    model's, the link-side deflection within 15 % RMS of the link-side file's; the saved result simulates the same."""
+    """The three-step DIDIM on the 2-joint vertical arm (both joints elastic) from its motor encoders alone, against
+    issue 39's done-when: each spring's K within 5 % of the truth, each joint's locked-rotor mode at the search's
+    mid-stroke within 3 % of the truth's there, the friction and the rotors within 5 %, the validation record within
+    1.2 times its truth floor, the link-side deflection within 15 % RMS of the link-side file's; the training force
+    error 10x below the rigid model's; the saved result simulates the same. Measured (benches/elastic_robots.py, one
+    core): worst K 0.18 %, rotor 0.29 %, Fv 0.48 %, validation 1.012 times its floor, deflection 0.3 %. The elbow's
+    light rotor (a third of its inertia) was 6.2 % off, and the validation at 1.03, while step 3's link rows held the
+    link side at step 1's rigid fit (methods.robot._model_columns)."""
     t, rob, rec, val, res = arm2
     assert res.structure.elastic == ("shoulder", "elbow")
     assert res.options["rigid_force_error"] > 5 * res.force_error
@@ -136,7 +135,7 @@ def test_three_step_didim_identifies_an_elastic_arm_from_its_motor_encoders(arm2
         assert res.options["modes"][j]["f_n_flex"] == pytest.approx(f_true, rel=0.03), j
         for p in ("Fv", "Fc"):
             assert res.params[f"{p}_{j}"] == pytest.approx(t[p][i], rel=0.05), (p, j)
-        assert res.params[f"Ia_{j}"] == pytest.approx(t["Ia"][i], rel=0.08 if j == "elbow" else 0.05), j
+        assert res.params[f"Ia_{j}"] == pytest.approx(t["Ia"][i], rel=0.05), j
     sim = simulate_robot(rec, res)
     defl = deflection_errors(rec, sim, res.structure)
     assert max(defl.values()) < 0.15, defl
@@ -167,14 +166,14 @@ print(json.dumps({"law": [res.law[0], list(res.law[1])], "params": res.params, "
 
 @pytest.mark.parametrize("blas_threads", [None, 1])
 def test_three_step_didim_identifies_the_elastic_ur5_with_its_friction_law(flex, blas_threads):
-    """The three-step DIDIM on the UR5 with joints 1-3 elastic and 4-6 rigid (issue 39's done-when): step 1 fits
-    the friction law on the rigid model of an elastic arm, whose smoothing speeds came out 1.6 to 3.4 times the
-    truth's 0.01 rad/s on joints 1-4; step 3 now reaches its convergence, where the law is chosen again on the elastic
-    model (a damping the least squares ask below zero is held at zero, where shortening the step stopped step 3
-    before: measured validation 1.51 times its floor then, the rigid wrist 1 at 2.8 times its own). Measured now, the
-    same with the BLAS on one thread or two (the law's search and the rounds' handoff no longer follow the encoders'
-    rounding: with one thread this test failed, K 6.5 % and Fv 5.1 % off): every ε within 10 % of 0.01 rad/s, K within
-    2.6 %, the elastic rotors within 1.4 %, Fv and Fc within 1.1 %, the validation record at 1.05 times its floor."""
+    """The three-step DIDIM on the UR5 with joints 1-3 elastic and 4-6 rigid (issue 39's done-when), the same with
+    the BLAS on one thread or two: step 1 fits the friction law on the rigid model of an elastic arm (exp, its
+    smoothing speeds 0.7 to 1.8 times the truth's tanh at 0.01 rad/s); step 3 chooses it again in closed loop once its
+    rounds start. From step 2's estimate the iterations settled at once, and a law chosen there stayed (exp at 0.7
+    times the truth's ε, with the link's equation in step 3's motor rows: validation 1.013 times its floor). Measured
+    now: tanh, every ε within 1.1 % of the truth's, K within 0.3 %, the elastic rotors within 0.1 %, Fv within 0.25 %,
+    Fc within 0.05 %, the validation record at 1.002 times its floor (before the link's equation moved into the motor
+    rows: K within 2.6 %, Fv 1.1 %, 1.05 times the floor)."""
     d, truth = flex
     t = truth["ur5flex"]
     env = dict(os.environ)
