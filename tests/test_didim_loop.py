@@ -108,3 +108,46 @@ def test_a_robot_didim_that_cycles_above_its_best_ends_after_its_patience():
         creep += [1.0 + 0.1 * k, 0.8, 0.9]
     loop = didim_loop(Toy(creep, tol=0.0), np.array([0.9]), max_iter=20, give_up=_stalled(DIDIM_PATIENCE))
     assert loop.message == "no convergence in 20 iterations" and loop.best[1][0] == pytest.approx(1.6)
+
+
+class Overshoot(Toy):
+    """A fixed-point map of slope ``slope`` around the truth 2 (the least squares from m land at 2 + slope·(m − 2)):
+    at −1 or below the full steps circle the truth, as the flexrobots UR5's step 3 did with the link's equation in
+    its motor rows. Its output error is lower on one side of the truth than on the other."""
+
+    def __init__(self, slope, relax):
+        super().__init__([], tol=1e-12)
+        self.slope, self.relax_alternation = slope, relax
+
+    def output_error(self, sim):
+        d = sim - 2.0
+        return 0.1 + 0.05 * abs(d) + 0.02 * d
+
+    def solve(self, theta, sim):
+        return {"params": np.array([2.0 + self.slope * (theta[0] - 2.0)]), "std": np.array([0.1]),
+                "covariance": np.eye(1) * 0.01}
+
+
+@pytest.mark.parametrize("slope", [-1.0, -1.1])
+def test_iterates_that_alternate_are_taken_halfway_where_the_plant_asks(slope):
+    """Two points in turn (slope −1), or a widening circle (−1.1): the plant that asks for it (a robot's elastic model)
+    takes half steps once four steps in a row have each reversed the one before and the errors swing without settling,
+    and reaches the fixed point (the half step's slope (1 + slope)/2 is within ±1); a plant that does not ask keeps
+    its full steps (one axis's own remedy, rows frozen, is its plant's), and circles."""
+    loop = didim_loop(Overshoot(slope, relax=True), np.array([2.5]), max_iter=30)
+    assert loop.relaxed and loop.converged
+    assert loop.theta[0] == pytest.approx(2.0, abs=1e-9)
+    # the fourth least squares ran on the fourth iterate: its step is the first taken halfway
+    assert [n.split(":")[0] for n in loop.notes] == ["iteration 4"]
+    plain = didim_loop(Overshoot(slope, relax=False), np.array([2.5]), max_iter=30)
+    assert not plain.relaxed and not plain.converged
+    if slope == -1.0:
+        assert plain.thetas[-2:] == [pytest.approx([2.5]), pytest.approx([1.5])] or \
+            plain.thetas[-2:] == [pytest.approx([1.5]), pytest.approx([2.5])]
+
+
+def test_an_iteration_that_converges_is_never_relaxed():
+    """A map of slope −0.5 overshoots too, but its circle narrows: the swings shrink below half the one before, and
+    the steps stay whole."""
+    loop = didim_loop(Overshoot(-0.5, relax=True), np.array([2.5]), max_iter=60)
+    assert loop.converged and not loop.relaxed and not loop.notes
