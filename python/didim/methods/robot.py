@@ -646,11 +646,10 @@ class _InverseModel:
                 continue
             other = np.setdiff1d(np.arange(p), ks)
             y = -(wd[:, other] @ est[other])
-            th, c, r = _solve(y, wd[:, ks])
+            th, c, _ = _solve(y, wd[:, ks])
             est[ks] = th
             cov[np.ix_(ks, ks)] = c
         return est, cov, res
-
 
 
 #: Relative step of ε in the law's central difference.
