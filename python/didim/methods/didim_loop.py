@@ -209,10 +209,10 @@ def didim_loop(plant: DidimPlant, theta0: np.ndarray, *, max_iter: int = 30,
         loop.solved.append((theta.copy(), err))
         if not loop.relaxed and getattr(plant, "relax_alternation", False) and _alternating(loop, sol["params"], fi):
             loop.relaxed = True
+            swings = ", ".join(f"{100 * e:.3f} %" for _, e in loop.solved[-ALTERNATION_STEPS:])
             loop.notes.append(f"iteration {len(loop.history) + 1}: the iterates alternate between two points (output "
-                              "errors " + ", ".join(f"{100 * e:.3f} %" for _, e in loop.solved[-ALTERNATION_STEPS:]) + "): each step "
-                              "is taken halfway from here on (the same fixed point, reached where the full steps "
-                              "overshoot it)")
+                              f"errors {swings}): each step is taken halfway from here on (the same fixed point, "
+                              "reached where the full steps overshoot it)")
         top = RELAXED_STEP if loop.relaxed else 1.0
         alpha = top
         new = theta.copy()
