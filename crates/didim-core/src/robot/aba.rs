@@ -820,7 +820,13 @@ impl Robot {
             let pa_i = st.pa + child_pa;
             let u_vec = ia.times_z(l.revolute);
             let d = if l.revolute { u_vec.n.z } else { u_vec.f.z } + armature.map_or(0.0, |a| a[i]);
-            if d.is_nan() || d <= 0.0 {
+            if d.is_nan() {
+                return Err(invalid!(
+                    "joint {}: its articulated inertia is not a number: the joint positions or the inertial parameters are not finite (a closed loop that diverged numerically, as a spring too stiff or too damped for the sample period makes it)",
+                    self.joints[i].name
+                ));
+            }
+            if d <= 0.0 {
                 return Err(invalid!(
                     "joint {}: its articulated inertia is not positive ({d}): the inertial parameters are not those of physical bodies",
                     self.joints[i].name
