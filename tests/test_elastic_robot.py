@@ -320,12 +320,14 @@ def test_three_step_didim_holds_frozen_body_parameters_through_every_step(flex):
 
 
 def test_the_elastic_inverse_model_is_exact_on_its_own_noise_free_loop(flex):
-    """Step 3's least squares (each elastic joint's motor rows and link rows on the simulated states) against the
-    closed loop that simulates them: on a record whose force is didim's own loop with the truth (no noise; its first
-    force the record's, so the loop replays itself), one DIDIM step from the truth returns the truth (measured within
-    2e-6 relative, the damping the loosest; asserted 1e-4). (On the independent simulator's record, whose torque noise
-    inside the loop rings the modes, the same step moves the elbow's rotor inertia by −5.9 % and its damping by +31 %:
-    docs/elastic_robots.md.)"""
+    """Step 3's least squares (each elastic joint's motor rows with its link's equation, then its link rows for K and
+    D, on the simulated states) against the closed loop that simulates them: on a record whose force is didim's own
+    loop with the truth (no noise; its first force the record's, so the loop replays itself), one DIDIM step from the
+    truth returns the truth (asserted 1e-4 relative). (On the independent simulator's record, whose torque noise
+    inside the loop rings the modes, the same step moves the elbow's rotor inertia by −7.0 %, its damping by +2.2 %
+    and the shoulder's by −4.7 %, and a near-zero first moment of the elbow's link (mz) by 2.2 times itself; with the
+    spring in the motor rows it moved the rotor by −5.9 % and the damping by +31 %. The fixed point, not one step, is
+    the estimate: docs/elastic_robots.md.)"""
     import dataclasses
 
     from didim.methods import robot as R
