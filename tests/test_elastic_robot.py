@@ -377,3 +377,29 @@ def test_an_elastic_record_declared_in_the_wrong_unit_is_said_when_step_2_fails(
     assert "read in rad" in hint and "better than in deg" in hint
     with pytest.raises(didim.SimulationError, match="read in rad, the revolute joints' positions fit"):
         didim.identify(wrong, rob, "didim", elastic=["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint"])
+
+
+def test_step_3s_verdict_names_a_joint_whose_final_mode_is_none_the_record_shows(flex):
+    """Step 3 moves each spring with the bodies: where the record holds no mode, the final split, mode or damping can
+    end where step 2 would have said "no mode" (the KR300 at 250 Hz: axis 2's rotor at λ = 0.001, ζ = 1.3). The
+    result's verdict names such a joint, as it names one whose force the elastic model explains no better than the
+    rigid one; a final model whose modes are all inside the bounds is left alone."""
+    from didim.methods.robot import _step3_verdict
+
+    d, _ = flex
+    rob = didim.Robot.from_urdf(d / "arm2_cad.urdf")
+    names = list(rob.joint_names)
+    per, rigid = {names[0]: 0.012, names[1]: 0.013}, {names[0]: 0.2, names[1]: 0.2}
+    fine = np.array([[0.3, 12.6, 0.03], [0.4, 20.0, 0.02]])
+    assert _step3_verdict(rob, (0, 1), per, rigid, fine, 1e-3, "") == ([], "")
+    gone = np.array([[0.3, 12.6, 0.03], [0.001, 56.7, 1.3]])
+    flat, message = _step3_verdict(rob, (0, 1), per, rigid, gone, 1e-3, "")
+    assert flat == [names[1]]
+    assert message.startswith(f"step 3 ends at no elastic mode of {names[1]}: the rotor's share") and "1.3" in message
+    # a joint at the Nyquist frequency (0.45 of the rate), after the iterations' own message
+    nyq = np.array([[0.3, 12.6, 0.03], [0.4, 240.0, 0.02]])
+    flat, message = _step3_verdict(rob, (0, 1), per, rigid, nyq, 2e-3, "diverged")
+    assert flat == [names[1]] and message.startswith("diverged; step 3 ends at no elastic mode") and "Nyquist" in message
+    # and one the elastic model explains no better than the rigid one, named by both checks once
+    flat, message = _step3_verdict(rob, (0, 1), {names[0]: 0.012, names[1]: 0.2}, rigid, gone, 1e-3, "")
+    assert flat == [names[1]] and "no better than the rigid one" in message and "step 3 ends at" in message
