@@ -1397,15 +1397,16 @@ class _RobotPlant:
         self.inverses: List[Tuple[np.ndarray, Any, _InverseModel]] = []
         self.last: Optional[Tuple[np.ndarray, Law, Any]] = None  # the last simulation (θ, law, its outputs)
         self.free = list(range(self.lay.size))
-        # the elastic joints' motor rows carry their link's equation, K and D fitted on the link rows after
-        # (_model_columns)
-        self.substitute = bool(self.elastic)
-        # those rows can overshoot their fixed point (didim_loop's half steps once the iterates alternate)
-        self.relax_alternation = bool(self.elastic)
         self.start_row = 0  # the decimated rows before the simulation joins the record, left out (set_start)
         self.skip = 0  # the same, in samples, left out of the output error
         self.norm = float(np.linalg.norm(rec.force))
         self.norms = np.maximum(np.sum(rec.force ** 2, axis=0), 1e-300)
+
+    @property
+    def relax_alternation(self) -> bool:
+        """An elastic model's rows (each elastic joint's motor rows with its link's equation, :func:`_model_columns`)
+        can overshoot their fixed point: :func:`didim_loop` takes half steps once its iterates alternate."""
+        return bool(self.elastic)
 
     def set_start(self, theta: np.ndarray) -> None:
         """Leaves out of the fits and the output error the samples the simulation of ``theta`` takes to join a record
@@ -1459,7 +1460,7 @@ class _RobotPlant:
         structure = replace(self.structure, backlash_gap=gaps)
         im = _InverseModel(self.rec, structure, self.base, sim["q"], sim["qd"], sim["qdd"], self.dec,
                            start_row=self.start_row, motor=_Motor.of(sim, self.elastic, structure.gaps),
-                           chain=self.model(theta)[0] if self.lay.load else None, substitute=self.substitute)
+                           chain=self.model(theta)[0] if self.lay.load else None, substitute=bool(self.elastic))
         self.inverses = [(theta.copy(), gaps, im)] + self.inverses[:3]
         return im
 
