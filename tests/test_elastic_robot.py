@@ -237,6 +237,33 @@ def test_step_2_damps_a_spring_at_most_critically(arm2):
     np.testing.assert_allclose(z_over, ELASTIC_ZETA_MAX, rtol=1e-9)
 
 
+def test_the_doctors_columns_of_an_elastic_joint_are_those_didim_fits(arm2):
+    """The robot doctor's base columns (``joint_regressors``: what a refit of the model can take, which a candidate's
+    test leaves out) of an elastic joint are the rows DIDIM's step 3 fits: its link's body columns at the simulated
+    link states beside its rotor, friction and offset, as a rigid joint's, and they carry the model's motor torque.
+    With the spring's rows instead (K, D), the link's gravity would be no part of it: a spring or counterbalance on an
+    elastic joint would be tested against nothing its link's first moments could take."""
+    from didim.methods.robot import joint_regressors
+
+    _, rob, rec, _, res = arm2
+    sim = simulate_robot(rec, res)
+    cols = joint_regressors(res, sim)
+    yb = rob.regressor(sim["q"], sim["qd"], sim["qdd"], by_joint=True)  # (n, 10 n, N)
+    for j in range(rob.ndof):
+        w = cols[j]
+        q, _ = np.linalg.qr(w / np.linalg.norm(w, axis=0))
+        link = yb[j][np.any(yb[j] != 0, axis=1)].T  # the link's nonzero body columns on this joint
+        left = link - q @ (q.T @ link)
+        # each body column within rounding of the span (its size relative to the column's; the QR of a well-scaled
+        # N × k matrix loses a few ε times its condition number)
+        rel = np.linalg.norm(left, axis=0) / np.linalg.norm(link, axis=0)
+        assert rel.max() < 1e-8 * max(np.linalg.cond(w / np.linalg.norm(w, axis=0)), 1.0), (j, rel)
+        # the model's own motor torque on the simulated states (the commanded one, noise-free) is in the span
+        f = sim["force"][:, j]
+        r = f - q @ (q.T @ f)
+        assert np.linalg.norm(r) < 1e-6 * np.linalg.norm(f), j
+
+
 def test_output_error_lm_from_three_step_didim_reaches_the_truth_floor(arm2):
     """OE-LM on the elastic arm (from the three-step DIDIM; forward-difference sensitivities of the loop without
     encoder quantization): every parameter within 1 % of the truth (measured 0.35 % at worst, the damping D within

@@ -527,6 +527,11 @@ def knot_weights(terms, q):
 STRUCTURE_FIELDS: Tuple[str, ...] = tuple(f.name for f in fields(Model) if f.name not in ("kind", "robot"))
 
 
+#: The structure fields :func:`as_model` takes, with the values that mean "not given".
+_ENTRY_DEFAULTS: Dict[str, Any] = {**{f.name: f.default for f in fields(Model) if f.name not in ("kind", "terms", "robot")},
+                                   "offset": None, "terms": ()}
+
+
 def as_model(model, **structure) -> Model:
     """A model given where it enters didim, once: a :class:`Model` as it is (giving a structure field again, set to
     anything but its default, is an error naming it), or a kind ("rigid", "flexible") with the structure fields
@@ -536,8 +541,7 @@ def as_model(model, **structure) -> Model:
     folder's UR5 Fv 7.8 % off instead of 0.24 %)."""
     from .robots.chain import Robot
 
-    defaults = {**{f.name: f.default for f in fields(Model) if f.name not in ("kind", "terms", "robot")},
-                "offset": None, "terms": ()}
+    defaults = _ENTRY_DEFAULTS
     unknown = set(structure) - set(defaults)
     if unknown:
         raise DataError(f"unknown model field(s) {', '.join(sorted(unknown))}")

@@ -151,11 +151,15 @@ def chain_of(res: IdentificationResult) -> Robot:
 def joint_regressors(res: IdentificationResult, sim: Dict[str, np.ndarray]) -> List[np.ndarray]:
     """Each joint's columns of a result's inverse model on the simulated states ``sim``, at the full rate on every
     sample (N × k per joint: the columns that act on its rows; an elastic joint's motor side's), the Coulomb and extra
-    terms' under the result's law: what the force the model explains is a combination of, joint by joint."""
+    terms' under the result's law: what the force the model explains is a combination of, joint by joint. An elastic
+    joint's motor rows are those DIDIM fits (:func:`_model_columns` with ``substitute``): its rotor, friction and
+    offset with its link's columns at the simulated link states, so that what a refit of the model can take is the
+    same on an elastic joint as on a rigid one (its link's gravity, for a spring or counterbalance on it)."""
     model, base = res.structure, res.base
     law = res.law if res.law is not None else ("algebraic", (0.0,) * model.robot.ndof)
     motor = _Motor.of(sim, elastic_of(model), model.gaps)
-    cols, _ = _model_columns(model.robot, base, sim["q"], sim["qd"], sim["qdd"], _Layout.for_model(model, base), motor)
+    cols, _ = _model_columns(model.robot, base, sim["q"], sim["qd"], sim["qdd"], _Layout.for_model(model, base), motor,
+                             substitute=True)
     v = sim["qd"] if motor is None else motor.friction_speeds(sim["qd"])
     x = sim["q"] if motor is None else motor.friction_positions(sim["q"])
     terms = joint_terms(model)
