@@ -263,3 +263,29 @@ def test_an_interrupt_python_swallows_in_a_finaliser_still_ends_the_run_as_inter
     assert r.returncode == 130, (r.returncode, r.stdout, r.stderr)
     assert "command finished" in r.stdout and "Traceback" not in r.stderr, r.stderr
     assert r.stderr.strip().splitlines()[-1].startswith("didim: interrupted"), r.stderr
+
+
+def test_a_process_forked_after_a_core_call_runs_its_own():
+    """Core computations run on a worker thread of the calling thread, started at its first and kept: a process
+    forked after that (``multiprocessing``'s default on Linux) inherits the worker's channel but not its thread, and
+    must start its own (else its first call would wait forever). The child's simulation equals the parent's."""
+    code = r"""
+import multiprocessing as mp, sys
+import numpy as np
+import didim
+
+rec = didim.Recording(dt=1e-3, qr=0.01 * np.sin(np.linspace(0, 6, 400)), force=np.zeros(400), qm=np.zeros(400),
+                      controller=didim.controllers.PD(kp=2e4, kd=400.0), lead_in=None)
+params = {"M": 95.0, "Fv": 200.0, "Fc": 20.0}
+
+def child(_):
+    return didim.simulate(rec, params, "rigid").force
+
+parent = didim.simulate(rec, params, "rigid").force  # starts this thread's worker
+with mp.get_context("fork").Pool(1) as pool:
+    got = pool.map_async(child, [0]).get(timeout=60)[0]
+np.testing.assert_array_equal(got, parent)
+print("ok")
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]

@@ -87,7 +87,9 @@ thread_local! {
     /// computation and reused for the next ones, which it runs one at a time. Starting a thread
     /// per computation cost about 60 µs, 6 % of one closed-loop simulation of the EMPS record.
     /// The worker ends when this thread does (its sender dropped).
-    static WORKER: std::cell::RefCell<Option<std::sync::mpsc::Sender<Job>>> =
+    /// With the process that started it: a process forked from this one (`multiprocessing`'s
+    /// default on Linux) inherits the sender but not the thread, and starts its own.
+    static WORKER: std::cell::RefCell<Option<(u32, std::sync::mpsc::Sender<Job>)>> =
         const { std::cell::RefCell::new(None) };
 }
 
@@ -96,13 +98,20 @@ thread_local! {
 fn submit(job: Job) -> Result<(), Job> {
     WORKER.with(|w| {
         let mut w = w.borrow_mut();
+        let pid = std::process::id();
         let job = match w.as_ref() {
-            Some(tx) => match tx.send(job) {
+            Some((owner, tx)) if *owner == pid => match tx.send(job) {
                 Ok(()) => return Ok(()),
                 Err(back) => back.0, // the worker has ended: a new one
             },
-            None => job,
+            // none yet, or another process's (forked from it): its thread is not in this one
+            _ => job,
         };
+        if let Some((owner, tx)) = w.take() {
+            if owner != pid {
+                std::mem::forget(tx); // the parent's channel: dropping it here would touch its state
+            }
+        }
         let (tx, rx) = std::sync::mpsc::channel::<Job>();
         let started = std::thread::Builder::new()
             .name("didim-core".to_string())
@@ -116,7 +125,7 @@ fn submit(job: Job) -> Result<(), Job> {
             return Err(job);
         }
         let sent = tx.send(job).map_err(|back| back.0);
-        *w = Some(tx);
+        *w = Some((pid, tx));
         sent
     })
 }
