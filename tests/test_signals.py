@@ -266,9 +266,10 @@ def test_an_interrupt_python_swallows_in_a_finaliser_still_ends_the_run_as_inter
 
 
 def test_a_process_forked_after_a_core_call_runs_its_own():
-    """Core computations run on a worker thread of the calling thread, started at its first and kept: a process
-    forked after that (``multiprocessing``'s default on Linux) inherits the worker's channel but not its thread, and
-    must start its own (else its first call would wait forever). The child's simulation equals the parent's."""
+    """Core computations run on a worker thread of the calling thread, started at its first and kept, and their
+    parallel loops on rayon's pool: a process forked after that (``multiprocessing``'s default on Linux) inherits the
+    worker's channel and the pool's state but none of their threads, and must start its own (else its first call, or
+    its first parallel loop, would wait forever). The child's simulation and decimation equal the parent's."""
     code = r"""
 import multiprocessing as mp, sys
 import numpy as np
@@ -278,13 +279,21 @@ rec = didim.Recording(dt=1e-3, qr=0.01 * np.sin(np.linspace(0, 6, 400)), force=n
                       controller=didim.controllers.PD(kp=2e4, kd=400.0), lead_in=None)
 params = {"M": 95.0, "Fv": 200.0, "Fc": 20.0}
 
-def child(_):
-    return didim.simulate(rec, params, "rigid").force
+from didim.signal import Decimation
+dec = Decimation.lowpass(40.0, 1000.0)
+cols = np.random.default_rng(0).standard_normal((4000, 16))
 
-parent = didim.simulate(rec, params, "rigid").force  # starts this thread's worker
+def both():
+    return didim.simulate(rec, params, "rigid").force, dec.apply(np.zeros(len(cols)), cols)[1]
+
+def child(_):
+    return both()
+
+parent = both()  # starts this thread's worker and rayon's pool (16 columns decimated in parallel)
 with mp.get_context("fork").Pool(1) as pool:
     got = pool.map_async(child, [0]).get(timeout=60)[0]
-np.testing.assert_array_equal(got, parent)
+for g, p in zip(got, parent):
+    np.testing.assert_array_equal(g, p)
 print("ok")
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

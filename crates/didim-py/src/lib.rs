@@ -116,8 +116,12 @@ fn submit(job: Job) -> Result<(), Job> {
         let started = std::thread::Builder::new()
             .name("didim-core".to_string())
             .spawn(move || {
+                let pool = forked_pool();
                 for job in rx {
-                    job();
+                    match pool {
+                        Some(pool) => pool.install(job),
+                        None => job(),
+                    }
                 }
             });
         if started.is_err() {
@@ -128,6 +132,32 @@ fn submit(job: Job) -> Result<(), Job> {
         *w = Some((pid, tx));
         sent
     })
+}
+
+/// The process that imported this module.
+static ORIGIN_PID: std::sync::OnceLock<u32> = std::sync::OnceLock::new();
+
+/// In a process forked from the one that imported this module (`multiprocessing`'s default on
+/// Linux), a thread pool of its own for the core's parallel loops: the fork copied rayon's global
+/// pool but none of its threads, and a parallel loop there waited forever. None in the process
+/// that imported the module (the global pool, no cost).
+fn forked_pool() -> Option<&'static rayon::ThreadPool> {
+    let pid = std::process::id();
+    if *ORIGIN_PID.get_or_init(|| pid) == pid {
+        return None;
+    }
+    static POOL: std::sync::Mutex<Option<(u32, &'static rayon::ThreadPool)>> = std::sync::Mutex::new(None);
+    let mut p = POOL.lock().ok()?;
+    match *p {
+        Some((owner, pool)) if owner == pid => Some(pool),
+        _ => {
+            // the same threads as the global pool (RAYON_NUM_THREADS, else one per core); kept for the process
+            let pool: &'static rayon::ThreadPool =
+                Box::leak(Box::new(rayon::ThreadPoolBuilder::new().build().ok()?));
+            *p = Some((pid, pool));
+            Some(pool)
+        }
+    }
 }
 
 /// Runs a short core computation (building a model, a filter design) on this thread: starting
@@ -610,6 +640,7 @@ fn default_factor(fs_hz: Real, cutoff_hz: Real) -> usize {
 /// The compiled core of didim. Use the `didim` package, not this module.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    ORIGIN_PID.get_or_init(std::process::id);
     m.add("DEFAULT_COULOMB_EPS", DEFAULT_COULOMB_EPS)?;
     m.add("COULOMB_LAWS", LAW_SHAPES.to_vec())?;
     m.add("DEFAULT_TOL", sim::DEFAULT_TOL)?;
