@@ -32,6 +32,17 @@ pub struct Problem<'a, const N: usize> {
     pub opts: SimOptions,
 }
 
+/// The buffers a batch of `m` simulations is written into ([`Problem::simulate_batch`]): the
+/// commanded forces (`m × n`, set after set) and the states (`m × N × n`); the speeds and
+/// accelerations only when asked for.
+#[derive(Debug)]
+pub struct BatchOut<'b> {
+    pub force: &'b mut [f64],
+    pub q: &'b mut [f64],
+    pub qd: Option<&'b mut [f64]>,
+    pub qdd: Option<&'b mut [f64]>,
+}
+
 /// The decimated DIDIM system of one iterate.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DidimSystem {
@@ -68,9 +79,62 @@ impl<const N: usize> Problem<'_, N> {
         simulate_sensitivity(self.model, chi, &self.controller, self.qr, self.u_ext, &self.opts)
     }
 
-    /// Simulations of many parameter sets, in parallel, in input order.
-    pub fn simulate_batch(&self, chis: &[Vec<f64>]) -> Vec<Result<SimOutput>> {
-        chis.par_iter().map(|chi| self.simulate(chi)).collect()
+    /// Simulations of many parameter sets, in parallel, each written into its rows of `out` as
+    /// soon as it is made (no set's signals wait for the others': holding them all, then copying
+    /// them, cost a third of a batch's time on one thread). The result of each set in input order;
+    /// a set that fails leaves NaN in its rows.
+    pub fn simulate_batch(&self, chis: &[Vec<f64>], out: BatchOut<'_>) -> Vec<Result<()>> {
+        let n = self.opts.outputs(self.qr.len());
+        let m = chis.len();
+        let per = N * n;
+        let sizes_ok = out.force.len() == m * n
+            && out.q.len() == m * per
+            && out.qd.as_ref().is_none_or(|b| b.len() == m * per)
+            && out.qdd.as_ref().is_none_or(|b| b.len() == m * per);
+        if !sizes_ok || n == 0 {
+            let why = if n == 0 {
+                invalid!("a batch of simulations of a reference without samples")
+            } else {
+                invalid!("a batch's buffers do not hold {m} sets of {n} samples of {N} dof(s)")
+            };
+            return (0..m).map(|_| Err(why.clone())).collect();
+        }
+        fn rows(b: Option<&mut [f64]>, per: usize, m: usize) -> Vec<Option<&mut [f64]>> {
+            match b {
+                Some(b) => b.chunks_mut(per).map(Some).collect(),
+                None => (0..m).map(|_| None).collect(),
+            }
+        }
+        let slots: Vec<_> = chis
+            .iter()
+            .zip(out.force.chunks_mut(n))
+            .zip(out.q.chunks_mut(per))
+            .zip(rows(out.qd, per, m))
+            .zip(rows(out.qdd, per, m))
+            .collect();
+        slots
+            .into_par_iter()
+            .map(|((((chi, force), q), qd), qdd)| match self.simulate(chi) {
+                Ok(o) => {
+                    force.copy_from_slice(&o.force);
+                    for (dst, src) in [(Some(q), &o.q), (qd, &o.qd), (qdd, &o.qdd)] {
+                        if let Some(dst) = dst {
+                            for (row, s) in dst.chunks_mut(n).zip(src.iter()) {
+                                row.copy_from_slice(s);
+                            }
+                        }
+                    }
+                    Ok(())
+                }
+                Err(e) => {
+                    force.fill(f64::NAN);
+                    for dst in [Some(q), qd, qdd].into_iter().flatten() {
+                        dst.fill(f64::NAN);
+                    }
+                    Err(e)
+                }
+            })
+            .collect()
     }
 
     /// `‖measured_dec − dec(simulated output)‖²`, the criterion of eq. (32) on decimated signals,
@@ -293,12 +357,46 @@ mod tests {
         let chis: Vec<Vec<f64>> = (0..6)
             .map(|i| base.iter().map(|x| x * (1.0 + 0.05 * i as f64)).collect())
             .collect();
-        let batch = pb.simulate_batch(&chis);
-        for (chi, b) in chis.iter().zip(&batch) {
-            assert_eq!(b.as_ref().unwrap(), &pb.simulate(chi).unwrap());
+        let n = qr.len();
+        let (mut force, mut q, mut qd, mut qdd) = (
+            vec![0.0; 6 * n],
+            vec![0.0; 12 * n],
+            vec![0.0; 12 * n],
+            vec![0.0; 12 * n],
+        );
+        let out = BatchOut {
+            force: &mut force,
+            q: &mut q,
+            qd: Some(&mut qd),
+            qdd: Some(&mut qdd),
+        };
+        assert!(pb.simulate_batch(&chis, out).iter().all(|r| r.is_ok()));
+        for (i, chi) in chis.iter().enumerate() {
+            let one = pb.simulate(chi).unwrap();
+            assert_eq!(&force[i * n..(i + 1) * n], &one.force[..]);
+            for d in 0..2 {
+                let at = (2 * i + d) * n;
+                assert_eq!(&q[at..at + n], &one.q[d][..]);
+                assert_eq!(&qd[at..at + n], &one.qd[d][..]);
+                assert_eq!(&qdd[at..at + n], &one.qdd[d][..]);
+            }
         }
+        // a failing set leaves NaN in its rows and its neighbours as they are
+        let mut bad = chis.clone();
+        bad[1][0] = -1.0;
+        let (mut f2, mut q2) = (vec![0.0; 6 * n], vec![0.0; 12 * n]);
+        let out = BatchOut {
+            force: &mut f2,
+            q: &mut q2,
+            qd: None,
+            qdd: None,
+        };
+        let res = pb.simulate_batch(&bad, out);
+        assert!(res[1].is_err() && res[0].is_ok() && res[2].is_ok());
+        assert!(f2[n..2 * n].iter().all(|x| x.is_nan()) && q2[2 * n..4 * n].iter().all(|x| x.is_nan()));
+        assert_eq!(&f2[2 * n..3 * n], &force[2 * n..3 * n]);
         let dec = Decimation::butterworth(4, 60.0, 1000.0, 6, FilterForm::Sos).unwrap();
-        let meas = dec.apply(&batch[0].as_ref().unwrap().force).unwrap();
+        let meas = dec.apply(&force[..n]).unwrap();
         let costs = pb.squared_error_batch(&chis, Output::Force, &meas, &dec, 0);
         assert_eq!(*costs[0].as_ref().unwrap(), 0.0);
         assert!(costs[1..].iter().all(|c| *c.as_ref().unwrap() > 0.0));

@@ -5,7 +5,7 @@
 use didim_core::error::Error;
 use didim_core::filter::{Decimation as CoreDecimation, FilterForm};
 use didim_core::model::Model;
-use didim_core::objective::{split_errors, Output, Problem as CoreProblem};
+use didim_core::objective::{split_errors, BatchOut, Output, Problem as CoreProblem};
 use didim_core::sim::{self, SimOutput};
 use didim_core::Controller;
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
@@ -314,23 +314,20 @@ impl Problem {
         let chis = rows2(&params);
         let (n, ndof) = (self.opts.outputs(self.qr.len()), self.ndof_());
         let m = chis.len();
-        // the core holds every set's signals, then they are copied into the arrays below: check that the whole
+        // the arrays below, and one set's signals per thread while it is copied into them: check that the whole
         // fits before starting (an allocation that fails halfway would abort the process)
-        let per_set = n.saturating_mul(1 + 3 * ndof + 1 + ndof * if states { 3 } else { 1 });
+        let per_set = n.saturating_mul(1 + ndof * if states { 3 } else { 1 });
+        let in_flight = rayon::current_num_threads().saturating_mul(n.saturating_mul(1 + 3 * ndof));
         let total = m
             .saturating_mul(per_set)
-            .saturating_add(m.saturating_mul(per_set) / 10);
+            .saturating_add(m.saturating_mul(per_set) / 10)
+            .saturating_add(in_flight);
         drop(
             didim_core::error::room(total, &format!("the batch of {m} simulations"))
                 .map_err(|e| core_error(py, e))?,
         );
-        let results = run(py, || {
-            interrupted(with_problem!(self, pb => pb.simulate_batch(&chis)))
-        })?;
-        let (outs, errs) = split_errors(results);
-        let big = |len: usize, what: &str| {
-            didim_core::error::filled(len, f64::NAN, what).map_err(|e| core_error(py, e))
-        };
+        let big =
+            |len: usize, what: &str| didim_core::error::filled(len, 0.0, what).map_err(|e| core_error(py, e));
         let mut force = big(m * n, "the batch's forces")?;
         let mut q = big(m * ndof * n, "the batch's positions")?;
         let (mut qd, mut qdd) = if states {
@@ -341,19 +338,16 @@ impl Problem {
         } else {
             (Vec::new(), Vec::new())
         };
-        for (i, o) in outs.into_iter().enumerate() {
-            if let Some(o) = o {
-                force[i * n..(i + 1) * n].copy_from_slice(&o.force);
-                for d in 0..ndof {
-                    let at = (i * ndof + d) * n;
-                    q[at..at + n].copy_from_slice(&o.q[d]);
-                    if states {
-                        qd[at..at + n].copy_from_slice(&o.qd[d]);
-                        qdd[at..at + n].copy_from_slice(&o.qdd[d]);
-                    }
-                }
-            }
-        }
+        let results = run(py, || {
+            let out = BatchOut {
+                force: &mut force,
+                q: &mut q,
+                qd: states.then_some(&mut qd[..]),
+                qdd: states.then_some(&mut qdd[..]),
+            };
+            interrupted(with_problem!(self, pb => pb.simulate_batch(&chis, out)))
+        })?;
+        let (_, errs) = split_errors(results);
         let d = PyDict::new(py);
         d.set_item("force", PyArray1::from_vec(py, force).reshape([m, n])?)?;
         d.set_item("q", PyArray1::from_vec(py, q).reshape([m, ndof, n])?)?;
