@@ -77,6 +77,12 @@ def test_the_dynamics_agree_with_pinocchio(robots_dir, case):
         _close(robot.mass_matrix(q), np.triu(mm) + np.triu(mm, 1).T, "mass matrix")
         _close(robot.aba(q, v, tau), pin.aba(m, d, q, v, tau), "aba")
         _close(robot.regressor(q, v, a), pin.computeJointTorqueRegressor(m, d, q, v, a), "regressor")
+        # the exact derivatives of inverse dynamics (the closed loop's sensitivities need them)
+        tau_d, dq_d, dv_d = robot.rnea_derivatives(q, v, a)
+        dq_p, dv_p, _ = pin.computeRNEADerivatives(m, d, q, v, a)
+        _close(tau_d, pin.rnea(m, d, q, v, a), "rnea with its derivatives")
+        _close(dq_d, dq_p, "∂τ/∂q")
+        _close(dv_d, dv_p, "∂τ/∂q̇")
         qs.append(q), vs.append(v), as_.append(a), taus.append(tau)
     # many states at once: the same as one by one
     q, v, a = np.array(qs), np.array(vs), np.array(as_)
@@ -84,6 +90,9 @@ def test_the_dynamics_agree_with_pinocchio(robots_dir, case):
     assert many.shape == (40, robot.ndof)
     _close(many, np.array([pin.rnea(m, d, *x).copy() for x in zip(q, v, a)]), "rnea of many states")
     assert robot.mass_matrix(q).shape == (40, robot.ndof, robot.ndof)
+    tau_m, dq_m, dv_m = robot.rnea_derivatives(q, v, a)
+    assert tau_m.shape == (40, robot.ndof) and dq_m.shape == dv_m.shape == (40, robot.ndof, robot.ndof)
+    assert np.array_equal(dq_m[3], robot.rnea_derivatives(q[3], v[3], a[3])[1])
     assert robot.regressor(q, v, a).shape == (40, robot.ndof, 10 * robot.ndof)
     # only some standard parameters' columns: those of the whole regressor, bit for bit
     cols = [3, 0, 10 * robot.ndof - 1, 3]
@@ -184,6 +193,10 @@ def test_a_prismatic_joint_and_tilted_axes_agree_with_pinocchio(tmp_path):
         _close(robot.mass_matrix(q), np.triu(mm) + np.triu(mm, 1).T, "mass matrix")
         _close(robot.aba(q, v, tau), pin.aba(m, d, q, v, tau), "aba")
         _close(robot.regressor(q, v, a), pin.computeJointTorqueRegressor(m, d, q, v, a), "regressor")
+        _, dq_d, dv_d = robot.rnea_derivatives(q, v, a)
+        dq_p, dv_p, _ = pin.computeRNEADerivatives(m, d, q, v, a)
+        _close(dq_d, dq_p, "∂τ/∂q (a prismatic joint, tilted axes)")
+        _close(dv_d, dv_p, "∂τ/∂q̇ (a prismatic joint, tilted axes)")
 
 
 def test_a_urdf_that_is_not_one_tree_is_refused_from_the_api_a_saved_result_and_the_command_line(tmp_path):

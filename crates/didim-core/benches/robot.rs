@@ -118,6 +118,9 @@ fn bench(c: &mut Criterion) {
     c.bench_function("regressor_ur5", |b| {
         b.iter(|| black_box(robot.regressor(black_box(&q), &v, &tau).unwrap()))
     });
+    c.bench_function("rnea_derivatives_ur5", |b| {
+        b.iter(|| black_box(robot.rnea_derivatives(black_box(&q), &v, &tau).unwrap()))
+    });
 }
 
 criterion_group!(benches, bench);

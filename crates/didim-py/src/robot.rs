@@ -148,6 +148,32 @@ impl PyRobot {
         )
     }
 
+    /// Inverse dynamics of N states with its exact derivatives: q, v, a (N, n) -> (N, n + 2 n²), each
+    /// row the torques, then ∂τ/∂q and ∂τ/∂q̇ (n × n each, row-major: entry (i, j) is ∂τ_i/∂x_j).
+    fn rnea_derivatives<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+        v: PyReadonlyArray2<'py, f64>,
+        a: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
+        let width = n + 2 * n * n;
+        self.batch(
+            py,
+            vec![flat(&q), flat(&v), flat(&a)],
+            width,
+            vec![rows, width],
+            |r, x, dst| {
+                let d = r.rnea_derivatives(x[0], x[1], x[2])?;
+                dst[..n].copy_from_slice(&d.tau);
+                dst[n..n + n * n].copy_from_slice(&d.dtau_dq);
+                dst[n + n * n..].copy_from_slice(&d.dtau_dv);
+                Ok(())
+            },
+        )
+    }
+
     /// Forward dynamics of N states: q, v, tau (N, n) -> accelerations (N, n); `armature` (n,)
     /// added to the mass matrix's diagonal.
     #[pyo3(signature = (q, v, tau, armature=None))]

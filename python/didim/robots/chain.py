@@ -186,6 +186,18 @@ class Robot:
         out = self._core.rnea(q, v, a)
         return out[0] if one else out
 
+    def rnea_derivatives(self, q, v, a):
+        """Inverse dynamics with its exact partial derivatives: ``(tau, dtau_dq, dtau_dv)``, the torques (n,) and
+        ``∂τ/∂q``, ``∂τ/∂q̇`` (n, n; entry (i, j) is ∂τ_i/∂x_j), or (N, n) and (N, n, n) for N states (``∂τ/∂q̈`` is
+        :meth:`mass_matrix`). Newton-Euler differentiated along each coordinate (forward mode), exact to rounding:
+        the linearization of the arm's dynamics, ``∂q̈/∂x = −M⁻¹ ∂τ/∂x``, as Pinocchio's
+        ``computeRNEADerivatives`` gives it."""
+        (q, v, a), one = self._states(q=q, v=v, a=a)
+        n = self.ndof
+        out = self._core.rnea_derivatives(q, v, a)
+        tau, dq, dv = out[:, :n], out[:, n:n + n * n].reshape(-1, n, n), out[:, n + n * n:].reshape(-1, n, n)
+        return (tau[0], dq[0], dv[0]) if one else (tau, dq, dv)
+
     def aba(self, q, v, tau, armature=None) -> np.ndarray:
         """Forward dynamics: the accelerations that torques ``tau`` give at ``q``, ``v``; ``armature`` (n,): rotor
         inertias reflected to the joints, added to the mass matrix's diagonal."""

@@ -76,6 +76,26 @@ pub struct Robot {
 /// Standard gravity's acceleration (m/s²): Pinocchio's default.
 pub const STANDARD_GRAVITY: f64 = 9.81;
 
+/// What Newton–Euler's passes leave behind ([`Robot::rnea_derivatives`] differentiates them).
+struct NewtonEuler {
+    poses: Vec<Pose>,
+    vel: Vec<Motion>,
+    /// The total force each joint transmits, in its body's frame.
+    force: Vec<Force>,
+    tau: Vec<f64>,
+}
+
+/// Inverse dynamics with its partial derivatives ([`Robot::rnea_derivatives`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RneaDerivatives {
+    /// The joint torques (forces on prismatic joints).
+    pub tau: Vec<f64>,
+    /// `∂τ/∂q`, n × n row-major.
+    pub dtau_dq: Vec<f64>,
+    /// `∂τ/∂q̇`, n × n row-major.
+    pub dtau_dv: Vec<f64>,
+}
+
 impl Robot {
     /// The chain of `joints` (in order, each moving after the one before it), with standard gravity
     /// along −z.
@@ -228,6 +248,12 @@ impl Robot {
     }
 
     fn rnea_unchecked(&self, q: &[f64], v: &[f64], a: &[f64], with_gravity: bool) -> Vec<f64> {
+        self.newton_euler(q, v, a, with_gravity).tau
+    }
+
+    /// Newton–Euler's passes, with what they leave behind: each body's pose, velocity, the total
+    /// force its joint transmits (its own and its descendants'), and the joint torques.
+    fn newton_euler(&self, q: &[f64], v: &[f64], a: &[f64], with_gravity: bool) -> NewtonEuler {
         let (poses, vel, acc) = self.forward(q, v, a, with_gravity);
         let n = self.ndof();
         let mut f: Vec<Force> = (0..n)
@@ -244,7 +270,94 @@ impl Robot {
                 f[i - 1] = f[i - 1] + fp;
             }
         }
-        tau
+        NewtonEuler {
+            poses,
+            vel,
+            force: f,
+            tau,
+        }
+    }
+
+    /// Inverse dynamics and its exact partial derivatives at `q`, `v`, `a` (gravity included):
+    /// the torques, `∂τ/∂q` and `∂τ/∂q̇` (n × n each, row-major: entry `(i, j)` is `∂τ_i/∂x_j`;
+    /// `∂τ/∂q̈` is the mass matrix). Each column is Newton–Euler's passes differentiated along one
+    /// coordinate (forward mode), on the values of one pass: a joint's transform `X_j` moves with
+    /// its angle or stroke as `∂(X_j m)/∂q_j = −s_j × (X_j m)` for a motion and
+    /// `∂(X_jᵀ f)/∂q_j = X_jᵀ (s_j ×* f)` for a force carried to the parent (`s_j` its motion
+    /// subspace), and everything else by the product rule. The closed loop's sensitivities need
+    /// these (`∂q̈/∂x = −M⁻¹ ∂τ/∂x`); checked against Pinocchio's `computeRNEADerivatives` and
+    /// against central differences in the tests.
+    pub fn rnea_derivatives(&self, q: &[f64], v: &[f64], a: &[f64]) -> Result<RneaDerivatives> {
+        self.check("q", q)?;
+        self.check("v", v)?;
+        self.check("a", a)?;
+        let n = self.ndof();
+        let ne = self.newton_euler(q, v, a, true);
+        let sub: Vec<Motion> = self.joints.iter().map(Self::subspace).collect();
+        let mut dq = vec![0.0; n * n];
+        let mut dv = vec![0.0; n * n];
+        let (mut dvel, mut dacc, mut dforce) = (
+            vec![Motion::zero(); n],
+            vec![Motion::zero(); n],
+            vec![Force::zero(); n],
+        );
+        for (wrt_q, out) in [(true, &mut dq), (false, &mut dv)] {
+            for j in 0..n {
+                // forward: the tangents of the bodies' velocities and accelerations (zero before j)
+                let (mut tvp, mut tap) = (Motion::zero(), Motion::zero());
+                let (mut vp, mut ap) = (Motion::zero(), Motion::new(Vector3::zeros(), -self.gravity));
+                for i in 0..n {
+                    let (xv, xa) = (ne.poses[i].motion_to_child(&vp), ne.poses[i].motion_to_child(&ap));
+                    let s = &sub[i];
+                    let mut tv = ne.poses[i].motion_to_child(&tvp);
+                    let mut ta = ne.poses[i].motion_to_child(&tap);
+                    if i == j {
+                        if wrt_q {
+                            tv = tv + s.cross(&xv).scale(-1.0);
+                            ta = ta + s.cross(&xa).scale(-1.0);
+                        } else {
+                            tv = tv + *s;
+                        }
+                    }
+                    // a_i = X a_p + s a_i + v_i × (s q̇_i): the last term's tangent
+                    let svi = s.scale(v[i]);
+                    ta = ta + tv.cross(&svi);
+                    if !wrt_q && i == j {
+                        ta = ta + ne.vel[i].cross(s);
+                    }
+                    dvel[i] = tv;
+                    dacc[i] = ta;
+                    vp = ne.vel[i];
+                    ap = xa + s.scale(a[i]) + ne.vel[i].cross(&svi);
+                    tvp = tv;
+                    tap = ta;
+                }
+                // each body's own force's tangent, then the totals carried to the root
+                for i in 0..n {
+                    let pi = &self.joints[i].inertia;
+                    let iv = spatial::inertia_apply(pi, &ne.vel[i]);
+                    dforce[i] = spatial::inertia_apply(pi, &dacc[i])
+                        + dvel[i].cross_force(&iv)
+                        + ne.vel[i].cross_force(&spatial::inertia_apply(pi, &dvel[i]));
+                }
+                for i in (0..n).rev() {
+                    out[i * n + j] = sub[i].dot(&dforce[i]);
+                    if i > 0 {
+                        let mut carried = dforce[i];
+                        if wrt_q && i == j {
+                            carried = carried + sub[i].cross_force(&ne.force[i]);
+                        }
+                        let fp = ne.poses[i].force_to_parent(&carried);
+                        dforce[i - 1] = dforce[i - 1] + fp;
+                    }
+                }
+            }
+        }
+        Ok(RneaDerivatives {
+            tau: ne.tau,
+            dtau_dq: dq,
+            dtau_dv: dv,
+        })
     }
 
     /// The joint torques of gravity alone at positions `q`.
