@@ -111,6 +111,15 @@ def test_the_dynamics_agree_with_pinocchio(robots_dir, case):
     m.armature = arm
     d = m.createData()
     _close(robot.aba(q[0], v[0], np.array(taus[0]), armature=arm), pin.aba(m, d, q[0], v[0], taus[0]), "aba with armature")
+    # forward dynamics' exact derivatives, with the armature
+    for k in range(5):
+        qdd, dq_d, dv_d, dtau_d = robot.aba_derivatives(q[k], v[k], np.array(taus[k]), armature=arm)
+        dq_p, dv_p, dtau_p = pin.computeABADerivatives(m, d, q[k], v[k], np.array(taus[k]))
+        _close(qdd, pin.aba(m, d, q[k], v[k], taus[k]), "aba with its derivatives")
+        _close(dq_d, dq_p, "∂q̈/∂q")
+        _close(dv_d, dv_p, "∂q̈/∂q̇")
+        _close(dtau_d, np.triu(dtau_p) + np.triu(dtau_p, 1).T, "∂q̈/∂τ")
+    assert robot.aba_derivatives(q, v, np.array(taus), armature=arm)[1].shape == (40, robot.ndof, robot.ndof)
 
 
 def test_a_robot_describes_itself(robots_dir):

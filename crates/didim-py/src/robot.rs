@@ -174,6 +174,37 @@ impl PyRobot {
         )
     }
 
+    /// Forward dynamics of N states with its exact derivatives: q, v, tau (N, n) -> (N, n + 3 n²),
+    /// each row the accelerations, then ∂q̈/∂q, ∂q̈/∂q̇ and ∂q̈/∂τ (n × n each, row-major);
+    /// `armature` (n,) on the mass matrix's diagonal.
+    #[pyo3(signature = (q, v, tau, armature=None))]
+    fn aba_derivatives<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+        v: PyReadonlyArray2<'py, f64>,
+        tau: PyReadonlyArray2<'py, f64>,
+        armature: Option<Vec<f64>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (n, rows) = (self.inner.ndof(), q.as_array().nrows());
+        let width = n + 3 * n * n;
+        self.batch(
+            py,
+            vec![flat(&q), flat(&v), flat(&tau)],
+            width,
+            vec![rows, width],
+            move |r, x, dst| {
+                let d = r.aba_derivatives(x[0], x[1], x[2], armature.as_deref())?;
+                let nn = n * n;
+                dst[..n].copy_from_slice(&d.qdd);
+                dst[n..n + nn].copy_from_slice(&d.dqdd_dq);
+                dst[n + nn..n + 2 * nn].copy_from_slice(&d.dqdd_dv);
+                dst[n + 2 * nn..].copy_from_slice(&d.dqdd_dtau);
+                Ok(())
+            },
+        )
+    }
+
     /// Forward dynamics of N states: q, v, tau (N, n) -> accelerations (N, n); `armature` (n,)
     /// added to the mass matrix's diagonal.
     #[pyo3(signature = (q, v, tau, armature=None))]

@@ -198,6 +198,22 @@ class Robot:
         tau, dq, dv = out[:, :n], out[:, n:n + n * n].reshape(-1, n, n), out[:, n + n * n:].reshape(-1, n, n)
         return (tau[0], dq[0], dv[0]) if one else (tau, dq, dv)
 
+    def aba_derivatives(self, q, v, tau, armature=None):
+        """Forward dynamics with its exact partial derivatives: ``(qdd, dqdd_dq, dqdd_dv, dqdd_dtau)``, the
+        accelerations (n,) and ``∂q̈/∂q``, ``∂q̈/∂q̇``, ``∂q̈/∂τ`` (the inverse mass matrix; n, n each), or (N, n) and
+        (N, n, n) for N states; ``armature`` (n,) as for :meth:`aba`. ``∂q̈/∂x = −(M + A)⁻¹ ∂τ/∂x`` from
+        :meth:`rnea_derivatives` at the accelerations: Pinocchio's ``computeABADerivatives``."""
+        (q, v, tau), one = self._states(q=q, v=v, tau=tau)
+        arm = None
+        if armature is not None:
+            arm = [float(x) for x in _checks.real_array("armature", armature, (1,))]
+            if len(arm) != self.ndof:
+                raise DataError(f"armature has {len(arm)} values, the robot {self.ndof} joints")
+        n = self.ndof
+        out = self._core.aba_derivatives(q, v, tau, arm)
+        parts = [out[:, :n]] + [out[:, n + k * n * n:n + (k + 1) * n * n].reshape(-1, n, n) for k in range(3)]
+        return tuple(p[0] for p in parts) if one else tuple(parts)
+
     def aba(self, q, v, tau, armature=None) -> np.ndarray:
         """Forward dynamics: the accelerations that torques ``tau`` give at ``q``, ``v``; ``armature`` (n,): rotor
         inertias reflected to the joints, added to the mass matrix's diagonal."""

@@ -96,6 +96,19 @@ pub struct RneaDerivatives {
     pub dtau_dv: Vec<f64>,
 }
 
+/// Forward dynamics with its partial derivatives ([`Robot::aba_derivatives`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AbaDerivatives {
+    /// The accelerations.
+    pub qdd: Vec<f64>,
+    /// `∂q̈/∂q`, n × n row-major.
+    pub dqdd_dq: Vec<f64>,
+    /// `∂q̈/∂q̇`, n × n row-major.
+    pub dqdd_dv: Vec<f64>,
+    /// `∂q̈/∂τ`, the inverse of the mass matrix (with the armature), n × n row-major.
+    pub dqdd_dtau: Vec<f64>,
+}
+
 impl Robot {
     /// The chain of `joints` (in order, each moving after the one before it), with standard gravity
     /// along −z.
@@ -418,6 +431,45 @@ impl Robot {
             invalid!("the mass matrix is not positive definite at this configuration: the inertial parameters are not those of physical bodies")
         })?;
         Ok(chol.solve(&rhs).iter().copied().collect())
+    }
+
+    /// Forward dynamics and its exact partial derivatives at `q`, `v`, `tau` (with `armature` on
+    /// the mass matrix's diagonal): the accelerations, `∂q̈/∂q`, `∂q̈/∂q̇` and `∂q̈/∂τ = (M + A)⁻¹`
+    /// (n × n each, row-major). Differentiating `(M(q) + A) q̈ + h(q, q̇) = τ` at fixed `τ` gives
+    /// `∂q̈/∂x = −(M + A)⁻¹ ∂τ_ID/∂x`, the inverse dynamics' derivatives at the accelerations
+    /// themselves ([`Robot::rnea_derivatives`]); as Pinocchio's `computeABADerivatives`.
+    pub fn aba_derivatives(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        tau: &[f64],
+        armature: Option<&[f64]>,
+    ) -> Result<AbaDerivatives> {
+        let qdd = self.aba(q, v, tau, armature)?;
+        let d = self.rnea_derivatives(q, v, &qdd)?;
+        let n = self.ndof();
+        let mut m = self.mass_matrix(q)?;
+        if let Some(ia) = armature {
+            for (i, x) in ia.iter().enumerate() {
+                m[(i, i)] += x;
+            }
+        }
+        let chol = Cholesky::new(m).ok_or_else(|| {
+            invalid!("the mass matrix is not positive definite at this configuration: the inertial parameters are not those of physical bodies")
+        })?;
+        let minv = chol.inverse();
+        let times = |jac: &[f64]| -> Vec<f64> {
+            // −M⁻¹ J, row-major
+            let j = DMatrix::from_row_slice(n, n, jac);
+            let out = -(&minv * j);
+            out.transpose().as_slice().to_vec()
+        };
+        Ok(AbaDerivatives {
+            dqdd_dq: times(&d.dtau_dq),
+            dqdd_dv: times(&d.dtau_dv),
+            dqdd_dtau: minv.transpose().as_slice().to_vec(),
+            qdd,
+        })
     }
 
     /// The inverse-dynamics regressor at one state: `Y` (n × 10n, row-major) with

@@ -217,6 +217,54 @@ fn rnea_derivatives_are_those_of_central_differences() {
 }
 
 #[test]
+fn aba_derivatives_are_those_of_central_differences() {
+    // ∂q̈/∂q, ∂q̈/∂q̇ against central differences of the articulated-body algorithm, with an
+    // armature; ∂q̈/∂τ is the inverse of the mass matrix with it (its product with M + A is I)
+    let r = Robot::from_urdf(CHAIN, None).unwrap();
+    let n = 3;
+    let h = 1e-5;
+    let ia = [0.1, 0.2, 0.3];
+    for seed in 0..20 {
+        let (q, v, tau) = (state(n, seed), state(n, seed + 100), state(n, seed + 200));
+        let d = r.aba_derivatives(&q, &v, &tau, Some(&ia)).unwrap();
+        assert_eq!(d.qdd, r.aba(&q, &v, &tau, Some(&ia)).unwrap());
+        let scale = d.qdd.iter().fold(1.0f64, |m, t| m.max(t.abs()));
+        for j in 0..n {
+            for (wrt_q, jac) in [(true, &d.dqdd_dq), (false, &d.dqdd_dv)] {
+                let shifted = |sign: f64| {
+                    let (mut q2, mut v2) = (q.clone(), v.clone());
+                    if wrt_q {
+                        q2[j] += sign * h;
+                    } else {
+                        v2[j] += sign * h;
+                    }
+                    r.aba(&q2, &v2, &tau, Some(&ia)).unwrap()
+                };
+                let (up, down) = (shifted(1.0), shifted(-1.0));
+                for i in 0..n {
+                    let fd = (up[i] - down[i]) / (2.0 * h);
+                    assert!(
+                        (jac[i * n + j] - fd).abs() < 1e-7 * scale,
+                        "seed {seed}: {} vs {fd}",
+                        jac[i * n + j]
+                    );
+                }
+            }
+        }
+        let mut m = r.mass_matrix(&q).unwrap();
+        for (i, x) in ia.iter().enumerate() {
+            m[(i, i)] += x;
+        }
+        for i in 0..n {
+            for k in 0..n {
+                let prod: f64 = (0..n).map(|j| d.dqdd_dtau[i * n + j] * m[(j, k)]).sum();
+                assert!((prod - if i == k { 1.0 } else { 0.0 }).abs() < 1e-12);
+            }
+        }
+    }
+}
+
+#[test]
 fn fixed_joints_merge_and_picked_joints_lock_the_others() {
     let r = Robot::from_urdf(CHAIN, None).unwrap();
     let names: Vec<&str> = r.joints.iter().map(|j| j.name.as_str()).collect();
