@@ -186,6 +186,22 @@ class Robot:
         out = self._core.rnea(q, v, a)
         return out[0] if one else out
 
+    def _armature(self, armature) -> Optional[List[float]]:
+        """The rotor inertias reflected to the joints (n,) as the core takes them, or None."""
+        if armature is None:
+            return None
+        arm = [float(x) for x in _checks.real_array("armature", armature, (1,))]
+        if len(arm) != self.ndof:
+            raise DataError(f"armature has {len(arm)} values, the robot {self.ndof} joints")
+        return arm
+
+    def _split(self, out: np.ndarray, matrices: int, one: bool):
+        """The core's rows (N, n + k n²) of a value and its ``matrices`` derivatives: ((N, n), (N, n, n) × k), or
+        each of one state."""
+        n = self.ndof
+        parts = [out[:, :n]] + [out[:, n + k * n * n:n + (k + 1) * n * n].reshape(-1, n, n) for k in range(matrices)]
+        return tuple(p[0] for p in parts) if one else tuple(parts)
+
     def rnea_derivatives(self, q, v, a):
         """Inverse dynamics with its exact partial derivatives: ``(tau, dtau_dq, dtau_dv)``, the torques (n,) and
         ``∂τ/∂q``, ``∂τ/∂q̇`` (n, n; entry (i, j) is ∂τ_i/∂x_j), or (N, n) and (N, n, n) for N states (``∂τ/∂q̈`` is
@@ -193,10 +209,7 @@ class Robot:
         the linearization of the arm's dynamics, ``∂q̈/∂x = −M⁻¹ ∂τ/∂x``, as Pinocchio's
         ``computeRNEADerivatives`` gives it."""
         (q, v, a), one = self._states(q=q, v=v, a=a)
-        n = self.ndof
-        out = self._core.rnea_derivatives(q, v, a)
-        tau, dq, dv = out[:, :n], out[:, n:n + n * n].reshape(-1, n, n), out[:, n + n * n:].reshape(-1, n, n)
-        return (tau[0], dq[0], dv[0]) if one else (tau, dq, dv)
+        return self._split(self._core.rnea_derivatives(q, v, a), 2, one)
 
     def aba_derivatives(self, q, v, tau, armature=None):
         """Forward dynamics with its exact partial derivatives: ``(qdd, dqdd_dq, dqdd_dv, dqdd_dtau)``, the
@@ -204,25 +217,14 @@ class Robot:
         (N, n, n) for N states; ``armature`` (n,) as for :meth:`aba`. ``∂q̈/∂x = −(M + A)⁻¹ ∂τ/∂x`` from
         :meth:`rnea_derivatives` at the accelerations: Pinocchio's ``computeABADerivatives``."""
         (q, v, tau), one = self._states(q=q, v=v, tau=tau)
-        arm = None
-        if armature is not None:
-            arm = [float(x) for x in _checks.real_array("armature", armature, (1,))]
-            if len(arm) != self.ndof:
-                raise DataError(f"armature has {len(arm)} values, the robot {self.ndof} joints")
-        n = self.ndof
-        out = self._core.aba_derivatives(q, v, tau, arm)
-        parts = [out[:, :n]] + [out[:, n + k * n * n:n + (k + 1) * n * n].reshape(-1, n, n) for k in range(3)]
-        return tuple(p[0] for p in parts) if one else tuple(parts)
+        arm = self._armature(armature)
+        return self._split(self._core.aba_derivatives(q, v, tau, arm), 3, one)
 
     def aba(self, q, v, tau, armature=None) -> np.ndarray:
         """Forward dynamics: the accelerations that torques ``tau`` give at ``q``, ``v``; ``armature`` (n,): rotor
         inertias reflected to the joints, added to the mass matrix's diagonal."""
         (q, v, tau), one = self._states(q=q, v=v, tau=tau)
-        arm = None
-        if armature is not None:
-            arm = [float(x) for x in _checks.real_array("armature", armature, (1,))]
-            if len(arm) != self.ndof:
-                raise DataError(f"armature has {len(arm)} values, the robot {self.ndof} joints")
+        arm = self._armature(armature)
         out = self._core.aba(q, v, tau, arm)
         return out[0] if one else out
 

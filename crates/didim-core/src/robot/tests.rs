@@ -172,6 +172,41 @@ fn forward_dynamics_inverts_inverse_dynamics() {
     }
 }
 
+/// Checks `jac` (∂f/∂q when `wrt_q`, else ∂f/∂q̇; n × n row-major) against central differences of
+/// `f` at `(q, v)`, within `tol` (absolute).
+fn assert_central_differences(
+    f: impl Fn(&[f64], &[f64]) -> Vec<f64>,
+    q: &[f64],
+    v: &[f64],
+    wrt_q: bool,
+    jac: &[f64],
+    tol: f64,
+) {
+    let n = q.len();
+    let h = 1e-5;
+    for j in 0..n {
+        let shifted = |sign: f64| {
+            let (mut q2, mut v2) = (q.to_vec(), v.to_vec());
+            if wrt_q {
+                q2[j] += sign * h;
+            } else {
+                v2[j] += sign * h;
+            }
+            f(&q2, &v2)
+        };
+        let (up, down) = (shifted(1.0), shifted(-1.0));
+        for i in 0..n {
+            let fd = (up[i] - down[i]) / (2.0 * h);
+            assert!(
+                (jac[i * n + j] - fd).abs() < tol,
+                "d f_{i} / d {}_{j}: {} against {fd}",
+                if wrt_q { "q" } else { "v" },
+                jac[i * n + j]
+            );
+        }
+    }
+}
+
 #[test]
 fn rnea_derivatives_are_those_of_central_differences() {
     // the chain of revolute joints about skewed axes, a fixed joint and a prismatic one: each column
@@ -179,37 +214,15 @@ fn rnea_derivatives_are_those_of_central_differences() {
     // O(h²)·τ‴ ≈ 1e-10 here, rounding ε·|τ|/h ≈ 1e-11), and τ bit for bit Newton–Euler's
     let r = Robot::from_urdf(CHAIN, None).unwrap();
     let n = 3;
-    let h = 1e-5;
     for seed in 0..20 {
         let (q, v, a) = (state(n, seed), state(n, seed + 100), state(n, seed + 200));
         let d = r.rnea_derivatives(&q, &v, &a).unwrap();
         assert_eq!(d.tau, r.rnea(&q, &v, &a).unwrap());
         let scale = d.tau.iter().fold(1.0f64, |m, t| m.max(t.abs()));
-        for j in 0..n {
-            for (wrt_q, jac) in [(true, &d.dtau_dq), (false, &d.dtau_dv)] {
-                let shifted = |sign: f64| {
-                    let (mut q2, mut v2) = (q.clone(), v.clone());
-                    if wrt_q {
-                        q2[j] += sign * h;
-                    } else {
-                        v2[j] += sign * h;
-                    }
-                    r.rnea(&q2, &v2, &a).unwrap()
-                };
-                let (up, down) = (shifted(1.0), shifted(-1.0));
-                for i in 0..n {
-                    let fd = (up[i] - down[i]) / (2.0 * h);
-                    assert!(
-                        (jac[i * n + j] - fd).abs() < 1e-7 * scale,
-                        "seed {seed}, d tau_{i} / d {}_{j}: {} against {fd}",
-                        if wrt_q { "q" } else { "v" },
-                        jac[i * n + j]
-                    );
-                }
-            }
-        }
-        // ∂τ/∂q̇ at rest is zero; at q̇ = 0 the speeds' terms vanish from ∂τ/∂q too: it is then
-        // gravity's and the accelerations' alone
+        let f = |q: &[f64], v: &[f64]| r.rnea(q, v, &a).unwrap();
+        assert_central_differences(f, &q, &v, true, &d.dtau_dq, 1e-7 * scale);
+        assert_central_differences(f, &q, &v, false, &d.dtau_dv, 1e-7 * scale);
+        // ∂τ/∂q̇ at rest is zero: the speeds enter the torques through products of two of them
         let zero = vec![0.0; n];
         let d0 = r.rnea_derivatives(&q, &zero, &a).unwrap();
         assert!(d0.dtau_dv.iter().all(|x| x.abs() < 1e-12 * scale));
@@ -222,35 +235,15 @@ fn aba_derivatives_are_those_of_central_differences() {
     // armature; ∂q̈/∂τ is the inverse of the mass matrix with it (its product with M + A is I)
     let r = Robot::from_urdf(CHAIN, None).unwrap();
     let n = 3;
-    let h = 1e-5;
     let ia = [0.1, 0.2, 0.3];
     for seed in 0..20 {
         let (q, v, tau) = (state(n, seed), state(n, seed + 100), state(n, seed + 200));
         let d = r.aba_derivatives(&q, &v, &tau, Some(&ia)).unwrap();
         assert_eq!(d.qdd, r.aba(&q, &v, &tau, Some(&ia)).unwrap());
         let scale = d.qdd.iter().fold(1.0f64, |m, t| m.max(t.abs()));
-        for j in 0..n {
-            for (wrt_q, jac) in [(true, &d.dqdd_dq), (false, &d.dqdd_dv)] {
-                let shifted = |sign: f64| {
-                    let (mut q2, mut v2) = (q.clone(), v.clone());
-                    if wrt_q {
-                        q2[j] += sign * h;
-                    } else {
-                        v2[j] += sign * h;
-                    }
-                    r.aba(&q2, &v2, &tau, Some(&ia)).unwrap()
-                };
-                let (up, down) = (shifted(1.0), shifted(-1.0));
-                for i in 0..n {
-                    let fd = (up[i] - down[i]) / (2.0 * h);
-                    assert!(
-                        (jac[i * n + j] - fd).abs() < 1e-7 * scale,
-                        "seed {seed}: {} vs {fd}",
-                        jac[i * n + j]
-                    );
-                }
-            }
-        }
+        let f = |q: &[f64], v: &[f64]| r.aba(q, v, &tau, Some(&ia)).unwrap();
+        assert_central_differences(f, &q, &v, true, &d.dqdd_dq, 1e-7 * scale);
+        assert_central_differences(f, &q, &v, false, &d.dqdd_dv, 1e-7 * scale);
         let mut m = r.mass_matrix(&q).unwrap();
         for (i, x) in ia.iter().enumerate() {
             m[(i, i)] += x;
