@@ -21,6 +21,15 @@ fn put(dst: &mut [f64], got: Result<Vec<f64>, Error>) -> Result<(), Error> {
     Ok(())
 }
 
+/// `parts` one after the other into `dst` (a value and its derivatives, as one row).
+fn put_parts(dst: &mut [f64], parts: &[&[f64]]) {
+    let mut at = 0;
+    for p in parts {
+        dst[at..at + p.len()].copy_from_slice(p);
+        at += p.len();
+    }
+}
+
 /// A row-major copy of an (N, n) array.
 fn flat(a: &PyReadonlyArray2<'_, f64>) -> Vec<f64> {
     a.as_array().iter().copied().collect()
@@ -166,9 +175,7 @@ impl PyRobot {
             vec![rows, width],
             |r, x, dst| {
                 let d = r.rnea_derivatives(x[0], x[1], x[2])?;
-                dst[..n].copy_from_slice(&d.tau);
-                dst[n..n + n * n].copy_from_slice(&d.dtau_dq);
-                dst[n + n * n..].copy_from_slice(&d.dtau_dv);
+                put_parts(dst, &[&d.tau, &d.dtau_dq, &d.dtau_dv]);
                 Ok(())
             },
         )
@@ -195,11 +202,7 @@ impl PyRobot {
             vec![rows, width],
             move |r, x, dst| {
                 let d = r.aba_derivatives(x[0], x[1], x[2], armature.as_deref())?;
-                let nn = n * n;
-                dst[..n].copy_from_slice(&d.qdd);
-                dst[n..n + nn].copy_from_slice(&d.dqdd_dq);
-                dst[n + nn..n + 2 * nn].copy_from_slice(&d.dqdd_dv);
-                dst[n + 2 * nn..].copy_from_slice(&d.dqdd_dtau);
+                put_parts(dst, &[&d.qdd, &d.dqdd_dq, &d.dqdd_dv, &d.dqdd_dtau]);
                 Ok(())
             },
         )

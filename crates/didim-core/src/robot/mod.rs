@@ -80,6 +80,7 @@ pub const STANDARD_GRAVITY: f64 = 9.81;
 struct NewtonEuler {
     poses: Vec<Pose>,
     vel: Vec<Motion>,
+    acc: Vec<Motion>,
     /// The total force each joint transmits, in its body's frame.
     force: Vec<Force>,
     tau: Vec<f64>,
@@ -286,6 +287,7 @@ impl Robot {
         NewtonEuler {
             poses,
             vel,
+            acc,
             force: f,
             tau,
         }
@@ -314,43 +316,50 @@ impl Robot {
             vec![Motion::zero(); n],
             vec![Force::zero(); n],
         );
+        // what every direction reads: each body's parent's velocity and acceleration in its frame,
+        // and its momentum
+        let gravity = Motion::new(Vector3::zeros(), -self.gravity);
+        let parent = |i: usize, m: &[Motion], root: Motion| if i == 0 { root } else { m[i - 1] };
+        let xv: Vec<Motion> = (0..n)
+            .map(|i| ne.poses[i].motion_to_child(&parent(i, &ne.vel, Motion::zero())))
+            .collect();
+        let xa: Vec<Motion> = (0..n)
+            .map(|i| ne.poses[i].motion_to_child(&parent(i, &ne.acc, gravity)))
+            .collect();
+        let momentum: Vec<Force> = (0..n)
+            .map(|i| spatial::inertia_apply(&self.joints[i].inertia, &ne.vel[i]))
+            .collect();
         for (wrt_q, out) in [(true, &mut dq), (false, &mut dv)] {
             for j in 0..n {
                 // forward: the tangents of the bodies' velocities and accelerations (zero before j)
                 let (mut tvp, mut tap) = (Motion::zero(), Motion::zero());
-                let (mut vp, mut ap) = (Motion::zero(), Motion::new(Vector3::zeros(), -self.gravity));
                 for i in 0..n {
-                    let (xv, xa) = (ne.poses[i].motion_to_child(&vp), ne.poses[i].motion_to_child(&ap));
                     let s = &sub[i];
                     let mut tv = ne.poses[i].motion_to_child(&tvp);
                     let mut ta = ne.poses[i].motion_to_child(&tap);
                     if i == j {
                         if wrt_q {
-                            tv = tv + s.cross(&xv).scale(-1.0);
-                            ta = ta + s.cross(&xa).scale(-1.0);
+                            tv = tv + s.cross(&xv[i]).scale(-1.0);
+                            ta = ta + s.cross(&xa[i]).scale(-1.0);
                         } else {
                             tv = tv + *s;
                         }
                     }
                     // a_i = X a_p + s a_i + v_i × (s q̇_i): the last term's tangent
-                    let svi = s.scale(v[i]);
-                    ta = ta + tv.cross(&svi);
+                    ta = ta + tv.cross(&s.scale(v[i]));
                     if !wrt_q && i == j {
                         ta = ta + ne.vel[i].cross(s);
                     }
                     dvel[i] = tv;
                     dacc[i] = ta;
-                    vp = ne.vel[i];
-                    ap = xa + s.scale(a[i]) + ne.vel[i].cross(&svi);
                     tvp = tv;
                     tap = ta;
                 }
                 // each body's own force's tangent, then the totals carried to the root
                 for i in 0..n {
                     let pi = &self.joints[i].inertia;
-                    let iv = spatial::inertia_apply(pi, &ne.vel[i]);
                     dforce[i] = spatial::inertia_apply(pi, &dacc[i])
-                        + dvel[i].cross_force(&iv)
+                        + dvel[i].cross_force(&momentum[i])
                         + ne.vel[i].cross_force(&spatial::inertia_apply(pi, &dvel[i]));
                 }
                 for i in (0..n).rev() {
