@@ -470,6 +470,17 @@ impl FrictionLaw {
     pub fn sign(&self, v: f64) -> f64 {
         self.sign_and_derivative(v).0
     }
+
+    /// The derivative of the smoothed sign of `v` with respect to the smoothing speed `eps`: every
+    /// shape is a function of `v / eps`, so `∂s/∂eps = −(v/eps) ∂s/∂v`; 0 for the hard sign.
+    #[inline]
+    pub fn eps_derivative(&self, v: f64) -> f64 {
+        let eps = self.eps;
+        if eps.is_nan() || eps <= 0.0 {
+            return 0.0;
+        }
+        -(v / eps) * self.sign_and_derivative(v).1
+    }
 }
 
 /// A friction law as the hot loops read it: the smoothed sign of a velocity and its
@@ -900,6 +911,45 @@ impl Basis {
                     0.0,
                 )
             }
+        }
+    }
+
+    /// `∂φ/∂eps`: the derivative of [`Basis::local`]'s `φ(x, ẋ)` with respect to the friction law's
+    /// smoothing speed, through the smoothed sign `s` each Coulomb-type term is made of
+    /// (`∂φ/∂s · ∂s/∂eps`, [`FrictionLaw::eps_derivative`]); 0 for a term without it. The closed
+    /// loop's sensitivities read it beside [`Basis::local`], case for case.
+    pub(crate) fn local_eps(&self, x: f64, xd: f64, law: FrictionLaw) -> f64 {
+        let ds_deps = || law.eps_derivative(xd);
+        match *self {
+            Basis::Coulomb { .. } => ds_deps(),
+            Basis::AbsViscous { .. } => xd * ds_deps(),
+            Basis::AbsCoulomb { .. } => law.sign(xd).signum() * ds_deps(),
+            Basis::Stribeck { vs, .. } => (-(xd / vs) * (xd / vs)).exp() * ds_deps(),
+            Basis::CoulombRipple { period, phase, .. } => {
+                (std::f64::consts::TAU / period * x + phase).sin() * ds_deps()
+            }
+            Basis::CoulombSpline {
+                center, width, side, ..
+            } => {
+                let (b, _) = cubic_bspline((x - center) / width);
+                if b == 0.0 {
+                    return 0.0;
+                }
+                if side == 0 {
+                    b * ds_deps()
+                } else {
+                    b * 0.5 * ds_deps() * (1.0 + 2.0 * f64::from(side) * law.sign(xd))
+                }
+            }
+            Basis::Inertia { .. }
+            | Basis::Viscous { .. }
+            | Basis::Damper { .. }
+            | Basis::Offset { .. }
+            | Basis::Spring { .. }
+            | Basis::Ripple { .. }
+            | Basis::Gravity { .. }
+            | Basis::Spline { .. }
+            | Basis::Backlash { .. } => 0.0,
         }
     }
 

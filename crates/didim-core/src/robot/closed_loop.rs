@@ -31,6 +31,11 @@ use crate::sim::drive::{JointDrive, Start};
 
 use super::{AbaWork, Robot};
 
+pub mod sensitivity;
+pub use sensitivity::PhysLayout;
+
+use sensitivity::Sensitivities;
+
 /// The drive side of each joint, beside the rigid bodies: rotor inertia reflected to the joint
 /// (kg·m² or kg), viscous (N·m·s/rad or N·s/m) and Coulomb (N·m or N) friction, and a constant
 /// torque offset, and each joint's friction law through zero speed (its shape and smoothing
@@ -354,6 +359,12 @@ struct Dynamics<'a> {
 }
 
 impl Dynamics<'_> {
+    /// Whether joint `j` is elastic.
+    #[inline(always)]
+    fn is_elastic(&self, j: usize) -> bool {
+        self.drives.stiffness.get(j).is_some_and(|k| *k != f64::INFINITY)
+    }
+
     /// The state's derivative `[q̇, q̈, θ̇, θ̈]` at `x` under the drives' forces `u`, into `out`;
     /// with load-dependent friction, the friction and the link torques it grows with solved
     /// together by fixed-point steps (a contraction of rate μ < 1), from the last derivative's.
@@ -419,10 +430,12 @@ impl Dynamics<'_> {
 /// The arm as the loop's [`Plant`]: its dynamics, the state `x` ([`Dynamics`]), its derivative
 /// at the last recorded state (the first RK4 stage of the next period), RK4's work buffers and the
 /// recorded link and motor sides (`samples × n`, row-major).
-struct Arm<'a, 'b> {
+struct Arm<'a, 'b, T: ArmTangent> {
     /// Borrowed, not held: the dynamics go out of line (ABA), and a pointer into the arm would
     /// keep the state and the stages' buffers out of registers.
     dynamics: &'b mut Dynamics<'a>,
+    /// What rides along the stages: nothing, or the forward sensitivities.
+    tangent: T,
     n: usize,
     x: Vec<f64>,
     dx: Vec<f64>,
@@ -441,11 +454,44 @@ struct Arm<'a, 'b> {
     out: RobotLoopOutput,
 }
 
-impl Plant for Arm<'_, '_> {
+/// What rides along the arm's loop: nothing for a plain simulation ([`NoTangent`]), the forward
+/// sensitivities for [`simulate_robot_sensitivity`] (`sensitivity::Sensitivities`).
+trait ArmTangent {
+    /// Joint `j`'s drive computed its command of sample `k` (`active`: not saturated); its encoder
+    /// reads the state's entry `encoder`.
+    fn commanded(&mut self, k: usize, j: usize, drive: &JointDrive, active: bool, encoder: usize);
+    /// Stage `i` (0–3) of an RK4 step of length `h`: the dynamics just computed the derivative
+    /// `f` at the stage's state `x` under the forces `u`.
+    fn stage(&mut self, dynamics: &Dynamics, i: usize, h: f64, x: &[f64], f: &[f64], u: &[f64])
+        -> Result<()>;
+    /// The RK4 step of length `h` is complete.
+    fn end(&mut self, h: f64);
+}
+
+/// A plain simulation's tangent: nothing.
+struct NoTangent;
+
+impl ArmTangent for NoTangent {
+    #[inline(always)]
+    fn commanded(&mut self, _: usize, _: usize, _: &JointDrive, _: bool, _: usize) {}
+    #[inline(always)]
+    fn stage(&mut self, _: &Dynamics, _: usize, _: f64, _: &[f64], _: &[f64], _: &[f64]) -> Result<()> {
+        Ok(())
+    }
+    #[inline(always)]
+    fn end(&mut self, _: f64) {}
+}
+
+impl<T: ArmTangent> Plant for Arm<'_, '_, T> {
     type Joints = Vec<f64>;
 
     fn joints(&self) -> Vec<f64> {
         vec![0.0; self.n]
+    }
+
+    #[inline(always)]
+    fn commanded(&mut self, k: usize, j: usize, drive: &JointDrive, active: bool, _applied: f64) {
+        self.tangent.commanded(k, j, drive, active, self.encoder[j]);
     }
 
     #[inline(always)]
@@ -481,6 +527,7 @@ impl Plant for Arm<'_, '_> {
         let h = self.h;
         let Self {
             dynamics,
+            tangent,
             x,
             dx,
             k1,
@@ -491,29 +538,33 @@ impl Plant for Arm<'_, '_> {
             ..
         } = self;
         let m = x.len();
-        let mut deriv = |x: &[f64], out: &mut [f64]| dynamics.deriv(x, applied, out);
         for s in 0..self.substeps {
             // the first stage of the first substep is the derivative just recorded
             if s == 0 {
                 k1.copy_from_slice(dx);
             } else {
-                deriv(x, k1)?;
+                dynamics.deriv(x, applied, k1)?;
             }
+            tangent.stage(dynamics, 0, h, x, k1, applied)?;
             for i in 0..m {
                 xs[i] = x[i] + 0.5 * h * k1[i];
             }
-            deriv(xs, k2)?;
+            dynamics.deriv(xs, applied, k2)?;
+            tangent.stage(dynamics, 1, h, xs, k2, applied)?;
             for i in 0..m {
                 xs[i] = x[i] + 0.5 * h * k2[i];
             }
-            deriv(xs, k3)?;
+            dynamics.deriv(xs, applied, k3)?;
+            tangent.stage(dynamics, 2, h, xs, k3, applied)?;
             for i in 0..m {
                 xs[i] = x[i] + h * k3[i];
             }
-            deriv(xs, k4)?;
+            dynamics.deriv(xs, applied, k4)?;
+            tangent.stage(dynamics, 3, h, xs, k4, applied)?;
             for i in 0..m {
                 x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
             }
+            tangent.end(h);
         }
         Ok(())
     }
@@ -600,6 +651,78 @@ pub fn auto_substeps(robot: &Robot, drives: &Drives, q0: &[f64], dt: f64) -> Res
     Ok((steps as usize).max(2))
 }
 
+/// The directions of [`simulate_robot_sensitivity`]: `count` columns `∂φ/∂χ` of the physical
+/// parameters over the caller's parameters χ (`physical`: [`PhysLayout::len`] × `count`,
+/// row-major; [`sensitivity`]), and `force0` (`n × count`) the derivatives of each drive's held
+/// first force ([`RobotLoopOptions::force0`]), which may depend on χ too (a lead-in's static torque).
+#[derive(Clone, Copy, Debug)]
+pub struct Directions<'a> {
+    pub count: usize,
+    pub physical: &'a [f64],
+    pub force0: &'a [f64],
+}
+
+/// [`simulate_robot`] with its forward sensitivities along `directions`. Returns the simulation
+/// and `∂force/∂χ`, `[joint][direction][sample]`. The encoders should read the exact positions
+/// (no quantization): a quantized loop is not differentiable.
+pub fn simulate_robot_sensitivity(
+    robot: &Robot,
+    drives: &Drives,
+    controllers: &[TransferFunction],
+    qr: &[f64],
+    opts: &RobotLoopOptions,
+    directions: Directions,
+) -> Result<(RobotLoopOutput, Vec<f64>)> {
+    let Directions {
+        count: p,
+        physical: directions,
+        force0: dforce0,
+    } = directions;
+    let n = robot.ndof();
+    drives.validate(n)?;
+    let lay = PhysLayout::of(n, drives);
+    if directions.len() != lay.len() * p {
+        return Err(invalid!(
+            "the directions must be {} physical parameters × {p} directions, got {} values",
+            lay.len(),
+            directions.len()
+        ));
+    }
+    if dforce0.len() != n * p {
+        return Err(invalid!(
+            "the first forces' sensitivities must be {n} joints × {p} directions, got {} values",
+            dforce0.len()
+        ));
+    }
+    if directions.iter().chain(dforce0).any(|x| !x.is_finite()) {
+        return Err(invalid!("the directions hold a non-finite value"));
+    }
+    let (out, sens) = run_arm(robot, drives, controllers, qr, opts, |dynamics, x0, samples| {
+        Sensitivities::new(
+            dynamics,
+            x0,
+            samples,
+            directions,
+            p,
+            dforce0,
+            &opts.delay,
+            &opts.force_lag,
+            opts.dt,
+        )
+    })?;
+    let forces = sens.forces();
+    if let Some(i) = forces.iter().position(|x| !x.is_finite()) {
+        let samples = qr.len() / n;
+        return Err(Error::Simulation(format!(
+            "the sensitivities of the robot's closed loop are not finite (joint {}, direction {}, sample {}): the loop is too stiff or the parameters are off",
+            i / (p * samples) + 1,
+            i / samples % p,
+            i % samples
+        )));
+    }
+    Ok((out, forces))
+}
+
 /// The closed loop of `robot` with `drives` under `controllers` (one per joint) following the
 /// references `qr` (`samples × n`, row-major), from rest at the first reference.
 pub fn simulate_robot(
@@ -609,6 +732,19 @@ pub fn simulate_robot(
     qr: &[f64],
     opts: &RobotLoopOptions,
 ) -> Result<RobotLoopOutput> {
+    run_arm(robot, drives, controllers, qr, opts, |_, _, _| Ok(NoTangent)).map(|(out, _)| out)
+}
+
+/// [`simulate_robot`] with the tangent `tangent(dynamics, x0, samples)` makes at the initial state
+/// `x0` riding along; returns it with the simulation.
+fn run_arm<T: ArmTangent>(
+    robot: &Robot,
+    drives: &Drives,
+    controllers: &[TransferFunction],
+    qr: &[f64],
+    opts: &RobotLoopOptions,
+    tangent: impl FnOnce(&Dynamics, &[f64], usize) -> Result<T>,
+) -> Result<(RobotLoopOutput, T)> {
     let n = robot.ndof();
     drives.validate(n)?;
     if controllers.len() != n {
@@ -756,8 +892,10 @@ pub fn simulate_robot(
             }
             let m = x.len();
             let motor = |what| if ne > 0 { zeros(what) } else { Ok(Vec::new()) };
+            let tangent = tangent(&dynamics, &x, samples)?;
             let mut arm = Arm {
                 dynamics: &mut dynamics,
+                tangent,
                 n,
                 x,
                 dx: vec![0.0; m],
@@ -784,7 +922,7 @@ pub fn simulate_robot(
             let u_ext = (!opts.u_ext.is_empty()).then_some(&opts.u_ext[..]);
             closed_loop::run(&mut arm, &mut joint_drives, qr, u_ext, &span, &mut force)?;
             arm.out.force = force;
-            Ok(arm.out)
+            Ok((arm.out, arm.tangent))
         },
     )
 }

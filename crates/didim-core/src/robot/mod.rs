@@ -18,7 +18,9 @@ mod spatial;
 mod urdf;
 
 pub use aba::AbaWork;
-pub use closed_loop::{simulate_robot, Drives, RobotLoopOptions, RobotLoopOutput};
+pub use closed_loop::{
+    simulate_robot, simulate_robot_sensitivity, Drives, PhysLayout, RobotLoopOptions, RobotLoopOutput,
+};
 
 use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, Vector3};
 

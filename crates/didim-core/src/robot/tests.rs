@@ -1,4 +1,5 @@
 use super::*;
+use crate::controller::TransferFunction;
 
 /// A pendulum: one revolute joint about y, a point-like body of mass `m` at `l` along x with its own
 /// inertia `iyy` about its centre.
@@ -852,4 +853,302 @@ fn a_joints_load_dependent_friction_grows_with_the_torque_its_link_asks() {
         moved > 0.05 * scale * mu,
         "the load friction should change the force: {moved}"
     );
+}
+
+/// The chain of [`CHAIN`] in closed loop with every kind of physics the loop simulates: its second
+/// joint elastic (spring, damping, backlash), load-dependent friction, a delay and a force lag, and
+/// extra terms on each joint (a Stribeck hump, a ripple on the elastic joint's rotor, a profile
+/// along the prismatic stroke).
+fn loaded_chain() -> (Robot, Drives, Vec<TransferFunction>, Vec<f64>, RobotLoopOptions) {
+    use crate::model::{Basis, FrictionLaw, LawShape};
+    let r = Robot::from_urdf(CHAIN, None).unwrap();
+    let (dt, samples) = (1e-3, 700);
+    let n = 3;
+    let mut qr = vec![0.0; samples * n];
+    for k in 0..samples {
+        let t = k as f64 * dt / (samples as f64 * dt);
+        let s = (std::f64::consts::PI * t).sin();
+        qr[k * n] = 0.2 + 0.5 * s * s;
+        qr[k * n + 1] = -0.3 + 0.4 * (2.0 * std::f64::consts::PI * t).sin();
+        qr[k * n + 2] = 0.1 + 0.05 * s;
+    }
+    let drives = Drives {
+        armature: vec![0.03, 0.2, 0.5],
+        viscous: vec![0.4, 0.3, 5.0],
+        coulomb: vec![0.5, 0.4, 2.0],
+        offset: vec![0.1, -0.05, 0.3],
+        laws: vec![
+            FrictionLaw::algebraic(0.02),
+            FrictionLaw {
+                shape: LawShape::Tanh,
+                eps: 0.03,
+            },
+            FrictionLaw {
+                shape: LawShape::Exp,
+                eps: 0.01,
+            },
+        ],
+        stiffness: vec![f64::INFINITY, 400.0, f64::INFINITY],
+        damping: vec![0.0, 0.4, 0.0],
+        backlash: Vec::new(),
+        terms: vec![
+            vec![(Basis::Stribeck { dof: 0, vs: 0.05 }, 0.3)],
+            vec![(
+                Basis::CoulombRipple {
+                    dof: 0,
+                    period: 0.4,
+                    phase: 0.3,
+                },
+                0.1,
+            )],
+            vec![(
+                Basis::Spline {
+                    dof: 0,
+                    center: 0.12,
+                    width: 0.05,
+                },
+                1.5,
+            )],
+        ],
+        load_friction: vec![0.05, 0.0, 0.0],
+    };
+    let law = |kp: f64, kv: f64| {
+        crate::Controller::EmpsCascade {
+            kp,
+            kv,
+            gtau: 1.0,
+            vsat: f64::INFINITY,
+        }
+        .law(dt)
+        .unwrap()
+    };
+    let laws = vec![law(40.0, 60.0), law(20.0, 10.0), law(40.0, 200.0)];
+    let g0 = r.rnea(&qr[..n], &[0.0; 3], &[0.0; 3]).unwrap();
+    let force0: Vec<f64> = (0..n).map(|j| g0[j] + drives.offset[j]).collect();
+    let opts = RobotLoopOptions {
+        delay: vec![1, 0, 0],
+        force_lag: vec![0.0, 0.0, 2e-3],
+        ..RobotLoopOptions::new(dt, 6, vec![0.0; 3], force0)
+    };
+    (r, drives, laws, qr, opts)
+}
+
+/// The chain's robot and drives with physical parameter `i` ([`PhysLayout`]) moved by `h`.
+fn moved(r: &Robot, d: &Drives, i: usize, h: f64) -> (Robot, Drives) {
+    let n = r.ndof();
+    let lay = PhysLayout::of(n, d);
+    let (mut r, mut d) = (r.clone(), d.clone());
+    if (n..11 * n).contains(&i) {
+        let mut pi = r.inertial_params();
+        pi[i - n] += h;
+        r = r.with_inertial_params(&pi).unwrap();
+    } else if i < n {
+        d.armature[i] += h;
+    } else if i >= lay.term(0) {
+        let mut t = i - lay.term(0);
+        for terms in d.terms.iter_mut() {
+            if t < terms.len() {
+                terms[t].1 += h;
+                break;
+            }
+            t -= terms.len();
+        }
+    } else {
+        let (group, j) = ((i - 11 * n) / n, (i - 11 * n) % n);
+        let field = match group {
+            0 => &mut d.viscous,
+            1 => &mut d.coulomb,
+            2 => &mut d.offset,
+            3 => &mut d.stiffness,
+            4 => &mut d.damping,
+            5 => &mut d.backlash,
+            6 => &mut d.load_friction,
+            _ => {
+                d.laws[j].eps += h;
+                return (r, d);
+            }
+        };
+        field[j] += h;
+    }
+    (r, d)
+}
+
+/// Checks the loop's sensitivities to each physical parameter it depends on and to each drive's
+/// held first force against central differences of steps `hrel` of each parameter (of its body's
+/// largest for a body's), within `tol` of the largest sensitivity of each (and the differences'
+/// rounding of the forces); the simulation itself must be the plain one, bit for bit.
+fn check_robot_sensitivities(
+    r: &Robot,
+    drives: &Drives,
+    laws: &[TransferFunction],
+    qr: &[f64],
+    opts: &RobotLoopOptions,
+    tol: f64,
+) {
+    use super::closed_loop::{simulate_robot_sensitivity, Directions};
+    let hrel = 1e-4;
+    let n = r.ndof();
+    let lay = PhysLayout::of(n, drives);
+    // every physical parameter the loop depends on (the rigid joints' stiffness, damping and backlash
+    // are not), then each drive's first force
+    let elastic = drives.elastic();
+    let params: Vec<usize> = (0..lay.len())
+        .filter(|&i| {
+            let g = i.checked_sub(11 * n).map(|x| (x / n, x % n));
+            !matches!(g, Some((3..=5, j)) if !elastic.contains(&j))
+                && !matches!(g, Some((5, j)) if drives.backlash.get(j).copied().unwrap_or(0.0) == 0.0)
+                && !matches!(g, Some((6, j)) if drives.load_friction[j] == 0.0)
+        })
+        .collect();
+    let p = params.len() + n;
+    let mut dirs = vec![0.0; lay.len() * p];
+    for (c, &i) in params.iter().enumerate() {
+        dirs[i * p + c] = 1.0;
+    }
+    let mut dforce0 = vec![0.0; n * p];
+    for j in 0..n {
+        dforce0[j * p + params.len() + j] = 1.0;
+    }
+    let (out, sens) = simulate_robot_sensitivity(
+        r,
+        drives,
+        laws,
+        qr,
+        opts,
+        Directions {
+            count: p,
+            physical: &dirs,
+            force0: &dforce0,
+        },
+    )
+    .unwrap();
+    let plain = simulate_robot(r, drives, laws, qr, opts).unwrap();
+    assert_eq!(
+        out.force, plain.force,
+        "the sensitivities must not change the simulation"
+    );
+    let samples = qr.len() / n;
+    let fscale = out.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    let value = |i: usize| -> f64 {
+        let d = drives;
+        match i {
+            _ if i < n => d.armature[i],
+            _ if i < 11 * n => r.inertial_params()[i - n],
+            _ if i >= lay.term(0) => d.terms.iter().flatten().nth(i - lay.term(0)).unwrap().1,
+            _ => {
+                let (g, j) = ((i - 11 * n) / n, (i - 11 * n) % n);
+                [
+                    d.viscous[j],
+                    d.coulomb[j],
+                    d.offset[j],
+                    d.stiffness[j],
+                    d.damping[j],
+                    d.backlash.get(j).copied().unwrap_or(0.0),
+                    d.load_friction[j],
+                    d.laws[j].eps,
+                ][g]
+            }
+        }
+    };
+    let mut worst: f64 = 0.0;
+    for c in 0..p {
+        let (h, plus, minus) = if c < params.len() {
+            let i = params[c];
+            // a body's parameters each by the same share of its largest (a first moment may be 0)
+            let h = hrel
+                * if (n..11 * n).contains(&i) {
+                    let b = (i - n) / 10 * 10;
+                    r.inertial_params()[b..b + 10]
+                        .iter()
+                        .fold(0.0f64, |m, x| m.max(x.abs()))
+                } else {
+                    value(i).abs()
+                };
+            let (rp, dp) = moved(r, drives, i, h);
+            let (rm, dm) = moved(r, drives, i, -h);
+            (
+                h,
+                simulate_robot(&rp, &dp, laws, qr, opts).unwrap().force,
+                simulate_robot(&rm, &dm, laws, qr, opts).unwrap().force,
+            )
+        } else {
+            let j = c - params.len();
+            let h = hrel * opts.force0[j].abs().max(1.0);
+            let shift = |s: f64| {
+                let mut o = opts.clone();
+                o.force0[j] += s;
+                simulate_robot(r, drives, laws, qr, &o).unwrap().force
+            };
+            (h, shift(h), shift(-h))
+        };
+        let col = |j: usize, k: usize| sens[(j * p + c) * samples + k];
+        let cscale = (0..n)
+            .flat_map(|j| (0..samples).map(move |k| (j, k)))
+            .fold(0.0f64, |m, (j, k)| m.max(col(j, k).abs()));
+        let mut err: f64 = 0.0;
+        for j in 0..n {
+            for k in 0..samples {
+                let fd = (plus[k * n + j] - minus[k * n + j]) / (2.0 * h);
+                err = err.max((fd - col(j, k)).abs());
+            }
+        }
+        // central differences' own error: h² of the third derivative, and the rounding of the forces over h
+        let rel = err / (cscale + 1e-9 * fscale / h);
+        worst = worst.max(rel);
+        assert!(
+            rel < tol,
+            "direction {c} (physical parameter {:?}): error {err:e} of {cscale:e}",
+            params.get(c)
+        );
+    }
+    assert!(worst > 0.0);
+}
+
+#[test]
+fn the_robot_loops_sensitivities_are_those_of_central_differences() {
+    // truncation of the central differences at steps of 1e-4: up to 5e-6 of each sensitivity
+    let (r, drives, laws, qr, opts) = loaded_chain();
+    check_robot_sensitivities(&r, &drives, &laws, &qr, &opts, 5e-5);
+}
+
+#[test]
+fn an_elastic_joints_backlash_has_its_sensitivities_while_in_contact() {
+    // a pendulum hanging on its spring across a dead zone, gravity keeping it on one side of its gap
+    // as it swings (a contact made or lost within an RK4 step is a kink the differences straddle)
+    let r = pendulum(2.0, 0.5, 0.01);
+    let (dt, samples) = (1e-3, 600);
+    let qr: Vec<f64> = (0..samples)
+        .map(|k| 0.7 + 0.05 * (2.0 * std::f64::consts::PI * k as f64 / samples as f64).sin())
+        .collect();
+    let drives = Drives {
+        armature: vec![0.05],
+        viscous: vec![0.5],
+        coulomb: vec![0.3],
+        offset: vec![0.1],
+        laws: vec![crate::model::FrictionLaw::algebraic(1e-2)],
+        stiffness: vec![3.0e3],
+        damping: vec![0.5],
+        backlash: vec![1e-3],
+        terms: vec![Vec::new()],
+        load_friction: vec![0.04],
+    };
+    let law = crate::Controller::EmpsCascade {
+        kp: 30.0,
+        kv: 8.0,
+        gtau: 1.0,
+        vsat: f64::INFINITY,
+    }
+    .law(dt)
+    .unwrap();
+    let g0 = r.rnea(&qr[..1], &[0.0], &[0.0]).unwrap()[0];
+    let opts = RobotLoopOptions {
+        delay: vec![2],
+        force_lag: vec![1e-3],
+        ..RobotLoopOptions::new(dt, 8, vec![0.0], vec![g0 + 0.1])
+    };
+    let out = simulate_robot(&r, &drives, &[law], &qr, &opts).unwrap();
+    let side = (out.theta[0] - out.q[0]).signum();
+    let least = (0..samples).fold(f64::INFINITY, |m, k| m.min(side * (out.theta[k] - out.q[k])));
+    assert!(least > 0.6e-3, "the link should stay in contact: {least:e}");
+    check_robot_sensitivities(&r, &drives, &[law], &qr, &opts, 5e-5);
 }

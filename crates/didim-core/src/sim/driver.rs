@@ -8,7 +8,7 @@
 //! plain simulation, the forward sensitivities for `simulate_sensitivity`.
 
 use super::closed_loop::{self, Plant};
-use super::drive::{Delay, JointDrive, Start};
+use super::drive::{Delay, ForceLag, JointDrive, Start};
 use super::{describe, Signals, SimOptions, SimOutput};
 use crate::controller::{Controller, FilterState, TransferFunction, MAX_TAPS};
 use crate::error::{filled, Error, Result};
@@ -57,16 +57,25 @@ pub(super) trait Tangent<const N: usize, S: Stepper<N>> {
     fn step(&mut self, ctx: &S::Ctx, step: &S::Step) -> Result<()>;
 }
 
-/// The command's part of the sensitivities, the same for every integrator: the
-/// controller's law run on `∂q1/∂χ_j` per parameter (zero while the command saturates),
-/// delayed like the command (the same [`Delay`], zero before the first command as the
-/// command's 0), and recorded as `∂force[k]/∂χ_j`.
-pub(super) struct CommandSens {
+/// The command's part of the sensitivities, the same for every plant and integrator: the
+/// controller's law run on `∂q1/∂χ_j` per parameter, plus the sensitivity of the force the drive
+/// adds (a robot's held first force; none on one axis), zero while the command saturates; delayed
+/// like the command (the same [`Delay`]: zero before the first command as one axis's 0, or the
+/// first command's own for a drive that held it) and through the same force lag; recorded as
+/// `∂force[k]/∂χ_j`.
+pub(crate) struct CommandSens {
     n: usize,
     /// The controller's state on `∂q1/∂χ`, one per parameter.
     ctl: Vec<FilterState>,
     /// The command sensitivities on their way (one vector per sample of delay).
     pending: Delay<Vec<f64>>,
+    /// The sensitivity of the force added to every command (one per parameter; empty: none).
+    dext: Vec<f64>,
+    /// Fill the delay with the first command's sensitivities ([`super::drive::Held::FirstCommand`]).
+    hold_first: bool,
+    /// The force lag and the sensitivities of its output at the start of the period.
+    lag: Option<ForceLag>,
+    lagged: Option<Vec<f64>>,
     /// Sensitivity of the force applied over the current period.
     pub dtau: Vec<f64>,
     /// `∂force[k]/∂χ_j`, layout `[j][k]`.
@@ -74,14 +83,31 @@ pub(super) struct CommandSens {
 }
 
 impl CommandSens {
+    /// One axis's: `p` parameters, `n` samples, `delay` samples of delay holding 0 before the
+    /// record, no force added, no lag.
     pub fn new(p: usize, n: usize, delay: usize) -> Result<Self> {
         Ok(Self {
             n,
             ctl: vec![[0.0; MAX_TAPS]; p],
             pending: Delay::new(vec![vec![0.0; p]; delay]),
+            dext: Vec::new(),
+            hold_first: false,
+            lag: None,
+            lagged: None,
             dtau: vec![0.0; p],
             dforce: filled(p * n, 0.0, "the force sensitivities")?,
         })
+    }
+
+    /// A robot joint's (`sim::drive::Start::Holding`): the first command held through the delay,
+    /// the force lag `lag` (s, 0 for none) at the sample period `dt`, and `dext` (one per
+    /// parameter) the sensitivity of the force the drive adds to every command.
+    pub fn holding(n: usize, delay: usize, lag: f64, dt: f64, dext: Vec<f64>) -> Result<Self> {
+        let mut out = Self::new(dext.len(), n, delay)?;
+        out.hold_first = delay > 0;
+        out.lag = ForceLag::new(lag, dt);
+        out.dext = dext;
+        Ok(out)
     }
 
     /// The command of sample `k` (by `law`, `active`: not saturated) with `dq1(j)` the
@@ -90,10 +116,26 @@ impl CommandSens {
         let gain = if active { law.gain() } else { 0.0 };
         for (j, c) in self.dtau.iter_mut().enumerate() {
             *c = gain * law.sensitivity_step(&mut self.ctl[j], dq1(j));
+            if active && !self.dext.is_empty() {
+                *c += self.dext[j];
+            }
             self.dforce[j * self.n + k] = *c;
+        }
+        if self.hold_first {
+            self.pending.fill(&self.dtau);
+            self.hold_first = false;
         }
         // this sample's sensitivities in, those of `delay` samples earlier out to be applied
         self.pending.pass(&mut self.dtau);
+        if let Some(lag) = self.lag {
+            // the lag is linear: its sensitivities follow it (`ForceLag::period`), from the first
+            let start = self.lagged.get_or_insert_with(|| self.dtau.clone());
+            for (c, f0) in self.dtau.iter_mut().zip(start.iter_mut()) {
+                let (mean, end) = lag.period(*f0, *c);
+                *f0 = end;
+                *c = mean;
+            }
+        }
     }
 }
 
