@@ -136,6 +136,8 @@ def simulate_robot(
     terms: Optional[Sequence[Sequence[Tuple[str, Sequence[Tuple[str, float]], float]]]] = None,
     load_friction: Optional[Sequence[float]] = None,
     backlash: Optional[Sequence[float]] = None,
+    directions: Optional[_F64] = None,
+    dforce0: Optional[_F64] = None,
 ) -> Dict[str, _F64]: ...
 
 def hold_stop(on: bool) -> None: ...

@@ -508,20 +508,15 @@ pub fn simulate_sensitivity<const N: usize>(
     opts: &SimOptions,
 ) -> Result<SensOutput> {
     check_inputs(model, chi, controller, qr, u_ext, opts)?; // before sizing the buffers by n and delay
-    if opts.force_lag > 0.0 {
-        return Err(invalid!(
-            "the forward sensitivities do not cover a force lag yet (force_lag = {} s): identify it with DIDIM or \
-             Nelder-Mead, or set force_lag to 0",
-            opts.force_lag
-        ));
-    }
     let (sim, dforce, dq) = if opts.integrator == Integrator::Exponential {
         let mut t = expint::Sens::<N>::new(model, qr.len(), opts.delay)?;
+        t.cmd.set_lag(opts.force_lag, opts.dt);
         let stepper = Exponential::new(model, chi, model.law(), qr, opts)?;
         let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
         (sim, t.cmd.dforce, t.dq)
     } else {
         let mut t = rk4::Sensitivity::<N>::new(model.n_params(), qr.len(), opts.delay)?;
+        t.cmd.set_lag(opts.force_lag, opts.dt);
         let stepper = Rk4::new(model, chi, model.law(), opts)?;
         let (sim, _) = driver::run(model, chi, controller, qr, u_ext, opts, true, stepper, &mut t)?;
         (sim, t.cmd.dforce, t.dq)

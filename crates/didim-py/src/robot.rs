@@ -4,8 +4,8 @@
 use didim_core::error::Error;
 use didim_core::model::{Basis, FrictionLaw, LawShape};
 use didim_core::robot::{
-    map_rows_into, regressor_many, simulate_robot as simulate_robot_core, Drives, JointKind, RegressorLayout,
-    Robot as CoreRobot, RobotLoopOptions, BODY_PARAMS,
+    map_rows_into, regressor_many, simulate_robot as simulate_robot_core, simulate_robot_sensitivity,
+    Directions, Drives, JointKind, RegressorLayout, Robot as CoreRobot, RobotLoopOptions, BODY_PARAMS,
 };
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -293,9 +293,12 @@ impl PyRobot {
 /// the one-axis model's kinds (`TERM_TABLE`), acting where the joint's friction acts;
 /// `load_friction` each joint's friction growing with the torque it carries (μ, 0 for none);
 /// `backlash` each elastic joint's dead zone between rotor and link (total width, rad or m; 0 for
-/// none; None: none on any joint).
+/// none; None: none on any joint). With `directions` (P, p): the forward sensitivities of the
+/// forces along p directions of the P physical parameters (`PhysLayout`: per joint the rotor
+/// inertia, then the bodies' 10 each, then per joint Fv, Fc, offset, K, D, backlash, μ, ε, then the
+/// terms' values), `dforce0` (n, p) those of `force0`: `dforce` (n, p, N) in the dict.
 #[pyfunction]
-#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law, u_ext=None, delay=None, force_lag=None, stiffness=None, damping=None, terms=None, load_friction=None, backlash=None))]
+#[pyo3(signature = (robot, armature, viscous, coulomb, offset, controllers, qr, dt, *, quantization, force0, substeps=0, coulomb_eps, coulomb_law, u_ext=None, delay=None, force_lag=None, stiffness=None, damping=None, terms=None, load_friction=None, backlash=None, directions=None, dforce0=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate_robot<'py>(
     py: Python<'py>,
@@ -320,9 +323,23 @@ pub fn simulate_robot<'py>(
     terms: Option<Vec<Vec<JointTerm>>>,
     load_friction: Option<Vec<f64>>,
     backlash: Option<Vec<f64>>,
+    directions: Option<PyReadonlyArray2<'py, f64>>,
+    dforce0: Option<PyReadonlyArray2<'py, f64>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let (rows, n) = (qr.as_array().nrows(), robot.inner.ndof());
     let qr = flat(&qr);
+    let p = directions.as_ref().map_or(0, |d| d.as_array().ncols());
+    let directions = directions.as_ref().map(flat);
+    let dforce0 = match (&directions, dforce0) {
+        (Some(_), Some(d)) if d.as_array().dim() != (n, p) => {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "dforce0 must be (joints, directions) = ({n}, {p}), got {:?}",
+                d.as_array().dim()
+            )))
+        }
+        (_, Some(d)) => flat(&d),
+        (_, None) => vec![0.0; n * p],
+    };
     if let Some(u) = &u_ext {
         let shape = u.as_array().dim();
         if shape != (rows, n) {
@@ -383,8 +400,23 @@ pub fn simulate_robot<'py>(
         opts.u_ext = u_ext;
         opts.delay = delay.unwrap_or_default();
         opts.force_lag = force_lag.unwrap_or_default();
-        simulate_robot_core(&robot.inner, &drives, &control, &qr, &opts)
+        match &directions {
+            None => simulate_robot_core(&robot.inner, &drives, &control, &qr, &opts).map(|o| (o, Vec::new())),
+            Some(dirs) => simulate_robot_sensitivity(
+                &robot.inner,
+                &drives,
+                &control,
+                &qr,
+                &opts,
+                Directions {
+                    count: p,
+                    physical: dirs,
+                    force0: &dforce0,
+                },
+            ),
+        }
     })?;
+    let (out, dforce) = out;
     let d = pyo3::types::PyDict::new(py);
     for (name, x) in [
         ("q", out.q),
@@ -398,6 +430,9 @@ pub fn simulate_robot<'py>(
         if !x.is_empty() {
             d.set_item(name, PyArray1::from_vec(py, x).reshape([rows, n])?)?;
         }
+    }
+    if directions.is_some() {
+        d.set_item("dforce", PyArray1::from_vec(py, dforce).reshape([n, p, rows])?)?;
     }
     Ok(d)
 }

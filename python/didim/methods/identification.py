@@ -44,8 +44,8 @@ IDIM_LS_SUPPORTS = frozenset({"terms", "coulomb_eps", "coulomb_law"})
 SIMULATING_SUPPORTS = frozenset(STRUCTURE_FIELDS) - {"offset"}
 #: The three-step DIDIM builds its flexible model from the rigid one's: the friction law only.
 THREE_STEP_SUPPORTS = frozenset({"coulomb_eps", "coulomb_law"})
-#: oe-lm's exact sensitivities do not cover a force lag.
-OE_LM_SUPPORTS = SIMULATING_SUPPORTS - {"force_lag"}
+#: oe-lm's exact sensitivities cover every field the simulator does (a force lag since the sixteenth session).
+OE_LM_SUPPORTS = SIMULATING_SUPPORTS
 
 
 def method_supports(method: str, kind: str) -> frozenset:

@@ -1073,8 +1073,42 @@ def _simulations() -> int:
     return getattr(_count, "n", 0)
 
 
+def _force0(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law) -> np.ndarray:
+    """Each drive's force held at the first sample of :func:`_simulate`'s loop: the logged first force, or through a
+    lead-in (:attr:`Recording.qr_lead`) the model's static torque at its start (gravity, offset and the terms that
+    hold at rest, less the feedforward)."""
+    qr, u_ext = rec.lead_in_signals()
+    if len(qr) == rec.n:
+        return np.asarray(rec.force[0], dtype=float)
+    rest = np.zeros(rec.ndof)
+    force0 = robot.rnea(qr[0], rest, rest) + np.asarray(d["offset"]) - (0.0 if u_ext is None else u_ext[0])
+    for j, terms in enumerate(d.get("terms") or ()):  # a torque along the stroke holds at rest too
+        for kind, hypers, value in terms:
+            force0[j] += value * term_columns([Term("at_rest", kind, **dict(hypers))], qr[0, j:j + 1], rest[:1],
+                                              law[0], law[1][j])[0, 0]
+    return force0
+
+
+def _physical(robot: Robot, d: Dict[str, List[float]], law: Law) -> np.ndarray:
+    """The physical parameters of the closed loop of ``robot`` with the drives ``d`` under ``law``, flattened as the
+    core's ``PhysLayout``: each joint's rotor inertia, the bodies' inertial parameters, each joint's Fv, Fc, offset,
+    stiffness (0 on a rigid joint), damping, backlash, load-dependent friction μ and smoothing speed ε, then the terms'
+    values joint by joint."""
+    n = robot.ndof
+
+    def get(key: str) -> np.ndarray:
+        v = d.get(key)
+        return np.zeros(n) if v is None else np.asarray(v, dtype=float)
+
+    k = get("stiffness")
+    values = [v for joint in (d.get("terms") or ()) for (_, _, v) in joint]
+    return np.concatenate([get("armature"), robot.inertial_params, get("viscous"), get("coulomb"), get("offset"),
+                           np.where(np.isfinite(k), k, 0.0), get("damping"), get("backlash"), get("load_friction"),
+                           np.asarray(law[1], dtype=float), np.asarray(values, dtype=float)])
+
+
 def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law, substeps: int = 0,
-              quantize: bool = True):
+              quantize: bool = True, directions: Optional[np.ndarray] = None, dforce0: Optional[np.ndarray] = None):
     """The closed loop of ``rec`` with the robot ``robot`` and drives ``d`` under ``law``: from rest at the first
     reference, each controller's integrator holding the logged first force; through the record's lead-in
     (:attr:`Recording.qr_lead`) when it begins in motion, from rest at the lead-in's start, each integrator then
@@ -1082,18 +1116,14 @@ def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law,
     from the outputs. ``quantize=False``: the encoders read the exact positions (a simulation smooth in the
     parameters, for a search that differentiates it: a parameter's change flips encoder counts, and the closed loop
     turns each flip into a step of force, so that the force error of the quantized loop jumps by about its noise at
-    any step of a parameter, 0.7 % of the force on the flexrobots' arm at steps from 1e-4 to 1e-2)."""
+    any step of a parameter, 0.7 % of the force on the flexrobots' arm at steps from 1e-4 to 1e-2). With
+    ``directions`` (:func:`_physical`'s length × p, ``∂φ/∂χ``) and ``dforce0`` (n × p, ``∂force0/∂χ``): ``dforce``
+    (n, p, N), the exact sensitivities of the simulated forces (the core's forward sensitivity equations of the
+    loop)."""
     _count.n = _simulations() + 1
     qr, u_ext = rec.lead_in_signals()
     lead = len(qr) - rec.n
-    force0 = rec.force[0]
-    if lead:
-        rest = np.zeros(rec.ndof)
-        force0 = robot.rnea(qr[0], rest, rest) + np.asarray(d["offset"]) - (0.0 if u_ext is None else u_ext[0])
-        for j, terms in enumerate(d.get("terms") or ()):  # a torque along the stroke holds at rest too
-            for kind, hypers, value in terms:
-                force0[j] += value * term_columns([Term("at_rest", kind, **dict(hypers))], qr[0, j:j + 1], rest[:1],
-                                                  law[0], law[1][j])[0, 0]
+    force0 = _force0(rec, robot, d, law)
     try:
         sim = _core.simulate_robot(robot._core, d["armature"], d["viscous"], d["coulomb"], d["offset"],
                                    rec.core_controllers(), qr, rec.dt,
@@ -1102,10 +1132,13 @@ def _simulate(rec: Recording, robot: Robot, d: Dict[str, List[float]], law: Law,
                                    coulomb_law=[law[0]] * len(law[1]), u_ext=u_ext,
                                    delay=list(rec.delay) or None, force_lag=list(rec.force_lag) or None,
                                    stiffness=d.get("stiffness"), damping=d.get("damping"), terms=d.get("terms"),
-                                   load_friction=d.get("load_friction"), backlash=d.get("backlash"))
+                                   load_friction=d.get("load_friction"), backlash=d.get("backlash"),
+                                   directions=directions, dforce0=dforce0)
     except DataError as e:
         raise SimulationError(f"the robot's closed loop cannot be simulated with these parameters: {e}") from None
-    return {k: v[lead:] for k, v in sim.items()} if lead else sim
+    if not lead:
+        return sim
+    return {k: (v[..., lead:] if k == "dforce" else v[lead:]) for k, v in sim.items()}
 
 
 #: A declared delay or force lag is questioned when the model simulates its joint significantly better without it
@@ -1954,11 +1987,14 @@ SPRING_MAX_ITER = 25
 
 def _output_least_squares(rec: Recording, simulate_u: Callable[[np.ndarray], Dict[str, np.ndarray]], u0: np.ndarray,
                           lower: np.ndarray, upper: np.ndarray, sims: List[int], max_nfev: int = 0,
-                          joints: Optional[Sequence[int]] = None):
+                          joints: Optional[Sequence[int]] = None,
+                          sensitivities: Optional[Callable[[np.ndarray], np.ndarray]] = None):
     """Least squares of the joints' relative force residuals in closed loop (:func:`_residuals`) over ``u``, the loop
     ``simulate_u(u)`` (simulated without encoder quantization: see :func:`_simulate`): scipy's trust-region
-    reflective Levenberg-Marquardt within the bounds, its Jacobian by forward differences of relative step
-    :data:`SPRING_FD_STEP`, simulated in parallel. Returns scipy's result (``x``, ``fun``, ``jac``, ``nfev``)."""
+    reflective Levenberg-Marquardt within the bounds. Its Jacobian: ``sensitivities(u)``, the exact ``∂force/∂u``
+    (n, len(u), N) of the loop, when given (a loop whose sensitivities cannot be computed falls back to differences);
+    otherwise forward differences of relative step :data:`SPRING_FD_STEP`, simulated in parallel. Returns scipy's
+    result (``x``, ``fun``, ``jac``, ``nfev``)."""
     from .._parallel import cores, map_threads
     from scipy.optimize import least_squares
 
@@ -1978,7 +2014,20 @@ def _output_least_squares(rec: Recording, simulate_u: Callable[[np.ndarray], Dic
                 cache.pop(next(iter(cache)))
         return cache[key]
 
+    kept = list(range(rec.ndof)) if joints is None else list(joints)
+    norms = np.maximum(np.linalg.norm(rec.force[:, kept], axis=0), 1e-300)
+
     def jac(u: np.ndarray) -> np.ndarray:
+        if sensitivities is not None:
+            try:
+                dforce = sensitivities(np.asarray(u, dtype=float))[kept]  # (nj, p, N)
+            except (SimulationError, DataError):
+                pass
+            else:
+                sims[0] += 1
+                # the residual's order (_residuals): joint by joint, each over its samples
+                scaled = -dforce / norms[:, None, None] / math.sqrt(nj)
+                return scaled.transpose(0, 2, 1).reshape(nj * rec.n, len(u))
         r0 = res(u)
         steps = SPRING_FD_STEP * np.maximum(np.abs(u), 1.0)
         steps = np.where(u + steps > upper, -steps, steps)
@@ -2495,6 +2544,69 @@ def _elastic_steps(rec: Recording, model: Model, plant: "_RobotPlant", theta0: n
     return res
 
 
+class _LoopSensitivities:
+    """``∂force/∂v`` of OE-LM's loop (n, len(v), N), v the fitted components of u (``full(v)`` the whole u): the core's
+    exact forward sensitivities along ``∂φ/∂v``, φ the loop's physical parameters (:func:`_physical`). θ's part of
+    ``∂φ/∂v`` is constant (φ is affine in θ: the bases' standard parameters, the drives' own values), taken once as
+    differences of unit steps of u, exact but for rounding; each smoothing speed's and backlash width's, fitted in
+    their logs, is the value itself. The drives' first forces move with θ through a lead-in's static torque
+    (:func:`_force0`, affine in θ too); they do not depend on ε (the terms at rest are at zero speed) nor on the
+    widths."""
+
+    def __init__(self, rec: Recording, start: IdentificationResult, split, full, mask: np.ndarray, p: int,
+                 gapped: np.ndarray):
+        self.rec, self.start, self.split, self.full, self.p, self.gapped = rec, start, split, full, p, gapped
+        self.free = np.flatnonzero(mask)
+        self.n = rec.ndof
+        self.theta_part: Optional[Tuple[np.ndarray, np.ndarray]] = None
+
+    def model(self, u: np.ndarray):
+        th, lw, gaps = self.split(u)
+        robot, d = _model_of(replace(self.start.structure, backlash_gap=gaps), self.start.base, th)
+        return robot, d, lw
+
+    def _theta_part(self, u: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        if self.theta_part is None:
+            phys, f0 = [], []
+            for c in self.free[self.free < self.p]:
+                ends = []
+                for step in (1.0, -1.0):
+                    v = u.copy()
+                    v[c] += step
+                    robot, d, lw = self.model(v)
+                    ends.append((_physical(robot, d, lw), _force0(self.rec, robot, d, lw)))
+                phys.append(0.5 * (ends[0][0] - ends[1][0]))
+                f0.append(0.5 * (ends[0][1] - ends[1][1]))
+            self.theta_part = (np.reshape(np.array(phys).T, (-1, len(phys))),
+                               np.reshape(np.array(f0).T, (self.n, len(f0))))
+        return self.theta_part
+
+    def __call__(self, v: np.ndarray) -> np.ndarray:
+        u = self.full(v)
+        robot, d, lw = self.model(u)
+        phys = _physical(robot, d, lw)
+        n, p, k = self.n, self.p, len(self.free)
+        theta_dirs, theta_f0 = self._theta_part(u)
+        dirs, dforce0 = np.zeros((len(phys), k)), np.zeros((n, k))
+        nt = theta_dirs.shape[1]
+        if nt:
+            dirs[:, :nt], dforce0[:, :nt] = theta_dirs, theta_f0
+        eps_at, gap_at = 18 * n, 16 * n  # the core's PhysLayout: ε and the backlash widths, one per joint
+        for col, c in enumerate(self.free):
+            if p <= c < p + n:
+                dirs[eps_at + c - p, col] = math.exp(u[c])
+            elif c >= p + n:
+                dirs[gap_at + int(self.gapped[c - p - n]), col] = math.exp(u[c])
+        # the directions in one chunk per core, each chunk a loop of its own (the simulation repeated: the tangent
+        # costs each direction most of a simulation)
+        from .._parallel import cores, map_threads
+
+        chunks = [c for c in np.array_split(np.arange(k), min(cores(), k)) if len(c)]
+        parts = map_threads(lambda c: _simulate(self.rec, robot, d, lw, quantize=False, directions=dirs[:, c],
+                                                dforce0=dforce0[:, c])["dforce"], chunks, len(chunks))
+        return np.concatenate(parts, axis=1)
+
+
 @serial_blas
 def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3,
           progress: Optional[Callable[[str], None]] = None, start: Optional[IdentificationResult] = None,
@@ -2565,7 +2677,8 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     say(f"oe-lm: Levenberg-Marquardt on {int(mask[:p].sum())} parameters and {int(mask[p:p + n].sum())} smoothing "
         "speeds" + (f" and {len(gapped)} backlash width(s)" if mask[p + n:].any() else ""))
     out = _output_least_squares(rec, lambda v: simulate_u(full(v)), u0[mask], np.full(int(mask.sum()), -np.inf),
-                                np.full(int(mask.sum()), np.inf), sims, max_nfev=max_iter, joints=joints)
+                                np.full(int(mask.sum()), np.inf), sims, max_nfev=max_iter, joints=joints,
+                                sensitivities=_LoopSensitivities(rec, start, split, full, mask, p, gapped))
     theta, law, gaps = split(full(out.x))
     r, jac = out.fun, out.jac
     cov_u = np.zeros((len(u0), len(u0)))
@@ -2578,7 +2691,8 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
                   ("" if out.status > 0 else str(out.message)),
                   notes=[f"started from {start.method}'s estimate (closed-loop force error "
                          f"{100 * start.force_error:.2f} %)",
-                         "sensitivities by forward differences of the loop without encoder quantization"]
+                         "exact sensitivities of the loop without encoder quantization (its forward sensitivity "
+                         "equations)"]
                   + ([] if free is None else [
                       f"fitted: {', '.join(k for k, m in zip(names, mask) if m) or 'no parameter'} and the smoothing "
                       f"speed of {', '.join(robot.joint_names[j] for j in np.flatnonzero(mask[p:p + n]))}, on the "

@@ -19,7 +19,8 @@ mod urdf;
 
 pub use aba::AbaWork;
 pub use closed_loop::{
-    simulate_robot, simulate_robot_sensitivity, Drives, PhysLayout, RobotLoopOptions, RobotLoopOutput,
+    simulate_robot, simulate_robot_sensitivity, Directions, Drives, PhysLayout, RobotLoopOptions,
+    RobotLoopOutput,
 };
 
 use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, Vector3};

@@ -105,9 +105,15 @@ impl CommandSens {
     pub fn holding(n: usize, delay: usize, lag: f64, dt: f64, dext: Vec<f64>) -> Result<Self> {
         let mut out = Self::new(dext.len(), n, delay)?;
         out.hold_first = delay > 0;
-        out.lag = ForceLag::new(lag, dt);
+        out.set_lag(lag, dt);
         out.dext = dext;
         Ok(out)
+    }
+
+    /// The force lag `lag` (s, 0 for none) at the sample period `dt` between the delayed command
+    /// and the force applied ([`super::drive::Actuator`]'s).
+    pub fn set_lag(&mut self, lag: f64, dt: f64) {
+        self.lag = ForceLag::new(lag, dt);
     }
 
     /// The command of sample `k` (by `law`, `active`: not saturated) with `dq1(j)` the

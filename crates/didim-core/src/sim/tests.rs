@@ -283,10 +283,22 @@ fn bad_inputs_are_invalid_input_errors() {
 /// switch, not the derivative: the perturbation is chosen so that both perturbed runs
 /// take the same steps as the nominal one.
 fn check_sensitivities<const N: usize>(model: &Model<N>, chi: &[f64], delay: usize, integrator: Integrator) {
+    check_sensitivities_lagged(model, chi, delay, 0.0, integrator);
+}
+
+/// [`check_sensitivities`] with a force lag `lag` (s).
+fn check_sensitivities_lagged<const N: usize>(
+    model: &Model<N>,
+    chi: &[f64],
+    delay: usize,
+    lag: f64,
+    integrator: Integrator,
+) {
     let dt = 1e-3;
     let qr = trapezoid(1500, dt);
     let opts = SimOptions {
         delay,
+        force_lag: lag,
         integrator,
         ..SimOptions::new(dt)
     };
@@ -355,6 +367,18 @@ fn sensitivities_match_finite_differences_for_the_rigid_model_with_delay() {
     let model = rigid(true, 1e-3).unwrap();
     check_sensitivities(&model, &[95.0, 203.0, 20.0, -3.0], 2, Integrator::Exponential);
     check_sensitivities(&model, &[95.0, 203.0, 20.0, -3.0], 2, Integrator::Rk4);
+}
+
+#[test]
+fn sensitivities_match_finite_differences_with_a_force_lag() {
+    // the lag is linear: the command's sensitivities go through it as the command does (its mean over
+    // each period), on the rigid and the flexible model, after a delay and without one
+    let chi = [95.0, 203.0, 20.0, -3.0];
+    let model = rigid(true, 1e-3).unwrap();
+    for integrator in [Integrator::Exponential, Integrator::Rk4] {
+        check_sensitivities_lagged(&model, &chi, 0, 8e-4, integrator);
+        check_sensitivities_lagged(&model, &chi, 1, 3e-3, integrator);
+    }
 }
 
 fn rel_err(a: &[f64], b: &[f64]) -> f64 {
