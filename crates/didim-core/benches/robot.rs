@@ -1,11 +1,16 @@
 //! A robot's closed loop and dynamics, one core: a 6-joint arm (the UR5's kinematics, written
 //! here so that the bench needs no file) under a PI velocity loop per joint, 20 s at 1 kHz with
-//! RK4 on 4 substeps, and the articulated-body algorithm, Newton–Euler and its regressor alone.
+//! RK4 on 4 substeps, its exact sensitivities to OE-LM's 78 parameters of a rigid arm (every
+//! body's 10, each joint's rotor, Fv and Fc) over its first 2 s beside the plain loop over the same
+//! 2 s, and the articulated-body algorithm, Newton–Euler and its regressor alone.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use didim_core::controller::TransferFunction;
 use didim_core::model::FrictionLaw;
-use didim_core::robot::{simulate_robot, AbaWork, Drives, Robot, RobotLoopOptions};
+use didim_core::robot::{
+    simulate_robot, simulate_robot_sensitivity, AbaWork, Directions, Drives, PhysLayout, Robot,
+    RobotLoopOptions,
+};
 use std::hint::black_box;
 
 const UR5: &str = r#"<robot name="ur5">
@@ -92,6 +97,32 @@ fn bench(c: &mut Criterion) {
     g.throughput(Throughput::Elements((qr.len() / n) as u64));
     g.bench_function("closed_loop_ur5_20s_rk4x4", |b| {
         b.iter(|| black_box(simulate_robot(&robot, &drives, &ctl, &qr, &opts).unwrap()))
+    });
+    // the sensitivities along the 78 directions against the plain loop, both without quantization
+    let short = &qr[..2000 * n];
+    let exact = RobotLoopOptions::new(1e-3, 4, vec![0.0; n], vec![0.0; n]);
+    let lay = PhysLayout::of(n, &drives);
+    let rows: Vec<usize> = (0..11 * n)
+        .chain((0..n).map(|j| lay.viscous(j)))
+        .chain((0..n).map(|j| lay.coulomb(j)))
+        .collect();
+    let p = rows.len();
+    let mut physical = vec![0.0; lay.len() * p];
+    for (c, &i) in rows.iter().enumerate() {
+        physical[i * p + c] = 1.0;
+    }
+    let force0 = vec![0.0; n * p];
+    let dirs = Directions {
+        count: p,
+        physical: &physical,
+        force0: &force0,
+    };
+    g.throughput(Throughput::Elements(2000));
+    g.bench_function("closed_loop_ur5_2s_rk4x4", |b| {
+        b.iter(|| black_box(simulate_robot(&robot, &drives, &ctl, short, &exact).unwrap()))
+    });
+    g.bench_function("closed_loop_ur5_2s_rk4x4_sensitivities_78", |b| {
+        b.iter(|| black_box(simulate_robot_sensitivity(&robot, &drives, &ctl, short, &exact, dirs).unwrap()))
     });
     g.finish();
     let (q, v, tau) = ([0.3, -1.0, 1.2, -1.6, -1.57, 0.2], [0.5; 6], [1.0; 6]);

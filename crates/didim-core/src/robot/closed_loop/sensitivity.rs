@@ -22,7 +22,7 @@
 //! contraction of rate μ). The first state's links, settled on their springs, are differentiated
 //! through their rest equation `K (θ − q) = g(q)`.
 
-use nalgebra::{Cholesky, DMatrix};
+use nalgebra::{Cholesky, DMatrix, DMatrixView};
 
 use super::{sign, ArmTangent, Drives, Dynamics};
 use crate::error::{filled, invalid, Error, Result};
@@ -119,6 +119,12 @@ pub(super) struct Sensitivities<'d> {
     coef_load: Vec<f64>,
     /// Each term's index in the layout, per joint: the first.
     term_start: Vec<usize>,
+}
+
+/// `x` read column-major as a `rows × cols` matrix.
+#[inline(always)]
+fn view(x: &[f64], rows: usize, cols: usize) -> DMatrixView<'_, f64> {
+    DMatrixView::from_slice(x, rows, cols)
 }
 
 /// A row of the directions.
@@ -402,31 +408,52 @@ impl<'d> Sensitivities<'d> {
         let chol = Cholesky::new(mm).ok_or_else(|| {
             invalid!("the mass matrix is not positive definite along the loop: the inertial parameters are not those of physical bodies")
         })?;
-        let mut base = vec![0.0; n * p];
+        // every n × p block (joint major, each joint's p directions contiguous) is, read column-major, its
+        // transpose p × n: the products below are those of the transposes, by nalgebra's matrix kernels
+        let mut base = DMatrix::<f64>::from_column_slice(p, n, &dtau);
+        // ∂RNEA/∂q (row-major n × n) read column-major is its transpose: dqᵀ ∂RNEA/∂qᵀ = (∂RNEA/∂q dq)ᵀ
+        base.gemm(-1.0, &view(&dxs[..n * p], p, n), &view(&rd.dtau_dq, n, n), 1.0);
+        base.gemm(
+            -1.0,
+            &view(&dxs[n * p..2 * n * p], p, n),
+            &view(&rd.dtau_dv, n, n),
+            1.0,
+        );
+        // the bodies' rows of the directions, (10n × p) row-major: their transpose; Y (n × 10n) likewise
+        let bodies = &self.dirs[lay.body(0, 0) * p..lay.body(n - 1, BODY_PARAMS - 1) * p + p];
+        base.gemm(
+            -1.0,
+            &view(bodies, p, BODY_PARAMS * n),
+            &view(&self.y, BODY_PARAMS * n, n),
+            1.0,
+        );
         for j in 0..n {
-            let b = &mut base[j * p..(j + 1) * p];
-            b.copy_from_slice(&dtau[j * p..(j + 1) * p]);
-            for i in 0..n {
-                axpy(b, -rd.dtau_dq[j * n + i], dq(i));
-                axpy(b, -rd.dtau_dv[j * n + i], dv(i));
-            }
             if !d.is_elastic(j) {
-                axpy(b, -qdd[j], row(self.dirs, p, lay.armature(j)));
+                axpy(
+                    base.column_mut(j).as_mut_slice(),
+                    -qdd[j],
+                    row(self.dirs, p, lay.armature(j)),
+                );
             }
         }
-        for j in 0..n {
-            self.body_part(j, &mut base[j * p..(j + 1) * p], -1.0);
-        }
+        // (M + A)⁻¹ is symmetric: dq̈ᵀ = baseᵀ (M + A)⁻¹
+        let minv = chol.inverse();
         let loaded = d.has_load && (0..n).any(|j| self.coef_load[j] != 0.0);
         self.dload.fill(0.0);
-        let mut sol = DMatrix::<f64>::zeros(n, p);
+        let mut rhs = base.clone();
+        let mut sol = DMatrix::<f64>::zeros(p, n);
         for it in 0..=LOAD_TANGENT_ITERATIONS {
-            for j in 0..n {
-                for c in 0..p {
-                    sol[(j, c)] = base[j * p + c] + self.coef_load[j] * self.dload[j * p + c];
+            if it > 0 {
+                rhs.copy_from(&base);
+                for j in 0..n {
+                    axpy(
+                        rhs.column_mut(j).as_mut_slice(),
+                        self.coef_load[j],
+                        &self.dload[j * p..(j + 1) * p],
+                    );
                 }
             }
-            chol.solve_mut(&mut sol);
+            sol.gemm(1.0, &rhs, &minv, 0.0);
             if !loaded {
                 break;
             }
@@ -441,7 +468,7 @@ impl<'d> Sensitivities<'d> {
                 for c in 0..p {
                     let new = dtau[j * p + c] + self.coef_load[j] * self.dload[j * p + c]
                         - dia[c] * qdd[j]
-                        - d.link_armature[j] * sol[(j, c)];
+                        - d.link_armature[j] * sol[(c, j)];
                     change = change.max((new - self.dload[j * p + c]).abs());
                     scale = scale.max(new.abs());
                     self.dload[j * p + c] = new;
@@ -451,11 +478,7 @@ impl<'d> Sensitivities<'d> {
                 break;
             }
         }
-        for j in 0..n {
-            for c in 0..p {
-                out[(n + j) * p + c] = sol[(j, c)];
-            }
-        }
+        out[n * p..2 * n * p].copy_from_slice(sol.as_slice());
         self.dtau = dtau;
         self.dxs = dxs;
         self.dk[i] = out;
