@@ -2601,6 +2601,8 @@ class _LoopSensitivities:
         # costs each direction most of a simulation)
         from .._parallel import cores, map_threads
 
+        if k == 0:
+            return np.zeros((n, 0, self.rec.n))
         chunks = [c for c in np.array_split(np.arange(k), min(cores(), k)) if len(c)]
         parts = map_threads(lambda c: _simulate(self.rec, robot, d, lw, quantize=False, directions=dirs[:, c],
                                                 dforce0=dforce0[:, c])["dforce"], chunks, len(chunks))

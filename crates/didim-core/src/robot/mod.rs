@@ -306,11 +306,65 @@ impl Robot {
     /// these (`∂q̈/∂x = −M⁻¹ ∂τ/∂x`); checked against Pinocchio's `computeRNEADerivatives` and
     /// against central differences in the tests.
     pub fn rnea_derivatives(&self, q: &[f64], v: &[f64], a: &[f64]) -> Result<RneaDerivatives> {
+        self.rnea_derivatives_and_mass(q, v, a, None)
+    }
+
+    /// [`Robot::rnea_derivatives`], and with `mass` (n × n) the mass matrix `∂τ/∂q̈` from the same
+    /// pass's poses: each column Newton–Euler's passes on a unit acceleration of one joint, without
+    /// speed nor gravity (the closed loop's sensitivities need both at every stage; the mass matrix
+    /// by [`Robot::mass_matrix`] makes n passes of its own, each computing the poses again).
+    pub(crate) fn rnea_derivatives_and_mass(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        a: &[f64],
+        mass: Option<&mut [f64]>,
+    ) -> Result<RneaDerivatives> {
         self.check("q", q)?;
         self.check("v", v)?;
         self.check("a", a)?;
         let n = self.ndof();
         let ne = self.newton_euler(q, v, a, true);
+        if let Some(m) = mass {
+            if m.len() != n * n {
+                return Err(invalid!(
+                    "the mass matrix of {n} joints has {} values, got room for {}",
+                    n * n,
+                    m.len()
+                ));
+            }
+            let mut force = vec![Force::zero(); n];
+            for j in 0..n {
+                let mut ta = Motion::zero();
+                for i in 0..n {
+                    if i < j {
+                        force[i] = Force::zero();
+                        continue;
+                    }
+                    ta = if i == j {
+                        Self::subspace(&self.joints[i])
+                    } else {
+                        ne.poses[i].motion_to_child(&ta)
+                    };
+                    force[i] = spatial::inertia_apply(&self.joints[i].inertia, &ta);
+                }
+                for i in (0..n).rev() {
+                    m[i * n + j] = Self::subspace(&self.joints[i]).dot(&force[i]);
+                    if i > 0 {
+                        let fp = ne.poses[i].force_to_parent(&force[i]);
+                        force[i - 1] = force[i - 1] + fp;
+                    }
+                }
+            }
+            // exact symmetry (each column's rounding differs), as `mass_matrix`
+            for i in 0..n {
+                for j in 0..i {
+                    let x = 0.5 * (m[i * n + j] + m[j * n + i]);
+                    m[i * n + j] = x;
+                    m[j * n + i] = x;
+                }
+            }
+        }
         let sub: Vec<Motion> = self.joints.iter().map(Self::subspace).collect();
         let mut dq = vec![0.0; n * n];
         let mut dv = vec![0.0; n * n];

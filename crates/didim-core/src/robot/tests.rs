@@ -1152,3 +1152,24 @@ fn an_elastic_joints_backlash_has_its_sensitivities_while_in_contact() {
     assert!(least > 0.6e-3, "the link should stay in contact: {least:e}");
     check_robot_sensitivities(&r, &drives, &[law], &qr, &opts, 5e-5);
 }
+
+#[test]
+fn the_mass_matrix_beside_the_derivatives_is_the_mass_matrix() {
+    // the chain with skewed axes and a prismatic joint, at a few random states
+    let r = Robot::from_urdf(CHAIN, None).unwrap();
+    let n = r.ndof();
+    for seed in 0..5 {
+        let x = state(3 * n, seed);
+        let (q, v, a) = (&x[..n], &x[n..2 * n], &x[2 * n..]);
+        let mut m = vec![0.0; n * n];
+        let d = r.rnea_derivatives_and_mass(q, v, a, Some(&mut m)).unwrap();
+        assert_eq!(d, r.rnea_derivatives(q, v, a).unwrap());
+        let want = r.mass_matrix(q).unwrap();
+        let scale = want.iter().fold(0.0f64, |s, x| s.max(x.abs()));
+        for i in 0..n {
+            for j in 0..n {
+                assert!((m[i * n + j] - want[(i, j)]).abs() <= 1e-13 * scale, "({i}, {j})");
+            }
+        }
+    }
+}

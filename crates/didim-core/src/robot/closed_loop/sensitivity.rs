@@ -114,6 +114,12 @@ pub(super) struct Sensitivities<'d> {
     cmd: Vec<CommandSens>,
     // work
     y: Vec<f64>,
+    mass: Vec<f64>,
+    scratch: Vec<f64>,
+    /// The chain's right-hand side, with the load's tangent, and its solution (p × n each).
+    base: DMatrix<f64>,
+    rhs: DMatrix<f64>,
+    sol: DMatrix<f64>,
     dtau: Vec<f64>,
     dload: Vec<f64>,
     coef_load: Vec<f64>,
@@ -197,6 +203,11 @@ impl<'d> Sensitivities<'d> {
             du: vec![0.0; n * p],
             cmd,
             y: vec![0.0; n * BODY_PARAMS * n],
+            mass: vec![0.0; n * n],
+            scratch: vec![0.0; p],
+            base: DMatrix::zeros(p, n),
+            rhs: DMatrix::zeros(p, n),
+            sol: DMatrix::zeros(p, n),
             dtau: vec![0.0; n * p],
             dload: vec![0.0; n * p],
             coef_load: vec![0.0; n],
@@ -340,7 +351,7 @@ impl<'d> Sensitivities<'d> {
         out[2 * n * p..(2 * n + ne) * p].copy_from_slice(&dxs[(2 * n + ne) * p..]);
         // each joint's torque's tangent, less the load-dependent friction's load term
         let mut dtau = std::mem::take(&mut self.dtau);
-        let mut scratch = vec![0.0; p];
+        let mut scratch = std::mem::take(&mut self.scratch);
         for j in 0..n {
             let dt = &mut dtau[j * p..(j + 1) * p];
             dt.copy_from_slice(&self.du[j * p..(j + 1) * p]);
@@ -399,9 +410,10 @@ impl<'d> Sensitivities<'d> {
             }
         }
         // the chain: (M + A) dq̈ = dτ − ∂RNEA/∂q dq − ∂RNEA/∂q̇ dq̇ − Y dπ − dA q̈
-        let rd = robot.rnea_derivatives(q, v, qdd)?;
+        let rd = robot.rnea_derivatives_and_mass(q, v, qdd, Some(&mut self.mass))?;
         robot.regressor_into(q, v, qdd, &mut self.y)?;
-        let mut mm = robot.mass_matrix(q)?;
+        // symmetric: its row-major values are its column-major ones
+        let mut mm = DMatrix::from_column_slice(n, n, &self.mass);
         for j in 0..n {
             mm[(j, j)] += d.link_armature[j];
         }
@@ -410,7 +422,8 @@ impl<'d> Sensitivities<'d> {
         })?;
         // every n × p block (joint major, each joint's p directions contiguous) is, read column-major, its
         // transpose p × n: the products below are those of the transposes, by nalgebra's matrix kernels
-        let mut base = DMatrix::<f64>::from_column_slice(p, n, &dtau);
+        let mut base = std::mem::replace(&mut self.base, DMatrix::zeros(0, 0));
+        base.copy_from_slice(&dtau);
         // ∂RNEA/∂q (row-major n × n) read column-major is its transpose: dqᵀ ∂RNEA/∂qᵀ = (∂RNEA/∂q dq)ᵀ
         base.gemm(-1.0, &view(&dxs[..n * p], p, n), &view(&rd.dtau_dq, n, n), 1.0);
         base.gemm(
@@ -440,8 +453,9 @@ impl<'d> Sensitivities<'d> {
         let minv = chol.inverse();
         let loaded = d.has_load && (0..n).any(|j| self.coef_load[j] != 0.0);
         self.dload.fill(0.0);
-        let mut rhs = base.clone();
-        let mut sol = DMatrix::<f64>::zeros(p, n);
+        let mut rhs = std::mem::replace(&mut self.rhs, DMatrix::zeros(0, 0));
+        rhs.copy_from(&base);
+        let mut sol = std::mem::replace(&mut self.sol, DMatrix::zeros(0, 0));
         for it in 0..=LOAD_TANGENT_ITERATIONS {
             if it > 0 {
                 rhs.copy_from(&base);
@@ -482,6 +496,7 @@ impl<'d> Sensitivities<'d> {
         self.dtau = dtau;
         self.dxs = dxs;
         self.dk[i] = out;
+        (self.scratch, self.base, self.rhs, self.sol) = (scratch, base, rhs, sol);
         Ok(())
     }
 }
