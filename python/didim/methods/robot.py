@@ -2616,9 +2616,9 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
     """Output-error Levenberg-Marquardt on a robot (rigid or with elastic joints): the least squares of the joints'
     relative force residuals in closed loop over every parameter of the model (θ of :class:`_Layout`) and each joint's
     friction smoothing speed ε, from DIDIM's estimate (``start``, by default :func:`didim`: the three-step DIDIM for
-    elastic joints); at most ``max_iter`` evaluations of the Jacobian. The sensitivities are forward differences of
-    the loop simulated without encoder quantization (:func:`_simulate`; not the exact sensitivity equations), the
-    Jacobian's columns simulated in parallel. The covariance is σ² (JᵀJ)⁻¹ at the solution, σ² from the residual
+    elastic joints); at most ``max_iter`` evaluations of the Jacobian. The Jacobian is the exact sensitivities of the
+    loop simulated without encoder quantization (:func:`_simulate`, :class:`_LoopSensitivities`: the core's tangent of
+    the loop along the parameters' directions, in one chunk per core). The covariance is σ² (JᵀJ)⁻¹ at the solution, σ² from the residual
     (correlated in time: the standard deviations are optimistic). ``free``: only the parameters of θ so named are
     fitted, with the smoothing speeds of ``joints`` (the dead zones' widths held), the others held at ``start``'s;
     ``joints``: only these joints' residuals count (:func:`polish_joint`)."""
