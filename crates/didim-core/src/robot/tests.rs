@@ -1173,3 +1173,51 @@ fn the_mass_matrix_beside_the_derivatives_is_the_mass_matrix() {
         }
     }
 }
+
+#[test]
+fn the_sensitivities_do_not_depend_on_how_the_directions_are_split() {
+    // OE-LM splits its directions in one chunk per core: each direction's values must be the same bit for
+    // bit in any chunk, so that its result does not depend on the machine's cores
+    use super::closed_loop::{simulate_robot_sensitivity, Directions};
+    let (r, drives, laws, qr, opts) = loaded_chain();
+    let n = r.ndof();
+    let lay = PhysLayout::of(n, &drives);
+    let samples = qr.len() / n;
+    let rows: Vec<usize> = (0..lay.len()).step_by(3).collect();
+    let run = |cols: &[usize]| {
+        let p = cols.len();
+        let mut physical = vec![0.0; lay.len() * p];
+        for (c, &i) in cols.iter().enumerate() {
+            physical[i * p + c] = 1.0 + 0.1 * i as f64;
+        }
+        let force0 = vec![0.0; n * p];
+        let dirs = Directions {
+            count: p,
+            physical: &physical,
+            force0: &force0,
+        };
+        simulate_robot_sensitivity(&r, &drives, &laws, &qr, &opts, dirs)
+            .unwrap()
+            .1
+    };
+    let all = run(&rows);
+    let (a, b) = rows.split_at(5);
+    let parts = [run(a), run(b)];
+    let p = rows.len();
+    for j in 0..n {
+        for (c, _) in rows.iter().enumerate() {
+            let (part, pc, cc) = if c < 5 {
+                (&parts[0], 5, c)
+            } else {
+                (&parts[1], p - 5, c - 5)
+            };
+            for k in 0..samples {
+                assert_eq!(
+                    all[(j * p + c) * samples + k].to_bits(),
+                    part[(j * pc + cc) * samples + k].to_bits(),
+                    "joint {j}, direction {c}, sample {k}"
+                );
+            }
+        }
+    }
+}

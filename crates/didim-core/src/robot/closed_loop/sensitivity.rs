@@ -22,7 +22,7 @@
 //! contraction of rate μ). The first state's links, settled on their springs, are differentiated
 //! through their rest equation `K (θ − q) = g(q)`.
 
-use nalgebra::{Cholesky, DMatrix, DMatrixView};
+use nalgebra::{Cholesky, DMatrix};
 
 use super::{sign, ArmTangent, Drives, Dynamics};
 use crate::error::{filled, invalid, Error, Result};
@@ -125,12 +125,6 @@ pub(super) struct Sensitivities<'d> {
     coef_load: Vec<f64>,
     /// Each term's index in the layout, per joint: the first.
     term_start: Vec<usize>,
-}
-
-/// `x` read column-major as a `rows × cols` matrix.
-#[inline(always)]
-fn view(x: &[f64], rows: usize, cols: usize) -> DMatrixView<'_, f64> {
-    DMatrixView::from_slice(x, rows, cols)
 }
 
 /// A row of the directions.
@@ -420,36 +414,32 @@ impl<'d> Sensitivities<'d> {
         let chol = Cholesky::new(mm).ok_or_else(|| {
             invalid!("the mass matrix is not positive definite along the loop: the inertial parameters are not those of physical bodies")
         })?;
-        // every n × p block (joint major, each joint's p directions contiguous) is, read column-major, its
-        // transpose p × n: the products below are those of the transposes, by nalgebra's matrix kernels
+        // each joint's p directions contiguous (column j of the p × n buffers). Every direction's value is
+        // the same sequence of operations whatever the other directions are (elementwise over the directions, in
+        // a fixed order over the joints and the bodies' parameters): the sensitivities do not depend on how the
+        // directions are split between calls, nor on the processor (no kernel chosen at run time)
         let mut base = std::mem::replace(&mut self.base, DMatrix::zeros(0, 0));
         base.copy_from_slice(&dtau);
-        // ∂RNEA/∂q (row-major n × n) read column-major is its transpose: dqᵀ ∂RNEA/∂qᵀ = (∂RNEA/∂q dq)ᵀ
-        base.gemm(-1.0, &view(&dxs[..n * p], p, n), &view(&rd.dtau_dq, n, n), 1.0);
-        base.gemm(
-            -1.0,
-            &view(&dxs[n * p..2 * n * p], p, n),
-            &view(&rd.dtau_dv, n, n),
-            1.0,
-        );
-        // the bodies' rows of the directions, (10n × p) row-major: their transpose; Y (n × 10n) likewise
-        let bodies = &self.dirs[lay.body(0, 0) * p..lay.body(n - 1, BODY_PARAMS - 1) * p + p];
-        base.gemm(
-            -1.0,
-            &view(bodies, p, BODY_PARAMS * n),
-            &view(&self.y, BODY_PARAMS * n, n),
-            1.0,
-        );
+        let width = BODY_PARAMS * n;
         for j in 0..n {
-            if !d.is_elastic(j) {
+            let mut col = base.column_mut(j);
+            let b = col.as_mut_slice();
+            for i in 0..n {
+                axpy(b, -rd.dtau_dq[j * n + i], dq(i));
+                axpy(b, -rd.dtau_dv[j * n + i], dv(i));
+            }
+            for k in 0..width {
                 axpy(
-                    base.column_mut(j).as_mut_slice(),
-                    -qdd[j],
-                    row(self.dirs, p, lay.armature(j)),
+                    b,
+                    -self.y[j * width + k],
+                    row(self.dirs, p, lay.body(k / BODY_PARAMS, k % BODY_PARAMS)),
                 );
             }
+            if !d.is_elastic(j) {
+                axpy(b, -qdd[j], row(self.dirs, p, lay.armature(j)));
+            }
         }
-        // (M + A)⁻¹ is symmetric: dq̈ᵀ = baseᵀ (M + A)⁻¹
+        // dq̈_j = Σ_i (M + A)⁻¹_ji rhs_i
         let minv = chol.inverse();
         let loaded = d.has_load && (0..n).any(|j| self.coef_load[j] != 0.0);
         self.dload.fill(0.0);
@@ -467,7 +457,14 @@ impl<'d> Sensitivities<'d> {
                     );
                 }
             }
-            sol.gemm(1.0, &rhs, &minv, 0.0);
+            sol.fill(0.0);
+            for j in 0..n {
+                let mut col = sol.column_mut(j);
+                let out = col.as_mut_slice();
+                for i in 0..n {
+                    axpy(out, minv[(j, i)], rhs.column(i).as_slice());
+                }
+            }
             if !loaded {
                 break;
             }
