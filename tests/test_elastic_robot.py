@@ -265,10 +265,10 @@ def test_the_doctors_columns_of_an_elastic_joint_are_those_didim_fits(arm2):
 
 
 def test_output_error_lm_from_three_step_didim_reaches_the_truth_floor(arm2):
-    """OE-LM on the elastic arm (from the three-step DIDIM; forward-difference sensitivities of the loop without
-    encoder quantization): every parameter within 1 % of the truth (measured 0.35 % at worst, the damping D within
-    0.24 %), the validation record at its truth floor (1.005x; 1.03 allowed), the deflection within 1 % RMS of the
-    link-side file (0.15 % and 0.29 %)."""
+    """OE-LM on the elastic arm (from the three-step DIDIM; the exact sensitivities of the loop without encoder
+    quantization): every parameter within 1 % of the truth (measured 0.34 % at worst, the damping D within 0.24 %),
+    the validation record at its truth floor (1.008x; 1.03 allowed; 1.005x with forward differences), the deflection
+    within 1 % RMS of the link-side file (0.15 % and 0.29 %)."""
     from didim.methods.robot import oe_lm
 
     t, rob, rec, val, start = arm2
