@@ -2654,9 +2654,7 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
                 tuple(float(g) for g in gaps) if len(gapped) else None)
 
     def simulate_u(u: np.ndarray) -> Dict[str, np.ndarray]:
-        th, lw, gaps = split(u)
-        robot_u, d = _model_of(replace(start.structure, backlash_gap=gaps), start.base, th)
-        return _simulate(rec, robot_u, d, lw, quantize=False)
+        return _simulate(rec, *sens.model(u), quantize=False)
 
     u0 = np.concatenate([theta0 / scale, np.log(np.maximum(law0[1], 1e-300)), np.log(gaps0[gapped])])
     # the components of u fitted (all by default), the others held at the start's
@@ -2675,12 +2673,14 @@ def oe_lm(rec: Recording, model: Model, *, max_iter: int = 30, tol: float = 1e-3
         u[mask] = v
         return u
 
+    # the loop at u (its robot, drives and law) and its exact sensitivities
+    sens = _LoopSensitivities(rec, start, split, full, mask, p, gapped)
     sims = [0]
     say(f"oe-lm: Levenberg-Marquardt on {int(mask[:p].sum())} parameters and {int(mask[p:p + n].sum())} smoothing "
         "speeds" + (f" and {len(gapped)} backlash width(s)" if mask[p + n:].any() else ""))
     out = _output_least_squares(rec, lambda v: simulate_u(full(v)), u0[mask], np.full(int(mask.sum()), -np.inf),
                                 np.full(int(mask.sum()), np.inf), sims, max_nfev=max_iter, joints=joints,
-                                sensitivities=_LoopSensitivities(rec, start, split, full, mask, p, gapped))
+                                sensitivities=sens)
     theta, law, gaps = split(full(out.x))
     r, jac = out.fun, out.jac
     cov_u = np.zeros((len(u0), len(u0)))

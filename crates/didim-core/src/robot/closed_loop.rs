@@ -461,9 +461,8 @@ trait ArmTangent {
     /// reads the state's entry `encoder`.
     fn commanded(&mut self, k: usize, j: usize, drive: &JointDrive, active: bool, encoder: usize);
     /// Stage `i` (0–3) of an RK4 step of length `h`: the dynamics just computed the derivative
-    /// `f` at the stage's state `x` under the forces `u`.
-    fn stage(&mut self, dynamics: &Dynamics, i: usize, h: f64, x: &[f64], f: &[f64], u: &[f64])
-        -> Result<()>;
+    /// `f` at the stage's state `x` under the period's forces.
+    fn stage(&mut self, dynamics: &Dynamics, i: usize, h: f64, x: &[f64], f: &[f64]) -> Result<()>;
     /// The RK4 step of length `h` is complete.
     fn end(&mut self, h: f64);
 }
@@ -475,7 +474,7 @@ impl ArmTangent for NoTangent {
     #[inline(always)]
     fn commanded(&mut self, _: usize, _: usize, _: &JointDrive, _: bool, _: usize) {}
     #[inline(always)]
-    fn stage(&mut self, _: &Dynamics, _: usize, _: f64, _: &[f64], _: &[f64], _: &[f64]) -> Result<()> {
+    fn stage(&mut self, _: &Dynamics, _: usize, _: f64, _: &[f64], _: &[f64]) -> Result<()> {
         Ok(())
     }
     #[inline(always)]
@@ -545,22 +544,22 @@ impl<T: ArmTangent> Plant for Arm<'_, '_, T> {
             } else {
                 dynamics.deriv(x, applied, k1)?;
             }
-            tangent.stage(dynamics, 0, h, x, k1, applied)?;
+            tangent.stage(dynamics, 0, h, x, k1)?;
             for i in 0..m {
                 xs[i] = x[i] + 0.5 * h * k1[i];
             }
             dynamics.deriv(xs, applied, k2)?;
-            tangent.stage(dynamics, 1, h, xs, k2, applied)?;
+            tangent.stage(dynamics, 1, h, xs, k2)?;
             for i in 0..m {
                 xs[i] = x[i] + 0.5 * h * k2[i];
             }
             dynamics.deriv(xs, applied, k3)?;
-            tangent.stage(dynamics, 2, h, xs, k3, applied)?;
+            tangent.stage(dynamics, 2, h, xs, k3)?;
             for i in 0..m {
                 xs[i] = x[i] + h * k3[i];
             }
             dynamics.deriv(xs, applied, k4)?;
-            tangent.stage(dynamics, 3, h, xs, k4, applied)?;
+            tangent.stage(dynamics, 3, h, xs, k4)?;
             for i in 0..m {
                 x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
             }

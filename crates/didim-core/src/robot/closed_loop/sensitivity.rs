@@ -102,7 +102,6 @@ const LOAD_TANGENT_ITERATIONS: usize = 60;
 pub(super) struct Sensitivities<'d> {
     p: usize,
     n: usize,
-    m: usize,
     lay: PhysLayout,
     /// The directions, `lay.len() × p` row-major.
     dirs: &'d [f64],
@@ -183,7 +182,6 @@ impl<'d> Sensitivities<'d> {
         let mut out = Self {
             p,
             n,
-            m,
             lay,
             dirs,
             dx: filled(m * p, 0.0, "the state's sensitivities")?,
@@ -420,7 +418,6 @@ impl<'d> Sensitivities<'d> {
         // directions are split between calls, nor on the processor (no kernel chosen at run time)
         let mut base = std::mem::replace(&mut self.base, DMatrix::zeros(0, 0));
         base.copy_from_slice(&dtau);
-        let width = BODY_PARAMS * n;
         for j in 0..n {
             let mut col = base.column_mut(j);
             let b = col.as_mut_slice();
@@ -428,13 +425,7 @@ impl<'d> Sensitivities<'d> {
                 axpy(b, -rd.dtau_dq[j * n + i], dq(i));
                 axpy(b, -rd.dtau_dv[j * n + i], dv(i));
             }
-            for k in 0..width {
-                axpy(
-                    b,
-                    -self.y[j * width + k],
-                    row(self.dirs, p, lay.body(k / BODY_PARAMS, k % BODY_PARAMS)),
-                );
-            }
+            self.body_part(j, b, -1.0);
             if !d.is_elastic(j) {
                 axpy(b, -qdd[j], row(self.dirs, p, lay.armature(j)));
             }
@@ -506,15 +497,7 @@ impl ArmTangent for Sensitivities<'_> {
         self.du[j * p..(j + 1) * p].copy_from_slice(&self.cmd[j].dtau);
     }
 
-    fn stage(
-        &mut self,
-        dynamics: &Dynamics,
-        i: usize,
-        h: f64,
-        x: &[f64],
-        f: &[f64],
-        _u: &[f64],
-    ) -> Result<()> {
+    fn stage(&mut self, dynamics: &Dynamics, i: usize, h: f64, x: &[f64], f: &[f64]) -> Result<()> {
         let w = [0.0, 0.5, 0.5, 1.0][i] * h;
         if i == 0 {
             self.dxs.copy_from_slice(&self.dx);
@@ -532,6 +515,5 @@ impl ArmTangent for Sensitivities<'_> {
         for (i, x) in self.dx.iter_mut().enumerate() {
             *x += w * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
         }
-        let _ = self.m;
     }
 }
