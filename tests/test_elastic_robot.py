@@ -264,6 +264,35 @@ def test_the_doctors_columns_of_an_elastic_joint_are_those_didim_fits(arm2):
         assert np.linalg.norm(r) < 1e-6 * np.linalg.norm(f), j
 
 
+def test_the_doctors_columns_leave_out_what_a_result_holds(arm2):
+    """Parameters a result holds (``frozen``: published bodies, say) are no columns of the doctor's base: no refit can
+    move them, so what they would explain is evidence for an effect (the KR300 with its published bodies held: joint 2's
+    counterbalance is its link's gravity sinusoid, which the held bodies cannot take). With the bodies held, each joint
+    keeps its drive's columns (its motor torque's rotor, friction and offset part in the span), and no link's body
+    column lies in the span any longer."""
+    from dataclasses import replace
+
+    from didim.methods.robot import joint_regressors
+
+    _, rob, rec, _, res = arm2
+    sim = simulate_robot(rec, res)
+    free = joint_regressors(res, sim)
+    bodies = res.base.bodies_only
+    held = replace(res, frozen={b: res.params[b] for b in bodies},
+                   params={k: v for k, v in res.params.items() if k not in bodies})
+    cols = joint_regressors(held, sim)
+    yb = rob.regressor(sim["q"], sim["qd"], sim["qdd"], by_joint=True)
+    for j in range(rob.ndof):
+        w = cols[j]
+        assert 0 < w.shape[1] < free[j].shape[1], (j, w.shape, free[j].shape)
+        q, _ = np.linalg.qr(w / np.linalg.norm(w, axis=0))
+        link = yb[j][np.any(yb[j] != 0, axis=1)].T
+        rel = np.linalg.norm(link - q @ (q.T @ link), axis=0) / np.linalg.norm(link, axis=0)
+        assert rel.max() > 0.1, (j, rel)  # the body columns that moved this joint's rows are out of the span
+        v = sim.get("thetad", sim["qd"])[:, j]  # the viscous friction's column stays (the motor side's speed)
+        assert np.linalg.norm(v - q @ (q.T @ v)) < 1e-8 * np.linalg.norm(v), j
+
+
 def test_output_error_lm_from_three_step_didim_reaches_the_truth_floor(arm2):
     """OE-LM on the elastic arm (from the three-step DIDIM; the exact sensitivities of the loop without encoder
     quantization): every parameter within 1 % of the truth (measured 0.34 % at worst, the damping D within 0.24 %),

@@ -154,12 +154,18 @@ def joint_regressors(res: IdentificationResult, sim: Dict[str, np.ndarray]) -> L
     terms' under the result's law: what the force the model explains is a combination of, joint by joint. An elastic
     joint's motor rows are those DIDIM fits (:func:`_model_columns` with ``substitute``): its rotor, friction and
     offset with its link's columns at the simulated link states, so that what a refit of the model can take is the
-    same on an elastic joint as on a rigid one (its link's gravity, for a spring or counterbalance on it)."""
+    same on an elastic joint as on a rigid one (its link's gravity, for a spring or counterbalance on it). The
+    parameters the result holds (its ``frozen``: published bodies, say) are no columns: a refit cannot move them, so
+    what they would explain is left for an effect to take (on the KR300 with its published bodies held, joint 2's
+    counterbalance is its link's gravity sinusoid, which the held bodies cannot take)."""
     model, base = res.structure, res.base
     law = res.law if res.law is not None else ("algebraic", (0.0,) * model.robot.ndof)
     motor = _Motor.of(sim, elastic_of(model), model.gaps)
     cols, _ = _model_columns(model.robot, base, sim["q"], sim["qd"], sim["qdd"], _Layout.for_model(model, base), motor,
                              substitute=True)
+    held = set(_held(model, base, frozen_for(model, getattr(res, "frozen", None) or {})))
+    if held:
+        cols = [(act, m[:, [k not in held for k in act]]) for act, m in cols]
     v = sim["qd"] if motor is None else motor.friction_speeds(sim["qd"])
     x = sim["q"] if motor is None else motor.friction_positions(sim["q"])
     terms = joint_terms(model)
