@@ -139,6 +139,37 @@ def test_a_spring_the_held_bodies_cannot_take_is_named_with_its_size(tmp_path):
     assert abs(f.params["phase_rad"] - 0.4) < 0.1, f.params
 
 
+def test_a_stribeck_hump_is_named_at_the_speed_its_refits_choose(tmp_path):
+    """benches/robot_doctor_sweep.py's n13 (the independent simulator's RPR arm, seed 53): a Stribeck hump of 0.6 Fc
+    at 0.05 rad/s on the wrist, under a tanh law of 0.03 rad/s. The base's law, fitted without the hump, sharpened to
+    0.0072 rad/s and took part of it, and the test chose 0.025 rad/s, where the refit could not fit the hump (its
+    held-out error rose, 1.07 -> 1.09 %): nothing was named. The speed is now chosen by refits, as one axis's
+    (effects.speed_search): named on the wrist, its speed within 20 % of the truth and the hump within 35 %
+    (measured 0.0527 rad/s, 0.101 N·m against 0.132), the held-out error near the joint's floor (0.76 % against
+    0.73 %; asserted below 0.85 %)."""
+    pytest.importorskip("pinocchio")
+    from conftest import bench_module
+
+    m = bench_module("robot_doctor_heldout")
+    m.CASES["t_wrist_hump"] = dict(robot="rpr", seed=53, effect=dict(kind="stribeck", joint=2, dF_over_Fc=0.6, vst=0.05),
+                                  want="stribeck")
+    try:
+        t = m.make_case("t_wrist_hump", tmp_path)
+    finally:
+        del m.CASES["t_wrist_hump"]
+    robot = didim.Robot.from_urdf(tmp_path / t["urdf"])
+    ctl = tmp_path / t["controller"]
+    rec = didim.load_record(tmp_path / "t_wrist_hump_train.csv", robot=robot, controller=ctl)
+    val = didim.load_record(tmp_path / "t_wrist_hump_valid.csv", robot=robot, controller=ctl)
+    d = didim.doctor(rec, robot, val, max_findings=1)
+    assert d.findings, d.summary()
+    f = d.findings[0]
+    assert (f.effect, f.joint) == ("stribeck", "wrist"), d.summary()
+    assert f.params["vs"] == pytest.approx(0.05, rel=0.2), f.params
+    assert abs(f.params["Fs_wrist"]) == pytest.approx(t["parameters"]["dF"], rel=0.35), f.params
+    assert f.fit["valid_after"] < 0.0085, f.fit
+
+
 def test_a_candidate_tried_brings_its_look_alike_significant_or_not():
     """As for one axis (Effect.tried_with), a mode on a joint and a delay on every joint are tried together: a
     flexibility candidate brings the best-ranked delay not tried yet, whatever its training p-value (held-out e8: a

@@ -61,6 +61,10 @@ def test_a_friction_term_the_joints_own_friction_explains_is_not_confirmed(panda
     # the concealed effect stands the comparison at the joint's output-error optimum (measured 1.68 -> 1.16 %)
     assert asym.fit["valid_polished_with"] < 0.8 * asym.fit["valid_polished_without"], asym.fit
     stribeck = [f for f in d.rejected if f.effect == "stribeck" and f.joint == "panda_joint3"]
-    if stribeck:  # tried: rejected by the comparison, with its numbers
-        assert "fitted otherwise explains it" in stribeck[0].evidence, stribeck[0].evidence
-        assert stribeck[0].fit["valid_polished_with"] > 0.95 * stribeck[0].fit["valid_polished_without"]
+    if stribeck:  # tried: rejected by the comparison, with its numbers, or before it by the term's own share
+        ev = stribeck[0].evidence
+        assert "fitted otherwise explains it" in ev or "the refit's other changes, not the term" in ev, ev
+        if "valid_polished_with" in stribeck[0].fit:
+            assert stribeck[0].fit["valid_polished_with"] > 0.95 * stribeck[0].fit["valid_polished_without"]
+        else:  # the term's own torque on the held-out record is a small share of the joint's residual
+            assert stribeck[0].fit["term_share"] < 0.05, stribeck[0].fit

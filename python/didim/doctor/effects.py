@@ -206,29 +206,56 @@ def _stribeck_retune(state: State, data: Data, progress) -> Optional[Adopted]:
     vs0 = next(t.hypers["vs"] for t in state.model.terms if t.name == "Fs")
     without = _remove_terms(("Fs",))(state)
     grid = _stribeck_grid(without.simulate(data.rec))
-    lo, hi = 0.5 * grid[0], grid[-1]
-    best = None
 
-    def fit(vs) -> bool:
-        nonlocal best
+    def fit(vs):
         try:
             st, r = refit(data, _with_stribeck(without, vs), {"Fs": fs}, progress)
         except DidimError:
-            return False
-        if r.converged and (best is None or r.output_error < best[1].output_error):
-            best = (st, r, float(vs))
+            return None
+        return (r.output_error, (st, r)) if r.converged else None
+
+    best = speed_search(fit, vs0, 0.5 * grid[0], grid[-1])
+    if best is None:
+        return None
+    vs, (st, r) = best
+    return _stribeck_adopted(st, r, vs)
+
+
+def speed_search(fit: Callable[[float], Optional[Tuple[float, Any]]], x0: float, lo: float, hi: float,
+                 steps: Tuple[float, ...] = (3.0, 1.4), scan: int = 0) -> Optional[Tuple[float, Any]]:
+    """A hyper-parameter chosen by refits, for every plant (one axis's and a robot joint's Stribeck speed): ``fit(x)``
+    returns (training error, what the refit made) or None when it failed; from ``x0``, in steps of each of ``steps``
+    in turn (3×, then 1.4×), down and up, each direction followed while the error falls, within [``lo``, ``hi``].
+    ``scan``: first the points ``x0`` times the first step to the powers −scan … scan within the range, all of them,
+    the search going on from the best (a landscape with a valley beyond a worse point, as a robot joint's hump whose
+    refit at the test's speed failed). Returns (the best x, what its refit made), or None when no refit succeeded
+    (without ``scan``: when the refit at ``x0`` failed)."""
+    best: Optional[Tuple[float, float, Any]] = None
+    made: Dict[float, Optional[Tuple[float, Any]]] = {}  # a point the search comes back to is not refitted again
+
+    def better(x: float) -> bool:
+        nonlocal best
+        if x not in made:
+            made[x] = fit(x)
+        got = made[x]
+        if got is not None and (best is None or got[0] < best[1]):
+            best = (float(x), got[0], got[1])
             return True
         return False
 
-    fit(vs0)
+    better(x0)
+    for k in range(1, scan + 1):
+        for x in (x0 / steps[0] ** k, x0 * steps[0] ** k):
+            if lo <= x <= hi:
+                better(x)
     if best is None:
         return None
-    for step in (3.0, 1.4):
+    for step in steps[1:] if scan else steps:
         for factor in (1 / step, step):
-            vs = best[2] * factor
-            while lo <= vs <= hi and fit(vs):
-                vs *= factor
-    return _stribeck_adopted(*best)
+            x = best[0] * factor
+            while lo <= x <= hi and better(x):
+                x *= factor
+    return best[0], best[2]
 
 
 def stribeck_physics(fs: float, fc: float, vs: float, eps: float) -> str:
