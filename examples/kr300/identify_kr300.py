@@ -2,7 +2,7 @@
 identified on trajectory A by DIDIM from the authors' published values, simulated on trajectory B beside the published
 parameters through the same loop, and the robot doctor on A with B held out. Public API only.
 
-    python examples/kr300/identify_kr300.py [--out examples/kr300/loop] [--steps all|records,published,rigid,elastic,report,doctor,scan]
+    python examples/kr300/identify_kr300.py [--out examples/kr300/loop] [--steps all|records,published,rigid,rigid_drives,elastic,elastic_c,elastic_drives,report,doctor,doctor_cb,doctor_drives,scan]
 
 Needs the records of ``make_kr300.py`` (``kr300_A.csv``, ``kr300_B.csv``, ``kr300.urdf``, ``kr300_published.json``).
 Writes, into --out: the loop's records ``A.csv``/``B.csv`` (with the counterbalance as a known torque, below) and
