@@ -110,28 +110,16 @@ def test_a_spring_the_held_bodies_cannot_take_is_named_with_its_size(tmp_path):
     itself they were −1.38, 1.47 where the spring's are 0.46, 0.19, the check said the fit did not carry over, and
     nothing was named. Named first on the wrist, amplitude within 10 % and phase within 0.1 rad (measured 0.500 N·m,
     0.400 rad)."""
-    pytest.importorskip("pinocchio")
-    from conftest import bench_module
+    from conftest import robot_doctor_case
 
-    m = bench_module("robot_doctor_heldout")
-    m.CASES["t_wrist_spring"] = dict(robot="rpr", seed=13, effect=dict(kind="spring", joint=2, k=0.5, phi=0.4, c=0.05),
-                                    want="position_dependent_torque")
-    m.CASES["t_wrist_clean"] = dict(robot="rpr", seed=13, effect=None, want=None)
-    try:
-        t = m.make_case("t_wrist_spring", tmp_path)
-        m.make_case("t_wrist_clean", tmp_path)
-    finally:
-        del m.CASES["t_wrist_spring"], m.CASES["t_wrist_clean"]
-    robot = didim.Robot.from_urdf(tmp_path / t["urdf"])
-    ctl = tmp_path / t["controller"]
-
-    def load(name):
-        return didim.load_record(tmp_path / name, robot=robot, controller=ctl)
-
-    clean = didim.identify(load("t_wrist_clean_train.csv"), robot)
+    spring = dict(robot="rpr", seed=13, effect=dict(kind="spring", joint=2, k=0.5, phi=0.4, c=0.05),
+                  want="position_dependent_torque")
+    robot, _, rec, val = robot_doctor_case("t_wrist_spring", spring, tmp_path)
+    _, _, clean_rec, _ = robot_doctor_case("t_wrist_clean", dict(robot="rpr", seed=13, effect=None, want=None),
+                                           tmp_path)
+    clean = didim.identify(clean_rec, robot)
     held = {b: clean.params[b] for b in clean.base.bodies_only}
-    d = didim.doctor(load("t_wrist_spring_train.csv"), robot, load("t_wrist_spring_valid.csv"), frozen=held,
-                     initial=clean, max_findings=1)
+    d = didim.doctor(rec, robot, val, frozen=held, initial=clean, max_findings=1)
     assert d.findings, d.summary()
     f = d.findings[0]
     assert (f.effect, f.joint) == ("position_dependent_torque", "wrist"), d.summary()
@@ -147,20 +135,10 @@ def test_a_stribeck_hump_is_named_at_the_speed_its_refits_choose(tmp_path):
     (effects.speed_search): named on the wrist, its speed within 20 % of the truth and the hump within 35 %
     (measured 0.0527 rad/s, 0.101 N·m against 0.132), the held-out error near the joint's floor (0.76 % against
     0.73 %; asserted below 0.85 %)."""
-    pytest.importorskip("pinocchio")
-    from conftest import bench_module
+    from conftest import robot_doctor_case
 
-    m = bench_module("robot_doctor_heldout")
-    m.CASES["t_wrist_hump"] = dict(robot="rpr", seed=53, effect=dict(kind="stribeck", joint=2, dF_over_Fc=0.6, vst=0.05),
-                                  want="stribeck")
-    try:
-        t = m.make_case("t_wrist_hump", tmp_path)
-    finally:
-        del m.CASES["t_wrist_hump"]
-    robot = didim.Robot.from_urdf(tmp_path / t["urdf"])
-    ctl = tmp_path / t["controller"]
-    rec = didim.load_record(tmp_path / "t_wrist_hump_train.csv", robot=robot, controller=ctl)
-    val = didim.load_record(tmp_path / "t_wrist_hump_valid.csv", robot=robot, controller=ctl)
+    hump = dict(robot="rpr", seed=53, effect=dict(kind="stribeck", joint=2, dF_over_Fc=0.6, vst=0.05), want="stribeck")
+    robot, t, rec, val = robot_doctor_case("t_wrist_hump", hump, tmp_path)
     d = didim.doctor(rec, robot, val, max_findings=1)
     assert d.findings, d.summary()
     f = d.findings[0]
