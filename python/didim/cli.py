@@ -740,10 +740,11 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--model", choices=["rigid", "flexible"], default="rigid", help="the base model (default: rigid)")
     o.add_argument("--apm", type=float, default=None, help="a priori total mass (kg)")
     o.add_argument("--alpha", type=float, default=0.01, help="family-wise test level (default 0.01)")
-    o.add_argument("--json", metavar="OUT")
+    o.add_argument("--json", metavar="OUT", help="write the diagnosis as JSON: findings (effect, joint, parameters, "
+                   "evidence), rejected, ambiguities, rounds, the base and final results")
     o.add_argument("--html", metavar="OUT", help="the report an engineer reads (plots embedded)")
     o.add_argument("--result", metavar="OUT.json", help="the final model as a result (for didim simulate)")
-    o.add_argument("--quiet", action="store_true")
+    o.add_argument("--quiet", action="store_true", help="no progress messages")
     o.add_argument("--urdf", metavar="URDF", help="a robot's record: its URDF; the base model is fitted by DIDIM and "
                    "each joint's mismatch located")
     o.add_argument("--joints", metavar="J1,J2,..", help="with --urdf: the actuated joints, as for identify")
@@ -789,7 +790,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "it back)")
     cf.add_argument("--urdf", metavar="URDF", help="a robot's record: each joint's controller fitted from its log")
     cf.add_argument("--joints", metavar="J1,J2,..", help="with --urdf: the actuated joints, as for identify")
-    cf.add_argument("--quiet", action="store_true")
+    cf.add_argument("--quiet", action="store_true", help="no progress messages")
     cf.set_defaults(func=cmd_controller_fit)
     cc = csub.add_parser("check", help="check a described controller against the log (exit 2 when it fails)")
     cc.add_argument("file", help="the record")
