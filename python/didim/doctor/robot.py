@@ -297,6 +297,10 @@ class _Residuals:
     def _dec_columns(self, m: np.ndarray) -> np.ndarray:
         return np.column_stack([self.dec(np.ascontiguousarray(c)) for c in np.asarray(m).T])
 
+    def beyond(self, j: int, m: np.ndarray) -> np.ndarray:
+        """Full-rate columns ``m`` of joint ``j``, decimated, beyond the model's own columns there."""
+        return self.orthogonalize(self._dec_columns(m), self.parts[j][1])
+
     def test(self, c: _Candidate) -> None:
         """The Wald test of ``c``'s columns on the residual of the joints it acts on (each joint's rows scaled by its
         prewhitened residual's σ, so that a joint counts by its evidence, not by its torque)."""
@@ -304,9 +308,8 @@ class _Residuals:
 
         rws, xws = [], []
         for j, m in c.columns.items():
-            _, qb, a, rw, s = self.parts[j]
-            x = self.orthogonalize(self._dec_columns(m), qb)
-            xw, = self.prewhiten(a, x)
+            _, _, a, rw, s = self.parts[j]
+            xw, = self.prewhiten(a, self.beyond(j, m))
             rws.append(rw / s)
             xws.append(xw / s)
         c.test = wald_whitened(np.concatenate(rws), np.concatenate(xws))
@@ -314,16 +317,16 @@ class _Residuals:
     def coefficients(self, c: _Candidate) -> np.ndarray:
         """``c``'s coefficients on the residual by feasible GLS under the alternative (one Cochrane–Orcutt step): each
         joint's AR polynomial fitted on its residual less the columns' least-squares fit, then both prewhitened with it.
-        The test's own coefficients come from the polynomial fitted on the residual itself, right under the null hypothesis
-        it tests; where the effect is most of that residual, the polynomial takes the effect's spectrum and whitens it
-        away, and the coefficients are those of what is left (a spring of 0.50 N·m on the held-out RPR arm's wrist with
+        The test's own coefficients come from the polynomial fitted on the residual itself, right under the null
+        hypothesis it tests; where the effect is most of that residual, the polynomial takes the effect's spectrum and
+        whitens it away, and the coefficients are those of what is left (a spring of 0.50 N·m on the held-out RPR arm's wrist with
         its bodies held: the test's −1.38, 1.47 against 0.43, 0.15 by this fit, the truth 0.46, 0.19)."""
         from ..stats import ar_fit
 
         rws, xws = [], []
         for j, m in c.columns.items():
-            r, qb, _, _, s = self.parts[j]
-            x = self.orthogonalize(self._dec_columns(m), qb)
+            r, _, _, _, s = self.parts[j]
+            x = self.beyond(j, m)
             b = np.linalg.lstsq(x, r, rcond=None)[0]
             rw, xw = self.prewhiten(ar_fit(r - x @ b), r, x)
             rws.append(rw / s)
@@ -471,18 +474,17 @@ def _with_look_alikes(tries: List[_Candidate], ranked: List[_Candidate], done: s
     return out
 
 
-def _carries_over(c: _Candidate, state: "_State", dec, alpha: float, resid: Optional[_Residuals] = None
-                  ) -> Tuple[bool, float]:
+def _carries_over(c: _Candidate, state: "_State", dec, alpha: float, resid: _Residuals) -> Tuple[bool, float]:
     """Whether a term candidate's training coefficients lower the validation record's residual at all (on the
     current model's loop without the encoders' rounding, its columns beyond the model's own there; the decimated
     residual of its joint), before any refit: an effect that the training record's noise made significant makes the
     held-out residual larger, and a DIDIM refit of it, judged on the same residual, is not worth its cost. The
     refit's own test decides the rest, and all of it where the current model does not carry over on that joint
-    (:data:`CARRY_OVER_BEND`). The training coefficients: ``resid``'s feasible GLS under the alternative
-    (:meth:`_Residuals.coefficients`), else the test's. Returns (carries over, the share of the held-out residual's
-    mean square it removes; nan when not judged)."""
+    (:data:`CARRY_OVER_BEND`). The training coefficients: the training residual ``resid``'s feasible GLS under the
+    alternative (:meth:`_Residuals.coefficients`), not the test's. Returns (carries over, the share of the held-out
+    residual's mean square it removes; nan when not judged)."""
     from ..methods.robot import simulate_robot
-    from ..stats import diebold_mariano, orthogonalize
+    from ..stats import diebold_mariano
 
     if "valid" not in state.cache:
         sim = simulate_robot(state.valid, state.res, quantize=False)
@@ -495,10 +497,8 @@ def _carries_over(c: _Candidate, state: "_State", dec, alpha: float, resid: Opti
     if not held <= CARRY_OVER_BEND * trained:
         return True, math.nan
     r = valid.parts[j][0]
-    x = orthogonalize(valid._dec_columns(_Columns(state.valid, state.res, sim).of(c.effect, j, c.hyper)),
-                      valid.parts[j][1])
-    beta = c.test.beta if resid is None else resid.coefficients(c)
-    after = r - x @ np.asarray(beta, dtype=float)
+    x = valid.beyond(j, _Columns(state.valid, state.res, sim).of(c.effect, j, c.hyper))
+    after = r - x @ resid.coefficients(c)
     _, p, gain = diebold_mariano(r, after)
     return bool(gain > 0), float(gain)
 
@@ -1199,8 +1199,8 @@ def _shared(resid: _Residuals, a: _Candidate, b: _Candidate) -> float:
     common = [j for j in a.columns if j in b.columns]
     if not common:
         return 0.0
-    xa = np.concatenate([resid.orthogonalize(resid._dec_columns(a.columns[j]), resid.parts[j][1]) for j in common])
-    xb = np.concatenate([resid.orthogonalize(resid._dec_columns(b.columns[j]), resid.parts[j][1]) for j in common])
+    xa = np.concatenate([resid.beyond(j, a.columns[j]) for j in common])
+    xb = np.concatenate([resid.beyond(j, b.columns[j]) for j in common])
     left = resid.orthogonalize(xb, xa)
     return 1 - float(np.sum(left ** 2) / max(float(np.sum(xb ** 2)), 1e-300))
 

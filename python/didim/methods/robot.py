@@ -163,7 +163,7 @@ def joint_regressors(res: IdentificationResult, sim: Dict[str, np.ndarray]) -> L
     motor = _Motor.of(sim, elastic_of(model), model.gaps)
     cols, _ = _model_columns(model.robot, base, sim["q"], sim["qd"], sim["qdd"], _Layout.for_model(model, base), motor,
                              substitute=True)
-    held = set(_held(model, base, frozen_for(model, getattr(res, "frozen", None) or {})))
+    held = set(_held(model, base, frozen_for(model, res.frozen)))
     if held:
         cols = [(act, m[:, [k not in held for k in act]]) for act, m in cols]
     v = sim["qd"] if motor is None else motor.friction_speeds(sim["qd"])
