@@ -26,6 +26,7 @@ pub mod model;
 pub mod objective;
 pub mod robot;
 pub mod sim;
+pub mod trig;
 
 pub use controller::Controller;
 pub use error::{Error, Result};

@@ -864,19 +864,19 @@ impl Basis {
             }
             Basis::Ripple { period, phase, .. } => {
                 let w = std::f64::consts::TAU / period;
-                let (sn, cs) = (w * x + phase).sin_cos();
+                let (sn, cs) = crate::trig::sin_cos(w * x + phase);
                 (sn, w * cs, 0.0)
             }
             Basis::CoulombRipple { period, phase, .. } => {
                 let w = std::f64::consts::TAU / period;
-                let (sn, cs) = (w * x + phase).sin_cos();
+                let (sn, cs) = crate::trig::sin_cos(w * x + phase);
                 let (s, ds) = law.sign_and_derivative(xd);
                 (s * sn, s * w * cs, ds * sn)
             }
             Basis::Gravity {
                 angle_offset, phase, ..
             } => {
-                let (sn, cs) = (x + angle_offset + phase).sin_cos();
+                let (sn, cs) = crate::trig::sin_cos(x + angle_offset + phase);
                 (sn, cs, 0.0)
             }
             Basis::Spline { center, width, .. } => {
@@ -926,7 +926,7 @@ impl Basis {
             Basis::AbsCoulomb { .. } => law.sign(xd).signum() * ds_deps(),
             Basis::Stribeck { vs, .. } => (-(xd / vs) * (xd / vs)).exp() * ds_deps(),
             Basis::CoulombRipple { period, phase, .. } => {
-                (std::f64::consts::TAU / period * x + phase).sin() * ds_deps()
+                crate::trig::sin(std::f64::consts::TAU / period * x + phase) * ds_deps()
             }
             Basis::CoulombSpline {
                 center, width, side, ..
@@ -1297,7 +1297,7 @@ impl<const N: usize> Model<N> {
     /// The regressor's columns `cols` (indices among the parameters) on the rows of dof `dof` over a
     /// whole trajectory, as [`Model::regressor`] gives them there (its other values not computed):
     /// layout `[column][sample]`.
-    pub fn regressor_columns<R: AsRef<[f64]>>(
+    pub fn regressor_columns<R: AsRef<[f64]> + Sync>(
         &self,
         q: &[R],
         qd: &[R],
@@ -1305,6 +1305,53 @@ impl<const N: usize> Model<N> {
         cols: &[usize],
         dof: usize,
     ) -> Result<Vec<f64>> {
+        let (n, fill) = self.column_filler(q, qd, qdd, cols, dof)?;
+        let mut w = vec![0.0; cols.len() * n];
+        if n > 0 {
+            for (i, col) in w.chunks_mut(n).enumerate() {
+                fill(i, col);
+            }
+        }
+        Ok(w)
+    }
+
+    /// [`Model::regressor_columns`] decimated by `dec`, one column a vector of `dec.output_len(n)`
+    /// values: bit for bit [`Decimation::apply_columns`] of the full-rate columns, which never
+    /// exist all at once ([`Decimation::apply_filled`]: a group of four at a time). The doctor's
+    /// grids are 160 columns of the record (32 MB at 1 kHz over 25 s); only their decimated form
+    /// is tested.
+    ///
+    /// [`Decimation::apply_columns`]: crate::filter::Decimation::apply_columns
+    /// [`Decimation::apply_filled`]: crate::filter::Decimation::apply_filled
+    pub fn decimated_columns<R: AsRef<[f64]> + Sync>(
+        &self,
+        q: &[R],
+        qd: &[R],
+        qdd: &[R],
+        cols: &[usize],
+        dof: usize,
+        dec: &crate::filter::Decimation,
+    ) -> Result<Vec<Vec<f64>>> {
+        let (n, fill) = self.column_filler(q, qd, qdd, cols, dof)?;
+        dec.apply_filled(
+            cols.len(),
+            n,
+            |i, col| fill(i, col),
+            |i| format!("regressor column {}", cols[i]),
+        )
+    }
+
+    /// Checks the series and the columns, and gives their length and the function that writes
+    /// column `i` (parameter `cols[i]` on the rows of `dof`) over the whole trajectory.
+    #[allow(clippy::type_complexity)]
+    fn column_filler<'a, R: AsRef<[f64]> + Sync>(
+        &'a self,
+        q: &'a [R],
+        qd: &'a [R],
+        qdd: &'a [R],
+        cols: &'a [usize],
+        dof: usize,
+    ) -> Result<(usize, impl Fn(usize, &mut [f64]) + Sync + 'a)> {
         let n = check_series::<N, R>(q, qd, qdd)?;
         let p = self.n_params();
         if dof >= N {
@@ -1313,30 +1360,57 @@ impl<const N: usize> Model<N> {
         if let Some(&j) = cols.iter().find(|&&j| j >= p) {
             return Err(invalid!("column {j} of a model of {p} parameters"));
         }
-        let mut w = vec![0.0; cols.len() * n];
-        for (i, &j) in cols.iter().enumerate() {
-            let b = self.basis[j];
+        // the friction law's sign of a dof's speed, shared by its position-periodic Coulomb columns
+        // (a grid of periods on one joint: computed once, not once a column)
+        let law = self.law;
+        let signs: Vec<Option<Vec<f64>>> = (0..N)
+            .map(|d| {
+                let periodic = cols.iter().any(|&j| {
+                    matches!(self.basis[j], Basis::CoulombRipple { .. }) && self.basis[j].dofs() == (d, None)
+                });
+                periodic.then(|| {
+                    qd[d]
+                        .as_ref()
+                        .iter()
+                        .map(|&v| law.sign_and_derivative(v).0)
+                        .collect()
+                })
+            })
+            .collect();
+        let fill = move |i: usize, col: &mut [f64]| {
+            let b = self.basis[cols[i]];
             let (a, other) = b.dofs();
             let sign = if a == dof {
                 1.0
             } else if other == Some(dof) {
                 -1.0
             } else {
-                continue; // zero on this dof's rows
+                col.iter_mut().for_each(|c| *c = 0.0);
+                return; // zero on this dof's rows
             };
-            let col = &mut w[i * n..(i + 1) * n];
             match (b, other) {
                 (Basis::Inertia { dof }, _) => col.copy_from_slice(qdd[dof].as_ref()),
+                // the periodic columns by the vector sine, each sample the bits of `local`'s
+                (Basis::Ripple { period, phase, .. }, None) => {
+                    crate::trig::sin_into(col, q[a].as_ref(), std::f64::consts::TAU / period, phase)
+                }
+                (Basis::CoulombRipple { period, phase, .. }, None) => {
+                    crate::trig::sin_into(col, q[a].as_ref(), std::f64::consts::TAU / period, phase);
+                    let s = signs[a]
+                        .as_ref()
+                        .expect("the signs of every dof with a periodic Coulomb column");
+                    col.iter_mut().zip(s).for_each(|(c, &s)| *c *= s);
+                }
                 (_, None) => {
                     let (x, v) = (q[a].as_ref(), qd[a].as_ref());
                     for ((c, &x), &v) in col.iter_mut().zip(x).zip(v) {
-                        *c = b.local(x, v, self.law).0;
+                        *c = b.local(x, v, law).0;
                     }
                 }
                 (_, Some(o)) => {
                     let (xa, va, xo, vo) = (q[a].as_ref(), qd[a].as_ref(), q[o].as_ref(), qd[o].as_ref());
                     for (k, c) in col.iter_mut().enumerate() {
-                        *c = b.local(xa[k] - xo[k], va[k] - vo[k], self.law).0;
+                        *c = b.local(xa[k] - xo[k], va[k] - vo[k], law).0;
                     }
                 }
             }
@@ -1345,8 +1419,8 @@ impl<const N: usize> Model<N> {
             } else {
                 col.iter_mut().for_each(|c| *c += 0.0);
             }
-        }
-        Ok(w)
+        };
+        Ok((n, fill))
     }
 
     /// The regressor of a whole trajectory, from per-dof sample series
@@ -1495,6 +1569,46 @@ mod tests {
             .with_terms(vec![
                 ("S1".into(), Basis::Stribeck { dof: 0, vs: 0.02 }),
                 ("S2".into(), Basis::Stribeck { dof: 1, vs: 0.05 }),
+                (
+                    "R1".into(),
+                    Basis::Ripple {
+                        dof: 0,
+                        period: 2.5e-3,
+                        phase: 0.0,
+                    },
+                ),
+                (
+                    "R2".into(),
+                    Basis::Ripple {
+                        dof: 0,
+                        period: 7e-3,
+                        phase: std::f64::consts::FRAC_PI_2,
+                    },
+                ),
+                (
+                    "C1".into(),
+                    Basis::CoulombRipple {
+                        dof: 0,
+                        period: 3e-3,
+                        phase: 0.0,
+                    },
+                ),
+                (
+                    "C2".into(),
+                    Basis::CoulombRipple {
+                        dof: 1,
+                        period: 5e-3,
+                        phase: 0.3,
+                    },
+                ),
+                (
+                    "C3".into(),
+                    Basis::CoulombRipple {
+                        dof: 0,
+                        period: 9e-3,
+                        phase: std::f64::consts::FRAC_PI_2,
+                    },
+                ),
             ])
             .unwrap()
             .with_basis(
@@ -1534,6 +1648,32 @@ mod tests {
         }
         assert!(m.regressor_columns(&q, &qd, &qdd, &[p], 0).is_err());
         assert!(m.regressor_columns(&q, &qd, &qdd, &[0], 2).is_err());
+
+        // decimated without the full-rate columns: bit for bit the decimation of the full-rate ones
+        let dec =
+            crate::filter::Decimation::butterworth(4, 5.0, 100.0, 4, crate::filter::FilterForm::Sos).unwrap();
+        for dof in 0..2 {
+            let cols: Vec<usize> = (0..p).collect();
+            let full = m.regressor_columns(&q, &qd, &qdd, &cols, dof).unwrap();
+            let want = dec
+                .apply_columns(&full.chunks(n).collect::<Vec<_>>(), |j| format!("{j}"))
+                .unwrap();
+            let got = m.decimated_columns(&q, &qd, &qdd, &cols, dof, &dec).unwrap();
+            assert_eq!(got.len(), p);
+            for (j, (g, w)) in got.iter().zip(&want).enumerate() {
+                assert_eq!(g.len(), dec.output_len(n));
+                assert!(
+                    g.iter().zip(w).all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "dof {dof}, column {j}"
+                );
+            }
+        }
+        let short: Vec<Vec<f64>> = q.iter().map(|c| c[..5].to_vec()).collect();
+        let err = m
+            .decimated_columns(&short, &short, &short, &[0, 1], 0, &dec)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("regressor column 0"), "{err}");
     }
 
     /// Values for every hyper-parameter of a kind: its default, or a value valid for its unit.

@@ -40,11 +40,11 @@ from ..result import IdentificationResult
 from ..signal import Decimation, welch
 from ..model import Model
 from ..simulation import SimResult, coulomb_eps_of, default_coulomb_eps, param_names
-from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_whitened
+from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_groups
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect, final_values,
                       params_text, separating_experiment)
 from .._parallel import cores
-from .fit import Data, State, base_columns, fit_friction_law, refit
+from .fit import Data, State, fit_friction_law, refit
 from .finding import MIN_HELDOUT_GAIN, Finding
 from .words import lead_in_words, start_words
 
@@ -204,19 +204,16 @@ class Diagnosis:
 
 
 def _test_all(cands: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> None:
-    """Sets each candidate's Wald test. The columns of all of them are decimated, orthogonalized to the base columns
-    ``wb`` and prewhitened in one pass (each of the three acts column by column), then tested one candidate at a
-    time: the same tests as one by one, at a fraction of the cost for the grids of hyper-parameters."""
+    """Sets each candidate's Wald test. The (decimated) columns of all of them are orthogonalized to the base
+    columns ``wb`` and prewhitened in one pass (both act column by column), then tested together
+    (:func:`didim.stats.wald_groups`): the same tests as one by one, at a fraction of the cost for the grids of
+    hyper-parameters."""
     if not cands:
         return
-    # stacked column by column (Fortran order): the core's columns come as transposed views, and the core decimates
-    # a Fortran-ordered matrix in place; np.column_stack copied them into rows, a strided copy as long as the filter
-    x = np.concatenate([np.asarray(c.columns, dtype=float).T for c in cands], axis=0).T
-    x = orthogonalize(data.train_columns(x), wb)
+    x = orthogonalize(np.column_stack([c.columns for c in cands]), wb)
     rw, xw = prewhiten(a, r, x)
-    ends = np.cumsum([c.columns.shape[1] for c in cands])
-    for c, e in zip(cands, ends):
-        c.test = wald_whitened(rw, xw[:, e - c.columns.shape[1]:e])
+    for c, t in zip(cands, wald_groups(rw, xw, [c.columns.shape[1] for c in cands])):
+        c.test = t
 
 
 def _better(c: Candidate, top: Optional[Candidate]) -> bool:
@@ -492,7 +489,7 @@ class _Search:
         """Every effect not tried on this model (of ``only``, when given), at its best hyper-parameter, by adjusted
         p-value."""
         state, rt, _, sim = cur
-        wb = orthogonalize(self.data.train_columns(base_columns(state, sim)), np.zeros((len(rt), 0)))
+        wb = orthogonalize(self.data.train_base_columns(state, sim), np.zeros((len(rt), 0)))
         a = ar_fit(rt)
         effects = [e for name, e in REGISTRY.items() if name not in self.done and (only is None or name in only)]
 
@@ -645,7 +642,7 @@ class _Search:
             return None
         st0, rt0, _, sim0 = base
         effect = REGISTRY[c.effect]
-        wb0 = orthogonalize(self.data.train_columns(base_columns(st0, sim0)), np.zeros((len(rt0), 0)))
+        wb0 = orthogonalize(self.data.train_base_columns(st0, sim0), np.zeros((len(rt0), 0)))
         c0 = _best_of(effect.candidates(st0, sim0, self.data), rt0, wb0, self.data, ar_fit(rt0))
         if c0 is None:
             return None
@@ -731,11 +728,11 @@ class _Search:
 
     def note_ambiguities(self, c: Candidate, significant: List[Candidate], wb: np.ndarray) -> None:
         """Records the significant candidates whose regressor is (over 90 %) that of the accepted ``c``."""
-        xc = orthogonalize(self.data.train_columns(c.columns), wb)
+        xc = orthogonalize(c.columns, wb)
         for other in significant:
             if other is c:
                 continue
-            xo = orthogonalize(self.data.train_columns(other.columns), wb)
+            xo = orthogonalize(other.columns, wb)
             res_o = orthogonalize(xo, xc)
             share = 1 - float(np.sum(res_o**2) / max(np.sum(xo**2), 1e-300))
             if share > 0.9:
@@ -912,7 +909,7 @@ def doctor(
     state, rt, rv, sim = cur
     for f in search.findings:  # in words with the final model's values (later refits move them)
         f.words = REGISTRY[f.effect].in_words(final_values(f.effect, f.params, state), state)
-    un = _unnamed(data, rt, sim, data.train_columns(base_columns(state, sim)), alpha)
+    un = _unnamed(data, rt, sim, data.train_base_columns(state, sim), alpha)
     if un is not None:
         search.findings.append(un)
     diag = Diagnosis(

@@ -20,13 +20,14 @@ from ..model import dead_zone, knot_weights
 from ..simulation import DEFAULT_COULOMB_EPS, SimResult, Term, coulomb_sign
 from .. import units
 from ..stats import orthogonalize
-from .fit import Data, State, motor_columns, motor_columns_many, refit, refit_each
+from .fit import Data, State, motor_columns, refit, refit_each
 
 
 @dataclass
 class Candidate:
-    """One variant of an effect's regressor: columns (n × k, full rate) on the simulated states, its
-    hyper-parameters, and the size of the grid it was searched on (Bonferroni factor)."""
+    """One variant of an effect's regressor: its columns on the simulated states, decimated on the training rows
+    (:meth:`Data.train_columns`, m × k: the only form the tests use), its hyper-parameters, and the size of the grid
+    it was searched on (Bonferroni factor)."""
 
     effect: str
     columns: np.ndarray
@@ -34,7 +35,7 @@ class Candidate:
     grid: int
     test: Any = None
     p_adj: float = 1.0
-    rebuild: Optional[Callable[[Sequence[float]], List[np.ndarray]]] = None  # columns for other hyper-parameter values
+    rebuild: Optional[Callable[[Sequence[float]], List[np.ndarray]]] = None  # (decimated) columns for other values
     step: float = 1.0  # ratio between neighbouring grid values
 
 
@@ -104,7 +105,7 @@ def _with_terms(effect: str, *terms: Tuple[str, str]):
     names = tuple(n for n, _ in terms)
 
     def candidates_of(state: State, sim: SimResult, data: Data) -> List[Candidate]:
-        return [Candidate(effect, motor_columns(state, sim, [Term(n, k) for n, k in terms]), {}, 1)]
+        return [Candidate(effect, data.train_motor_columns(state, sim, [[Term(n, k) for n, k in terms]])[0], {}, 1)]
 
     def adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
         st = state.with_(terms=state.model.terms + tuple(Term(n, k) for n, k in terms))
@@ -126,7 +127,7 @@ def _remove_terms(names):
 
 
 def _offset_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
-    return [] if state.model.offset else [Candidate("offset", np.ones((data.rec.n, 1)), {}, 1)]
+    return [] if state.model.offset else [Candidate("offset", data.train_columns(np.ones((data.rec.n, 1))), {}, 1)]
 
 
 def _offset_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
@@ -164,7 +165,7 @@ def _stribeck_candidates(state: State, sim: SimResult, data: Data) -> List[Candi
     grid = _stribeck_grid(sim)
 
     def make(speeds):
-        return motor_columns_many(state, sim, [[Term("Fs", "stribeck", vs)] for vs in speeds])
+        return data.train_motor_columns(state, sim, [[Term("Fs", "stribeck", vs)] for vs in speeds])
 
     return [Candidate("stribeck", x, {"vs": float(vs)}, len(grid), rebuild=make, step=float(grid[1] / grid[0]))
             for vs, x in zip(grid, make(grid))]
@@ -303,7 +304,7 @@ def _periodic(name: str, names: Tuple[str, str], kinds: Tuple[str, str], share: 
             return []
 
         def make(periods):
-            return motor_columns_many(state, sim, [terms(P) for P in periods])
+            return data.train_motor_columns(state, sim, [terms(P) for P in periods])
 
         return [Candidate(name, x, {"period": float(P)}, len(grid), rebuild=make, step=float(grid[1] / grid[0]))
                 for P, x in zip(grid, make(grid))]
@@ -406,7 +407,7 @@ def _spline_candidates(state: State, sim: SimResult, data: Data) -> List[Candida
     return [Candidate("position_dependent_coulomb", x, {"intervals": float(m), "origin": lo, "spacing": stroke / m,
                                                          "per_direction": float(per_direction)},
                       len(SPLINE_INTERVALS))
-            for m, x in zip(SPLINE_INTERVALS, motor_columns_many(state, sim, groups))]
+            for m, x in zip(SPLINE_INTERVALS, data.train_motor_columns(state, sim, groups))]
 
 
 def spline_profile(state: State, n: int = 201) -> Optional[Dict[str, np.ndarray]]:
@@ -474,7 +475,7 @@ def _spline_summary(st: State) -> Dict[str, float]:
 def _delay_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
     if state.model.delay or state.model.force_lag:
         return []
-    return [Candidate("delay", diffcent(sim.force, data.rec.dt)[:, None] * data.rec.dt, {}, 1)]
+    return [Candidate("delay", data.train_columns(diffcent(sim.force, data.rec.dt)[:, None] * data.rec.dt), {}, 1)]
 
 
 #: Force lags tried (in sample periods), upward: a current loop's lag is a fraction of a period at a drive's usual
@@ -575,7 +576,7 @@ def _flexibility_candidates(state: State, sim: SimResult, data: Data) -> List[Ca
     if state.kind != "rigid":
         return []
     q4 = diffcent(diffcent(sim.qdd[0], data.rec.dt), data.rec.dt)
-    return [Candidate("flexibility", q4[:, None], {}, 1)]
+    return [Candidate("flexibility", data.train_columns(q4[:, None]), {}, 1)]
 
 
 def _flexibility_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
@@ -620,7 +621,7 @@ def _load_friction_candidates(state: State, sim: SimResult, data: Data) -> List[
     if state.kind != "flexible" or state.frozen.get("Fv2", None) != 0.0:
         return []
     v12 = sim.qd[1]
-    return [Candidate("load_friction", np.column_stack([v12, coulomb_sign(v12)]), {}, 1)]
+    return [Candidate("load_friction", data.train_columns(np.column_stack([v12, coulomb_sign(v12)])), {}, 1)]
 
 
 def _load_friction_lm(data: Data, st: State, init: Dict[str, float]) -> IdentificationResult:
@@ -666,7 +667,7 @@ def _load_friction_baseline(state: State, data: Data, progress) -> Optional[Stat
 def _damping_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
     if state.kind != "flexible" or any(t.kind == "damper" for t in state.model.terms):
         return []
-    return [Candidate("coupling_damping", (sim.qd[0] - sim.qd[1])[:, None], {}, 1)]
+    return [Candidate("coupling_damping", data.train_columns((sim.qd[0] - sim.qd[1])[:, None]), {}, 1)]
 
 
 def _damping_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
@@ -685,8 +686,8 @@ def _backlash_candidates(state: State, sim: SimResult, data: Data) -> List[Candi
     amp = float(np.percentile(np.abs(q2), 90))
     grid = np.geomspace(max(amp / 100, 1e-8), max(amp, 2e-8), 8)
     k12 = state.all_params()["K12"]
-    return [Candidate("backlash", (k12 * (dead_zone(q2, g) - q2))[:, None],
-                      {"gap": float(g)}, len(grid)) for g in grid]
+    x = data.train_columns(np.column_stack([k12 * (dead_zone(q2, g) - q2) for g in grid]))
+    return [Candidate("backlash", x[:, [i]], {"gap": float(g)}, len(grid)) for i, g in enumerate(grid)]
 
 
 def _backlash_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
@@ -704,7 +705,7 @@ GRAVITY_TERMS = (Term("G_sin", "gravity"), Term("G_cos", "gravity", phase=math.p
 def _gravity_candidates(state: State, sim: SimResult, data: Data) -> List[Candidate]:
     if state.axis != "rotary" or any(t.kind == "gravity" for t in state.model.terms):
         return []
-    return [Candidate("gravity", motor_columns(state, sim, GRAVITY_TERMS), {}, 1)]
+    return [Candidate("gravity", data.train_motor_columns(state, sim, [GRAVITY_TERMS])[0], {}, 1)]
 
 
 def _gravity_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:

@@ -159,6 +159,19 @@ class Data:
         """Full-rate regressor columns (n × k), decimated, on the training rows."""
         return self.decimated_columns(columns, self.train_rows)
 
+    def train_motor_columns(self, state: State, sim: SimResult, groups: Sequence[Sequence[Term]]) -> List[np.ndarray]:
+        """:func:`motor_columns_many` decimated on the training rows, as :meth:`train_columns` gives them (bit for
+        bit), from the core without the full-rate columns (:func:`_decimated_motor_columns`)."""
+        core, first, ends = _extra_core(state, groups)
+        x = _decimated_motor_columns(core, sim, list(range(first, first + int(ends[-1]) if len(ends) else first)),
+                                     self.dec)[self.train_rows]
+        return [x[:, e - len(g):e] for g, e in zip(groups, ends)]
+
+    def train_base_columns(self, state: State, sim: SimResult) -> np.ndarray:
+        """:func:`base_columns` decimated on the training rows (as :meth:`train_motor_columns`)."""
+        core, keep = _base_core(state)
+        return _decimated_motor_columns(core, sim, keep, self.dec)[self.train_rows]
+
 
 def refit(data: Data, state: State, init: Dict[str, float], progress,
           give_up_above: Optional[float] = None) -> Tuple[State, IdentificationResult]:
@@ -199,20 +212,33 @@ def motor_columns(state: State, sim: SimResult, extra: Sequence[Term]) -> np.nda
 def motor_columns_many(state: State, sim: SimResult, groups: Sequence[Sequence[Term]]) -> List[np.ndarray]:
     """:func:`motor_columns` of each group of extra terms (the variants of a grid), from one core call: the columns
     of every group are computed together, each exactly as alone (a term's column depends on that term only)."""
+    core, first, ends = _extra_core(state, groups)
+    # the extra terms' columns on the motor's rows only (the whole regressor of both dofs is 2 × p columns)
+    cols = np.asarray(core.regressor_columns(sim.q, sim.qd, sim.qdd, list(range(first, len(core.names))), 0))
+    return [cols[:, e - len(g):e] for g, e in zip(groups, ends)]
+
+
+def _extra_core(state: State, groups: Sequence[Sequence[Term]]):
+    """The core model of ``state`` with every group's terms (renamed apart), the index of the first of them and the
+    groups' ends among them."""
     extra = [Term(f"{t.name}_{i}", t.kind, dof=t.dof, **t.hypers) for i, g in enumerate(groups) for t in g]
     core = state.model.with_terms(*extra).core(DEFAULT_COULOMB_EPS)
-    p = len(core.names)
-    # the extra terms' columns on the motor's rows only (the whole regressor of both dofs is 2 × p columns)
-    cols = np.asarray(core.regressor_columns(sim.q, sim.qd, sim.qdd, list(range(p - len(extra), p)), 0))
-    ends = np.cumsum([len(g) for g in groups])
-    return [cols[:, e - len(g):e] for g, e in zip(groups, ends)]
+    return core, len(core.names) - len(extra), np.cumsum([len(g) for g in groups], dtype=int)
+
+
+def _decimated_motor_columns(core, sim: SimResult, cols: List[int], dec) -> np.ndarray:
+    """The core model's columns ``cols`` on the motor's rows, decimated by ``dec`` (m × k)."""
+    return np.asarray(core.decimated_columns(sim.q, sim.qd, sim.qdd, cols, 0, dec.core))
+
+
+def _base_core(state: State):
+    core = state.model.core(DEFAULT_COULOMB_EPS)
+    return core, [i for i, n in enumerate(core.names) if n not in state.frozen]
 
 
 def base_columns(state: State, sim: SimResult) -> np.ndarray:
     """Columns of the motor-row regressor of the state's free parameters."""
-    core = state.model.core(DEFAULT_COULOMB_EPS)
-    names = list(core.names)
-    keep = [i for i, n in enumerate(names) if n not in state.frozen]
+    core, keep = _base_core(state)
     return np.asarray(core.regressor_columns(sim.q, sim.qd, sim.qdd, keep, 0))
 
 

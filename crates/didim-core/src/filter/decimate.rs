@@ -326,6 +326,51 @@ impl Decimation {
             .collect()
     }
 
+    /// Decimates `ncols` columns of `n` samples that `fill(j, column)` writes (over a column of
+    /// `n` zeros), [`lanes::LANES`] at a time, the groups in parallel with rayon: a group's
+    /// full-rate columns exist only while it is filtered. Bit for bit what
+    /// [`Decimation::apply_columns`] gives on the filled columns, with its errors (`name(j)` names
+    /// column `j`).
+    pub fn apply_filled(
+        &self,
+        ncols: usize,
+        n: usize,
+        fill: impl Fn(usize, &mut [f64]) + Sync,
+        name: impl Fn(usize) -> String + Sync,
+    ) -> Result<Vec<Vec<f64>>> {
+        let edge = match self.prepared {
+            Prepared::Identity => 0,
+            _ => self.padlen,
+        };
+        let (start, r) = (self.start_index(n), self.factor);
+        let group = |g: usize| -> Result<Vec<Vec<f64>>> {
+            let j0 = g * lanes::LANES;
+            let k = lanes::LANES.min(ncols - j0);
+            let mut buf = vec![0.0; k * n];
+            for c in 0..k {
+                let col = &mut buf[c * n..(c + 1) * n];
+                fill(j0 + c, col);
+                self.check_column(col, &name(j0 + c))?;
+            }
+            lanes::filtfilt_slice(&self.prepared, k, n, |c, i| buf[c * n + i], edge, start, r)
+                .into_iter()
+                .enumerate()
+                .map(|(c, out)| finite_output(out, &name(j0 + c)))
+                .collect()
+        };
+        match ncols.div_ceil(lanes::LANES) {
+            0 => Ok(Vec::new()),
+            1 => group(0),
+            groups => Ok((0..groups)
+                .into_par_iter()
+                .map(group)
+                .collect::<Result<Vec<_>>>()?
+                .into_iter()
+                .flatten()
+                .collect()),
+        }
+    }
+
     /// Length and finiteness of one column (`check_record` with this decimator's padding).
     fn check_column(&self, c: &[f64], name: &str) -> Result<()> {
         match &self.prepared {
