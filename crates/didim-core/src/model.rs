@@ -1305,11 +1305,11 @@ impl<const N: usize> Model<N> {
         cols: &[usize],
         dof: usize,
     ) -> Result<Vec<f64>> {
-        let (n, fill) = self.column_filler(q, qd, qdd, cols, dof)?;
+        let (n, columns) = self.columns(q, qd, qdd, cols, dof)?;
         let mut w = vec![0.0; cols.len() * n];
         if n > 0 {
-            for (i, col) in w.chunks_mut(n).enumerate() {
-                fill(i, col);
+            for (&j, col) in cols.iter().zip(w.chunks_mut(n)) {
+                columns.fill(j, dof, col);
             }
         }
         Ok(w)
@@ -1332,26 +1332,25 @@ impl<const N: usize> Model<N> {
         dof: usize,
         dec: &crate::filter::Decimation,
     ) -> Result<Vec<Vec<f64>>> {
-        let (n, fill) = self.column_filler(q, qd, qdd, cols, dof)?;
+        let (n, columns) = self.columns(q, qd, qdd, cols, dof)?;
         dec.apply_filled(
             cols.len(),
             n,
-            |i, col| fill(i, col),
+            |i, col| columns.fill(cols[i], dof, col),
             |i| format!("regressor column {}", cols[i]),
         )
     }
 
-    /// Checks the series and the columns, and gives their length and the function that writes
-    /// column `i` (parameter `cols[i]` on the rows of `dof`) over the whole trajectory.
-    #[allow(clippy::type_complexity)]
-    fn column_filler<'a, R: AsRef<[f64]> + Sync>(
+    /// Checks the series, the dof and the columns `cols` (parameters) that will be filled, and
+    /// gives the series' length and their [`Columns`].
+    fn columns<'a, R: AsRef<[f64]>>(
         &'a self,
         q: &'a [R],
         qd: &'a [R],
         qdd: &'a [R],
-        cols: &'a [usize],
+        cols: &[usize],
         dof: usize,
-    ) -> Result<(usize, impl Fn(usize, &mut [f64]) + Sync + 'a)> {
+    ) -> Result<(usize, Columns<'a, N, R>)> {
         let n = check_series::<N, R>(q, qd, qdd)?;
         let p = self.n_params();
         if dof >= N {
@@ -1363,64 +1362,24 @@ impl<const N: usize> Model<N> {
         // the friction law's sign of a dof's speed, shared by its position-periodic Coulomb columns
         // (a grid of periods on one joint: computed once, not once a column)
         let law = self.law;
-        let signs: Vec<Option<Vec<f64>>> = (0..N)
+        let signs = (0..N)
             .map(|d| {
                 let periodic = cols.iter().any(|&j| {
                     matches!(self.basis[j], Basis::CoulombRipple { .. }) && self.basis[j].dofs() == (d, None)
                 });
-                periodic.then(|| {
-                    qd[d]
-                        .as_ref()
-                        .iter()
-                        .map(|&v| law.sign_and_derivative(v).0)
-                        .collect()
-                })
+                periodic.then(|| qd[d].as_ref().iter().map(|&v| law.sign_and_derivative(v).0).collect())
             })
             .collect();
-        let fill = move |i: usize, col: &mut [f64]| {
-            let b = self.basis[cols[i]];
-            let (a, other) = b.dofs();
-            let sign = if a == dof {
-                1.0
-            } else if other == Some(dof) {
-                -1.0
-            } else {
-                col.iter_mut().for_each(|c| *c = 0.0);
-                return; // zero on this dof's rows
-            };
-            match (b, other) {
-                (Basis::Inertia { dof }, _) => col.copy_from_slice(qdd[dof].as_ref()),
-                // the periodic columns by the vector sine, each sample the bits of `local`'s
-                (Basis::Ripple { period, phase, .. }, None) => {
-                    crate::trig::sin_into(col, q[a].as_ref(), std::f64::consts::TAU / period, phase)
-                }
-                (Basis::CoulombRipple { period, phase, .. }, None) => {
-                    crate::trig::sin_into(col, q[a].as_ref(), std::f64::consts::TAU / period, phase);
-                    let s = signs[a]
-                        .as_ref()
-                        .expect("the signs of every dof with a periodic Coulomb column");
-                    col.iter_mut().zip(s).for_each(|(c, &s)| *c *= s);
-                }
-                (_, None) => {
-                    let (x, v) = (q[a].as_ref(), qd[a].as_ref());
-                    for ((c, &x), &v) in col.iter_mut().zip(x).zip(v) {
-                        *c = b.local(x, v, law).0;
-                    }
-                }
-                (_, Some(o)) => {
-                    let (xa, va, xo, vo) = (q[a].as_ref(), qd[a].as_ref(), q[o].as_ref(), qd[o].as_ref());
-                    for (k, c) in col.iter_mut().enumerate() {
-                        *c = b.local(xa[k] - xo[k], va[k] - vo[k], law).0;
-                    }
-                }
-            }
-            if sign < 0.0 {
-                col.iter_mut().for_each(|c| *c = 0.0 - *c);
-            } else {
-                col.iter_mut().for_each(|c| *c += 0.0);
-            }
-        };
-        Ok((n, fill))
+        Ok((
+            n,
+            Columns {
+                model: self,
+                q,
+                qd,
+                qdd,
+                signs,
+            },
+        ))
     }
 
     /// The regressor of a whole trajectory, from per-dof sample series
@@ -1430,40 +1389,129 @@ impl<const N: usize> Model<N> {
     /// `(n × p)` block whose columns are the `φ_j` over time, ready for
     /// parallel decimation column by column.
     pub fn regressor<R: AsRef<[f64]>>(&self, q: &[R], qd: &[R], qdd: &[R]) -> Result<Vec<f64>> {
-        let n = check_series::<N, R>(q, qd, qdd)?;
         let p = self.n_params();
+        let (n, columns) = self.columns(q, qd, qdd, &(0..p).collect::<Vec<_>>(), 0)?;
         let mut w = vec![0.0; N * p * n];
-        let mut col = vec![0.0; n];
+        if n == 0 {
+            return Ok(w);
+        }
         // column by column, each basis function over the whole series (a sample's row, as
         // `regressor_into` builds it, visited every column's block n apart): the same values,
-        // 0 + φ on the term's dof and 0 − φ on its second dof
+        // 0 + φ on the term's dof and 0 − φ on its second dof, 0 on the other dofs' rows (as
+        // allocated)
         for (j, b) in self.basis.iter().enumerate() {
-            match (*b, b.dofs()) {
-                (Basis::Inertia { dof }, _) => col.copy_from_slice(qdd[dof].as_ref()),
-                (_, (a, None)) => {
-                    let (x, v) = (q[a].as_ref(), qd[a].as_ref());
-                    for ((c, &x), &v) in col.iter_mut().zip(x).zip(v) {
-                        *c = b.local(x, v, self.law).0;
-                    }
-                }
-                (_, (a, Some(o))) => {
-                    let (xa, va, xo, vo) = (q[a].as_ref(), qd[a].as_ref(), q[o].as_ref(), qd[o].as_ref());
-                    for (k, c) in col.iter_mut().enumerate() {
-                        *c = b.local(xa[k] - xo[k], va[k] - vo[k], self.law).0;
-                    }
-                }
-            }
             let (a, other) = b.dofs();
-            for (o, &c) in w[(a * p + j) * n..(a * p + j + 1) * n].iter_mut().zip(&col) {
-                *o = 0.0 + c;
-            }
-            if let Some(o2) = other {
-                for (o, &c) in w[(o2 * p + j) * n..(o2 * p + j + 1) * n].iter_mut().zip(&col) {
-                    *o = 0.0 - c;
-                }
+            for d in std::iter::once(a).chain(other) {
+                columns.fill(j, d, &mut w[(d * p + j) * n..(d * p + j + 1) * n]);
             }
         }
         Ok(w)
+    }
+}
+
+/// A model's regressor columns over one trajectory (per-dof series `q`, `qd`, `qdd`, checked by
+/// [`Model::regressor_columns`] and its kin), column by column: [`Columns::fill`] writes one, each
+/// loop compiled for the processor (AVX2 and FMA where it has both, as [`crate::sim::driver::simd`]
+/// does, the same IEEE operations in either build) and for the model's friction-law shape
+/// ([`FrictionLaw::dispatch`]: no branch on it per sample).
+struct Columns<'a, const N: usize, R> {
+    model: &'a Model<N>,
+    q: &'a [R],
+    qd: &'a [R],
+    qdd: &'a [R],
+    /// The law's sign of each dof's speed where a position-periodic Coulomb column needs it.
+    signs: Vec<Option<Vec<f64>>>,
+}
+
+impl<'a, const N: usize, R: AsRef<[f64]>> Columns<'a, N, R> {
+    /// Writes the column of parameter `j` on the rows of dof `dof` into `col` (0 where the
+    /// parameter does not act on that dof).
+    fn fill(&self, j: usize, dof: usize, col: &mut [f64]) {
+        struct Fill<'b, 'a, const N: usize, R> {
+            columns: &'b Columns<'a, N, R>,
+            j: usize,
+            dof: usize,
+            col: &'b mut [f64],
+        }
+        impl<const N: usize, R: AsRef<[f64]>> WithLaw for Fill<'_, '_, N, R> {
+            type Out = ();
+            #[inline(always)]
+            fn call<L: Law>(self, law: L) {
+                self.columns.fill_with(law, self.j, self.dof, self.col)
+            }
+        }
+        /// # Safety
+        /// The processor must support AVX2 and FMA.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn wide<F: WithLaw<Out = ()>>(law: FrictionLaw, f: F) {
+            law.dispatch(f)
+        }
+        let f = Fill {
+            columns: self,
+            j,
+            dof,
+            col,
+        };
+        let law = self.model.law;
+        #[cfg(target_arch = "x86_64")]
+        {
+            let _flush = crate::filter::FlushSubnormals::on();
+            if crate::sim::driver::wide_simd() {
+                // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
+                return unsafe { wide(law, f) };
+            }
+            law.dispatch(f)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        law.dispatch(f)
+    }
+
+    /// [`Columns::fill`] under the law `law` (the model's, its shape static).
+    #[inline(always)]
+    fn fill_with<L: Law>(&self, law: L, j: usize, dof: usize, col: &mut [f64]) {
+        let (q, qd, qdd) = (self.q, self.qd, self.qdd);
+        let b = self.model.basis[j];
+        let (a, other) = b.dofs();
+        let sign = if a == dof {
+            1.0
+        } else if other == Some(dof) {
+            -1.0
+        } else {
+            col.iter_mut().for_each(|c| *c = 0.0);
+            return; // zero on this dof's rows
+        };
+        match (b, other) {
+            (Basis::Inertia { dof }, _) => col.copy_from_slice(qdd[dof].as_ref()),
+            // the periodic columns by the vector sine, each sample the bits of `local`'s
+            (Basis::Ripple { period, phase, .. }, None) => {
+                crate::trig::sin_into(col, q[a].as_ref(), std::f64::consts::TAU / period, phase)
+            }
+            (Basis::CoulombRipple { period, phase, .. }, None) => {
+                crate::trig::sin_into(col, q[a].as_ref(), std::f64::consts::TAU / period, phase);
+                let s = self.signs[a]
+                    .as_ref()
+                    .expect("the signs of every dof with a periodic Coulomb column");
+                col.iter_mut().zip(s).for_each(|(c, &s)| *c *= s);
+            }
+            (_, None) => {
+                let (x, v) = (q[a].as_ref(), qd[a].as_ref());
+                for ((c, &x), &v) in col.iter_mut().zip(x).zip(v) {
+                    *c = b.local(x, v, law).0;
+                }
+            }
+            (_, Some(o)) => {
+                let (xa, va, xo, vo) = (q[a].as_ref(), qd[a].as_ref(), q[o].as_ref(), qd[o].as_ref());
+                for (k, c) in col.iter_mut().enumerate() {
+                    *c = b.local(xa[k] - xo[k], va[k] - vo[k], law).0;
+                }
+            }
+        }
+        if sign < 0.0 {
+            col.iter_mut().for_each(|c| *c = 0.0 - *c);
+        } else {
+            col.iter_mut().for_each(|c| *c += 0.0);
+        }
     }
 }
 
