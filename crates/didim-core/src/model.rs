@@ -1367,7 +1367,13 @@ impl<const N: usize> Model<N> {
                 let periodic = cols.iter().any(|&j| {
                     matches!(self.basis[j], Basis::CoulombRipple { .. }) && self.basis[j].dofs() == (d, None)
                 });
-                periodic.then(|| qd[d].as_ref().iter().map(|&v| law.sign_and_derivative(v).0).collect())
+                periodic.then(|| {
+                    qd[d]
+                        .as_ref()
+                        .iter()
+                        .map(|&v| law.sign_and_derivative(v).0)
+                        .collect()
+                })
             })
             .collect();
         Ok((
