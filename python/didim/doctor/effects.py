@@ -37,6 +37,8 @@ class Candidate:
     p_adj: float = 1.0
     rebuild: Optional[Callable[[Sequence[float]], List[np.ndarray]]] = None  # (decimated) columns for other values
     step: float = 1.0  # ratio between neighbouring grid values
+    # the Wald test by the SVD solve, one candidate alone (set by the tests that ranked it by the grouped solve)
+    exact: Optional[Callable[[], Any]] = field(default=None, repr=False)
 
 
 #: What adopting an effect gives: the new state, its fit, the parameters to report and their σ.
