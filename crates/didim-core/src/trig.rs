@@ -1,87 +1,80 @@
-//! Sine and cosine of the model's periodic terms (a force periodic in position, gravity), one
-//! kernel for the scalar calls of the simulator, the regressor and the sensitivities, and for the
-//! whole columns the doctor tests ([`sin_into`]): the same operations in the same order, so a
-//! column equals, bit for bit, what [`sin_cos`] gives sample by sample.
+//! Sine and cosine of the model's angles and periodic terms: the robot chain's joint rotations
+//! ([`crate::robot`]), a force periodic in position and gravity on one axis ([`crate::model`]), one
+//! kernel for the scalar calls of the simulators, the regressors and the sensitivities, and for the
+//! whole columns the doctor tests ([`sin_into`]): the same operations in the same order, so a column
+//! equals, bit for bit, what [`sin_cos`] gives sample by sample.
 //!
-//! The argument is reduced by `n = round(x·2/π)` against π/2 split in three (fdlibm's
-//! `__ieee754_rem_pio2` constants: the first two parts of 33 bits, so `n·C1` and `n·C2` are exact
-//! while `|n| < 2²⁰`) and the reduced argument in [−π/4, π/4] goes through fdlibm's
-//! `__kernel_sin` and `__kernel_cos` polynomials (FreeBSD's `k_sin.c`, `k_cos.c`), each accurate
-//! to under one ulp there. Against the C library's `sin` and `cos` the error is at most half an ulp
-//! of max(1, |value|) on the test's 216 000 arguments up to [`REDUCED_LIMIT`] (an absolute error
-//! near the zeros, where the reduced argument's own rounding sets it), which is all a regressor
-//! column or a simulated force needs. Beyond that limit the standard library's `sin` and `cos`
-//! take over.
+//! The argument is reduced by `k = round(x·2/π)` against π/2 in two parts (fdlibm's `pio2_1`, 33
+//! bits, so `k·pio2_1` is exact while |x| ≤ 2²⁰ rad, and `pio2_1t`), and the reduced argument in
+//! [−π/4, π/4] goes through fdlibm's `__kernel_sin` and `__kernel_cos` polynomials (their
+//! coefficients, evaluated by Horner's rule). Against the C library's `sin` and `cos` the error is at
+//! most half an ulp of max(1, |value|) on the test's 216 000 arguments up to [`REDUCED_LIMIT`] (an
+//! absolute error near the zeros, where the reduced argument's own rounding sets it); beyond, and
+//! for NaN, the standard library computes.
 //!
-//! Why not `f64::sin_cos`: it calls the C library's `sin` and `cos` one sample at a time (two
-//! reductions, no vector registers). The doctor's position-periodic candidates are 160 columns of
-//! the whole record per grid: on the EMPS record, 9 % of a doctor run was glibc's `sin`. Here the
-//! loop has no branch and no call, and [`crate::sim::driver::simd`]'s AVX2 build runs it four
-//! samples at a time.
+//! Why not `f64::sin_cos`: it calls the C library's `sin` and `cos` one at a time (two reductions,
+//! no vector registers). A robot's ABA takes a sine and a cosine per joint and step; the doctor's
+//! position-periodic candidates are 160 columns of the whole record per grid (on the EMPS record,
+//! 9 % of a doctor run was glibc's `sin`). Here the loop has no branch and no call, and
+//! [`sin_into`]'s AVX2 build runs it four samples at a time.
 
 // fdlibm's constants as it prints them (more digits than a double holds; each rounds to its double)
 #![allow(clippy::excessive_precision)]
 
-/// Above this |x| the reduction's `n·C1` is no longer exact: the standard library computes.
-pub const REDUCED_LIMIT: f64 = 823_549.6; // 2¹⁹·π/2
+/// Above this |x| the reduction's `k·pio2_1` is no longer exact: the standard library computes.
+pub const REDUCED_LIMIT: f64 = 1_048_576.0; // 2²⁰
 
-const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
-/// 1.5·2⁵²: adding and subtracting it rounds a double of magnitude below 2⁵¹ to an integer (ties
-/// to even), and the integer is in the low bits of the sum.
+/// 1.5·2⁵²: added to an integer-valued double of magnitude below 2⁵¹, it puts the integer in the
+/// low bits of the sum (two's complement residue for a negative one).
 const ROUNDER: f64 = 6_755_399_441_055_744.0;
-// π/2 = C1 + C2 + C3 (fdlibm's pio2_1, pio2_2, pio2_2t)
-const C1: f64 = 1.570_796_326_734_125_614_17e+00;
-const C2: f64 = 6.077_100_506_303_965_976_6e-11;
-const C3: f64 = 2.022_266_248_795_950_631_54e-21;
-// __kernel_sin
-const S1: f64 = -1.666_666_666_666_663_243_48e-01;
-const S2: f64 = 8.333_333_333_322_489_461_24e-03;
-const S3: f64 = -1.984_126_982_985_794_931_34e-04;
-const S4: f64 = 2.755_731_370_707_006_767_89e-06;
-const S5: f64 = -2.505_076_025_340_686_341_95e-08;
-const S6: f64 = 1.589_690_995_211_550_102_21e-10;
-// __kernel_cos
-const K1: f64 = 4.166_666_666_666_660_190_37e-02;
-const K2: f64 = -1.388_888_888_887_410_957_49e-03;
-const K3: f64 = 2.480_158_728_947_672_941_78e-05;
-const K4: f64 = -2.755_731_435_139_066_330_35e-07;
-const K5: f64 = 2.087_572_321_298_174_827_90e-09;
-const K6: f64 = -1.135_964_755_778_819_482_65e-11;
+// π/2's first 33 bits and the rest (fdlibm's pio2_1, pio2_1t)
+const PIO2_1: f64 = 1.570_796_326_734_125_6;
+const PIO2_1T: f64 = 6.077_100_506_506_192e-11;
+// __kernel_sin's and __kernel_cos's coefficients
+const S: [f64; 6] = [
+    -1.666_666_666_666_663_2e-1,
+    8.333_333_333_322_49e-3,
+    -1.984_126_982_985_795e-4,
+    2.755_731_370_707_006_8e-6,
+    -2.505_076_025_340_686_3e-8,
+    1.589_690_995_211_55e-10,
+];
+const C: [f64; 6] = [
+    4.166_666_666_666_660_2e-2,
+    -1.388_888_888_887_411e-3,
+    2.480_158_728_947_673e-5,
+    -2.755_731_435_139_066_3e-7,
+    2.087_572_321_298_175e-9,
+    -1.135_964_755_778_819_5e-11,
+];
 
 /// `(sin x, cos x)` for |x| ≤ [`REDUCED_LIMIT`], branch-free (the caller checks the range).
 #[inline(always)]
 fn reduced(x: f64) -> (f64, f64) {
-    let t = x * FRAC_2_PI + ROUNDER;
-    let quadrant = t.to_bits(); // n in the low bits (two's complement for n < 0)
-    let n = t - ROUNDER;
-    let r = ((x - n * C1) - n * C2) - n * C3;
+    let k = (x * std::f64::consts::FRAC_2_PI).round();
+    let r = (x - k * PIO2_1) - k * PIO2_1T;
     let z = r * r;
-    let w = z * z;
-    let sr = S2 + z * (S3 + z * S4) + z * w * (S5 + z * S6);
-    let s = r + z * r * (S1 + z * sr);
-    let cr = z * (K1 + z * (K2 + z * K3)) + w * w * (K4 + z * (K5 + z * K6));
+    let sp = S[0] + z * (S[1] + z * (S[2] + z * (S[3] + z * (S[4] + z * S[5]))));
+    let sin = r + r * z * sp;
+    let cp = z * (C[0] + z * (C[1] + z * (C[2] + z * (C[3] + z * (C[4] + z * C[5])))));
     let hz = 0.5 * z;
-    let one_hz = 1.0 - hz;
-    let c = one_hz + (((1.0 - one_hz) - hz) + z * cr);
-    // x = n·π/2 + r: quadrant 1 swaps sine and cosine, 2 negates both, 3 both
-    let swap = quadrant & 1 == 1;
-    let (a, b) = if swap { (c, s) } else { (s, c) };
-    let sin_sign = (quadrant & 2) << 62;
-    let cos_sign = (quadrant.wrapping_add(1) & 2) << 62;
-    (
-        f64::from_bits(a.to_bits() ^ sin_sign),
-        f64::from_bits(b.to_bits() ^ cos_sign),
-    )
+    let w = 1.0 - hz;
+    let cos = w + (((1.0 - w) - hz) + z * cp);
+    // the quadrant k mod 4 from the low bits, without a conversion to an integer register: odd
+    // ones swap, the upper two negate
+    let q = (k + ROUNDER).to_bits();
+    let (s, c) = if q & 1 == 0 { (sin, cos) } else { (cos, -sin) };
+    let flip = if q & 2 == 0 { 1.0 } else { -1.0 };
+    (flip * s, flip * c)
 }
 
 /// `(sin x, cos x)`.
 #[inline(always)]
 pub fn sin_cos(x: f64) -> (f64, f64) {
-    if x.abs() <= REDUCED_LIMIT {
-        reduced(x)
-    } else {
-        x.sin_cos()
+    if x.abs() > REDUCED_LIMIT || x.is_nan() {
+        return x.sin_cos();
     }
+    reduced(x)
 }
 
 /// `sin x`.
@@ -187,7 +180,7 @@ mod tests {
 
     #[test]
     fn beyond_the_reduction_and_at_special_values_the_library_computes() {
-        for x in [1e6, -3.3e7, 1e300, f64::MAX] {
+        for x in [1.1e6, -3.3e7, 1e300, f64::MAX] {
             assert_eq!(sin_cos(x), x.sin_cos());
         }
         assert!(sin(f64::NAN).is_nan() && sin(f64::INFINITY).is_nan());

@@ -256,51 +256,6 @@ impl Turn {
     }
 }
 
-/// sin and cos of `x` (rad): the argument reduced by multiples of π/2 in two parts (exact
-/// products for |x| ≤ 2²⁰ rad), then fdlibm's polynomials on [−π/4, π/4], within an ulp or two of
-/// the C library's (checked in the tests), which serves larger arguments.
-#[inline(always)]
-#[allow(clippy::excessive_precision)]
-pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
-    // π/2's first 33 bits and the rest (fdlibm's pio2_1, pio2_1t); the kernels' coefficients as
-    // fdlibm prints them
-    const PIO2_1: f64 = 1.570_796_326_734_125_6;
-    const PIO2_1T: f64 = 6.077_100_506_506_192e-11;
-    const S: [f64; 6] = [
-        -1.666_666_666_666_663_2e-1,
-        8.333_333_333_322_49e-3,
-        -1.984_126_982_985_795e-4,
-        2.755_731_370_707_006_8e-6,
-        -2.505_076_025_340_686_3e-8,
-        1.589_690_995_211_55e-10,
-    ];
-    const C: [f64; 6] = [
-        4.166_666_666_666_660_2e-2,
-        -1.388_888_888_887_411e-3,
-        2.480_158_728_947_673e-5,
-        -2.755_731_435_139_066_3e-7,
-        2.087_572_321_298_175e-9,
-        -1.135_964_755_778_819_5e-11,
-    ];
-    if x.abs() > 1_048_576.0 || x.is_nan() {
-        return x.sin_cos();
-    }
-    let k = (x * std::f64::consts::FRAC_2_PI).round();
-    let r = (x - k * PIO2_1) - k * PIO2_1T;
-    let z = r * r;
-    let sp = S[0] + z * (S[1] + z * (S[2] + z * (S[3] + z * (S[4] + z * S[5]))));
-    let sin = r + r * z * sp;
-    let cp = z * (C[0] + z * (C[1] + z * (C[2] + z * (C[3] + z * (C[4] + z * C[5])))));
-    let hz = 0.5 * z;
-    let w = 1.0 - hz;
-    let cos = w + (((1.0 - w) - hz) + z * cp);
-    // the quadrant without branches: odd ones swap, the upper two negate
-    let q = k as i64;
-    let (s, c) = if q & 1 == 0 { (sin, cos) } else { (cos, -sin) };
-    let flip = if q & 2 == 0 { 1.0 } else { -1.0 };
-    (flip * s, flip * c)
-}
-
 /// `Rz·x` for the rotation about z of `(cos, sin)`.
 #[inline(always)]
 fn rz(c: f64, s: f64, x: &Vector3<f64>) -> Vector3<f64> {
@@ -786,7 +741,7 @@ impl Robot {
         // the joints' sines and cosines first: independent of each other, they overlap
         for ((l, st), &qi) in links.iter().zip(state.iter_mut()).zip(q) {
             if l.revolute {
-                let (s, c) = sin_cos(qi + l.offset);
+                let (s, c) = crate::trig::sin_cos(qi + l.offset);
                 st.cs = (c, s);
             }
         }
@@ -870,29 +825,5 @@ impl Robot {
             ap = to_child(l, st, &ap) + st.c + along_z(l.revolute, qdd);
         }
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::sin_cos;
-
-    /// Within 2 ulp of 1 of the C library's, over a grid of angles from −10³ to 10³ rad, near
-    /// the quadrant boundaries, and beyond the reduction's range.
-    #[test]
-    fn sin_cos_agrees_with_the_c_library() {
-        let mut xs: Vec<f64> = (-200_000..=200_000).map(|k| k as f64 * 5e-3 + 1e-7).collect();
-        for k in -64..=64 {
-            let b = k as f64 * std::f64::consts::FRAC_PI_2;
-            xs.extend([b, b + 1e-9, b - 1e-9, b.next_up(), b.next_down()]);
-        }
-        xs.extend([1e6, -3e6, 1e12, 0.0, -0.0, 1e-300]);
-        for x in xs {
-            let (s, c) = sin_cos(x);
-            let (s0, c0) = x.sin_cos();
-            assert!((s - s0).abs() <= 2.0 * f64::EPSILON, "sin({x}): {s} against {s0}");
-            assert!((c - c0).abs() <= 2.0 * f64::EPSILON, "cos({x}): {c} against {c0}");
-        }
-        assert!(sin_cos(f64::NAN).0.is_nan() && sin_cos(f64::INFINITY).1.is_nan());
     }
 }
