@@ -18,6 +18,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod controller;
+pub(crate) mod cpu;
 pub mod error;
 pub mod filter;
 pub mod interrupt;

@@ -1463,7 +1463,7 @@ impl<'a, const N: usize, R: AsRef<[f64]>> Columns<'a, N, R> {
         #[cfg(target_arch = "x86_64")]
         {
             let _flush = crate::filter::FlushSubnormals::on();
-            if crate::sim::driver::wide_simd() {
+            if crate::cpu::wide_simd() {
                 // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
                 return unsafe { wide(law, f) };
             }

@@ -290,7 +290,7 @@ impl std::ops::IndexMut<usize> for Signals {
 /// the same, only the time differs.
 pub fn simulator_build() -> &'static str {
     #[cfg(target_arch = "x86_64")]
-    if driver::wide_simd() {
+    if crate::cpu::wide_simd() {
         return "avx2+fma";
     }
     "baseline"

@@ -104,7 +104,7 @@ pub fn sin_into(out: &mut [f64], x: &[f64], w: f64, phase: f64) {
         sin_loop(out, x, w, phase)
     }
     #[cfg(target_arch = "x86_64")]
-    let beyond = if crate::sim::driver::wide_simd() {
+    let beyond = if crate::cpu::wide_simd() {
         // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
         unsafe { wide(out, x, w, phase) }
     } else {

@@ -85,7 +85,7 @@ fn filter_slice<const L: usize>(
 
 /// Forward and backward pass over `buf`, in place, compiled for the processor: with AVX2
 /// (a group of four lanes in one register) where it has AVX2 and FMA
-/// ([`crate::sim::driver::wide_simd`]), else for the baseline x86-64. Rust never fuses a
+/// ([`crate::cpu::wide_simd`]), else for the baseline x86-64. Rust never fuses a
 /// multiply and an add by itself, so both builds compute the same IEEE operations in the
 /// same order and give the same results.
 fn filter<const L: usize>(prepared: &Prepared, buf: &mut [[f64; L]]) {
@@ -99,7 +99,7 @@ fn filter<const L: usize>(prepared: &Prepared, buf: &mut [[f64; L]]) {
         filter_in_place(prepared, buf)
     }
     #[cfg(target_arch = "x86_64")]
-    if crate::sim::driver::wide_simd() {
+    if crate::cpu::wide_simd() {
         // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
         return unsafe { wide(prepared, buf) };
     }

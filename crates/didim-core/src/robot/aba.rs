@@ -696,7 +696,7 @@ impl Robot {
         out: &mut [f64],
     ) -> Result<()> {
         #[cfg(target_arch = "x86_64")]
-        if crate::sim::driver::wide_simd() {
+        if crate::cpu::wide_simd() {
             // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
             return unsafe { self.aba_wide(q, v, tau, armature, ws, out) };
         }

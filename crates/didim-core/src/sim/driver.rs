@@ -360,7 +360,7 @@ pub(super) fn run<const N: usize, S: Stepper<N>, T: Tangent<N, S>>(
 }
 
 /// Runs `f` compiled for the processor: with AVX2 and FMA enabled where it has both
-/// ([`wide_simd`]), else for the baseline x86-64 (SSE2). `f` is inlined into each build
+/// ([`crate::cpu::wide_simd`]), else for the baseline x86-64 (SSE2). `f` is inlined into each build
 /// with whatever `#[inline(always)]` code it calls (the closed loop, the steppers' steps,
 /// the controller): three-operand instructions and wider registers, about 4 % of a
 /// simulation on the quantized EMPS record. Rust never fuses a multiply and an add by
@@ -378,21 +378,9 @@ pub(crate) fn simd<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
     let _flush = crate::filter::FlushSubnormals::on();
     #[cfg(target_arch = "x86_64")]
-    if wide_simd() {
+    if crate::cpu::wide_simd() {
         // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
         return unsafe { wide(f) };
     }
     f()
-}
-
-/// Whether [`simd`] runs the AVX2 and FMA build: the processor has both, and the
-/// environment variable `DIDIM_BASELINE_SIMD` is not set (to compare the two builds).
-#[cfg(target_arch = "x86_64")]
-pub(crate) fn wide_simd() -> bool {
-    static WIDE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *WIDE.get_or_init(|| {
-        std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
-            && std::env::var_os("DIDIM_BASELINE_SIMD").is_none()
-    })
 }

@@ -448,7 +448,7 @@ impl<const N: usize, L: Law> Plant<N, L> {
         scale: f64,
     ) -> Step<N> {
         #[cfg(target_arch = "x86_64")]
-        if super::driver::wide_simd() {
+        if crate::cpu::wide_simd() {
             // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
             return unsafe { self.implicit_avx2(l, q, v, gn, f, qp, vp, dw, scale) };
         }
@@ -643,7 +643,7 @@ impl<const N: usize, L: Law> Plant<N, L> {
         hook: &mut H,
     ) -> Result<()> {
         #[cfg(target_arch = "x86_64")]
-        if super::driver::wide_simd() {
+        if crate::cpu::wide_simd() {
             // SAFETY: `wide_simd` has checked that this processor has AVX2 and FMA.
             return unsafe { self.subdivide_avx2(l, q, v, g, b, target, hook) };
         }
