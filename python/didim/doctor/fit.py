@@ -163,8 +163,7 @@ class Data:
         """:func:`motor_columns_many` decimated on the training rows, as :meth:`train_columns` gives them (bit for
         bit), from the core without the full-rate columns (:func:`_decimated_motor_columns`)."""
         core, first, ends = _extra_core(state, groups)
-        x = _decimated_motor_columns(core, sim, list(range(first, first + int(ends[-1]) if len(ends) else first)),
-                                     self.dec)[self.train_rows]
+        x = _decimated_motor_columns(core, sim, list(range(first, len(core.names))), self.dec)[self.train_rows]
         return [x[:, e - len(g):e] for g, e in zip(groups, ends)]
 
     def train_base_columns(self, state: State, sim: SimResult) -> np.ndarray:
