@@ -957,6 +957,11 @@ def entry() -> None:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)
+    # the interpreter's last collection walks every object the imports made (SciPy's are most of them), 60 ms of a
+    # 3 s doctor run: frozen, they are left to the process's end (the outputs are written and closed by now)
+    import gc
+
+    gc.freeze()
     sys.exit(code)
 
 

@@ -138,7 +138,8 @@ class Decimation:
     def apply(self, y, w=None) -> Tuple[np.ndarray, Optional[np.ndarray]]:
         """Decimates ``y`` (n,) and, when given, every column of ``w`` (n, p) in parallel; returns (y_dec, w_dec).
 
-        The columns go through the filter four at a time (interleaved), each with exactly the one-column arithmetic.
+        The columns go through the filter four at a time (eight with second-order sections on a processor with
+        AVX-512), interleaved, each with exactly the one-column arithmetic.
         """
         y = np.ascontiguousarray(_checks.real_array("y", y))
         if w is not None:
@@ -162,9 +163,9 @@ class Decimation:
         return self.apply(x)[0]
 
     def columns(self, x) -> np.ndarray:
-        """Decimates every column of ``x`` (n, k) in one pass of the filter, four columns at a time: each column as
-        :meth:`__call__` gives it, bit for bit, at about a quarter of the cost of ``k`` calls (a robot's per-joint
-        Coulomb and friction-law columns)."""
+        """Decimates every column of ``x`` (n, k) in one pass of the filter, four (or eight, see :meth:`apply`)
+        columns at a time: each column as :meth:`__call__` gives it, bit for bit, at about a quarter of the cost of
+        ``k`` calls (a robot's per-joint Coulomb and friction-law columns, the doctors' candidate columns)."""
         x = _checks.real_array("x", x, (2,))
         if x.shape[1] == 0:
             return np.zeros((len(self(np.zeros(x.shape[0]))), 0))

@@ -87,7 +87,9 @@ def settling_samples(qm: np.ndarray, q_sim: np.ndarray, dt: float, resolution: O
         return 0
     over = gap > bound
     # the first sample after which the gap stays within the bound for a whole window
-    run = np.convolve(over.astype(np.int64), np.ones(w, np.int64), "full")[w - 1:n + w - 1]  # over[i:i+w] counts
+    # run[i]: how many of over[i:i+w] are set (from the running count, not a convolution of n × w operations)
+    csum = np.concatenate(([0], np.cumsum(over, dtype=np.int64)))
+    run = csum[np.minimum(np.arange(n) + w, n)] - csum[:n]
     for i in np.flatnonzero(over):
         if i + 1 >= n // 2:
             break

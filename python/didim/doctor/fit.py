@@ -139,7 +139,7 @@ class Data:
 
     def decimated_columns(self, columns: np.ndarray, rows: slice) -> np.ndarray:
         """Full-rate regressor columns (n × k) of any record of this rate, decimated, on ``rows``."""
-        return self.dec.apply(np.zeros(len(columns)), columns)[1][rows]
+        return self.dec.columns(columns)[rows]
 
     def train_record(self) -> Recording:
         """The training samples as a record of their own (the whole record when a separate one validates): for fits

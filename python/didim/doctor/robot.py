@@ -283,7 +283,7 @@ class _Residuals:
         cols = joint_regressors(res, sim)
         for j in range(rec.ndof):
             r = dec(np.ascontiguousarray(rec.force[:, j] - sim["force"][:, j]))
-            w = self._dec_columns(cols[j])
+            w = dec.columns(cols[j])
             scale = np.linalg.norm(w, axis=0)
             w = w[:, scale > 1e-12 * max(float(scale.max()) if scale.size else 0.0, 1e-300)]
             qb = np.linalg.qr(w / np.linalg.norm(w, axis=0))[0] if w.size else np.zeros((len(r), 0))
@@ -294,12 +294,9 @@ class _Residuals:
         self.prewhiten = prewhiten
         self.orthogonalize = orthogonalize
 
-    def _dec_columns(self, m: np.ndarray) -> np.ndarray:
-        return np.column_stack([self.dec(np.ascontiguousarray(c)) for c in np.asarray(m).T])
-
     def beyond(self, j: int, m: np.ndarray) -> np.ndarray:
         """Full-rate columns ``m`` of joint ``j``, decimated, beyond the model's own columns there."""
-        return self.orthogonalize(self._dec_columns(m), self.parts[j][1])
+        return self.orthogonalize(self.dec.columns(m), self.parts[j][1])
 
     def test(self, c: _Candidate) -> None:
         """The Wald test of ``c``'s columns on the residual of the joints it acts on (each joint's rows scaled by its

@@ -301,7 +301,7 @@ impl Decimation {
         Ok((yd, wd))
     }
 
-    /// Decimates equal-length columns alike, [`lanes::LANES`] columns at a time through
+    /// Decimates equal-length columns alike, [`lanes::width`] columns at a time through
     /// the filter (column-interleaved, bit-for-bit the result of [`Decimation::apply`]),
     /// the groups in parallel with rayon. `name(j)` names column `j` in errors.
     pub fn apply_columns(&self, cols: &[&[f64]], name: impl Fn(usize) -> String) -> Result<Vec<Vec<f64>>> {
@@ -327,7 +327,7 @@ impl Decimation {
     }
 
     /// Decimates `ncols` columns of `n` samples that `fill(j, column)` writes (over a column of
-    /// `n` zeros), [`lanes::LANES`] at a time, the groups in parallel with rayon: a group's
+    /// `n` zeros), [`lanes::width`] at a time, the groups in parallel with rayon: a group's
     /// full-rate columns exist only while it is filtered. Bit for bit what
     /// [`Decimation::apply_columns`] gives on the filled columns, with its errors (`name(j)` names
     /// column `j`).
@@ -342,10 +342,10 @@ impl Decimation {
             Prepared::Identity => 0,
             _ => self.padlen,
         };
-        let (start, r) = (self.start_index(n), self.factor);
+        let (start, r, width) = (self.start_index(n), self.factor, lanes::width(&self.prepared));
         let group = |g: usize| -> Result<Vec<Vec<f64>>> {
-            let j0 = g * lanes::LANES;
-            let k = lanes::LANES.min(ncols - j0);
+            let j0 = g * width;
+            let k = width.min(ncols - j0);
             let mut buf = vec![0.0; k * n];
             for c in 0..k {
                 let col = &mut buf[c * n..(c + 1) * n];
@@ -358,7 +358,7 @@ impl Decimation {
                 .map(|(c, out)| finite_output(out, &name(j0 + c)))
                 .collect()
         };
-        match ncols.div_ceil(lanes::LANES) {
+        match ncols.div_ceil(width) {
             0 => Ok(Vec::new()),
             1 => group(0),
             groups => Ok((0..groups)
@@ -396,22 +396,22 @@ impl Decimation {
     }
 
     /// The decimated columns `0..ncols` of `n` validated samples, column `j`'s sample `i`
-    /// being `at(j, i)`: groups of [`lanes::LANES`] columns in parallel.
+    /// being `at(j, i)`: groups of [`lanes::width`] columns in parallel.
     fn decimate(&self, ncols: usize, n: usize, at: impl Fn(usize, usize) -> f64 + Sync) -> Vec<Vec<f64>> {
         let edge = match self.prepared {
             Prepared::Identity => 0,
             _ => self.padlen,
         };
         let start = self.start_index(n);
-        let r = self.factor;
+        let (r, width) = (self.factor, lanes::width(&self.prepared));
         let at = &at;
         let group = |g: usize| {
-            let j0 = g * lanes::LANES;
-            let k = lanes::LANES.min(ncols - j0);
+            let j0 = g * width;
+            let k = width.min(ncols - j0);
             lanes::filtfilt_slice(&self.prepared, k, n, |c, i| at(j0 + c, i), edge, start, r)
         };
-        match ncols.div_ceil(lanes::LANES) {
-            // one group (one to four columns) on this thread: handing it to the pool would add a
+        match ncols.div_ceil(width) {
+            // one group (up to four or eight columns) on this thread: handing it to the pool would add a
             // thread hand-off to a fraction of a millisecond of filtering
             1 => group(0),
             groups => (0..groups)

@@ -2,7 +2,7 @@
 //! crate ([`super::filtfilt`], [`super::sosfiltfilt`], [`super::Decimation`]).
 //!
 //! A recursive filter is a chain of dependent multiply-adds per sample, so one column
-//! runs at the latency of that chain, not at the machine's throughput. Here up to `LANES`
+//! runs at the latency of that chain, not at the machine's throughput. Here up to [`width`]
 //! columns go through the filter together, sample by sample, each keeping its own state
 //! in one lane of small arrays the compiler turns into vector instructions: the chains
 //! of the columns overlap. Every lane performs exactly the operations, in the same order,
@@ -18,14 +18,32 @@
 
 use super::Prepared;
 
-/// Columns filtered together at most.
-pub(super) const LANES: usize = 4;
+/// Columns filtered together: four (an AVX2 register), or eight where the processor has
+/// AVX-512 ([`crate::cpu::wide512`]). The passes are bound by the latency of each section's
+/// recurrence, not by arithmetic, so a group of eight costs about what a group of four does;
+/// with AVX2's sixteen registers eight lanes spilled the states and ran slower (docs/speed.md
+/// §14), AVX-512's thirty-two 8-wide registers hold them.
+const LANES: usize = 4;
+const LANES_512: usize = 8;
+
+/// How many columns [`filtfilt_slice`] takes together with this filter on this processor:
+/// eight for second-order sections on AVX-512, else four. (A transfer function of order 8,
+/// MATLAB's `decimate`, ran its eight lanes slower than two groups of four: 1.74 against
+/// 1.11 ms for eight EMPS columns.)
+pub(super) fn width(prepared: &Prepared) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if matches!(prepared, Prepared::Sos { .. }) && crate::cpu::wide512() {
+        return LANES_512;
+    }
+    let _ = prepared;
+    LANES
+}
 
 /// Kernels are unrolled up to this many second-order sections (a Butterworth or Chebyshev
 /// design of order 8); longer cascades run the general loop.
 const MAX_FIXED_SECTIONS: usize = 4;
 
-/// Zero-phase filtering of `k ≤ LANES` equal-length columns of `n` samples (already
+/// Zero-phase filtering of `k ≤ width(prepared)` equal-length columns of `n` samples (already
 /// validated, `n > edge`), column `c`'s sample `i` being `at(c, i)`, then slicing
 /// `start, start + r, …` of each: the decimated columns. `r = 1, start = 0` is the whole
 /// filtered column.
@@ -38,11 +56,12 @@ pub(super) fn filtfilt_slice(
     start: usize,
     r: usize,
 ) -> Vec<Vec<f64>> {
-    debug_assert!((1..=LANES).contains(&k) && n > edge && r >= 1);
+    debug_assert!((1..=width(prepared)).contains(&k) && n > edge && r >= 1);
     match k {
         1 => group::<1>(prepared, k, n, &at, edge, start, r),
         2 => group::<2>(prepared, k, n, &at, edge, start, r),
-        _ => group::<LANES>(prepared, k, n, &at, edge, start, r),
+        3 | 4 => group::<LANES>(prepared, k, n, &at, edge, start, r),
+        _ => group::<LANES_512>(prepared, k, n, &at, edge, start, r),
     }
 }
 
@@ -83,14 +102,26 @@ fn filter_slice<const L: usize>(
         .collect()
 }
 
-/// Forward and backward pass over `buf`, in place, compiled for the processor: with AVX2
-/// (a group of four lanes in one register) where it has AVX2 and FMA
-/// ([`crate::cpu::wide_simd`]), else for the baseline x86-64. Rust never fuses a
-/// multiply and an add by itself, so both builds compute the same IEEE operations in the
-/// same order and give the same results.
+/// Forward and backward pass over `buf`, in place, compiled for the processor: eight lanes
+/// in one AVX-512 register where it has AVX-512 ([`crate::cpu::wide512`]), four in one
+/// AVX2 register where it has AVX2 and FMA ([`crate::cpu::wide_simd`]), else for the
+/// baseline x86-64. Rust never fuses a multiply and an add by itself, so every build
+/// computes the same IEEE operations in the same order and gives the same results.
 fn filter<const L: usize>(prepared: &Prepared, buf: &mut [[f64; L]]) {
     #[cfg(target_arch = "x86_64")]
     let _flush = super::FlushSubnormals::on();
+    /// # Safety
+    /// The processor must support AVX-512F, AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    unsafe fn wide512<const L: usize>(prepared: &Prepared, buf: &mut [[f64; L]]) {
+        filter_in_place(prepared, buf)
+    }
+    #[cfg(target_arch = "x86_64")]
+    if L > LANES && crate::cpu::wide512() {
+        // SAFETY: `wide512` has checked that this processor has AVX-512F, AVX2 and FMA.
+        return unsafe { wide512(prepared, buf) };
+    }
     /// # Safety
     /// The processor must support AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
