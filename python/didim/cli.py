@@ -944,9 +944,30 @@ def _describe_error(e: BaseException) -> str:
     return str(e)
 
 
+def _keep_freed_memory() -> None:
+    """glibc's allocator, told to keep what the process frees for its next allocations: the simulations' columns
+    (25 000 samples, 200 kB each, hundreds of times) otherwise go back to the system at each free and come back as
+    fresh pages, zeroed by the kernel (the EMPS doctor: 0.2 s of system time, 0.1 s with this; its peak memory +7 MB).
+    The console script's process only; elsewhere (another C library) nothing is done."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return
+    m_trim_threshold, m_top_pad, m_mmap_threshold = -1, -2, -3
+    mallopt(m_mmap_threshold, 32 << 20)  # glibc's largest: blocks up to 32 MB from the heap, not mmap'd one by one
+    mallopt(m_trim_threshold, 256 << 20)  # the heap's free top returned only beyond 256 MB
+    mallopt(m_top_pad, 16 << 20)  # the heap grows 16 MB at a time
+
+
 def entry() -> None:
     """The console script: :func:`main`, then exit with its code. After Ctrl-C or SIGTERM (outputs already cleaned up
     as the interruption unwound) the process exits at once, without waiting for core threads still computing."""
+    if sys.platform.startswith("linux"):
+        _keep_freed_memory()
     try:
         code = main(_last=True)
     except KeyboardInterrupt as e:  # a signal in the instants between main's own handlers and its end
