@@ -249,29 +249,43 @@ def _holm_ranked(best: List[Candidate]) -> List[Candidate]:
     return sorted(best, key=lambda c: (c.p_adj, -c.test.explained))
 
 
-def _best_of(variants: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> Optional[Candidate]:
-    """The best variant of one effect's candidates, its hyper-parameter refined between grid neighbours."""
+def best_variant(variants: list, test_all: Callable[[list], None], refine: Callable[[Any], list]):
+    """The best of one effect's variants on one residual, for either plant: ``test_all`` sets each candidate's
+    grouped Wald test and its one-by-one SVD test (``exact``, see :func:`_test_all`); the best by p-value (then by the
+    share it explains) is tested again exactly, then ``refine(best)`` lists the variants between its grid neighbours
+    ([]: none), and the one that explains most is kept, tested exactly, its grid (the Bonferroni factor) counting
+    both."""
     if not variants:
         return None
-    _test_all(variants, r, wb, data, a)
+    test_all(variants)
     top = None
     for c in variants:
         if _better(c, top):
             top = c
-    top = _exact(top) if top is not None else None
-    if top is not None and top.rebuild is not None:
-        # refine the hyper-parameter between the grid neighbours of the best value
-        (key, h0), = top.hyper.items()
-        fine = h0 * np.geomspace(1 / top.step, top.step, 21)
-        refined = [Candidate(top.effect, x, {key: float(h)}, top.grid, rebuild=top.rebuild, step=top.step)
-                   for h, x in zip(fine, top.rebuild(fine))]
-        _test_all(refined, r, wb, data, a)
-        for c in refined:
+    top = _exact(top)
+    fine = refine(top)
+    if fine:
+        test_all(fine)
+        for c in fine:
             if c.test.explained > top.test.explained:
                 top = c
         top = _exact(top)
         top.grid = len(variants) + len(fine)
     return top
+
+
+def _best_of(variants: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> Optional[Candidate]:
+    """The best variant of one effect's candidates, its hyper-parameter refined between grid neighbours
+    (:func:`best_variant`)."""
+    def refine(top: Candidate) -> List[Candidate]:
+        if top.rebuild is None:
+            return []
+        (key, h0), = top.hyper.items()
+        fine = h0 * np.geomspace(1 / top.step, top.step, 21)
+        return [Candidate(top.effect, x, {key: float(h)}, top.grid, rebuild=top.rebuild, step=top.step)
+                for h, x in zip(fine, top.rebuild(fine))]
+
+    return best_variant(variants, lambda cs: _test_all(cs, r, wb, data, a), refine)
 
 
 def _locate(data: Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:

@@ -268,6 +268,7 @@ class _Candidate:
     test: Any = None
     p_adj: float = 1.0
     rebuild: Optional[Callable[[float], np.ndarray]] = None  # the joint's columns at another value of the hyper
+    exact: Optional[Callable[[], Any]] = field(default=None, repr=False)  # its one-by-one test (_Residuals.test_all)
 
 
 class _Residuals:
@@ -298,18 +299,36 @@ class _Residuals:
         """Full-rate columns ``m`` of joint ``j``, decimated, beyond the model's own columns there."""
         return self.orthogonalize(self.dec.columns(m), self.parts[j][1])
 
-    def test(self, c: _Candidate) -> None:
-        """The Wald test of ``c``'s columns on the residual of the joints it acts on (each joint's rows scaled by its
-        prewhitened residual's σ, so that a joint counts by its evidence, not by its torque)."""
-        from ..stats import wald_whitened
-
+    def whitened(self, c: _Candidate) -> Tuple[np.ndarray, np.ndarray]:
+        """The prewhitened residual and columns of ``c``'s test, on the joints it acts on (each joint's rows scaled by
+        its prewhitened residual's σ, so that a joint counts by its evidence, not by its torque)."""
         rws, xws = [], []
         for j, m in c.columns.items():
             _, _, a, rw, s = self.parts[j]
             xw, = self.prewhiten(a, self.beyond(j, m))
             rws.append(rw / s)
             xws.append(xw / s)
-        c.test = wald_whitened(np.concatenate(rws), np.concatenate(xws))
+        return np.concatenate(rws), np.concatenate(xws)
+
+    def test_all(self, cands: List[_Candidate]) -> None:
+        """The Wald test of each candidate's columns on the residual of the joints it acts on (:meth:`whitened`), as
+        one axis tests a grid (:func:`didim.doctor._test_all`): the candidates on the same joints (one effect's
+        variants) by their normal equations together (:func:`didim.stats.wald_groups`), each keeping its one-by-one
+        SVD test (``exact``) for the variant the ranking keeps."""
+        from ..stats import wald_groups, wald_whitened
+
+        pieces = [self.whitened(c) for c in cands]
+        i = 0
+        while i < len(cands):
+            k = i + 1
+            while k < len(cands) and list(cands[k].columns) == list(cands[i].columns):
+                k += 1
+            rw = pieces[i][0]
+            xs = [x for _, x in pieces[i:k]]
+            for c, t, x in zip(cands[i:k], wald_groups(rw, np.concatenate(xs, axis=1), [x.shape[1] for x in xs]), xs):
+                c.test = t
+                c.exact = (lambda rw=rw, x=x: wald_whitened(rw, x))
+            i = k
 
     def coefficients(self, c: _Candidate) -> np.ndarray:
         """``c``'s coefficients on the residual by feasible GLS under the alternative (one Cochrane–Orcutt step): each
@@ -507,31 +526,26 @@ def _core_sign(v: np.ndarray, shape: str, eps: float) -> np.ndarray:
 
 
 def _rank(resid: _Residuals, groups: List[List[_Candidate]]) -> List[_Candidate]:
-    """The best variant of each group by its Wald test, p-values times its grid (Bonferroni) and Holm-adjusted across
-    the groups, ranked."""
-    from ..stats import holm
+    """The best variant of each group by its Wald test (one axis's :func:`didim.doctor.best_variant`: the grid's
+    best, then its hyper-parameter refined between the grid's neighbours of the best), p-values times its grid
+    (Bonferroni) and Holm-adjusted across the groups, ranked."""
+    from . import _holm_ranked, best_variant
 
     best = []
     for g in groups:
-        for c in g:
-            resid.test(c)
-        top = min(g, key=lambda c: (c.test.p_value, -c.test.explained))
-        if top.rebuild is not None and len(g) > 1:
-            # the hyper-parameter refined between the grid's neighbours of the best
+        def refine(top: _Candidate, g: List[_Candidate] = g) -> List[_Candidate]:
+            if top.rebuild is None or len(g) < 2:
+                return []
             (key, h0), = top.hyper.items()
             ratio = (g[1].hyper[key] / g[0].hyper[key]) ** 0.5
-            for h in h0 * np.geomspace(1 / ratio, ratio, REFINE):
-                c = _Candidate(top.effect, top.joint, {top.joint: top.rebuild(float(h))}, {key: float(h)},
+            return [_Candidate(top.effect, top.joint, {top.joint: top.rebuild(float(h))}, {key: float(h)},
                                len(g) + REFINE, rebuild=top.rebuild)
-                resid.test(c)
-                if c.test.explained > top.test.explained:
-                    top = c
-            top.grid = len(g) + REFINE
-        best.append(top)
-    raw = [min(1.0, c.test.p_value * c.grid) for c in best]
-    for c, p in zip(best, holm(raw) if raw else []):
-        c.p_adj = float(p)
-    return sorted(best, key=lambda c: (c.p_adj, -c.test.explained))
+                    for h in h0 * np.geomspace(1 / ratio, ratio, REFINE)]
+
+        top = best_variant(g, resid.test_all, refine)
+        if top is not None:
+            best.append(top)
+    return _holm_ranked(best)
 
 
 @dataclass
