@@ -45,7 +45,7 @@ from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candi
                       params_text, separating_experiment)
 from .._parallel import cores
 from .fit import Data, State, fit_friction_law, refit
-from .finding import MIN_HELDOUT_GAIN, Finding
+from .finding import AMBIGUOUS_SHARE, MIN_HELDOUT_GAIN, Finding
 from .words import lead_in_words, start_words
 
 #: Practical significance of the ``unnamed`` check: structure left in the residual is reported only when its mean in
@@ -757,7 +757,7 @@ class _Search:
         return alt
 
     def note_ambiguities(self, c: Candidate, significant: List[Candidate], wb: np.ndarray) -> None:
-        """Records the significant candidates whose regressor is (over 90 %) that of the accepted ``c``."""
+        """Records the significant candidates whose regressor is (over :data:`AMBIGUOUS_SHARE`) that of the accepted ``c``."""
         xc = orthogonalize(c.columns, wb)
         for other in significant:
             if other is c:
@@ -765,7 +765,7 @@ class _Search:
             xo = orthogonalize(other.columns, wb)
             res_o = orthogonalize(xo, xc)
             share = 1 - float(np.sum(res_o**2) / max(np.sum(xo**2), 1e-300))
-            if share > 0.9:
+            if share > AMBIGUOUS_SHARE:
                 # "equal": the other explains (nearly) as much of the residual, so the record cannot say which it is
                 self.ambiguities.append({"effects": [c.effect, other.effect], "shared_pct": 100 * share,
                                          "equal": bool(other.test.explained >= 0.9 * c.test.explained),

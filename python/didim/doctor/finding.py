@@ -13,6 +13,11 @@ from ..formats._io import jsonable as _clean
 #: finds such differences; an engineer cares about an effect that changes the fit, not about one that is detectable.
 MIN_HELDOUT_GAIN = 0.05
 
+#: Two candidates are ambiguous when one's regressor spans more than this share of the other's (beyond the model's
+#: own columns): the record cannot say which it is. A candidate the model's own columns span by as much cannot be
+#: seen at all (the robot doctor's blind spots). Both doctors.
+AMBIGUOUS_SHARE = 0.9
+
 
 @dataclass
 class Finding:

@@ -18,7 +18,7 @@ import numpy as np
 
 from .._errors import DataError, DidimError, SimulationError
 from ..recording import Recording
-from .finding import MIN_HELDOUT_GAIN
+from .finding import AMBIGUOUS_SHARE, MIN_HELDOUT_GAIN
 
 #: Bands of each joint's speed (shares of its top reference speed) and of its stroke the residual is reported in.
 SPEED_EDGES = (0.0, 0.05, 0.25, 0.5, 1.0)
@@ -1225,6 +1225,68 @@ def _shared(resid: _Residuals, a: _Candidate, b: _Candidate) -> float:
     return 1 - float(np.sum(left ** 2) / max(float(np.sum(xb ** 2)), 1e-300))
 
 
+#: :func:`_gravity_like`: a joint's sinusoid is its links' gravity when what the gravity columns leave of it, over
+#: random poses of the arm, is below this share of its energy: the rounding of a well-conditioned least squares (the
+#: UR5's shoulder lift leaves 1e-30); any other joint leaves a share of order one (a part of its links' gravity
+#: follows the joints before it that turn about a horizontal axis).
+GRAVITY_LIKE = 1e-12
+
+
+def _gravity_like(robot, j: int) -> bool:
+    """Whether a torque A·sin(q_j + φ) on revolute joint ``j`` is, at every pose of the arm, a torque its links'
+    centres of mass can give it under gravity: the joints before it turn about the vertical (or slide), so its angle
+    to gravity is its own. Tested on random poses (not the record's: a structure, not an excitation), the
+    gravity-only rows of the joint's regressor (``robot.regressor`` at rest) against sin and cos of its angle."""
+    n = robot.ndof
+    rng = np.random.default_rng(40)  # poses that sample the arm's configurations; any draw gives the same verdict
+    poses = 4 * 10 * n
+    q = np.empty((poses, n))
+    for k, (kind, lim) in enumerate(zip(robot.joint_kinds, robot.limits)):
+        lo, hi = (float(lim[0]), float(lim[1])) if lim is not None else (-math.pi, math.pi)
+        if kind != "prismatic":
+            lo, hi = -math.pi, math.pi
+        elif not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+            lo, hi = -1.0, 1.0
+        q[:, k] = rng.uniform(lo, hi, poses)
+    zero = np.zeros_like(q)
+    rows = np.asarray(robot.regressor(q, zero, zero))
+    # the joint's gravity columns where they are more than the rounding of the arm's gravity (a vertical axis's are
+    # 1e-12 of the others', and would fit anything)
+    u, sv, _ = np.linalg.svd(rows[:, j, :], full_matrices=False)
+    u = u[:, sv > 1e-9 * float(np.linalg.norm(rows.reshape(-1, rows.shape[-1]), 2))]
+    x = np.column_stack([np.sin(q[:, j]), np.cos(q[:, j])])
+    left = x - u @ (u.T @ x)
+    return float(np.sum(left ** 2) / np.sum(x ** 2)) < GRAVITY_LIKE
+
+
+def _blind_spots(resid: _Residuals, groups: List[List[_Candidate]], robot) -> List[Dict[str, Any]]:
+    """The position-dependent torques the base model cannot see: a torque A·sin(q + φ) on a revolute joint whose
+    angle to gravity is its own (:func:`_gravity_like`: a UR's shoulder lift, a KUKA's axis 2, where counterbalances
+    act) is a torque its links' centres of mass can give it, and the model's free bodies take it whole (a 15 N·m
+    spring on the held-out UR10's shoulder lift: 14.97 N·m in the first moments, docs/robot_doctor_sweep.md). Said
+    as an ambiguity with ``gravity`` on that joint, with what would separate them, when the model's own columns on
+    the joint span the candidate's on this record (beyond :data:`AMBIGUOUS_SHARE`); bodies held (``frozen``) leave no
+    first moments to take it, and nothing is said."""
+    out = []
+    for g in groups:
+        c = g[0]
+        if c.effect != "position_dependent_torque" or c.joint is None or "period" in c.hyper:
+            continue
+        m = c.columns[c.joint]
+        x = resid.dec.columns(m)
+        left = resid.beyond(c.joint, m)
+        share = 1 - float(np.sum(left ** 2) / max(float(np.sum(x ** 2)), 1e-300))
+        if share > AMBIGUOUS_SHARE and _gravity_like(robot, c.joint):
+            out.append({"effects": ["position_dependent_torque", "gravity"], "joint": robot.joint_names[c.joint],
+                        "shared_pct": 100 * share, "equal": True,
+                        "experiment": "no record of this arm separates them: a spring or counterbalance A·sin(q + φ) "
+                                      "on this joint is the torque its links' centres of mass give it, which the "
+                                      "model's free bodies take; to look for one, hold the bodies at trusted values "
+                                      "(the doctor's frozen= with a result of the CAD's or published inertial "
+                                      "parameters, initial= that result)"})
+    return out
+
+
 def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable[[str], None]] = None,
                  controller_check: str = "error", offset: Optional[bool] = None, alpha: float = 0.01,
                  max_findings: int = MAX_FINDINGS, initial=None, frozen=None) -> RobotDiagnosis:
@@ -1315,7 +1377,10 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
                              f"simulated ({e})")
                 break
             resid = _Residuals(state.train, state.res, sim, dec)
-            ranked = _rank(resid, _candidates(state.train, state.res, sim, done))
+            groups = _candidates(state.train, state.res, sim, done)
+            if not rounds:
+                ambiguities += _blind_spots(resid, groups, robot)
+            ranked = _rank(resid, groups)
             rounds.append({"round": len(rounds) + 1, "candidates": [
                 {"effect": c.effect, "joint": _names(c, robot)[0], "hyper": c.hyper, "wald": c.test.statistic,
                  "dof": c.test.dof, "p_value": c.test.p_value, "p_adjusted": c.p_adj,
@@ -1375,7 +1440,7 @@ def doctor_robot(recording, robot, validate=None, *, progress: Optional[Callable
             for other in significant:
                 if other is not c and other.joint == c.joint:
                     share = _shared(resid, c, other)
-                    if share > 0.9:
+                    if share > AMBIGUOUS_SHARE:
                         ambiguities.append({"effects": [c.effect, other.effect], "joint": f.joint,
                                             "shared_pct": 100 * share,
                                             "equal": bool(other.test.explained >= 0.9 * c.test.explained),
