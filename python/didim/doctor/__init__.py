@@ -189,8 +189,8 @@ class Diagnosis:
                          f"{a['experiment']}")
         if not self.findings and not self.rejected:
             return "\n".join(lines)
-        lines.append(f"details (each effect's values when it was accepted; the tests work on the force decimated at "
-                     f"{self.options['cutoff_hz']:g} Hz: training "
+        lines.append(f"details (each effect's values when it was accepted; the tests work on the force low-passed at "
+                     f"{self.options['cutoff_hz']:g} Hz and decimated: training "
                      f"{100 * f['train_before']:.2f} % -> {100 * f['train_after']:.2f} %, validation "
                      f"{100 * f['valid_before']:.2f} % -> {100 * f['valid_after']:.2f} %):")
         for x in self.findings + self.rejected:

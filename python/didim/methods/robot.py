@@ -1532,7 +1532,8 @@ class _RobotPlant:
             if np.any(moved):
                 new = np.where(moved, np.clip(eps + step, eps / 2, 2 * eps), eps)
                 self.law = (self.law[0], tuple(float(e) for e in new))
-                self.say("smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new) + f" {speed_unit(rec)}")
+                self.say("the next iterate's smoothing speed ε = " + ", ".join(f"{e:.4g}" for e in new)
+                         + f" {speed_unit(rec)} (the result keeps the law of the iterate it returns)")
         est, cov, res = inverse.fit(self.law, held=self.held)
         # a spring's damping is not negative: where the least squares ask for less than none, it is held at none and
         # the rest fitted again (the bound active for this iteration only). Shortening the step cannot keep it
