@@ -46,6 +46,7 @@ from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candi
 from .._parallel import cores
 from .fit import Data, State, fit_friction_law, refit
 from .finding import AMBIGUOUS_SHARE, MIN_HELDOUT_GAIN, Finding
+from .ranking import best_variant, holm_ranked as _holm_ranked
 from .words import lead_in_words, start_words
 
 #: Practical significance of the ``unnamed`` check: structure left in the residual is reported only when its mean in
@@ -223,55 +224,10 @@ def _test_all(cands: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Data,
         c.exact = (lambda s=int(e - c.columns.shape[1]), e=int(e): wald_whitened(rw, xw[:, s:e]))
 
 
-def _exact(c: Candidate) -> Candidate:
-    """``c`` with its one-by-one SVD test (:func:`_test_all`)."""
-    if c.exact is not None:
-        c.test, c.exact = c.exact(), None
-    return c
-
-
-def _better(c: Candidate, top: Optional[Candidate]) -> bool:
-    return top is None or c.test.p_value < top.test.p_value or (
-        c.test.p_value == top.test.p_value and c.test.explained > top.test.explained)
-
-
 def _score(groups: List[List[Candidate]], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> List[Candidate]:
     """Best variant of each candidate, scored; Holm-adjusted p-values set in place."""
     best = [c for c in (_best_of(variants, r, wb, data, a) for variants in groups) if c is not None]
     return _holm_ranked(best)
-
-
-def _holm_ranked(best: List[Candidate]) -> List[Candidate]:
-    """Sets the Holm-adjusted p-values (with each candidate's grid as a Bonferroni factor) and ranks."""
-    raw = [min(1.0, c.test.p_value * c.grid) for c in best]
-    for c, p in zip(best, holm(raw) if raw else []):
-        c.p_adj = float(p)
-    return sorted(best, key=lambda c: (c.p_adj, -c.test.explained))
-
-
-def best_variant(variants: list, test_all: Callable[[list], None], refine: Callable[[Any], list]):
-    """The best of one effect's variants on one residual, for either plant: ``test_all`` sets each candidate's
-    grouped Wald test and its one-by-one SVD test (``exact``, see :func:`_test_all`); the best by p-value (then by the
-    share it explains) is tested again exactly, then ``refine(best)`` lists the variants between its grid neighbours
-    ([]: none), and the one that explains most is kept, tested exactly, its grid (the Bonferroni factor) counting
-    both."""
-    if not variants:
-        return None
-    test_all(variants)
-    top = None
-    for c in variants:
-        if _better(c, top):
-            top = c
-    top = _exact(top)
-    fine = refine(top)
-    if fine:
-        test_all(fine)
-        for c in fine:
-            if c.test.explained > top.test.explained:
-                top = c
-        top = _exact(top)
-        top.grid = len(variants) + len(fine)
-    return top
 
 
 def _best_of(variants: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> Optional[Candidate]:

@@ -526,10 +526,10 @@ def _core_sign(v: np.ndarray, shape: str, eps: float) -> np.ndarray:
 
 
 def _rank(resid: _Residuals, groups: List[List[_Candidate]]) -> List[_Candidate]:
-    """The best variant of each group by its Wald test (one axis's :func:`didim.doctor.best_variant`: the grid's
+    """The best variant of each group by its Wald test (one axis's :func:`didim.doctor.ranking.best_variant`: the grid's
     best, then its hyper-parameter refined between the grid's neighbours of the best), p-values times its grid
     (Bonferroni) and Holm-adjusted across the groups, ranked."""
-    from . import _holm_ranked, best_variant
+    from .ranking import best_variant, holm_ranked
 
     best = []
     for g in groups:
@@ -545,7 +545,7 @@ def _rank(resid: _Residuals, groups: List[List[_Candidate]]) -> List[_Candidate]
         top = best_variant(g, resid.test_all, refine)
         if top is not None:
             best.append(top)
-    return _holm_ranked(best)
+    return holm_ranked(best)
 
 
 @dataclass
