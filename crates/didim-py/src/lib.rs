@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyType};
 
 mod convert;
+mod decimation;
 mod model;
 mod problem;
 mod robot;
@@ -613,7 +614,7 @@ fn decimate<'py>(
         None => (Matrix::ColMajor(Vec::new().into()), y.len(), 0),
     };
     let (yd, wd) = run(py, || {
-        let dec = problem::make_decimation(factor, kind, order, cutoff_hz, fs_hz, form)?;
+        let dec = decimation::make_decimation(factor, kind, order, cutoff_hz, fs_hz, form)?;
         if p > 0 && n != y.len() {
             return Err(Error::InvalidInput(format!(
                 "w has {n} rows but y has {} samples",
@@ -662,7 +663,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sosfiltfilt, m)?)?;
     m.add_function(wrap_pyfunction!(decimate, m)?)?;
     m.add_function(wrap_pyfunction!(default_factor, m)?)?;
-    m.add_class::<problem::Decimation>()?;
+    m.add_class::<decimation::Decimation>()?;
     m.add_class::<problem::Problem>()?;
     Ok(())
 }

@@ -306,7 +306,7 @@ impl PyModel {
         qdd: PyReadonlyArray2<'py, f64>,
         cols: Vec<usize>,
         dof: usize,
-        decimation: PyRef<'py, crate::problem::Decimation>,
+        decimation: PyRef<'py, crate::decimation::Decimation>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (q, qd, qdd) = (rows2(&q), rows2(&qd), rows2(&qdd));
         let k = cols.len();
