@@ -98,6 +98,8 @@ def main() -> None:
                      + (f"{dd['M']:+.2f} %, {dd['Fv']:+.2f} %, {dd['Fc']:+.2f} %" if dd else "") + " |")
     lines += ["", "Unit variants against their source record (rigid DIDIM, relative difference of each parameter):", ""]
     for v, src in sorted(variants.items()):
+        if v not in res or src not in res:  # a run of some records only (their names given)
+            continue
         a, b = res[v].get("didim_params"), res[src].get("didim_params")
         if a and b:
             diff = max(abs(a[k] / b[k] - 1) for k in a)
