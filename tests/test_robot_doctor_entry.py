@@ -51,3 +51,30 @@ def test_a_robot_joints_stribeck_term_is_worded_as_one_axis_s():
     assert _physics("stribeck", {"Fs_j2": 0.1, "vs": 0.08}, res, 1) == STRIBECK_DEFICIT  # against a negative Fc
     assert _physics("stribeck", {"Fs_j1": 0.4, "vs": 0.05}, res, 0) == REGISTRY["stribeck"].physics
     assert _physics("stribeck") == REGISTRY["stribeck"].physics  # no fit given: the effect's sentence
+
+
+def test_the_bodies_of_a_start_result_can_be_held_from_the_command_line(robots_dir, tmp_path, capsys):
+    """``didim doctor ... --start RESULT.json --hold-bodies``: the start's bodies held in every fit, so that no free
+    first moment can take a spring on a joint whose angle to gravity is its own. The pendulum swings in a vertical
+    plane: its first joint is such a joint, said as a blind spot with free bodies, not with them held; the final
+    model keeps the start's bodies."""
+    urdf, ctl = robots_dir / "pendulum_cad.urdf", robots_dir / "pendulum_controller.json"
+    train, valid = robots_dir / "pendulum_train.csv", robots_dir / "pendulum_valid.csv"
+    base, out = tmp_path / "base.json", tmp_path / "d.json"
+    common = ["--urdf", str(urdf), "--controller", str(ctl), "--quiet"]
+    assert main(["identify", str(train), *common, "--method", "didim", "--json", str(base)]) == 0
+    assert main(["doctor", str(train), *common, "--validate", str(valid), "--hold-bodies"]) == 2
+    assert "--hold-bodies holds the bodies of the --start result: give --start" in capsys.readouterr().err
+    assert main(["doctor", str(train), *common, "--validate", str(valid), "--json", str(out)]) == 0
+    free = json.loads(out.read_text())
+    blind = [a for a in free["ambiguities"] if a["effects"] == ["position_dependent_torque", "gravity"]]
+    assert [a["joint"] for a in blind] == ["joint1"] and "--hold-bodies" in blind[0]["experiment"]
+    result = tmp_path / "final.json"
+    assert main(["doctor", str(train), *common, "--validate", str(valid), "--start", str(base), "--hold-bodies",
+                 "--json", str(out), "--result", str(result)]) == 0
+    held = json.loads(out.read_text())
+    assert not [a for a in held["ambiguities"] if "gravity" in a["effects"]]
+    start, final = didim.load_result(base), didim.load_result(result)
+    for b in start.base.bodies_only:
+        assert final.params[b] == start.params[b], b
+

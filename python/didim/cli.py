@@ -530,12 +530,19 @@ def _robot_diagnosis(args):
     for flag, value in (("--model", args.model != "rigid"), ("--apm", args.apm is not None)):
         if value:
             raise DataError(f"{flag} does not apply to a robot (--urdf): DIDIM starts from the URDF's values")
+    if args.hold_bodies and not args.start:
+        raise DataError("--hold-bodies holds the bodies of the --start result: give --start RESULT.json too, a "
+                        "result of this robot whose bodies you trust (published values, or the CAD's: didim "
+                        "identify ... --json)")
     robot = Robot.from_urdf(args.urdf, _joints(args))
     rec = _robot_record(args, args.file, robot)
     val = _robot_record(args, args.validate, robot) if args.validate else None
+    start = _start_result(args.start) if args.start else None
+    # the bodies' base parameters of the start held in every fit: what the free bodies would take (a spring on a
+    # joint whose angle to gravity is its own) is left to the candidates
+    frozen = {b: start.params[b] for b in start.base.bodies_only} if args.hold_bodies else None
     return doctor(rec, _robot_model(args, robot), val, alpha=args.alpha, progress=_progress(args.quiet),
-                  controller_check=args.controller_check,
-                  initial=_start_result(args.start) if args.start else None)
+                  controller_check=args.controller_check, initial=start, frozen=frozen)
 
 
 def _robot_model(args, robot):
@@ -754,6 +761,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "total width, rad or m), as for identify")
     o.add_argument("--start", metavar="RESULT.json", help="with --urdf: a result of the same robot (didim identify "
                    "--json, or published values) the base fit starts from instead of the URDF's values")
+    o.add_argument("--hold-bodies", action="store_true", help="with --start: the bodies' parameters held at the "
+                   "start's in every fit (the drives and the effects fitted): a spring or counterbalance on a joint "
+                   "whose angle to gravity is its own, which free bodies take, can then be named")
     o.set_defaults(func=cmd_doctor)
 
     m = sub.add_parser("simulate", help="apply a saved result to a record: simulated vs measured force (cross-test)")

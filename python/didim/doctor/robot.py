@@ -1282,8 +1282,9 @@ def _blind_spots(resid: _Residuals, groups: List[List[_Candidate]], robot) -> Li
                         "experiment": "no record of this arm separates them: a spring or counterbalance A·sin(q + φ) "
                                       "on this joint is the torque its links' centres of mass give it, which the "
                                       "model's free bodies take; to look for one, hold the bodies at trusted values "
-                                      "(the doctor's frozen= with a result of the CAD's or published inertial "
-                                      "parameters, initial= that result)"})
+                                      "(on the command line --start RESULT.json --hold-bodies, a result of the CAD's "
+                                      "or published inertial parameters; in Python initial= that result, frozen= "
+                                      "its bodies' parameters)"})
     return out
 
 
