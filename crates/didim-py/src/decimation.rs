@@ -84,26 +84,37 @@ impl Decimation {
         y: PyReadonlyArray1<'py, f64>,
         w: Option<PyReadonlyArray2<'py, f64>>,
     ) -> PyResult<Decimated<'py>> {
-        let y = slice1(&y);
-        let y: &[f64] = &y;
-        let (wm, n, p) = match &w {
-            Some(w) => Matrix::of(w),
-            None => (Matrix::ColMajor(Vec::new().into()), y.len(), 0),
-        };
-        let (yd, wd) = run(py, || {
-            if p > 0 && n != y.len() {
-                return Err(Error::InvalidInput(format!(
-                    "w has {n} rows but y has {} samples",
-                    y.len()
-                )));
-            }
-            wm.decimate(&self.inner, y, p)
-        })?;
-        let m = yd.len();
-        let wd = match w {
-            Some(_) => Some(colmajor_to_array(py, wd, m, p)?),
-            None => None,
-        };
-        Ok((yd.into_pyarray(py), wd))
+        decimate_arrays(py, &self.inner, y, w)
     }
+}
+
+/// `y` (n,) and, when given, every column of `w` (n, p) decimated by `dec`: `(y_dec, w_dec)`
+/// (`Decimation.apply` and the module's `decimate`).
+pub fn decimate_arrays<'py>(
+    py: Python<'py>,
+    dec: &CoreDecimation,
+    y: PyReadonlyArray1<'py, f64>,
+    w: Option<PyReadonlyArray2<'py, f64>>,
+) -> PyResult<Decimated<'py>> {
+    let y = slice1(&y);
+    let y: &[f64] = &y;
+    let (wm, n, p) = match &w {
+        Some(w) => Matrix::of(w),
+        None => (Matrix::ColMajor(Vec::new().into()), y.len(), 0),
+    };
+    let (yd, wd) = run(py, || {
+        if p > 0 && n != y.len() {
+            return Err(Error::InvalidInput(format!(
+                "w has {n} rows but y has {} samples",
+                y.len()
+            )));
+        }
+        wm.decimate(dec, y, p)
+    })?;
+    let m = yd.len();
+    let wd = match w {
+        Some(_) => Some(colmajor_to_array(py, wd, m, p)?),
+        None => None,
+    };
+    Ok((yd.into_pyarray(py), wd))
 }

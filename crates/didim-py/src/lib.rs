@@ -607,29 +607,9 @@ fn decimate<'py>(
     let factor = factor.get("factor").map_err(|e| core_error(py, e))?;
     let order = order.get("order").map_err(|e| core_error(py, e))?;
     let (cutoff_hz, fs_hz) = (cutoff_hz.map(|r| r.0), fs_hz.map(|r| r.0));
-    let y = slice1(&y);
-    let y: &[f64] = &y;
-    let (wm, n, p) = match &w {
-        Some(w) => Matrix::of(w),
-        None => (Matrix::ColMajor(Vec::new().into()), y.len(), 0),
-    };
-    let (yd, wd) = run(py, || {
-        let dec = decimation::make_decimation(factor, kind, order, cutoff_hz, fs_hz, form)?;
-        if p > 0 && n != y.len() {
-            return Err(Error::InvalidInput(format!(
-                "w has {n} rows but y has {} samples",
-                y.len()
-            )));
-        }
-        wm.decimate(&dec, y, p)
-    })?;
-    let m = yd.len();
-    let wd = if w.is_some() {
-        Some(colmajor_to_array(py, wd, m, p)?)
-    } else {
-        None
-    };
-    Ok((yd.into_pyarray(py), wd))
+    let dec = decimation::make_decimation(factor, kind, order, cutoff_hz, fs_hz, form)
+        .map_err(|e| core_error(py, e))?;
+    decimation::decimate_arrays(py, &dec, y, w)
 }
 
 /// Down-sampling factor keeping the cutoff at 80 % of the new Nyquist frequency.
