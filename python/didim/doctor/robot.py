@@ -1242,11 +1242,11 @@ def _gravity_like(robot, j: int) -> bool:
     poses = 4 * 10 * n
     q = np.empty((poses, n))
     for k, (kind, lim) in enumerate(zip(robot.joint_kinds, robot.limits)):
-        lo, hi = (float(lim[0]), float(lim[1])) if lim is not None else (-math.pi, math.pi)
-        if kind != "prismatic":
-            lo, hi = -math.pi, math.pi
-        elif not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-            lo, hi = -1.0, 1.0
+        # a revolute joint over its turn; a prismatic one over its stroke (no stroke given: held at zero, no length
+        # assumed: a slide turns no axis against gravity)
+        lo, hi = (-math.pi, math.pi) if kind != "prismatic" else (
+            (float(lim[0]), float(lim[1])) if lim is not None and math.isfinite(lim[0]) and math.isfinite(lim[1])
+            else (0.0, 0.0))
         q[:, k] = rng.uniform(lo, hi, poses)
     zero = np.zeros_like(q)
     rows = np.asarray(robot.regressor(q, zero, zero))
@@ -1274,7 +1274,7 @@ def _blind_spots(resid: _Residuals, groups: List[List[_Candidate]], robot) -> Li
             continue
         m = c.columns[c.joint]
         x = resid.dec.columns(m)
-        left = resid.beyond(c.joint, m)
+        left = resid.orthogonalize(x, resid.parts[c.joint][1])  # as beyond(), the columns decimated once
         share = 1 - float(np.sum(left ** 2) / max(float(np.sum(x ** 2)), 1e-300))
         if share > AMBIGUOUS_SHARE and _gravity_like(robot, c.joint):
             out.append({"effects": ["position_dependent_torque", "gravity"], "joint": robot.joint_names[c.joint],
