@@ -7,13 +7,15 @@ The loop (``doctor``):
    position (each direction apart) and around events, with confidence bands;
 3. name: each candidate effect's regressor is built from the simulated, noise-free states (with the core's basis
    functions where the effect is a model term), orthogonalized against the current model's regressor, and scored
-   by a Wald test on the AR-prewhitened residual with a HAC (Newey-West) covariance; hyper-parameters (Stribeck
+   by a Wald test on the residual prewhitened under the alternative (the AR polynomial of the residual less the
+   candidate's fit: :func:`didim.stats.wald_fgls`); hyper-parameters (Stribeck
    speed, ripple period, backlash gap) by grid search with a Bonferroni factor for the grid; Holm's correction
    across candidates;
 4. model: the best significant candidate is added to the model (simulator and regressor alike) and refitted in
    closed loop;
 5. show: it is accepted only if the output error on held-out data (a validation recording, or the last part of
-   the record) falls, by a one-sided Diebold-Mariano test at level ``alpha`` (HAC variance of the loss difference);
+   the record) falls, by a one-sided Diebold-Mariano test on the absolute errors at level ``alpha`` (HAC variance
+   of the loss difference), and by at least ``MIN_HELDOUT_GAIN`` of itself;
    repeat until nothing significant is left. Remaining structure that no candidate explains is reported as
    ``unnamed`` with where it lives.
 
@@ -40,12 +42,12 @@ from ..result import IdentificationResult
 from ..signal import Decimation, welch
 from ..model import Model
 from ..simulation import SimResult, coulomb_eps_of, default_coulomb_eps, param_names
-from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, prewhiten, wald_added, wald_groups, wald_whitened
+from ..stats import ar_fit, diebold_mariano, holm, orthogonalize, wald_added, wald_fgls
 from .effects import (FRICTION_SHAPE, REGISTRY, STRIBECK_DEFICIT, UNNAMED, Candidate, Effect, final_values,
                       params_text, separating_experiment)
 from .._parallel import cores
 from .fit import Data, State, fit_friction_law, refit
-from .finding import AMBIGUOUS_SHARE, MIN_HELDOUT_GAIN, Finding
+from .finding import AMBIGUOUS_SHARE, HELDOUT_LOSS, MIN_HELDOUT_GAIN, Finding
 from .ranking import best_variant, holm_ranked as _holm_ranked
 from .words import lead_in_words, start_words
 
@@ -204,33 +206,22 @@ class Diagnosis:
         return self.summary()
 
 
-def _test_all(cands: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> None:
-    """Sets each candidate's Wald test. The (decimated) columns of all of them are orthogonalized to the base
-    columns ``wb`` and prewhitened in one pass (both act column by column), then tested together by their normal
-    equations (:func:`didim.stats.wald_groups`): the ranking's tests at a fraction of the cost for the grids of
-    hyper-parameters. Each candidate keeps the one-by-one SVD test (``exact``) on the same columns, which
-    :func:`_best_of` sets on the variant it keeps: an adopted effect's refit starts from that test's coefficients, and
-    DIDIM stops within its tolerance of wherever its start leads (from the normal equations' coefficients, 3e-11 apart,
-    a Stribeck hump on truthbench/axes was adopted at 2.889 N instead of 2.893 N)."""
+def _test_all(cands: List[Candidate], r: np.ndarray, wb: np.ndarray) -> None:
+    """Sets each candidate's Wald test (:func:`didim.stats.wald_fgls`: prewhitened under the alternative, by the AR
+    polynomial of the residual less the candidate's fit) on its columns orthogonalized to the base columns ``wb`` (all
+    candidates' in one pass: it acts column by column)."""
     if not cands:
         return
     # stacked column by column (Fortran order), as the core gives them: the product in orthogonalize then runs the
     # BLAS on the same layout as for the columns of any other call, and gives each column the same bits
     x = orthogonalize(np.concatenate([np.asarray(c.columns, dtype=float).T for c in cands], axis=0).T, wb)
-    rw, xw = prewhiten(a, r, x)
     ends = np.cumsum([c.columns.shape[1] for c in cands])
-    for c, t, e in zip(cands, wald_groups(rw, xw, [c.columns.shape[1] for c in cands]), ends):
-        c.test = t
-        c.exact = (lambda s=int(e - c.columns.shape[1]), e=int(e): wald_whitened(rw, xw[:, s:e]))
+    for c, e in zip(cands, ends):
+        c.test = wald_fgls(r, x[:, int(e - c.columns.shape[1]):int(e)])
+        c.exact = None
 
 
-def _score(groups: List[List[Candidate]], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> List[Candidate]:
-    """Best variant of each candidate, scored; Holm-adjusted p-values set in place."""
-    best = [c for c in (_best_of(variants, r, wb, data, a) for variants in groups) if c is not None]
-    return _holm_ranked(best)
-
-
-def _best_of(variants: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Data, a: np.ndarray) -> Optional[Candidate]:
+def _best_of(variants: List[Candidate], r: np.ndarray, wb: np.ndarray) -> Optional[Candidate]:
     """The best variant of one effect's candidates, its hyper-parameter refined between grid neighbours
     (:func:`best_variant`)."""
     def refine(top: Candidate) -> List[Candidate]:
@@ -241,7 +232,7 @@ def _best_of(variants: List[Candidate], r: np.ndarray, wb: np.ndarray, data: Dat
         return [Candidate(top.effect, x, {key: float(h)}, top.grid, rebuild=top.rebuild, step=top.step)
                 for h, x in zip(fine, top.rebuild(fine))]
 
-    return best_variant(variants, lambda cs: _test_all(cs, r, wb, data, a), refine)
+    return best_variant(variants, lambda cs: _test_all(cs, r, wb), refine)
 
 
 def _locate(data: Data, r: np.ndarray, sim: SimResult) -> Dict[str, Any]:
@@ -476,11 +467,10 @@ class _Search:
         p-value."""
         state, rt, _, sim = cur
         wb = orthogonalize(self.data.train_base_columns(state, sim), np.zeros((len(rt), 0)))
-        a = ar_fit(rt)
         effects = [e for name, e in REGISTRY.items() if name not in self.done and (only is None or name in only)]
 
         def best(e: Effect) -> Optional[Candidate]:  # the core and numpy's large operations release the interpreter
-            return _best_of(e.candidates(state, sim, self.data), rt, wb, self.data, a)
+            return _best_of(e.candidates(state, sim, self.data), rt, wb)
 
         workers = min(2, cores())
         if workers == 1:
@@ -506,9 +496,9 @@ class _Search:
                 out += [c for c in ranked if c.effect == partner]
         return out
 
-    def attempt(self, c: Candidate, cur: Fitted, loss: str = "squared") -> Tuple[Optional[Finding], Optional[Fitted]]:
-        """Adopts candidate ``c`` into the model and judges it on held-out data (Diebold-Mariano on the ``loss`` of
-        the errors): the finding and the new fit."""
+    def attempt(self, c: Candidate, cur: Fitted) -> Tuple[Optional[Finding], Optional[Fitted]]:
+        """Adopts candidate ``c`` into the model and judges it on held-out data (Diebold-Mariano on the
+        :data:`~didim.doctor.finding.HELDOUT_LOSS` of the errors): the finding and the new fit."""
         state, rt, rv, _ = cur
         effect: Effect = REGISTRY[c.effect]
         self.done.append(c.effect)
@@ -530,7 +520,7 @@ class _Search:
                                          accepted=False))
             return None, None
         rt_n, rv_n = new[1], new[2]
-        dm, p_dm, gain = diebold_mariano(rv, rv_n, loss)
+        dm, p_dm, gain = diebold_mariano(rv, rv_n, HELDOUT_LOSS)
         stat = {"wald": c.test.statistic, "dof": c.test.dof, "p_value": c.test.p_value, "p_adjusted": c.p_adj,
                 "explained_pct": 100 * c.test.explained, "dm_statistic": dm, "dm_p_value": p_dm,
                 "valid_mse_reduction_pct": 100 * gain}
@@ -540,7 +530,7 @@ class _Search:
         evidence = (f"explains {100 * c.test.explained:.1f} % of the prewhitened training residual (Wald "
                     f"{c.test.statistic:.1f} on {c.test.dof} dof, adjusted p = {c.p_adj:.2g}); held-out error "
                     f"{100 * fit['valid_before']:.2f} % -> {100 * fit['valid_after']:.2f} % (Diebold-Mariano p = {p_dm:.2g})"
-                    + same_optimiser + ("" if loss == "squared" else f" on the {loss} errors"))
+                    + same_optimiser)
         if c.p_adj >= self.alpha:  # tried with its look-alike (Effect.tried_with), not on its own training test
             partners = [e.name for e in REGISTRY.values() if e.tried_with == c.effect]
             evidence += (f"; not significant on the training record itself: tried as the look-alike of "
@@ -583,10 +573,10 @@ class _Search:
                 chosen = next((c for c in significant if c.effect == name), None)
                 if chosen is None:
                     continue
-                # the base's loop, fitted to a force it cannot carry, swings far off at moments (on that pendulum one
-                # held-out error 5 times the next largest): their squares would set the test's variance, and a model
-                # that brings the error from 121 % to 1.0 % would not count as better (p = 0.014)
-                f, new = self.attempt(chosen, cur, "squared" if physical else "absolute")
+                # judged on the absolute errors (HELDOUT_LOSS): the base's loop, fitted to a force it cannot carry,
+                # swings far off at moments (on that pendulum one held-out error 5 times the next largest), and on
+                # their squares a model that brings the error from 121 % to 1.0 % would not count as better (p = 0.014)
+                f, new = self.attempt(chosen, cur)
                 if new is not None:
                     self.note_ambiguities(chosen, significant, wb)
                     cur = self.accept(f, new)
@@ -629,7 +619,7 @@ class _Search:
         st0, rt0, _, sim0 = base
         effect = REGISTRY[c.effect]
         wb0 = orthogonalize(self.data.train_base_columns(st0, sim0), np.zeros((len(rt0), 0)))
-        c0 = _best_of(effect.candidates(st0, sim0, self.data), rt0, wb0, self.data, ar_fit(rt0))
+        c0 = _best_of(effect.candidates(st0, sim0, self.data), rt0, wb0)
         if c0 is None:
             return None
         try:
@@ -695,7 +685,7 @@ class _Search:
             alt = (st_alt, *self.data.errors(st_alt))
         except DidimError:
             return cur
-        _, p_keep, _ = diebold_mariano(alt[2], cur[2])
+        _, p_keep, _ = diebold_mariano(alt[2], cur[2], HELDOUT_LOSS)
         if p_keep < self.alpha:
             return cur
         old.accepted = False
@@ -746,7 +736,7 @@ class _Search:
                 dropped = (st_drop, *self.data.errors(st_drop))
             except DidimError:
                 continue
-            _, p_keep, _ = diebold_mariano(dropped[2], cur[2])
+            _, p_keep, _ = diebold_mariano(dropped[2], cur[2], HELDOUT_LOSS)
             # kept only while it still matters in practice (as when it was accepted): a later finding can leave an
             # earlier one significant but negligible (a ripple whose amplitude fell to a few hundredths of a newton)
             negligible = self.data.rel(cur[2], False) >= (1 - MIN_HELDOUT_GAIN) * self.data.rel(dropped[2], False)

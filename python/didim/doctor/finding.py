@@ -13,6 +13,13 @@ from ..formats._io import jsonable as _clean
 #: finds such differences; an engineer cares about an effect that changes the fit, not about one that is detectable.
 MIN_HELDOUT_GAIN = 0.05
 
+#: The loss whose held-out difference the one-sided Diebold-Mariano test judges (both doctors): the absolute errors.
+#: A closed loop's force errors are heavy-tailed (large at a few starts, stops and reversals), and their squares let
+#: those few samples set the test's variance: on a belt axis whose force lags 0.4 ms, the model with the lag lowered
+#: the held-out mean square by 62 % (error 1.65 → 1.02 %) at p = 0.11 on the squares, p = 0.0009 on the absolute
+#: errors; a base that swings far off at moments is the same case. The practical threshold stays on the RMS error.
+HELDOUT_LOSS = "absolute"
+
 #: Two candidates are ambiguous when one's regressor spans more than this share of the other's (beyond the model's
 #: own columns): the record cannot say which it is. A candidate the model's own columns span by as much cannot be
 #: seen at all (the robot doctor's blind spots). Both doctors.
