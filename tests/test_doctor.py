@@ -70,26 +70,38 @@ def test_the_statistics_written_without_scipy_signal_equal_scipys():
     assert p == pytest.approx(st.norm.sf(stat), rel=1e-9, abs=1e-300)
 
 
-def test_the_test_prewhitened_under_the_alternative_keeps_its_size_and_sees_a_slow_effect():
-    """wald_fgls (the AR polynomial fitted on the residual less the columns' fit): on coloured noise and a slow
-    effect's columns it rejects at its nominal rate (300 draws: the binomial's 99.9 % bound); where a slow effect is most of
-    the residual, the polynomial fitted on the residual itself (wald_added's) takes the effect's spectrum and whitens
-    most of it away, this one estimates it within its σ and explains most of the prewhitened residual."""
-    from didim.stats import wald_fgls
+def test_the_grouped_wald_tests_equal_the_one_by_one_tests():
+    """wald_groups (the normal equations of each group of columns, all groups at once) against wald_whitened (an SVD
+    least-squares solve per group) on groups of 1, 2, 3 and 26 columns: an effect's sine and cosine, pure noise, a
+    pair 0.9999 correlated (condition 2·10⁴), a column of zeros and a pair correlated beyond the grouped solve's
+    limit (both through wald_whitened). The tolerance is the rounding of the normal equations, ε·cond(XᵀX)."""
+    from didim.stats import wald_groups, wald_whitened
 
-    rng = np.random.default_rng(7)
-    n = 1200
-    x = np.column_stack([np.sin(np.arange(n) / 60.0), np.cos(np.arange(n) / 60.0)])  # a slow effect's two columns
-    p = np.array([wald_fgls(lfilter([1.0], [1.0, -0.6], rng.standard_normal(n)), x).p_value for _ in range(300)])
-    assert np.mean(p < 0.05) < 0.09 and np.mean(p < 0.01) < 0.03
+    rng = np.random.default_rng(5)
     n = 3000
     t = np.arange(n)
-    bump = np.exp(-(((t % 1000) - 500) / 120.0) ** 2)  # a zone passed three times, 1000 samples apart
-    r = 3.0 * bump + lfilter([1.0], [1.0, -0.5], 0.3 * rng.standard_normal(n))
-    h0, h1 = wald_added(r, bump), wald_fgls(r, bump)
-    sigma = float(np.sqrt(h1.cov[0, 0]))
-    assert h1.p_value < 1e-12 and abs(h1.beta[0] - 3.0) < 4 * sigma and sigma < 0.1
-    assert h1.explained > 0.5 and h1.explained > 5 * h0.explained
+    r = rng.standard_normal(n) + 0.3 * np.sin(t / 9.0)
+    near = rng.standard_normal(n)
+    groups = [np.column_stack([np.sin(t / 9.0), np.cos(t / 9.0)]), rng.standard_normal((n, 1)),
+              np.column_stack([near, near + 0.014 * rng.standard_normal(n)]), rng.standard_normal((n, 3)),
+              rng.standard_normal((n, 26)), np.column_stack([rng.standard_normal(n), np.zeros(n)]),
+              np.column_stack([near, near + 1e-6 * rng.standard_normal(n)]), 1e-3 * rng.standard_normal((n, 2))]
+    x = np.column_stack(groups)
+    got = wald_groups(r, x, [g.shape[1] for g in groups])
+    for g, t_got in zip(groups, got):
+        want = wald_whitened(r, g)
+        scaled = g / np.maximum(np.linalg.norm(g, axis=0), 1e-300)
+        cond = np.linalg.cond(scaled.T @ scaled) if np.all(np.any(g != 0, axis=0)) else 1.0
+        tol = max(1e-12, 50 * np.finfo(float).eps * cond)
+        assert t_got.dof == want.dof
+        assert t_got.statistic == pytest.approx(want.statistic, rel=tol)
+        assert t_got.p_value == pytest.approx(want.p_value, rel=10 * tol * max(1.0, want.statistic), abs=1e-300)
+        assert t_got.explained == pytest.approx(want.explained, rel=tol, abs=1e-15)
+        np.testing.assert_allclose(t_got.beta, want.beta, rtol=tol, atol=tol * np.max(np.abs(want.beta)))
+        np.testing.assert_allclose(t_got.cov, want.cov, rtol=tol, atol=tol * np.max(np.abs(want.cov)))
+    assert got[0].p_value < 1e-20 and got[1].p_value > 1e-4
+    with pytest.raises(ValueError, match="groups of 3 columns for"):
+        wald_groups(r, x, [1, 2])
 
 
 def test_the_held_out_test_on_absolute_errors_sees_through_spikes():

@@ -300,13 +300,43 @@ class _Residuals:
         return self.orthogonalize(self.dec.columns(m), self.parts[j][1])
 
     def whitened(self, c: _Candidate) -> Tuple[np.ndarray, np.ndarray]:
-        """The prewhitened residual and columns of ``c``'s test and coefficients, on the joints it acts on, by feasible
-        GLS under the alternative (:func:`didim.stats.wald_fgls`, one Cochrane–Orcutt step): each joint's AR polynomial
-        fitted on its residual less the columns' least-squares fit, then both prewhitened with it, the joint's rows
-        scaled by its prewhitened residual's σ (so that a joint counts by its evidence, not by its torque). The
-        polynomial fitted on the residual itself is right under the null hypothesis only; where the effect is most of
-        that residual, it takes the effect's spectrum and whitens it away (a spring of 0.50 N·m on the held-out RPR
-        arm's wrist with its bodies held: coefficients −1.38, 1.47 so, 0.43, 0.15 by this fit, the truth 0.46, 0.19)."""
+        """The prewhitened residual and columns of ``c``'s test, on the joints it acts on (each joint's rows scaled by
+        its prewhitened residual's σ, so that a joint counts by its evidence, not by its torque)."""
+        rws, xws = [], []
+        for j, m in c.columns.items():
+            _, _, a, rw, s = self.parts[j]
+            xw, = self.prewhiten(a, self.beyond(j, m))
+            rws.append(rw / s)
+            xws.append(xw / s)
+        return np.concatenate(rws), np.concatenate(xws)
+
+    def test_all(self, cands: List[_Candidate]) -> None:
+        """The Wald test of each candidate's columns on the residual of the joints it acts on (:meth:`whitened`), as
+        one axis tests a grid (:func:`didim.doctor._test_all`): the candidates on the same joints (one effect's
+        variants) by their normal equations together (:func:`didim.stats.wald_groups`), each keeping its one-by-one
+        SVD test (``exact``) for the variant the ranking keeps."""
+        from ..stats import wald_groups, wald_whitened
+
+        pieces = [self.whitened(c) for c in cands]
+        i = 0
+        while i < len(cands):
+            k = i + 1
+            while k < len(cands) and list(cands[k].columns) == list(cands[i].columns):
+                k += 1
+            rw = pieces[i][0]
+            xs = [x for _, x in pieces[i:k]]
+            for c, t, x in zip(cands[i:k], wald_groups(rw, np.concatenate(xs, axis=1), [x.shape[1] for x in xs]), xs):
+                c.test = t
+                c.exact = (lambda rw=rw, x=x: wald_whitened(rw, x))
+            i = k
+
+    def coefficients(self, c: _Candidate) -> np.ndarray:
+        """``c``'s coefficients on the residual by feasible GLS under the alternative (one Cochrane–Orcutt step): each
+        joint's AR polynomial fitted on its residual less the columns' least-squares fit, then both prewhitened with it.
+        The test's own coefficients come from the polynomial fitted on the residual itself, right under the null
+        hypothesis it tests; where the effect is most of that residual, the polynomial takes the effect's spectrum and
+        whitens it away, and the coefficients are those of what is left (a spring of 0.50 N·m on the held-out RPR arm's wrist with
+        its bodies held: the test's −1.38, 1.47 against 0.43, 0.15 by this fit, the truth 0.46, 0.19)."""
         from ..stats import ar_fit
 
         rws, xws = [], []
@@ -317,21 +347,7 @@ class _Residuals:
             rw, xw = self.prewhiten(ar_fit(r - x @ b), r, x)
             rws.append(rw / s)
             xws.append(xw / s)
-        return np.concatenate(rws), np.concatenate(xws)
-
-    def test_all(self, cands: List[_Candidate]) -> None:
-        """The Wald test of each candidate's columns on the residual of the joints it acts on (:meth:`whitened`), as
-        one axis tests a grid (:func:`didim.doctor._test_all`)."""
-        from ..stats import wald_whitened
-
-        for c in cands:
-            c.test = wald_whitened(*self.whitened(c))
-            c.exact = None
-
-    def coefficients(self, c: _Candidate) -> np.ndarray:
-        """``c``'s coefficients on the residual by feasible GLS under the alternative (:meth:`whitened`)."""
-        rw, xw = self.whitened(c)
-        return np.linalg.lstsq(xw, rw, rcond=None)[0]
+        return np.linalg.lstsq(np.concatenate(xws), np.concatenate(rws), rcond=None)[0]
 
 
 def _tau_link(chain, sim: Dict[str, np.ndarray]) -> np.ndarray:
