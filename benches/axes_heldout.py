@@ -131,16 +131,23 @@ def controller(kind: str, ax: dict) -> dict:
 
 
 def moves(ax: dict, T: float, rng: np.random.Generator) -> np.ndarray:
-    """Point-to-point moves between random positions at speeds from 2 % to 100 % of the top speed, rests between,
-    the corners rounded by a 20 ms moving average."""
+    """Point-to-point moves at speeds from 3 % to 100 % of the top speed (log-uniform), each 0.45-1.5 s at its
+    speed, rests of 0.2-0.6 s between, the corners rounded by a 20 ms moving
+    average."""
     dt = 1 / ax["fs"]
     lo, hi = ax["stroke"]
     amax = ax["vmax"] / 0.15
     q = [lo + 0.5 * (hi - lo)]
     pos = q[0]
     while len(q) * dt < T:
-        target = rng.uniform(lo + 0.05 * (hi - lo), hi - 0.05 * (hi - lo))
-        v = ax["vmax"] * 10 ** rng.uniform(-1.7, 0)
+        v = ax["vmax"] * 10 ** rng.uniform(-1.5, 0)
+        # a move of 0.45-1.5 s at its speed (a slow move across the whole stroke would take the record), within the
+        # stroke, turning back at its ends
+        span = min(0.9 * (hi - lo), v * 1.5) * rng.uniform(0.3, 1.0)
+        way = rng.choice([-1, 1])
+        if not lo + 0.05 * (hi - lo) <= pos + way * span <= hi - 0.05 * (hi - lo):
+            way = -way
+        target = float(np.clip(pos + way * span, lo + 0.05 * (hi - lo), hi - 0.05 * (hi - lo)))
         d = target - pos
         # trapezoid (or triangle)
         ta = v / amax

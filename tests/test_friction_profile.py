@@ -75,6 +75,35 @@ def test_the_terms_are_bsplines_times_the_sign_of_one_direction():
     np.testing.assert_allclose(wf[inside, 9:].sum(axis=1), (s * (1 - s) / 2)[inside], atol=1e-12)
 
 
+def test_a_profile_held_within_its_stroke_keeps_its_end_values_beyond_it():
+    """With ``lo < hi`` each knot's B-spline reads the position held within [lo, hi] (the doctor's profiles: the stroke
+    of the training record), so a profile carries its end values on where the record goes further; inside, the terms
+    are the plain ones. Regressor columns against the B-spline written here, on a move past both ends."""
+    qr = sc.emps_like(n=6000)
+    rec = didim.Recording(dt=1e-3, qr=qr, force=np.zeros(6000), qm=qr, controller=didim.EmpsCascade())
+    lo, hi = 0.05, 0.15
+    plain = _splines()
+    held = [didim.Term(t.name, t.kind, t.hypers["center"], width=t.hypers["width"], side=t.hypers["side"], lo=lo, hi=hi)
+            for t in plain]
+    p = {"M": M, "Fv": FV, "Fc": 20.0}
+    sim = didim.simulate(rec, p, "rigid")
+    assert sim.q1.min() < lo and sim.q1.max() > hi
+    s = didim.coulomb_sign(sim.qd1)
+    w_held = didim.Model("rigid", terms=held).core().regressor(sim.q, sim.qd, sim.qdd)[0, :, 3:]
+    w_plain = didim.Model("rigid", terms=plain).core().regressor(sim.q, sim.qd, sim.qdd)[0, :, 3:]
+    inside = (sim.q1 >= lo) & (sim.q1 <= hi)
+    np.testing.assert_array_equal(w_held[inside], w_plain[inside])
+    for i, t in enumerate(held):
+        side = s * (1 + s) / 2 if t.hypers["side"] > 0 else s * (1 - s) / 2
+        want = _bspline((np.clip(sim.q1, lo, hi) - t.hypers["center"]) / t.hypers["width"]) * side
+        np.testing.assert_allclose(w_held[:, i], want, atol=1e-12)
+    # saved and read back with its stroke; a stroke with lo > hi is refused, naming it
+    again = didim.Model.from_dict(didim.Model("rigid", terms=held).to_dict())
+    assert again.terms[0].hypers["lo"] == lo and again.terms[0].hypers["hi"] == hi
+    with pytest.raises(didim.DataError, match="lo <= hi"):
+        didim.Term("x", "coulomb_spline", 0.1, width=0.05, lo=0.2, hi=0.1)
+
+
 def test_its_sensitivities_match_central_differences():
     qr = sc.emps_like(n=6000)
     rec = didim.Recording(dt=1e-3, qr=qr, force=np.zeros(len(qr)), qm=qr, controller=didim.EmpsCascade())
@@ -86,6 +115,11 @@ def test_its_sensitivities_match_central_differences():
     for integrator in ("rk4", "exponential"):
         err = check_sensitivities(rec, p, "rigid", terms=terms, integrator=integrator, quantization=0.0, rel_step=1e-4)
         assert max(err.values()) < 1e-3, (integrator, err)
+    # held within a stroke the record passes both ends of (the slope 0 beyond them)
+    held = [didim.Term(t.name, t.kind, t.hypers["center"], width=t.hypers["width"], side=t.hypers["side"], lo=0.05,
+                       hi=0.15) for t in terms]
+    err = check_sensitivities(rec, p, "rigid", terms=held, quantization=0.0, rel_step=1e-4)
+    assert max(err.values()) < 1e-3, err
 
 
 def test_didim_recovers_both_profiles_from_the_independent_plant(records):
@@ -190,4 +224,5 @@ def test_terms_say_what_is_wrong_with_their_width():
     # the older name is the kind with its side fixed, and the hyper-parameters are named
     t = didim.Term("a", "coulomb_spline_fwd", 0.1, width=0.05)
     assert t == didim.Term("a", "coulomb_spline", center=0.1, width=0.05, side=1)
-    assert t.spec() == ("a", "coulomb_spline", "motor", [("center", 0.1), ("width", 0.05), ("side", 1.0)])
+    assert t.spec() == ("a", "coulomb_spline", "motor", [("center", 0.1), ("width", 0.05), ("side", 1.0), ("lo", 0.0),
+                                                           ("hi", 0.0)])

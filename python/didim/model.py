@@ -44,9 +44,10 @@ class Term:
     - ``coulomb_ripple``: sign(q̇)·sin(2π q/period + phase): Coulomb friction that varies along the stroke;
     - ``coulomb_spline``: B((q − center)/width)·σ(q̇), ``center`` and ``width`` (m), ``side`` 1 forward, −1 backward,
       0 both (the default): a friction profile along the stroke, B the cubic B-spline (B-splines ``width`` apart sum
-      to 1), σ the forward or backward part of sign(q̇), smooth through rest;
+      to 1), σ the forward or backward part of sign(q̇), smooth through rest; with ``lo < hi``, q is held within
+      [lo, hi] (the profile keeps its end values beyond the stroke it was fitted on; ``lo = hi = 0``: no limit);
     - ``spline``: B((q − center)/width), ``center`` and ``width`` (m): a force profile along the stroke whatever the
-      motion (a counterbalance's, a cable's), one knot's share;
+      motion (a counterbalance's, a cable's), one knot's share; ``lo``, ``hi`` as for ``coulomb_spline``;
     - ``gravity``: sin(q + angle_offset + phase) (N·m), q the joint angle (rad); ``A sin(q) + B cos(q)`` is two terms,
       ``phase`` 0 and π/2;
     - ``damper`` (flexible model): coupling damping in parallel with K12 (N/(m/s)).
@@ -518,7 +519,8 @@ def knot_weights(terms, q):
     import numpy as np
 
     q = np.asarray(q, dtype=float)[None, :]
-    both = [Term(t.name, t.kind, center=t.hypers["center"], width=t.hypers["width"]) for t in terms]
+    both = [Term(t.name, t.kind, center=t.hypers["center"], width=t.hypers["width"], lo=t.hypers.get("lo", 0.0),
+                 hi=t.hypers.get("hi", 0.0)) for t in terms]
     w = Model("rigid", terms=both, coulomb_eps=0.0).core().regressor(q, np.ones_like(q), np.zeros_like(q))
     return w[0, :, 3:]
 

@@ -130,23 +130,36 @@ pub const TERM_TABLE: &[TermKind] = &[
             hyper("center", "m"),
             hyper("width", "m"),
             hyper_or("side", "1", 0.0),
+            hyper_or("lo", "m", 0.0),
+            hyper_or("hi", "m", 0.0),
         ],
-        doc: "a friction profile's knot: B((q − center)/width)·σ(q̇), side 1 forward, −1 backward, 0 both",
+        doc: "a friction profile's knot: B((q − center)/width)·σ(q̇), side 1 forward, −1 backward, 0 both; \
+              q held within [lo, hi] when lo < hi (the profile flat beyond its stroke)",
         build: |dof, h| Basis::CoulombSpline {
             dof,
             center: h[0],
             width: h[1],
             side: h[2] as i8,
+            lo: h[3],
+            hi: h[4],
         },
     },
     TermKind {
         name: "spline",
-        hypers: &[hyper("center", "m"), hyper("width", "m")],
-        doc: "a force profile's knot along the stroke: B((q − center)/width) (a counterbalance, a cable, a spring)",
+        hypers: &[
+            hyper("center", "m"),
+            hyper("width", "m"),
+            hyper_or("lo", "m", 0.0),
+            hyper_or("hi", "m", 0.0),
+        ],
+        doc: "a force profile's knot along the stroke: B((q − center)/width) (a counterbalance, a cable, a spring); \
+              q held within [lo, hi] when lo < hi (the profile flat beyond its stroke)",
         build: |dof, h| Basis::Spline {
             dof,
             center: h[0],
             width: h[1],
+            lo: h[2],
+            hi: h[3],
         },
     },
     TermKind {
@@ -350,6 +363,18 @@ pub fn cubic_bspline(u: f64) -> (f64, f64) {
     } else {
         (0.0, 0.0)
     }
+}
+
+/// A spline knot's value and slope in `x` (`B((x − center)/width)`, `B'/width`), with `x` held
+/// within `[lo, hi]` when `lo < hi`: beyond the ends the value of the end and slope 0.
+#[inline]
+pub fn held_bspline(x: f64, center: f64, width: f64, lo: f64, hi: f64) -> (f64, f64) {
+    if lo < hi && !(lo..=hi).contains(&x) {
+        let (b, _) = cubic_bspline((x.clamp(lo, hi) - center) / width);
+        return (b, 0.0);
+    }
+    let (b, db) = cubic_bspline((x - center) / width);
+    (b, db / width)
 }
 
 /// [`coulomb_sign`] and [`coulomb_sign_derivative`] at once (one square root).
@@ -659,17 +684,31 @@ pub enum Basis {
     /// its knot (a tight or worn zone of a guide, a preload that changes along a screw, seen
     /// differently going forward and backward). `side`: 1 forward, −1 backward, 0 both
     /// directions alike (`σ = s`: one profile against the motion whichever way it goes).
+    ///
+    /// `lo < hi`: the profile's stroke; beyond it `q` is held at the end it passed (`B` at `lo` or
+    /// `hi`, its slope 0), so that a profile fitted on one stretch of the stroke carries its end
+    /// values beyond it instead of falling back to the plain Coulomb friction. `lo = hi` (0 and 0,
+    /// the default): no limit.
     CoulombSpline {
         dof: usize,
         center: f64,
         width: f64,
         side: i8,
+        lo: f64,
+        hi: f64,
     },
     /// A force that varies along the stroke whatever the motion (N): `φ = B((q − center)/width)`,
     /// the uniform cubic B-spline of [`Basis::CoulombSpline`]. A set of them `width` apart is a
     /// smooth profile of force along the stroke, each parameter the force near its knot (a
     /// counterbalance cylinder's or a cable's torque, a spring's force, an unmodelled weight).
-    Spline { dof: usize, center: f64, width: f64 },
+    /// `lo`, `hi` as for [`Basis::CoulombSpline`].
+    Spline {
+        dof: usize,
+        center: f64,
+        width: f64,
+        lo: f64,
+        hi: f64,
+    },
     /// Gravity torque of a rotary joint (N·m, the core's "N" on the load side): `φ =
     /// sin(q + angle_offset + phase)`, q the joint angle (rad); the torque `A sin(q + θ0) + B cos(q + θ0)`
     /// is two terms, phases 0 and π/2, with `angle_offset` θ0 where the joint's zero is.
@@ -749,6 +788,13 @@ impl Basis {
                 Err(invalid!(
                     "a friction spline needs a finite knot position (hyper, m) and a finite knot spacing width > 0 m, \
                      got {center} and {width}"
+                ))
+            }
+            Basis::CoulombSpline { lo, hi, .. } | Basis::Spline { lo, hi, .. }
+                if !(lo.is_finite() && hi.is_finite() && lo <= hi) =>
+            {
+                Err(invalid!(
+                    "a spline's stroke [lo, hi] needs finite ends with lo <= hi (lo = hi: no limit), got {lo} and {hi}"
                 ))
             }
             Basis::CoulombSpline { side, .. } if !(-1..=1).contains(&side) => {
@@ -879,14 +925,25 @@ impl Basis {
                 let (sn, cs) = crate::trig::sin_cos(x + angle_offset + phase);
                 (sn, cs, 0.0)
             }
-            Basis::Spline { center, width, .. } => {
-                let (b, db) = cubic_bspline((x - center) / width);
-                (b, db / width, 0.0)
+            Basis::Spline {
+                center,
+                width,
+                lo,
+                hi,
+                ..
+            } => {
+                let (b, db) = held_bspline(x, center, width, lo, hi);
+                (b, db, 0.0)
             }
             Basis::CoulombSpline {
-                center, width, side, ..
+                center,
+                width,
+                side,
+                lo,
+                hi,
+                ..
             } => {
-                let (b, db) = cubic_bspline((x - center) / width);
+                let (b, db) = held_bspline(x, center, width, lo, hi);
                 if b == 0.0 && db == 0.0 {
                     // outside the knot's support (most of the stroke for each of a profile's splines): no
                     // friction law to evaluate, the products below would all be zero
@@ -901,7 +958,7 @@ impl Basis {
                     let side = f64::from(side);
                     (0.5 * s * (1.0 + side * s), 0.5 * ds * (1.0 + 2.0 * side * s))
                 };
-                (b * sigma, db / width * sigma, b * dsigma)
+                (b * sigma, db * sigma, b * dsigma)
             }
             Basis::Backlash { gap, .. } => {
                 // slope 1 outside the gap, 0 inside
@@ -929,9 +986,14 @@ impl Basis {
                 crate::trig::sin(std::f64::consts::TAU / period * x + phase) * ds_deps()
             }
             Basis::CoulombSpline {
-                center, width, side, ..
+                center,
+                width,
+                side,
+                lo,
+                hi,
+                ..
             } => {
-                let (b, _) = cubic_bspline((x - center) / width);
+                let (b, _) = held_bspline(x, center, width, lo, hi);
                 if b == 0.0 {
                     return 0.0;
                 }
@@ -1815,7 +1877,9 @@ mod tests {
                 dof: MOTOR,
                 center: 0.1,
                 width: 0.05,
-                side: -1
+                side: -1,
+                lo: 0.0,
+                hi: 0.0,
             }
         );
         for (kind, hypers, says) in [
@@ -1887,6 +1951,61 @@ mod tests {
             .role(),
             Role::Force
         );
+    }
+
+    #[test]
+    fn a_profile_held_within_its_stroke_keeps_its_end_values_beyond_it() {
+        // knots 0.1 apart from -0.1 to 1.1 cover the stroke [0, 1]: inside, the held splines are the
+        // plain ones; beyond, each keeps its value at the end it passed (slope 0), so a profile
+        // (here weights 1, 2, ... per knot) carries its end value on, where the plain splines fall
+        // to 0 within two knots
+        let (lo, hi, w) = (0.0, 1.0, 0.1);
+        let knots: Vec<f64> = (-1..=11).map(|j| lo + f64::from(j) * w).collect();
+        let profile = |x: f64, held: bool| -> (f64, f64) {
+            knots.iter().enumerate().fold((0.0, 0.0), |(p, dp), (j, &c)| {
+                let (b, db) = if held {
+                    held_bspline(x, c, w, lo, hi)
+                } else {
+                    held_bspline(x, c, w, 0.0, 0.0)
+                };
+                (p + (j as f64 + 1.0) * b, dp + (j as f64 + 1.0) * db)
+            })
+        };
+        for x in [0.0, 0.013, 0.5, 0.77, 1.0] {
+            assert_eq!(profile(x, true), profile(x, false));
+        }
+        let (at_hi, _) = profile(hi, true);
+        let (at_lo, _) = profile(lo, true);
+        for x in [1.01, 1.3, 5.0] {
+            assert_eq!(profile(x, true), (at_hi, 0.0));
+        }
+        for x in [-0.01, -0.4, -7.0] {
+            assert_eq!(profile(x, true), (at_lo, 0.0));
+        }
+        assert!(profile(5.0, false).0 == 0.0 && at_hi > 10.0);
+        // the basis functions of both kinds hold alike, and a stroke with lo > hi is refused
+        let b = Basis::from_kind(
+            "coulomb_spline",
+            &[("center", 1.0), ("width", w), ("lo", lo), ("hi", hi)],
+            MOTOR,
+        )
+        .unwrap();
+        let law = FrictionLaw::algebraic(1e-3);
+        assert_eq!(b.local(3.0, 0.2, law).0, b.local(hi, 0.2, law).0);
+        assert_eq!(b.local(3.0, 0.2, law).1, 0.0);
+        let s = Basis::from_kind(
+            "spline",
+            &[("center", 1.0), ("width", w), ("lo", lo), ("hi", hi)],
+            MOTOR,
+        )
+        .unwrap();
+        assert_eq!(s.local(3.0, 0.0, law), s.local(hi, 0.0, law));
+        assert!(Basis::from_kind(
+            "spline",
+            &[("center", 1.0), ("width", w), ("lo", 1.0), ("hi", 0.0)],
+            MOTOR
+        )
+        .is_err());
     }
 
     #[test]
@@ -2075,6 +2194,8 @@ mod tests {
                     center: 0.01,
                     width: 0.02,
                     side: -1,
+                    lo: 0.0,
+                    hi: 0.0,
                 },
             ),
             (
@@ -2083,6 +2204,8 @@ mod tests {
                     dof: 1,
                     center: -0.01,
                     width: 0.03,
+                    lo: 0.0,
+                    hi: 0.0,
                 },
             ),
             (

@@ -328,6 +328,7 @@ def _unnamed(data: Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: f
     q = dec(sim.q[0])[rows]
     n = len(r)
     fs = data.rec.fs / dec.factor
+    axis = data.rec.axis  # the labels in the record's kind of units (mm or rad)
     views = {}
     every = np.ones(n, bool)
     t_idx = np.minimum((np.arange(n) * 10) // n, 9)
@@ -337,13 +338,13 @@ def _unnamed(data: Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: f
     vmax = float(np.max(np.abs(v))) or 1.0
     ve = np.linspace(-vmax, vmax, 11)
     views["velocity"] = (np.clip(np.digitize(v, ve) - 1, 0, 9), every,
-                         [f"{1e3 * ve[k]:.3g} to {1e3 * ve[k + 1]:.3g} mm/s" for k in range(10)])
+                         [f"{units.speed(ve[k], axis)} to {units.speed(ve[k + 1], axis)}" for k in range(10)])
     qe = np.linspace(q.min(), q.max() + 1e-12, 11)
     q_idx = np.clip(np.digitize(q, qe) - 1, 0, 9)
     moving = np.abs(v) > 0.02 * vmax
     for way, mask in (("forward", moving & (v > 0)), ("backward", moving & (v < 0))):
-        views[f"position, moving {way}"] = (q_idx, mask, [f"{1e3 * qe[k]:.4g} to {1e3 * qe[k + 1]:.4g} mm, moving {way}"
-                                                          for k in range(10)])
+        views[f"position, moving {way}"] = (q_idx, mask, [
+            f"{units.length(qe[k], axis)} to {units.length(qe[k + 1], axis)}, moving {way}" for k in range(10)])
     tests = {}
     for name, (idx, mask, labels) in views.items():
         x = np.zeros((n, 10))
@@ -374,7 +375,7 @@ def _unnamed(data: Data, r: np.ndarray, sim: SimResult, wb: np.ndarray, alpha: f
         statistic={"wald": test.statistic, "dof": test.dof, "p_value": test.p_value, "p_adjusted": float(p),
                    "explained_pct": 100 * test.explained},
         evidence=f"the residual depends on {name} (Wald {test.statistic:.1f} on {test.dof} dof, adjusted p = {p:.2g}); "
-                 f"largest mean residual {means[worst]:+.3g} N at {labels[worst]}",
+                 f"largest mean residual {'+' if means[worst] > 0 else ''}{units.force(means[worst], axis)} at {labels[worst]}",
         physics=UNNAMED,
         where={"view": name, "range": labels[worst], "mean_residual_N": float(means[worst])},
     )

@@ -386,10 +386,15 @@ SPLINE_INTERVALS = (2, 3, 5, 8)
 def _spline_terms(lo: float, w: float, intervals: int, per_direction: bool = True) -> List[Term]:
     """The friction splines of a profile with knots ``lo + j·w``, j = −1 … intervals + 1, forward and backward (or,
     not ``per_direction``, one profile for both directions); the last knot of each is left out: the splines sum to 1,
-    which the Coulomb friction already is."""
+    which the Coulomb friction already is. Beyond the stroke ``[lo, lo + intervals·w]`` the profile keeps its end
+    values (the held-out record may go further than the training record: a wrist's zone fitted on −1.39 to 0.32 rad,
+    its splines falling away beyond, simulated the validation record's moves to 1.62 rad at 13.6 % error against
+    7.9 % without the profile)."""
+    hi = lo + intervals * w  # the stroke the profile was fitted on: held at its ends beyond it (the core's lo, hi)
     if not per_direction:
-        return [Term(f"Fcz{j + 1}", "coulomb_spline", lo + j * w, width=w) for j in range(-1, intervals + 1)]
-    return [Term(f"Fc{d[0]}{j + 1}", f"coulomb_spline_{d}", lo + j * w, width=w)
+        return [Term(f"Fcz{j + 1}", "coulomb_spline", lo + j * w, width=w, lo=lo, hi=hi)
+                for j in range(-1, intervals + 1)]
+    return [Term(f"Fc{d[0]}{j + 1}", f"coulomb_spline_{d}", lo + j * w, width=w, lo=lo, hi=hi)
             for d in ("fwd", "bwd") for j in range(-1, intervals + 1)]
 
 
@@ -445,10 +450,14 @@ def _spline_adopt(c: Candidate, state: State, data: Data, progress) -> Adopted:
                 else {t.name: 0.0 for t in terms})
         jobs.append((state.with_(terms=state.model.terms + tuple(terms)), init))
         spacings.append((m, terms))
+    # a refit that has not settled within its iterations counts by its best iterate: with many splines, the
+    # regression's residual wanders by a few percent of itself from one iterate to the next (a spindle's zone at
+    # 4 kHz: 0.87-1.02 % over the last iterations, from 3.27 % without the profile) and never meets the tolerance;
+    # the held-out test judges the profile as any other
     fits = [(m, *got, terms) for (m, terms), got in zip(spacings, refit_each(data, jobs, progress))
-            if not isinstance(got, DidimError) and got[1].converged]
+            if not isinstance(got, DidimError) and math.isfinite(got[1].output_error)]
     if not fits:
-        raise SimulationError("the friction profile refit did not converge at any spacing")
+        raise SimulationError("the friction profile refit failed at every spacing")
     best = min(r.output_error for _, _, r, _ in fits)
     m, st, r, terms = next(f for f in fits if f[2].output_error <= (1 + SPLINE_PARSIMONY) * best)
     return st, r, _spline_summary(st), _std(r, [t.name for t in terms])

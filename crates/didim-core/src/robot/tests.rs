@@ -906,6 +906,8 @@ fn loaded_chain() -> (Robot, Drives, Vec<TransferFunction>, Vec<f64>, RobotLoopO
                     dof: 0,
                     center: 0.12,
                     width: 0.05,
+                    lo: 0.0,
+                    hi: 0.0,
                 },
                 1.5,
             )],
