@@ -111,9 +111,15 @@ class Term:
         object.__setattr__(self, "kind", base)
         object.__setattr__(self, "dof", dof)
         object.__setattr__(self, "hyper_values", tuple(values))
-        # the core checks the values (a Stribeck speed > 0, a knot spacing > 0, a side in {-1, 0, 1})
-        _core_model("flexible" if dof == "load" or base == "damper" else "rigid", False, (_freeze(self.axis_spec()),),
-                    None, 1.0, "algebraic")
+        # the core checks the values (a Stribeck speed > 0, a knot spacing > 0, a side in {-1, 0, 1}); under one
+        # name for every term, so that the same kind and values are checked once (a doctor's round builds thousands),
+        # and again under the term's own name where they fail, for the message
+        plant = "flexible" if dof == "load" or base == "damper" else "rigid"
+        try:
+            _core_model(plant, False, (_freeze(("term", *self.axis_spec()[1:])),), None, 1.0, "algebraic")
+        except DataError:
+            _core_model(plant, False, (_freeze(self.axis_spec()),), None, 1.0, "algebraic")
+            raise
 
     @property
     def hypers(self) -> Dict[str, float]:
