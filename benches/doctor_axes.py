@@ -46,7 +46,7 @@ def run_one(name: str, entry: dict) -> dict:
             d = didim.doctor(train, entry["model"], valid)
         out.update(ok=True, named=[f.effect for f in d.findings if f.effect != "unnamed"],
                    unnamed=any(f.effect == "unnamed" for f in d.findings), fit=d.fit,
-                   words=[f"{f.effect}: {f.words}" for f in d.findings])
+                   words=[f"{f.effect}: {f.words or f.evidence}" for f in d.findings])
     except Exception as e:  # noqa: BLE001 - a crash is what the benchmark counts
         out.update(ok=False, error=f"{type(e).__name__}: {e}", trace=traceback.format_exc(limit=3))
     out["time_s"] = time.perf_counter() - t0

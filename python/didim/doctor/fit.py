@@ -9,6 +9,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .. import units
 from ..methods.identification import didim_iterate
 from ..model import Model
 from ..recording import Recording
@@ -314,8 +315,9 @@ def fit_friction_law(data: Data, state: State, progress, around: Optional[float]
     if not math.isfinite(found.error):
         return refit(data, state, {}, progress)
     law = found.law
-    say(f"friction law: {law[0]}, Coulomb smoothing speed {law[1][0] / scale:.3g} of the top speed (output error "
-        f"{100 * found.error:.2f} %)")
     if law not in fitted and errors(law) is None:
         return refit(data, state, {}, progress)
+    eps = float(fitted[law][0].model.coulomb_eps)
+    say(f"friction law: the search's best is {law[0]}, smoothing speed {units.speed(eps, data.rec.axis)} "
+        f"({eps / scale:.3g} of the top speed; output error {100 * found.error:.2f} %)")
     return fitted[law]
