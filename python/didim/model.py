@@ -519,14 +519,13 @@ def dead_zone(x, gap: float):
 
 
 def knot_weights(terms, q):
-    """``B((q − center)/width)`` of each ``coulomb_spline`` term at the positions ``q`` (n,): its weight along the
-    stroke, whatever its side, from the core's basis function (the term moving forward at full speed, hard sign).
+    """``B((q − center)/width)`` of each ``coulomb_spline`` term at the positions ``q`` (n,), held within its
+    ``lo``, ``hi``: its weight along the stroke, whatever its side, from the core's basis function (the term moving forward at full speed, hard sign).
     Shape (n, len(terms))."""
     import numpy as np
 
     q = np.asarray(q, dtype=float)[None, :]
-    both = [Term(t.name, t.kind, center=t.hypers["center"], width=t.hypers["width"], lo=t.hypers.get("lo", 0.0),
-                 hi=t.hypers.get("hi", 0.0)) for t in terms]
+    both = [Term(t.name, t.kind, **{h: v for h, v in t.hypers.items() if h != "side"}) for t in terms]
     w = Model("rigid", terms=both, coulomb_eps=0.0).core().regressor(q, np.ones_like(q), np.zeros_like(q))
     return w[0, :, 3:]
 
