@@ -520,8 +520,8 @@ def dead_zone(x, gap: float):
 
 def knot_weights(terms, q):
     """``B((q − center)/width)`` of each ``coulomb_spline`` term at the positions ``q`` (n,), held within its
-    ``lo``, ``hi``: its weight along the stroke, whatever its side, from the core's basis function (the term moving forward at full speed, hard sign).
-    Shape (n, len(terms))."""
+    ``lo``, ``hi``: its weight along the stroke, whatever its side, from the core's basis function (the term moving
+    forward at full speed, hard sign). Shape (n, len(terms))."""
     import numpy as np
 
     q = np.asarray(q, dtype=float)[None, :]
